@@ -1,0 +1,152 @@
+"""Scripted motor-torque profiles τ(t), N·m on link 1, t in s.
+
+A profile is evaluated at each integrator stage time. Piecewise-constant profiles
+(step, square) also name their switching times, so the simulator can end a sub-step
+exactly there and integrate each smooth piece on its own: a switch inside a step
+would otherwise cost a first-order error.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import MISSING, asdict, dataclass
+from typing import Any, ClassVar
+
+from finger_sim.errors import ConfigError
+
+TorqueFn = Callable[[float], float]
+
+
+@dataclass(frozen=True)
+class Profile:
+    """Base of the torque profiles: smooth unless a subclass says otherwise."""
+
+    kind: ClassVar[str]
+
+    def __call__(self, t: float) -> float:
+        raise NotImplementedError
+
+    def breakpoints(self, t0: float, t1: float) -> list[float]:
+        """Switching times strictly inside (t0, t1), s."""
+        return []
+
+    def on_segment(self, a: float, b: float) -> TorqueFn:
+        """τ on the closed segment [a, b], which holds no switch inside it."""
+        return self
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"type": self.kind, **asdict(self)}
+
+
+@dataclass(frozen=True)
+class Constant(Profile):
+    """τ = value."""
+
+    kind: ClassVar[str] = "constant"
+    value: float
+
+    def __call__(self, t: float) -> float:
+        return self.value
+
+
+@dataclass(frozen=True)
+class Ramp(Profile):
+    """τ = offset + slope·t (the paper's input (8): offset 0.001 N·m, slope 0.01 N·m/s)."""
+
+    kind: ClassVar[str] = "ramp"
+    offset: float
+    slope: float
+
+    def __call__(self, t: float) -> float:
+        return self.offset + self.slope * t
+
+
+@dataclass(frozen=True)
+class Sine(Profile):
+    """τ = offset + amplitude·sin(2π·frequency·t)."""
+
+    kind: ClassVar[str] = "sine"
+    amplitude: float
+    frequency: float
+    offset: float = 0.0
+
+    def __call__(self, t: float) -> float:
+        return self.offset + self.amplitude * math.sin(2.0 * math.pi * self.frequency * t)
+
+
+@dataclass(frozen=True)
+class _PiecewiseConstant(Profile):
+    """A profile that switches between constants at known times."""
+
+    def on_segment(self, a: float, b: float) -> TorqueFn:
+        value = self(0.5 * (a + b))
+        return lambda t: value
+
+
+@dataclass(frozen=True)
+class Step(_PiecewiseConstant):
+    """τ = before for t < at, after from t = at on."""
+
+    kind: ClassVar[str] = "step"
+    before: float
+    after: float
+    at: float
+
+    def __call__(self, t: float) -> float:
+        return self.before if t < self.at else self.after
+
+    def breakpoints(self, t0: float, t1: float) -> list[float]:
+        return [self.at] if t0 < self.at < t1 else []
+
+
+@dataclass(frozen=True)
+class Square(_PiecewiseConstant):
+    """τ = offset + amplitude over the first half of each period, offset − amplitude over the second."""
+
+    kind: ClassVar[str] = "square"
+    amplitude: float
+    frequency: float
+    offset: float = 0.0
+
+    def __call__(self, t: float) -> float:
+        phase = (t * self.frequency) % 1.0
+        return self.offset + (self.amplitude if phase < 0.5 else -self.amplitude)
+
+    def breakpoints(self, t0: float, t1: float) -> list[float]:
+        half = 0.5 / self.frequency
+        k = math.floor(t0 / half) + 1
+        out = []
+        while k * half < t1:
+            out.append(k * half)
+            k += 1
+        return out
+
+
+PROFILES: dict[str, type[Profile]] = {cls.kind: cls for cls in (Constant, Ramp, Step, Square, Sine)}
+
+
+def profile_from_dict(data: Any, key: str = "input.torque") -> Profile:
+    """A profile from its scene mapping, e.g. {type: ramp, offset: 0.001, slope: 0.01}."""
+    if not isinstance(data, dict):
+        raise ConfigError(key, f"a mapping with 'type' in {sorted(PROFILES)}", data)
+    kind = data.get("type")
+    if kind not in PROFILES:
+        raise ConfigError(f"{key}.type", f"one of {sorted(PROFILES)}", kind)
+    cls = PROFILES[kind]
+    names = [f for f in cls.__dataclass_fields__ if f != "kind"]
+    required = [f for f in names if cls.__dataclass_fields__[f].default is MISSING]
+    unknown = sorted(set(data) - set(names) - {"type"})
+    if unknown:
+        raise ConfigError(f"{key}.{unknown[0]}", f"only keys {names} for type {kind}", data[unknown[0]])
+    for name in names:
+        if name not in data:
+            if name in required:
+                raise ConfigError(f"{key}.{name}", f"a number (required for type {kind})", None)
+            continue
+        value = data[name]
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise ConfigError(f"{key}.{name}", "a finite number", value)
+    if kind in ("square", "sine") and not data["frequency"] > 0:
+        raise ConfigError(f"{key}.frequency", "a number > 0 (Hz)", data["frequency"])
+    return cls(**{n: float(data[n]) for n in names if n in data})

@@ -1,0 +1,23 @@
+"""Integrators sharing one step interface; `METHODS` maps scene names to classes."""
+
+from finger_sim.integrators.adaptive import AdaptiveReference
+from finger_sim.integrators.base import Integrator, TorqueFn
+from finger_sim.integrators.explicit import RK4, ExplicitRungeKutta, PaperEuler
+from finger_sim.integrators.radau import RadauIIA
+from finger_sim.integrators.rattle import Rattle
+
+METHODS: dict[str, type[Integrator]] = {
+    cls.name: cls for cls in (PaperEuler, RK4, Rattle, RadauIIA, AdaptiveReference)
+}
+
+__all__ = [
+    "METHODS",
+    "AdaptiveReference",
+    "ExplicitRungeKutta",
+    "Integrator",
+    "PaperEuler",
+    "RK4",
+    "RadauIIA",
+    "Rattle",
+    "TorqueFn",
+]

@@ -1,0 +1,64 @@
+"""Linear stability of a method on a scene: the fastest mode against dt.
+
+The finger has one degree of freedom; along the null-space direction n of Φ_q
+(n = g₁ × g₂) its linearization is I s² + C s + K = 0 with I = nᵀMn, K = nᵀ(∂²V)n
+from the spring and C = nᵀ C n from the joint dampers. A method is stable at dt when
+both roots s·dt lie in its stability region; this is checked over the reachable range.
+"""
+
+from __future__ import annotations
+
+import cmath
+import math
+
+from finger_sim import kinematics
+from finger_sim.dynamics import FingerSystem
+from finger_sim.forces import JointDamping, PipSpring
+from finger_sim.integrators.base import Integrator
+from finger_sim.kinematics import Vec3
+
+#: Poses sampled across the reachable MCP range when looking for the stiffest one.
+SAMPLES = 33
+#: Stay this far (rad) from the toggles, where the θ1-parametrized assembly is singular.
+TOGGLE_MARGIN = 1e-3
+
+
+def modal_roots(system: FingerSystem, q: Vec3) -> tuple[complex, complex]:
+    """Roots s (1/s) of I s² + C s + K = 0 for the 1-DOF linearization at q."""
+    g1, g2 = system.constraint_jacobian(q)
+    n = (g1[1] * g2[2] - g1[2] * g2[1], g1[2] * g2[0] - g1[0] * g2[2], g1[0] * g2[1] - g1[1] * g2[0])
+    m = system.mass_matrix(q)
+    inertia = sum(n[i] * m[i][j] * n[j] for i in range(3) for j in range(3))
+    stiffness = sum(e.stiffness_along(n) for e in system.elements if isinstance(e, PipSpring))
+    damping = sum(e.damping_along(n) for e in system.elements if isinstance(e, JointDamping))
+    disc = cmath.sqrt(damping * damping - 4.0 * inertia * stiffness)
+    return ((-damping + disc) / (2.0 * inertia), (-damping - disc) / (2.0 * inertia))
+
+
+def fastest_mode(system: FingerSystem, mcp_range: tuple[float, float]) -> complex:
+    """The modal root of largest magnitude over poses θ1 in mcp_range (rad), 1/s."""
+    lo, hi = kinematics.assembly_range(system.params)
+    lo, hi = max(mcp_range[0], lo + TOGGLE_MARGIN), min(mcp_range[1], hi - TOGGLE_MARGIN)
+    worst = 0j
+    for i in range(SAMPLES):
+        q = kinematics.assemble(system.params, lo + (hi - lo) * i / (SAMPLES - 1))
+        for s in modal_roots(system, q):
+            if abs(s) > abs(worst):
+                worst = s
+    return worst
+
+
+def stable_at(method: type[Integrator], root: complex, dt: float) -> bool:
+    """Whether `method` is stable on a mode with root s at step dt (checks s and its conjugate)."""
+    return method.is_stable(root * dt) and method.is_stable(root.conjugate() * dt)
+
+
+def largest_stable_dt(method: type[Integrator], root: complex, dt: float) -> float:
+    """The largest step ≤ dt at which `method` is stable on the mode (bisection), s."""
+    if stable_at(method, root, dt):
+        return dt
+    lo, hi = 0.0, dt
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if stable_at(method, root, mid) else (lo, mid)
+    return lo if lo > 0 else math.nan

@@ -1,0 +1,48 @@
+"""ament_python package finger_sim: `colcon build` on a ROS 2 machine, or `pip install .[ros]` in a venv."""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = "finger_sim"
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=find_packages(exclude=["test", "test.*"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
+        (f"share/{PACKAGE}", ["package.xml"]),
+        (f"share/{PACKAGE}/config", glob("config/*.yaml")),
+    ],
+    package_data={PACKAGE: ["py.typed"]},
+    python_requires=">=3.10",
+    install_requires=["numpy", "scipy", "pyyaml", "matplotlib", "tqdm", "mcap>=1.2", "mcap-ros2-support>=0.5"],
+    extras_require={
+        # ROS 2 Jazzy's Python stack from PyPI, for machines without a ROS install.
+        "ros": [
+            "ros-jazzy-rclpy[fastrtps]",
+            "ros-jazzy-sensor-msgs",
+            "ros-jazzy-std-msgs",
+            "ros-jazzy-geometry-msgs",
+            "ros-jazzy-rosgraph-msgs",
+            "ros-jazzy-std-srvs",
+            "ros-jazzy-diagnostic-msgs",
+            "ros-jazzy-visualization-msgs",
+        ],
+        "test": ["pytest", "pytest-timeout", "rosbags"],
+        "bench": ["mujoco"],
+    },
+    zip_safe=True,
+    maintainer="finger_sim developers",
+    description="Constrained dynamics of a four-bar prosthetic finger with a ROS 2 node.",
+    license="Apache-2.0",
+    entry_points={
+        "console_scripts": [
+            "finger-sim = finger_sim.cli:main",
+            "finger_node = finger_sim.ros.node:main",
+            "finger_pd_controller = finger_sim.ros.pd_controller:main",
+            "finger_replay = finger_sim.ros.replay:main",
+        ],
+    },
+)
