@@ -1,0 +1,355 @@
+"""Reading MCAP logs without ROS: topics, times, metadata, decoded messages and an info text.
+
+`read_log(path)` (or `LogReader(path)`) indexes a file and raises a LogFileError subclass,
+naming the file and the problem, for anything it cannot read. A complete file is indexed
+from its summary section. A file without a valid footer (recorder killed, disk full) is
+scanned record by record up to the first record that runs past its end: that prefix stays
+readable and `LogReader.truncation` holds a TruncatedLogError describing the cut, for a
+tool to warn and exit nonzero. Messages are decoded by mcap_ros2 from the schemas in the
+file, so neither rclpy nor message packages are needed.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any, BinaryIO, NamedTuple
+
+from mcap.reader import SeekingReader
+from mcap.records import Channel, Chunk, DataEnd, Header, McapRecord, Message, Metadata, Schema
+from mcap.stream_reader import StreamReader, breakup_chunk
+from mcap.writer import MCAP0_MAGIC
+from mcap_ros2.decoder import DecoderFactory
+
+from .errors import (
+    CorruptLogError,
+    LogDecodeError,
+    LogFileError,
+    LogNotFoundError,
+    MissingMetadataError,
+    MissingTopicsError,
+    NotMcapError,
+    TruncatedLogError,
+)
+
+FINGER_SIM_METADATA = "finger_sim"  # name of the metadata record the node writes
+_RECORD_PREFIX = 1 + 8  # opcode byte and uint64 record length before every record's body
+_HEAD_BYTES = 16  # bytes read to tell what a non-MCAP file is
+_UNIX_TIME_NS = 10**18  # later log times are taken as Unix time (after 2001) and also shown as a date
+_INFO_VALUE_CHARS = 60  # metadata values longer than this (or multi-line) are summarised in info()
+
+
+@dataclass(frozen=True)
+class TopicInfo:
+    """One topic of a log: its ROS 2 type ('pkg/msg/Type'), message encoding and message count."""
+
+    topic: str
+    type: str
+    encoding: str
+    count: int
+
+
+class LogMessage(NamedTuple):
+    """A decoded message; `msg` has the fields of the ROS message as attributes."""
+
+    topic: str
+    log_time_ns: int
+    msg: Any
+
+
+@dataclass(frozen=True)
+class _Truncated:
+    """End of a scan: the record at `offset` runs past the end of the file."""
+
+    offset: int
+
+
+class LogReader:
+    """The index of one MCAP log plus decoding access to its messages.
+
+    Attributes: path, size (bytes), profile, library, topics (by name, sorted),
+    message_count, chunk_count, start_ns and end_ns (log times; None without messages),
+    metadata (record name → key → value; for a repeated name later keys win),
+    truncation (TruncatedLogError or None).
+    """
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        self.path = Path(path)
+        if not self.path.exists():
+            raise LogNotFoundError(self.path)
+        if self.path.is_dir():
+            raise NotMcapError(self.path, "a directory; for a rosbag2 bag pass the .mcap file inside it")
+        self.size = self.path.stat().st_size
+        self.profile = self.library = ""
+        self.chunk_count = self.message_count = 0
+        self.start_ns: int | None = None
+        self.end_ns: int | None = None
+        self.metadata: dict[str, dict[str, str]] = {}
+        self.truncation: TruncatedLogError | None = None
+        self._schemas: dict[int, Schema] = {}
+        self._channels: dict[int, Channel] = {}
+        self._counts: dict[int, int] = {}
+        with self._open() as file:
+            head = file.read(_HEAD_BYTES)
+            if not head.startswith(MCAP0_MAGIC):
+                raise NotMcapError(self.path, _describe(head))
+            file.seek(-len(MCAP0_MAGIC), os.SEEK_END)
+            # Without the closing magic the file was cut short; with it, damage is corruption.
+            self._complete = file.read() == MCAP0_MAGIC
+            if not (self._complete and self._index_summary(file)):
+                self._index_scan(file)
+        self.topics = self._topics()
+
+    # -- queries --------------------------------------------------------------------------------
+
+    @property
+    def truncated(self) -> bool:
+        """True if the file ends inside a record (only its intact prefix is readable)."""
+        return self.truncation is not None
+
+    @property
+    def duration_s(self) -> float:
+        """Log time from the first to the last message, s (0 without messages)."""
+        if self.start_ns is None or self.end_ns is None:
+            return 0.0
+        return (self.end_ns - self.start_ns) / 1e9
+
+    def metadata_record(self, name: str = FINGER_SIM_METADATA) -> dict[str, str]:
+        """The metadata record `name` (default: the node's 'finger_sim'), or MissingMetadataError."""
+        if name not in self.metadata:
+            raise MissingMetadataError(self.path, name, self.metadata)
+        return dict(self.metadata[name])
+
+    def require_topics(self, topics: Iterable[str]) -> None:
+        """Raise MissingTopicsError unless every topic in `topics` is in the log."""
+        missing = set(topics) - self.topics.keys()
+        if missing:
+            raise MissingTopicsError(self.path, missing, self.topics)
+
+    def messages(self, topics: str | Iterable[str] | None = None) -> Iterator[LogMessage]:
+        """Decoded messages (topic, log_time_ns, msg) in file order, optionally of some topics only.
+
+        File order is recording order. For a truncated log the iteration ends at the cut;
+        a corrupt chunk raises CorruptLogError, an undecodable message LogDecodeError, both
+        after the messages before them have been yielded.
+        """
+        wanted = None if topics is None else {topics} if isinstance(topics, str) else set(topics)
+        if wanted is not None:
+            self.require_topics(wanted)  # here, not at the first next()
+        return self._messages(wanted)
+
+    def _messages(self, wanted: set[str] | None) -> Iterator[LogMessage]:
+        schemas, channels = dict(self._schemas), dict(self._channels)
+        decoders: dict[int, Callable[[bytes], Any]] = {}
+        factory = DecoderFactory()
+        with self._open() as file:
+            for record in self._records(file):
+                if isinstance(record, Schema):
+                    schemas[record.id] = record
+                elif isinstance(record, Channel):
+                    channels[record.id] = record
+                elif isinstance(record, Message):
+                    channel = channels.get(record.channel_id)
+                    if channel is None:
+                        problem = f"a message names undeclared channel {record.channel_id}"
+                        raise CorruptLogError(self.path, None, problem)
+                    if wanted is None or channel.topic in wanted:
+                        if channel.id not in decoders:
+                            schema = schemas.get(channel.schema_id)
+                            decoders[channel.id] = self._decoder(factory, channel, schema)
+                        msg = self._decode(decoders[channel.id], channel, record)
+                        yield LogMessage(channel.topic, record.log_time, msg)
+
+    def info(self) -> str:
+        """A short human summary, like `ros2 bag info`, plus the 'finger_sim' metadata."""
+        rows = [
+            ("File", str(self.path)),
+            ("Size", _format_bytes(self.size)),
+            ("Status", "complete" if self.truncation is None else f"TRUNCATED, {self.truncation.problem}"),
+            ("Profile", f"{self.profile or '(none)'} (written by {self.library or 'unknown'})"),
+            ("Duration", f"{self.duration_s:.9f} s"),
+            ("Start", _format_time(self.start_ns)),
+            ("End", _format_time(self.end_ns)),
+            ("Messages", f"{self.message_count} in {self.chunk_count} chunks"),
+        ]
+        topics = [f"{t.topic} | {t.type} | {t.count} msgs | {t.encoding}" for t in self.topics.values()]
+        rows += [("Topics" if i == 0 else "", text) for i, text in enumerate(topics or ["none"])]
+        names = sorted(self.metadata, key=lambda name: (name != FINGER_SIM_METADATA, name))
+        rows.append(("Metadata", ", ".join(names) or "none"))
+        for key, value in sorted(self.metadata.get(FINGER_SIM_METADATA, {}).items()):
+            rows.append(("", f"  {key}: {_summarise(value)}"))
+        width = max(len(label) for label, _ in rows) + 2
+        return "\n".join(f"{label + ':' if label else '':<{width}}{value}" for label, value in rows)
+
+    # -- indexing -------------------------------------------------------------------------------
+
+    def _open(self) -> BinaryIO:
+        try:
+            return self.path.open("rb")
+        except OSError as exc:
+            raise LogFileError(self.path, f"cannot open ({exc.strerror or exc})") from exc
+
+    def _index_summary(self, file: BinaryIO) -> bool:
+        """Index from the summary section; False if there is none or it is damaged."""
+        file.seek(0)
+        try:
+            reader = SeekingReader(file)
+            header = reader.get_header()
+            summary = reader.get_summary()
+            if summary is None or summary.statistics is None:
+                return False
+            metadata = list(reader.iter_metadata())
+        except Exception:  # any damage at the end: the record-by-record scan will say exactly what
+            return False
+        stats = summary.statistics
+        self.profile, self.library = header.profile, header.library
+        self._schemas, self._channels = dict(summary.schemas), dict(summary.channels)
+        self._counts = dict(stats.channel_message_counts)
+        self.message_count, self.chunk_count = stats.message_count, stats.chunk_count
+        if stats.message_count:
+            self.start_ns, self.end_ns = stats.message_start_time, stats.message_end_time
+        for record in metadata:
+            self.metadata.setdefault(record.name, {}).update(record.metadata)
+        return True
+
+    def _index_scan(self, file: BinaryIO) -> None:
+        """Index by reading every record up to the end of the data section or the cut."""
+        for record in self._records(file):
+            if isinstance(record, Message):
+                self._counts[record.channel_id] = self._counts.get(record.channel_id, 0) + 1
+                self.message_count += 1
+                t = record.log_time
+                self.start_ns = t if self.start_ns is None else min(self.start_ns, t)
+                self.end_ns = t if self.end_ns is None else max(self.end_ns, t)
+            elif isinstance(record, Schema):
+                self._schemas[record.id] = record
+            elif isinstance(record, Channel):
+                self._channels[record.id] = record
+            elif isinstance(record, Chunk):
+                self.chunk_count += 1
+            elif isinstance(record, Metadata):
+                self.metadata.setdefault(record.name, {}).update(record.metadata)
+            elif isinstance(record, Header):
+                self.profile, self.library = record.profile, record.library
+            elif isinstance(record, _Truncated):
+                self.truncation = TruncatedLogError(self.path, record.offset, self.size, self.message_count)
+
+    def _records(self, file: BinaryIO) -> Iterator[McapRecord | _Truncated]:
+        """Data-section records in file order, chunks followed by their contents.
+
+        A parse failure in a file without a valid footer, at a record that runs past the end
+        of the file, ends the scan with _Truncated; any other failure is CorruptLogError.
+        """
+        file.seek(len(MCAP0_MAGIC))
+        # A record longer than the file is damage: refuse it before reading it.
+        records = StreamReader(file, skip_magic=True, emit_chunks=True, record_size_limit=self.size).records
+        while True:
+            offset = file.tell()
+            try:
+                record = next(records)
+            except StopIteration:
+                return
+            except Exception as exc:  # mcap's parsers raise assorted types at a cut or on garbage
+                if not self._complete and _runs_past_end(file, offset, self.size):
+                    yield _Truncated(offset)
+                    return
+                raise CorruptLogError(self.path, offset, f"malformed record ({exc!r})") from exc
+            if isinstance(record, DataEnd):
+                return
+            yield record
+            if isinstance(record, Chunk):
+                try:
+                    contents = breakup_chunk(record, validate_crc=True)
+                except Exception as exc:  # decompressors and the CRC check raise assorted types
+                    raise CorruptLogError(
+                        self.path, offset, f"chunk does not decompress or fails its CRC ({exc!r})"
+                    ) from exc
+                yield from contents
+
+    def _topics(self) -> dict[str, TopicInfo]:
+        topics: dict[str, TopicInfo] = {}
+        for channel in sorted(self._channels.values(), key=lambda c: (c.topic, c.id)):
+            schema = self._schemas.get(channel.schema_id)
+            count = self._counts.get(channel.id, 0)
+            if channel.topic in topics:  # several channels on one topic: add up
+                count += topics[channel.topic].count
+            topics[channel.topic] = TopicInfo(
+                channel.topic, schema.name if schema else "(no schema)", channel.message_encoding, count
+            )
+        return topics
+
+    def _decoder(
+        self, factory: DecoderFactory, channel: Channel, schema: Schema | None
+    ) -> Callable[[bytes], Any]:
+        try:
+            decoder = factory.decoder_for(channel.message_encoding, schema)
+        except Exception as exc:  # the .msg parser raises assorted types on a bad schema
+            raise LogDecodeError(self.path, channel.topic, f"bad schema ({exc!r})") from exc
+        if decoder is None:
+            encodings = f"message encoding {channel.message_encoding!r} with schema encoding "
+            encodings += repr(schema.encoding if schema else "none")
+            raise LogDecodeError(self.path, channel.topic, f"{encodings} is not ROS 2 CDR")
+        return decoder
+
+    def _decode(self, decoder: Callable[[bytes], Any], channel: Channel, message: Message) -> Any:
+        try:
+            return decoder(message.data)
+        except Exception as exc:  # the CDR reader raises assorted types on bad data
+            problem = f"message at {message.log_time} ns: {exc!r}"
+            raise LogDecodeError(self.path, channel.topic, problem) from exc
+
+
+def read_log(path: str | os.PathLike[str], *, expected_topics: Iterable[str] = ()) -> LogReader:
+    """Index the log at `path`; raise MissingTopicsError if any of `expected_topics` is absent."""
+    reader = LogReader(path)
+    reader.require_topics(expected_topics)
+    return reader
+
+
+def _runs_past_end(file: BinaryIO, offset: int, size: int) -> bool:
+    """Whether the record starting at `offset` needs bytes beyond the end of the file."""
+    if offset + _RECORD_PREFIX > size:
+        return True
+    file.seek(offset + 1)
+    length = int.from_bytes(file.read(8), "little")
+    return offset + _RECORD_PREFIX + length > size
+
+
+def _describe(head: bytes) -> str:
+    """What a file that does not start with the MCAP magic looks like."""
+    if not head:
+        return "the file is empty"
+    if head.startswith(b"SQLite format 3"):
+        return "an SQLite database, e.g. a rosbag2 .db3 file"
+    if head.startswith(b"#ROSBAG"):
+        return "a ROS 1 bag"
+    return f"it starts with {head!r}"
+
+
+def _format_bytes(size: int) -> str:
+    if size < 1024:
+        return f"{size} B"
+    value, unit = size / 1024, "KiB"
+    for larger in ("MiB", "GiB"):
+        if value < 1024:
+            break
+        value, unit = value / 1024, larger
+    return f"{value:.1f} {unit}"
+
+
+def _format_time(ns: int | None) -> str:
+    if ns is None:
+        return "-"
+    text = f"{ns // 10**9}.{ns % 10**9:09d} s"
+    if ns >= _UNIX_TIME_NS:
+        text += f" ({datetime.fromtimestamp(ns / 1e9, timezone.utc):%Y-%m-%d %H:%M:%S} UTC)"
+    return text
+
+
+def _summarise(value: str) -> str:
+    if "\n" not in value.strip() and len(value) <= _INFO_VALUE_CHARS:
+        return value
+    return f"<{len(value.splitlines())} lines, {len(value)} chars>"

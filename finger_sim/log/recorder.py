@@ -1,0 +1,514 @@
+"""A non-blocking, crash-tolerant MCAP recorder for ROS 2 messages that rosbag2 tools can read.
+
+Life cycle: `McapRecorder(path)` → `open()` → `register_channel()` … → `write()` and
+`add_metadata()` … → `close()` (safe to call twice); or `with McapRecorder(path) as rec: …`.
+
+The file is what `ros2 bag record -s mcap` writes: header profile 'ros2'; one schema per type,
+named 'pkg/msg/Type', encoding 'ros2msg', holding the complete concatenated definition
+(finger_sim.log.definitions); one channel per absolute topic with message encoding 'cdr';
+messages with the caller's log and publish times (ns) and a per-channel sequence number
+counted from 1 (a message dropped before the queue leaves a gap); compressed chunks (zstd
+by default) with CRCs and message indexes; close() writes the summary (statistics, chunk and
+metadata indexes).
+
+QoS: channels carry no 'offered_qos_profiles' metadata and the file has no 'rosbag2' metadata
+record. rosbag2 reads a missing key as "no recorded offers" and replays with its default QoS,
+whereas a QoS YAML in the wrong bag-metadata version would be misread.
+
+Crash safety: a chunk is closed — written and flushed to the operating system — before a
+message that would stretch its log-time span to `chunk_interval_s`, once its uncompressed
+payload reaches `chunk_size`, and after `idle_flush_s` wall seconds without messages (a paused
+sim). Closing uses `mcap.writer.Writer.flush()` (mcap >= 1.5); the Writer's own size trigger
+is set out of reach so that every chunk boundary goes through it. A `kill -9` loses the open
+chunk and the summary; the prefix stays readable by linear readers (mcap's StreamReader,
+finger_sim.log.reader).
+
+Serialization happens in the caller, so a message object may be reused as soon as write()
+returns. CDR bytes are written as given. Messages are encoded by mcap_ros2 from the channel's
+schema (its `_dynamic.serialize_dynamic`, the encoder its own Writer uses): plain objects or
+dicts with the message's fields, e.g. messages decoded by finger_sim.log.reader, and rclpy
+messages read attribute by attribute (~30 µs for a JointState). rclpy values that encoder
+does not take (numpy arrays of fixed-size fields, `byte` scalars) go through rclpy's
+serialize_message and a decode first (two to three times slower). rclpy's bytes are never
+written as they are: rmw sizes that buffer by an estimate and leaves uninitialised padding
+and trailing bytes, so files would differ run to run and strict readers (rosbags) reject
+the trailing bytes.
+
+Threading: all file I/O runs on one writer thread fed by a queue; the caller only checks,
+serializes and enqueues. More than `queue_size` pending messages, an unwritable path or a
+full disk never raise: each kind of trouble is reported once through `on_problem` (default:
+logger 'finger_sim.log'; may be called from the writer thread) and the lost messages are
+counted in `dropped`. After an I/O error the recorder writes nothing more. After close(),
+written + dropped == the number of write() calls that did not raise.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import math
+import operator
+import os
+import queue
+import re
+import stat
+import threading
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from enum import Enum, auto
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+from mcap.records import Schema
+from mcap.well_known import MessageEncoding, Profile, SchemaEncoding
+from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
+from mcap_ros2._dynamic import serialize_dynamic
+from mcap_ros2.decoder import DecoderFactory
+
+from .definitions import message_definition, normalize_type_name, type_name_of
+from .errors import LogArgumentError, RecorderStateError
+
+DEFAULT_CHUNK_INTERVAL_S = 0.5  # log-time span of one chunk: what a kill -9 may lose
+DEFAULT_CHUNK_SIZE = 1 << 20  # uncompressed bytes; bounds memory if an interval holds many messages
+DEFAULT_QUEUE_SIZE = 10_000  # pending messages (~1 s of a 1 kHz node's six topics) before dropping
+DEFAULT_IDLE_FLUSH_S = 1.0  # wall seconds without messages after which the open chunk is closed
+_NO_SIZE_TRIGGER = 1 << 62  # chunk_size given to mcap's Writer so only this module closes chunks
+_MAX_TIME_NS = 1 << 64  # MCAP timestamps are uint64
+_SEQUENCE_MODULUS = 1 << 32  # MCAP sequence numbers are uint32: they wrap
+_TOPIC = re.compile(r"^(/[A-Za-z_][A-Za-z0-9_]*)+$")  # absolute, fully expanded ROS 2 topic name
+LIBRARY = f"finger_sim.log; {LIBRARY_IDENTIFIER}"
+
+_logger = logging.getLogger("finger_sim.log")
+
+
+class _State(Enum):
+    NEW = "not open yet"
+    OPEN = "open"
+    CLOSED = "closed"
+
+
+class _Problem(Enum):
+    """Kinds of trouble, each reported once per recorder."""
+
+    QUEUE_FULL = auto()
+    IO = auto()
+    CLOSED = auto()  # write() after close()
+    STUCK = auto()  # close() timed out
+
+
+@dataclass(frozen=True, slots=True)
+class _Register:
+    topic: str
+    type_name: str
+    definition: str
+
+
+@dataclass(frozen=True, slots=True)
+class _Metadata:
+    name: str
+    data: dict[str, str]
+
+
+@dataclass(frozen=True, slots=True)
+class _Message:
+    topic: str
+    data: bytes
+    log_time_ns: int
+    publish_time_ns: int
+    sequence: int
+
+
+_CLOSE = object()  # queue sentinel: finish the file and end the writer thread
+
+
+@dataclass(frozen=True, slots=True)
+class _Codec:
+    """CDR encoder and decoder of one type, both built from the definition stored in the file."""
+
+    definition: str
+    encode: Callable[[Any], bytes]
+    decode: Callable[[bytes], Any]
+
+
+@dataclass(slots=True)
+class _Channel:
+    type_name: str
+    codec: _Codec
+    last_sequence: int = 0
+
+
+class McapRecorder:
+    """Records ROS 2 messages to one MCAP file without blocking the caller. Thread-safe.
+
+    path: the .mcap file, overwritten if it exists.
+    chunk_interval_s: longest log-time span of a chunk (s of the caller's clock, e.g. sim time).
+    chunk_size: uncompressed bytes after which a chunk is closed whatever its span.
+    compression: chunk compression (mcap.writer.CompressionType).
+    queue_size: messages that may wait for the writer thread before new ones are dropped.
+    idle_flush_s: wall seconds without messages after which the open chunk is closed.
+    on_problem: called once per kind of trouble with a one-line description.
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        *,
+        chunk_interval_s: float = DEFAULT_CHUNK_INTERVAL_S,
+        chunk_size: int = DEFAULT_CHUNK_SIZE,
+        compression: CompressionType = CompressionType.ZSTD,
+        queue_size: int = DEFAULT_QUEUE_SIZE,
+        idle_flush_s: float = DEFAULT_IDLE_FLUSH_S,
+        on_problem: Callable[[str], None] | None = None,
+    ) -> None:
+        if not (math.isfinite(chunk_interval_s) and chunk_interval_s > 0):
+            raise LogArgumentError("chunk_interval_s", "a finite number > 0", chunk_interval_s)
+        if chunk_size < 1:
+            raise LogArgumentError("chunk_size", "an int >= 1", chunk_size)
+        if queue_size < 1:
+            raise LogArgumentError("queue_size", "an int >= 1", queue_size)
+        if not (math.isfinite(idle_flush_s) and idle_flush_s > 0):
+            raise LogArgumentError("idle_flush_s", "a finite number > 0", idle_flush_s)
+        if not isinstance(compression, CompressionType):
+            raise LogArgumentError("compression", "a mcap.writer.CompressionType", compression)
+        self._path = Path(path)
+        self._interval_ns = round(chunk_interval_s * 1e9)
+        self._chunk_size = chunk_size
+        self._compression = compression
+        self._queue_size = queue_size
+        self._idle_flush_s = idle_flush_s
+        self._on_problem = on_problem if on_problem is not None else _logger.warning
+        self._queue: queue.SimpleQueue[object] = queue.SimpleQueue()
+        self._free_slots = threading.Semaphore(queue_size)
+        # Guards state, sequences, dropped, reported. Reentrant: a signal handler that calls
+        # close() while the interrupted main thread is inside write() must not deadlock.
+        self._lock = threading.RLock()
+        self._state = _State.NEW
+        self._thread: threading.Thread | None = None
+        self._channels: dict[str, _Channel] = {}
+        self._codecs: dict[str, _Codec] = {}
+        self._reported: set[_Problem] = set()
+        self._written = 0  # changed by the writer thread only
+        self._dropped = 0
+
+    # -- life cycle -------------------------------------------------------------------------
+
+    def open(self) -> McapRecorder:
+        """Start the writer thread, which creates the file. Raises RecorderStateError if reopened."""
+        with self._lock:
+            if self._state is not _State.NEW:
+                raise RecorderStateError("open", self._state.value)
+            self._state = _State.OPEN
+        # Daemon: a node that dies without close() must still exit; its file then reads as a crash.
+        self._thread = threading.Thread(target=self._run, name=f"mcap {self._path.name}", daemon=True)
+        self._thread.start()
+        return self
+
+    def close(self, timeout_s: float | None = None) -> None:
+        """Write what is queued, the open chunk and the summary, then close the file.
+
+        Blocks until done, or for at most `timeout_s` seconds (then reports it once).
+        Idempotent; a recorder never opened just becomes closed.
+        """
+        with self._lock:
+            if self._state is _State.CLOSED:
+                return
+            was_open, self._state = self._state is _State.OPEN, _State.CLOSED
+            if was_open:
+                self._queue.put(_CLOSE)
+        if was_open and self._thread is not None:
+            self._thread.join(timeout_s)
+            if self._thread.is_alive():
+                self._report(_Problem.STUCK, f"MCAP recorder {self._path}: writer still busy after "
+                             f"{timeout_s} s; the file may lack its summary")
+
+    def __enter__(self) -> McapRecorder:
+        return self.open()
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
+
+    # -- setup --------------------------------------------------------------------------------
+
+    def register_channel(self, topic: str, msg_type: str | type, *, definition: str | None = None) -> None:
+        """Declare a topic and its type (an rclpy message class or 'pkg/msg/Type').
+
+        definition: the complete 'ros2msg' text (e.g. a schema copied from another log); by default
+        built from the installed .msg files (MessageDefinitionNotFoundError if one is missing).
+        Registering a topic again with the same type does nothing; with another type, or a type
+        again with a different definition, raises LogArgumentError.
+        """
+        if not isinstance(topic, str) or not _TOPIC.match(topic):
+            raise LogArgumentError("topic", "an absolute ROS 2 name such as '/joint_states'", topic)
+        type_name = normalize_type_name(msg_type) if isinstance(msg_type, str) else type_name_of(msg_type)
+        existing = self._channels.get(topic)
+        if existing is not None:
+            if existing.type_name != type_name:
+                expected = f"{existing.type_name} (as registered for {topic})"
+                raise LogArgumentError("msg_type", expected, type_name)
+            return
+        codec = self._codecs.get(type_name)
+        if codec is None:
+            codec = _codec(type_name, message_definition(type_name) if definition is None else definition)
+        elif definition is not None and definition != codec.definition:
+            expected = f"the text registered before for {type_name}"
+            raise LogArgumentError("definition", expected, "another text")
+        with self._lock:
+            self._require_open("register a channel")
+            self._codecs[type_name] = codec
+            self._channels[topic] = _Channel(type_name, codec)
+            self._queue.put(_Register(topic, type_name, codec.definition))
+
+    def add_metadata(self, name: str, data: Mapping[str, str]) -> None:
+        """Queue a metadata record (e.g. name 'finger_sim': scene YAML, parameters, version)."""
+        if not isinstance(name, str) or not name:
+            raise LogArgumentError("name", "a non-empty str", name)
+        if not all(isinstance(k, str) and isinstance(v, str) for k, v in data.items()):
+            raise LogArgumentError("data", "a mapping of str to str", data)
+        with self._lock:
+            self._require_open("add metadata")
+            self._queue.put(_Metadata(name, dict(data)))
+
+    # -- hot path -----------------------------------------------------------------------------
+
+    def write(
+        self, topic: str, message: Any, log_time_ns: int, *, publish_time_ns: int | None = None
+    ) -> bool:
+        """Queue one message; True if queued, False if dropped. Never raises for I/O trouble.
+
+        message: CDR bytes, an rclpy message of the topic's type, or an object or dict with
+        its fields. log_time_ns, publish_time_ns: ns on the caller's clock (sim time);
+        publish defaults to log. Raises LogArgumentError for an unregistered topic, a message
+        that does not fit the topic's type or a bad time, and RecorderStateError before
+        open(); after close() the message is dropped and counted.
+        """
+        log_ns = _as_time_ns("log_time_ns", log_time_ns)
+        publish_ns = log_ns if publish_time_ns is None else _as_time_ns("publish_time_ns", publish_time_ns)
+        if self._state is _State.NEW:
+            raise RecorderStateError("write", self._state.value)
+        channel = self._channels.get(topic)
+        if channel is None and self._state is _State.OPEN:
+            registered = ", ".join(self._channels) or "none yet"
+            raise LogArgumentError("topic", f"a registered topic ({registered})", topic)
+        data = self._serialized(topic, channel, message) if channel is not None else b""
+        with self._lock:
+            if self._state is not _State.OPEN or channel is None:  # closed, maybe meanwhile
+                self._dropped += 1
+                problem, text = _Problem.CLOSED, f"MCAP recorder {self._path} is closed; dropping messages"
+            elif not self._free_slots.acquire(blocking=False):
+                self._dropped += 1
+                # The number is spent: the gap tells a reader where the drop was.
+                channel.last_sequence = (channel.last_sequence + 1) % _SEQUENCE_MODULUS
+                problem, text = _Problem.QUEUE_FULL, (
+                    f"MCAP recorder {self._path}: {self._queue_size} messages wait for the writer; "
+                    "dropping messages (see the dropped count)"
+                )
+            else:
+                channel.last_sequence = (channel.last_sequence + 1) % _SEQUENCE_MODULUS
+                self._queue.put(_Message(topic, data, log_ns, publish_ns, channel.last_sequence))
+                return True
+        self._report(problem, text)
+        return False
+
+    @property
+    def path(self) -> Path:
+        """The file being written."""
+        return self._path
+
+    @property
+    def written(self) -> int:
+        """Messages in chunks that reached the file (flushed to the operating system)."""
+        return self._written
+
+    @property
+    def dropped(self) -> int:
+        """Messages lost: queue full, written after close, or hit by an I/O error."""
+        return self._dropped
+
+    # -- internals ----------------------------------------------------------------------------
+
+    def _serialized(self, topic: str, channel: _Channel, message: Any) -> bytes:
+        if isinstance(message, (bytes, bytearray, memoryview)):
+            return bytes(message)
+        is_rclpy = hasattr(type(message), "get_fields_and_field_types")
+        if is_rclpy and (got := type_name_of(message)) != channel.type_name:
+            raise LogArgumentError("message", f"a {channel.type_name} for {topic}", got)
+        try:
+            if is_rclpy:
+                try:
+                    return channel.codec.encode(message)
+                except Exception:  # a numpy array or a byte scalar: let rclpy lay the values out
+                    # Imported here: offline tools never hand over rclpy messages and need no ROS.
+                    from rclpy.serialization import serialize_message
+
+                    message = channel.codec.decode(serialize_message(message))
+            return channel.codec.encode(message)
+        except Exception as exc:  # rclpy's and mcap_ros2's encoders raise assorted types on a misfit
+            expected = f"the fields of {channel.type_name} for {topic}"
+            raise LogArgumentError("message", expected, exc) from exc
+
+    def _require_open(self, action: str) -> None:
+        if self._state is not _State.OPEN:
+            raise RecorderStateError(action, self._state.value)
+
+    def _report(self, problem: _Problem, text: str) -> None:
+        with self._lock:
+            if problem in self._reported:
+                return
+            self._reported.add(problem)
+        self._on_problem(text)
+
+    def _drop(self, count: int) -> None:
+        with self._lock:
+            self._dropped += count
+
+    def _run(self) -> None:
+        """Writer thread: drain the queue into the file until the close sentinel."""
+        file = self._create_file()
+        handed = 0  # messages given to the file; each one ends up written or dropped
+        while True:
+            try:
+                timeout = self._idle_flush_s if file is not None and file.pending else None
+                item = self._queue.get(timeout=timeout)
+            except queue.Empty:
+                item = None  # idle: close the open chunk
+            if isinstance(item, _Message):
+                self._free_slots.release()
+                if file is None:
+                    self._drop(1)
+                    continue
+                handed += 1
+            if file is not None:
+                try:
+                    self._written += file.finish() if item is _CLOSE else file.handle(item)
+                except Exception as exc:  # OSError (disk full, I/O error) or a failure inside mcap
+                    self._fail(exc)
+                    self._drop(handed - self._written)
+                    file.abandon()
+                    file = None
+            if item is _CLOSE:
+                return
+
+    def _create_file(self) -> _ChunkedFile | None:
+        try:
+            return _ChunkedFile(self._path, interval_ns=self._interval_ns, chunk_size=self._chunk_size,
+                                compression=self._compression)
+        except Exception as exc:  # OSError, or mcap's UnsupportedCompressionError
+            self._fail(exc)
+            return None
+
+    def _fail(self, exc: Exception) -> None:
+        self._report(_Problem.IO, f"MCAP recorder cannot write {self._path}: {exc}; "
+                     "dropping every further message")
+
+
+class _ChunkedFile:
+    """The writer thread's file: one mcap Writer whose chunks this class closes (see module doc)."""
+
+    def __init__(
+        self, path: Path, *, interval_ns: int, chunk_size: int, compression: CompressionType
+    ) -> None:
+        self._file = open(path, "wb")  # closed by finish() or abandon()
+        try:
+            self._writer = Writer(self._file, chunk_size=_NO_SIZE_TRIGGER, compression=compression)
+            self._writer.start(profile=Profile.ROS2, library=LIBRARY)
+            self._writer.flush()  # the header reaches the disk before any message
+        except BaseException:
+            self.abandon()
+            raise
+        self._interval_ns = interval_ns
+        self._chunk_size = chunk_size
+        self._schema_ids: dict[str, int] = {}
+        self._channel_ids: dict[str, int] = {}
+        self.pending = 0  # messages in the open chunk
+        self._pending_bytes = 0
+        self._first_ns = self._last_ns = 0  # log-time range of the open chunk
+
+    def handle(self, item: object) -> int:
+        """Apply one queue item (None: idle); returns messages newly committed to the file."""
+        if isinstance(item, _Message):
+            return self._add_message(item)
+        if isinstance(item, _Register):
+            schema_id = self._schema_ids.get(item.type_name)
+            if schema_id is None:
+                schema_id = self._writer.register_schema(
+                    name=item.type_name, encoding=SchemaEncoding.ROS2, data=item.definition.encode()
+                )
+                self._schema_ids[item.type_name] = schema_id
+            self._channel_ids[item.topic] = self._writer.register_channel(
+                topic=item.topic, message_encoding=MessageEncoding.CDR, schema_id=schema_id
+            )
+            return 0
+        if isinstance(item, _Metadata):
+            self._writer.add_metadata(item.name, item.data)
+            self._file.flush()  # the record is outside chunks: push it out without cutting the chunk
+            return 0
+        return self._close_chunk()  # idle
+
+    def _add_message(self, message: _Message) -> int:
+        t = message.log_time_ns
+        span = max(self._last_ns, t) - min(self._first_ns, t)
+        committed = self._close_chunk() if self.pending and span >= self._interval_ns else 0
+        self._writer.add_message(
+            channel_id=self._channel_ids[message.topic],
+            log_time=t,
+            data=message.data,
+            publish_time=message.publish_time_ns,
+            sequence=message.sequence,
+        )
+        if self.pending == 0:
+            self._first_ns = self._last_ns = t
+        else:
+            self._first_ns, self._last_ns = min(self._first_ns, t), max(self._last_ns, t)
+        self.pending += 1
+        self._pending_bytes += len(message.data)
+        if self._pending_bytes >= self._chunk_size:
+            committed += self._close_chunk()
+        return committed
+
+    def _close_chunk(self) -> int:
+        self._writer.flush()  # finalizes the open chunk (if it holds messages) and flushes the stream
+        committed, self.pending, self._pending_bytes = self.pending, 0, 0
+        return committed
+
+    def finish(self) -> int:
+        """Close the open chunk, write the summary and footer, fsync and close the file."""
+        try:
+            self._writer.finish()  # closes the open chunk too
+            self._file.flush()
+            if stat.S_ISREG(os.fstat(self._file.fileno()).st_mode):  # not a pipe or device
+                os.fsync(self._file.fileno())  # a finished log survives a power cut
+        finally:
+            self._file.close()
+        committed, self.pending = self.pending, 0
+        return committed
+
+    def abandon(self) -> None:
+        """Close the file after a failure, ignoring further errors; the file stays as it is."""
+        with contextlib.suppress(OSError):  # closing flushes the buffer: fails again on a full disk
+            self._file.close()
+
+
+def _codec(type_name: str, definition: str) -> _Codec:
+    """Encoder and decoder for `type_name` from its complete 'ros2msg' definition."""
+    schema = Schema(id=0, name=type_name, encoding=SchemaEncoding.ROS2, data=definition.encode())
+    try:
+        encode = serialize_dynamic(type_name, definition)[type_name]
+        decode = DecoderFactory().decoder_for(MessageEncoding.CDR, schema)
+    except Exception as exc:  # the .msg parser raises assorted types on a bad text
+        expected = f"a complete ros2msg definition of {type_name}"
+        raise LogArgumentError("definition", expected, exc) from exc
+    assert decode is not None  # cdr with a ros2msg schema always has a decoder
+    return _Codec(definition, encode, decode)
+
+
+def _as_time_ns(argument: str, value: Any) -> int:
+    """An MCAP timestamp (uint64 ns) from an int-like value, or LogArgumentError."""
+    try:
+        ns = operator.index(value)
+    except TypeError:
+        raise LogArgumentError(argument, "an integer number of nanoseconds", value) from None
+    if not 0 <= ns < _MAX_TIME_NS:
+        raise LogArgumentError(argument, "0 <= ns < 2**64", value)
+    return ns
