@@ -66,6 +66,9 @@ class Simulator:
 
     def reset(self) -> None:
         """Back to the scene's initial state at t = 0."""
+        # A fresh integrator: a warm start kept from the last run (adaptive's step size,
+        # rattle's Jacobian) would make the rerun differ in the last bits.
+        self.integrator = type(self.integrator)(self.system)
         self.step_index = 0
         self.q, self.v = self.scene.initial_state()
         self._contact = 0  # +1 resting on the upper MCP stop, −1 on the lower, 0 free
@@ -156,7 +159,9 @@ class Simulator:
         keep = 0
         for _ in range(MAX_LOCATE_ITERATIONS):
             s = b - gb * (b - a) / (gb - ga)
-            gs, qs, vs = gap(s)
+            # A step that starts on the stop (g(t) = 0) crosses at t itself: stepping a
+            # zero-length interval would divide by zero in rattle and fail in scipy.
+            gs, qs, vs = gap(s) if s > t else (q[0] - limit, q, v)
             if abs(gs) <= STOP_TOLERANCE or s <= a or s >= b:
                 break
             if (gs > 0) == (gb > 0):

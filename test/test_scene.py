@@ -1,0 +1,232 @@
+"""Scenes: every shipped file read back with an independent YAML read, round trips, and
+every refusal with its exact message (key, what is allowed, what arrived)."""
+
+from __future__ import annotations
+
+import math
+import os
+
+import pytest
+import yaml
+
+import reference as ref
+from finger_sim.errors import ConfigError
+from finger_sim.inputs import Constant, Ramp, Sine, Square, Step
+from finger_sim.integrators import METHODS
+from finger_sim.kinematics import assembly_range
+from finger_sim.model import FingerParams
+from finger_sim.scene import Scene, load_scene, scene_from_dict
+
+SHIPPED = sorted(ref.CONFIG.glob("*.yaml"))
+LO, HI = assembly_range(FingerParams())
+
+
+def test_all_six_scenes_are_shipped():
+    assert [p.stem for p in SHIPPED] == ["bang_bang", "free_swing", "paper_flexion", "paper_to_stop", "stiff_spring", "toggle_passage"]
+
+
+@pytest.mark.parametrize("path", SHIPPED, ids=lambda p: p.stem)
+def test_shipped_scene_holds_the_numbers_in_its_file(path):
+    raw = yaml.safe_load(path.read_text())
+    scene = load_scene(path)
+    model = raw.get("model", {})
+    assert scene.name == path.stem
+    assert scene.description == raw["description"]
+    assert scene.spring_stiffness == model.get("spring_stiffness", 0.001)
+    assert scene.damping == model.get("damping", 0.0)
+    assert scene.restitution == model.get("restitution", 0.0)
+    limits = model.get("joint_limits", {}).get("mcp")
+    assert scene.mcp_limits == (tuple(limits) if limits else None)
+    assert scene.torque.to_dict() == raw["input"]["torque"] | ({"offset": 0.0} if raw["input"]["torque"]["type"] == "square" else {})
+    assert scene.theta1 == raw.get("initial", {}).get("theta1", 0.0)
+    assert scene.theta1_dot == raw.get("initial", {}).get("theta1_dot", 0.0)
+    assert scene.duration == raw["duration"]
+    assert (scene.method, scene.dt) == (raw["integrator"]["method"], raw["integrator"]["dt"])
+    assert scene.params == FingerParams()
+
+
+@pytest.mark.parametrize("path", SHIPPED, ids=lambda p: p.stem)
+def test_round_trip_through_dict_and_yaml(path, tmp_path):
+    scene = load_scene(path)
+    assert scene_from_dict(scene.to_dict(), default_name="other") == scene
+    copy = tmp_path / "copy.yaml"
+    copy.write_text(scene.to_yaml())
+    assert load_scene(copy) == scene
+    # a different reader sees the same mapping
+    assert yaml.safe_load(copy.read_text()) == scene.to_dict()
+
+
+def test_round_trip_of_every_effect_and_profile():
+    base = {
+        "name": "all",
+        "model": {
+            "spring_stiffness": 0.002,
+            "damping": 0.01,
+            "gravity": [0.0, -9.81],
+            "tip_force": [0.1, 0.2],
+            "joint_limits": {"mcp": [-0.1, 1.5]},
+            "restitution": 0.5,
+            "geometry": {"r1": 0.047, "m3": 0.015},
+        },
+        "initial": {"theta1": 0.2, "theta1_dot": -1.0},
+        "duration": 0.5,
+        "integrator": {"method": "radau", "dt": 0.002},
+    }
+    profiles = [
+        {"type": "constant", "value": 0.01},
+        {"type": "ramp", "offset": 0.001, "slope": 0.01},
+        {"type": "step", "before": 0.0, "after": 0.02, "at": 0.1},
+        {"type": "square", "amplitude": 0.004, "frequency": 50.0, "offset": 0.001},
+        {"type": "sine", "amplitude": 0.004, "frequency": 5.0, "offset": 0.0},
+    ]
+    for torque, cls in zip(profiles, (Constant, Ramp, Step, Square, Sine)):
+        scene = scene_from_dict({**base, "input": {"torque": torque}})
+        assert isinstance(scene.torque, cls)
+        assert scene.torque.to_dict() == torque
+        assert scene_from_dict(scene.to_dict()) == scene
+        assert scene.params.r1 == 0.047 and scene.params.m3 == 0.015 and scene.params.r2 == 0.0444
+        assert scene.mcp_limits == (-0.1, 1.5)
+        assert len(scene.force_elements()) == 4
+
+
+def test_defaults_are_the_papers_run():
+    scene = scene_from_dict({})
+    assert scene == Scene()
+    assert scene.torque == Ramp(offset=0.001, slope=0.01)
+    assert (scene.spring_stiffness, scene.duration, scene.theta1, scene.dt) == (0.001, 0.3, 0.0, 0.001)
+    # an absent effect is no element at all
+    assert scene_from_dict({"model": {"spring_stiffness": 0}}).force_elements() == []
+
+
+def test_with_overrides_validates_like_the_file():
+    scene = load_scene(ref.CONFIG / "paper_flexion.yaml").with_overrides(method="radau", dt=0.002, duration=0.1)
+    assert (scene.method, scene.dt, scene.duration) == ("radau", 0.002, 0.1)
+    with pytest.raises(ConfigError, match=r"^integrator\.dt: expected a number > 0, got -0\.001$"):
+        scene.with_overrides(dt=-0.001)
+
+
+# -- refusals ----------------------------------------------------------------------------
+def refusal(data) -> str:
+    with pytest.raises(ConfigError) as info:
+        scene_from_dict(data)
+    return str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        # unknown keys, top level and nested
+        ({"modle": {}}, "scene: expected only the keys ['description', 'duration', 'initial', 'input', 'integrator', 'model', 'name'], got 'modle'"),
+        ({"model": {"stiffness": 1.0}}, "model: expected only the keys ['damping', 'geometry', 'gravity', 'joint_limits', 'restitution', 'spring_stiffness', 'tip_force'], got 'stiffness'"),
+        ({"model": {"geometry": {"r5": 0.01}}}, "model.geometry: expected only the keys ['L3', 'm1', 'm2', 'm3', 'r1', 'r2', 'r3', 'r4', 'theta4'], got 'r5'"),
+        ({"model": {"joint_limits": {"pip": [0, 1]}}}, "model.joint_limits: expected only the keys ['mcp'], got 'pip'"),
+        ({"initial": {"theta2": 0.1}}, "initial: expected only the keys ['theta1', 'theta1_dot'], got 'theta2'"),
+        ({"integrator": {"method": "rk4", "tol": 1e-6}}, "integrator: expected only the keys ['dt', 'method'], got 'tol'"),
+        ({"input": {"torque": {"type": "ramp", "offset": 0.0, "slope": 0.01, "phase": 1.0}}}, "input.torque.phase: expected only keys ['offset', 'slope'] for type ramp, got 1.0"),
+        # wrong types
+        ([1, 2], "scene: expected a mapping, got [1, 2]"),
+        ({"model": [1.0]}, "model: expected a mapping, got [1.0]"),
+        ({"model": {"damping": "0.1"}}, "model.damping: expected a finite number, got '0.1'"),
+        ({"model": {"spring_stiffness": True}}, "model.spring_stiffness: expected a finite number, got True"),
+        ({"model": {"gravity": [0.0, -9.81, 0.0]}}, "model.gravity: expected a list of two numbers, got [0.0, -9.81, 0.0]"),
+        ({"model": {"tip_force": [0.0, "x"]}}, "model.tip_force[1]: expected a finite number, got 'x'"),
+        ({"model": {"geometry": {"r1": None}}}, "model.geometry.r1: expected a finite number, got None"),
+        ({"duration": float("nan")}, "duration: expected a finite number, got nan"),
+        ({"initial": {"theta1": "0"}}, "initial.theta1: expected a finite number, got '0'"),
+        ({"integrator": {"method": "rk5"}}, f"integrator.method: expected one of {sorted(METHODS) + ['auto']}, got 'rk5'"),
+        # out of range
+        ({"model": {"damping": -0.01}}, "model.damping: expected a number ≥ 0, got -0.01"),
+        ({"model": {"spring_stiffness": -1.0}}, "model.spring_stiffness: expected a number ≥ 0, got -1.0"),
+        ({"model": {"restitution": 1.5}}, "model.restitution: expected a number ≥ 0 and ≤ 1, got 1.5"),
+        ({"model": {"restitution": -0.5}}, "model.restitution: expected a number ≥ 0 and ≤ 1, got -0.5"),
+        ({"integrator": {"dt": 0}}, "integrator.dt: expected a number > 0, got 0"),
+        ({"integrator": {"dt": -0.001}}, "integrator.dt: expected a number > 0, got -0.001"),
+        ({"duration": 0.0}, "duration: expected a number > 0, got 0.0"),
+        ({"duration": 0.01, "integrator": {"dt": 0.02}}, "integrator.dt: expected a step no longer than duration (0.01 s), got 0.02"),
+        ({"model": {"geometry": {"r3": -0.0077}}}, "model.r3: expected a finite value > 0, got -0.0077"),
+        # torque profiles
+        ({"input": {"torque": {"type": "triangle"}}}, "input.torque.type: expected one of ['constant', 'ramp', 'sine', 'square', 'step'], got 'triangle'"),
+        ({"input": {"torque": 0.01}}, "input.torque: expected a mapping with 'type' in ['constant', 'ramp', 'sine', 'square', 'step'], got 0.01"),
+        ({"input": {"torque": {"type": "ramp", "offset": 0.001}}}, "input.torque.slope: expected a number (required for type ramp), got None"),
+        ({"input": {"torque": {"type": "step", "before": 0.0, "after": 1.0}}}, "input.torque.at: expected a number (required for type step), got None"),
+        ({"input": {"torque": {"type": "constant", "value": "high"}}}, "input.torque.value: expected a finite number, got 'high'"),
+        ({"input": {"torque": {"type": "square", "amplitude": 0.004, "frequency": 0.0}}}, "input.torque.frequency: expected a number > 0 (Hz), got 0.0"),
+        ({"input": {"torque": {"type": "sine", "amplitude": 0.004, "frequency": -5.0}}}, "input.torque.frequency: expected a number > 0 (Hz), got -5.0"),
+        # joint limits
+        ({"model": {"joint_limits": {"mcp": [1.0, 0.5]}}}, "model.joint_limits.mcp: expected [lower, upper] with lower < upper (rad), got [1.0, 0.5]"),
+        ({"model": {"joint_limits": {"mcp": [0.0]}}}, "model.joint_limits.mcp: expected a list of two numbers, got [0.0]"),
+        ({"model": {"joint_limits": {"mcp": [0.0, 2.0]}}}, f"model.joint_limits.mcp: expected limits inside the assemblable range ({LO:.6f}, {HI:.6f}) rad, got [0.0, 2.0]"),
+        ({"model": {"joint_limits": {"mcp": [-3.0, 1.0]}}}, f"model.joint_limits.mcp: expected limits inside the assemblable range ({LO:.6f}, {HI:.6f}) rad, got [-3.0, 1.0]"),
+        ({"model": {"joint_limits": {"mcp": [0.0, 1.0]}}, "initial": {"theta1": 1.2}}, "initial.theta1: expected an angle within model.joint_limits.mcp [0.0, 1.0] rad, got 1.2"),
+        # initial θ1 outside the assemblable range (spec §1: −160.36° .. 104.21°)
+        ({"initial": {"theta1": 1.9}}, f"initial.theta1: expected an MCP angle in the assemblable range [{LO:.6f}, {HI:.6f}] rad, got 1.9"),
+        ({"initial": {"theta1": -2.9}}, f"initial.theta1: expected an MCP angle in the assemblable range [{LO:.6f}, {HI:.6f}] rad, got -2.9"),
+    ],
+)
+def test_refusal_names_key_allowed_and_value(data, message):
+    assert refusal(data) == message
+
+
+def test_range_in_the_message_is_the_spec_toggles():
+    assert math.degrees(LO) == pytest.approx(-160.3615, abs=5e-5)
+    assert math.degrees(HI) == pytest.approx(104.2116, abs=5e-5)
+    assert refusal({"initial": {"theta1": HI + 1e-6}}).startswith("initial.theta1: expected an MCP angle in the assemblable range")
+    # just inside assembles
+    assert scene_from_dict({"initial": {"theta1": HI - 1e-6}}).theta1 == HI - 1e-6
+    # exactly at a toggle the θ1-parametrized start is singular (dθ3/dθ1 unbounded): refused
+    for toggle in (HI, LO):
+        assert refusal({"initial": {"theta1": toggle}}) == f"initial.theta1: expected a pose away from the toggle (θ2 ∥ θ3), got {toggle!r}"
+
+
+def test_load_scene_prefixes_the_file_name(tmp_path):
+    path = tmp_path / "bad.yaml"
+    path.write_text("model: {damping: -1}\n")
+    with pytest.raises(ConfigError) as info:
+        load_scene(path)
+    assert str(info.value) == "bad.yaml: model.damping: expected a number ≥ 0, got -1"
+    assert info.value.key == "bad.yaml: model.damping"
+
+
+def test_load_scene_refuses_an_unreadable_file(tmp_path):
+    missing = tmp_path / "missing.yaml"
+    with pytest.raises(ConfigError) as info:
+        load_scene(missing)
+    assert str(info.value) == f"scene: expected a readable scene file, got '{missing} (No such file or directory)'"
+    with pytest.raises(ConfigError, match=r"^scene: expected a readable scene file, got '.*Is a directory\)'$"):
+        load_scene(tmp_path)
+    if os.geteuid() != 0:  # root reads anything
+        locked = tmp_path / "locked.yaml"
+        locked.write_text("{}")
+        locked.chmod(0)
+        with pytest.raises(ConfigError, match="Permission denied"):
+            load_scene(locked)
+
+
+@pytest.mark.parametrize("text", ["model: [1, 2\n", "model:\n  damping: 1\n bad indent: 2\n", "a: b: c\n"])
+def test_load_scene_refuses_invalid_yaml(tmp_path, text):
+    path = tmp_path / "broken.yaml"
+    path.write_text(text)
+    with pytest.raises(ConfigError) as info:
+        load_scene(path)
+    msg = str(info.value)
+    assert msg.startswith(f"scene: expected valid YAML, got '{path}: ")
+    assert "line" in msg  # the YAML error's position is kept
+
+
+def test_empty_file_is_the_default_scene(tmp_path):
+    path = tmp_path / "empty.yaml"
+    path.write_text("")
+    assert load_scene(path) == Scene(name="empty")
+
+
+def test_a_yaml_that_is_not_a_mapping_is_refused(tmp_path):
+    path = tmp_path / "list.yaml"
+    path.write_text("- 1\n- 2\n")
+    with pytest.raises(ConfigError, match=r"^list\.yaml: scene: expected a mapping, got \[1, 2\]$"):
+        load_scene(path)
+
+
+def test_refusals_are_value_errors_too():
+    """ConfigError subclasses ValueError, so generic callers can catch it."""
+    with pytest.raises(ValueError):
+        scene_from_dict({"duration": -1})
