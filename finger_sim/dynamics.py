@@ -114,6 +114,17 @@ class FingerSystem:
             (lam1, lam2),
         )
 
+    def mass_solve(self, q: Vec3, p: Vec3) -> Vec3:
+        """M(q)⁻¹ p in closed form (θ2 decouples, the (1,3) block is 2×2): velocities from momenta."""
+        b = self._c * math.cos(q[0] - q[2] - self.alpha)
+        det = self._m11 * self._m33 - b * b
+        return ((self._m33 * p[0] - b * p[2]) / det, p[1] / self._m22, (self._m11 * p[2] - b * p[0]) / det)
+
+    def kinetic_gradient(self, q: Vec3, v: Vec3) -> Vec3:
+        """∂T/∂q at fixed q', J/rad: only M13 = c cos(θ1 − θ3 − α) depends on q."""
+        w = self._c * math.sin(q[0] - q[2] - self.alpha) * v[0] * v[2]
+        return (-w, 0.0, w)
+
     # -- energy ------------------------------------------------------------------------
     def kinetic_energy(self, q: Vec3, v: Vec3) -> float:
         """T = ½ q'ᵀ M q', J."""

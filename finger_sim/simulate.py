@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
+from scipy.optimize import brentq
 
 from finger_sim import kinematics
 from finger_sim.errors import SimulationDiverged, StabilityError
@@ -29,6 +30,8 @@ from finger_sim.stability import fastest_mode, largest_stable_dt, stable_at
 STOP_TOLERANCE = 1e-12
 #: Regula-falsi iterations allowed to locate one crossing.
 MAX_LOCATE_ITERATIONS = 60
+#: The release from a stop is located to this fraction of the step.
+RELEASE_TOLERANCE = 1e-12
 #: Impacts allowed within one step before the run is declared chattering.
 MAX_IMPACTS_PER_STEP = 8
 #: A constant torque is split nowhere: a break closer than this (relative to dt) to a
@@ -116,10 +119,12 @@ class Simulator:
         """Integrate [t0, t1] under a smooth torque, resolving MCP stop impacts on the way."""
         t, q, v = t0, self.q, self.v
         for _ in range(MAX_IMPACTS_PER_STEP):
-            if self._contact and self._stays_in_contact(t, q, torque):
-                self.q, self.v = q, ZERO
-                return
-            self._contact = 0
+            if self._contact:
+                release = self._release_time(t, t1, q, torque)
+                if release is None:  # held on the stop for the whole segment
+                    self.q, self.v = q, ZERO
+                    return
+                t, v, self._contact = release, ZERO, 0
             q1, v1 = self.integrator.step(t, q, v, t1 - t, torque)
             side = self._violated(q1[0])
             if not side:
@@ -137,10 +142,22 @@ class Simulator:
             return -1
         return 0
 
-    def _stays_in_contact(self, t: float, q: Vec3, torque: TorqueFn) -> bool:
-        """True while the stop must push back (the free acceleration points into it)."""
-        a, _ = self.system.accelerations(t, q, ZERO, torque(t))
-        return a[0] * self._contact > 0.0
+    def _release_time(self, t: float, t1: float, q: Vec3, torque: TorqueFn) -> float | None:
+        """When in [t, t1] the finger resting on the stop leaves it; None if it stays throughout.
+
+        At rest on the stop q is fixed and q' = 0, so the free acceleration is a function of
+        time alone: the release is the root of its component into the stop, found by brentq.
+        """
+
+        def push(s: float) -> float:
+            a, _ = self.system.accelerations(s, q, ZERO, torque(s))
+            return a[0] * self._contact
+
+        if push(t) <= 0.0:
+            return t
+        if push(t1) > 0.0:
+            return None
+        return brentq(push, t, t1, xtol=RELEASE_TOLERANCE * (t1 - t), rtol=4 * np.finfo(float).eps)
 
     def _impact(self, t: float, q: Vec3, v: Vec3, t1: float, torque: TorqueFn, side: int) -> tuple[float, Vec3, Vec3]:
         """Locate the crossing in (t, t1], apply the impact there; returns (t*, q*, v⁺)."""

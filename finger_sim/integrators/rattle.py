@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.linalg import lu_factor, lu_solve
 
 from finger_sim.errors import SimulationDiverged
 from finger_sim.integrators.base import Integrator, TorqueFn
@@ -31,8 +32,12 @@ NEWTON_TOLERANCE = 1e-10
 MAX_NEWTON_ITERATIONS = 12
 #: Relative finite-difference step for the Jacobian: ~ sqrt(machine epsilon).
 FD_STEP = 1.5e-8
-#: With a Jacobian kept from an earlier step, give up and refresh it after this many iterations.
-REUSE_ITERATIONS = 4
+#: With a Jacobian kept from an earlier step, give up and refresh it after this many
+#: iterations: one costs ~1/6 of a fresh Jacobian, and at 5 ms steps on a fast swing an
+#: old Jacobian contracts by only ~0.03 per iteration.
+REUSE_ITERATIONS = 8
+#: A Jacobian is reused for steps whose length differs by less than this, relatively.
+JAC_REUSE_RTOL = 1e-6
 
 
 class Rattle(Integrator):
@@ -48,43 +53,45 @@ class Rattle(Integrator):
 
     def __init__(self, system) -> None:  # type: ignore[no-untyped-def]
         super().__init__(system)
-        self._jac: np.ndarray | None = None
+        self._lu: tuple[np.ndarray, np.ndarray] | None = None
         self._jac_dt = 0.0
 
     def step(self, t: float, q: Vec3, v: Vec3, dt: float, torque: TorqueFn) -> tuple[Vec3, Vec3]:
         s = self.system
         h2 = 0.5 * dt
-        m0 = np.array(s.mass_matrix(q))
-        m0_inv = np.linalg.inv(m0)
-        g0 = np.array(s.constraint_jacobian(q))
-        p0 = m0 @ np.array(v)
-        kick0 = np.array(s.generalized_force(t, q, v, torque(t)))
+        tau0 = torque(t)
+        m0 = s.mass_matrix(q)
+        p0 = tuple(m0[i][0] * v[0] + m0[i][1] * v[1] + m0[i][2] * v[2] for i in range(3))
+        k0 = s.generalized_force(t, q, v, tau0)
+        g01, g02 = s.constraint_jacobian(q)
         # predictor: the index-1 solution over half a step
-        a0, lam0 = s.accelerations(t, q, v, torque(t))
-        p_half = m0 @ (np.array(v) + h2 * np.array(a0))
-        x = np.concatenate([p_half, np.array(q) + dt * np.array(v) + h2 * dt * np.array(a0), lam0])
-        p_scale = max(float(np.max(np.abs(p0))), s.params.m3 * s.params.r1 * s.params.r1 * 1e-3)
+        a0, lam0 = s.accelerations(t, q, v, tau0)
+        vh = tuple(v[i] + h2 * a0[i] for i in range(3))
+        x = [
+            *(m0[i][0] * vh[0] + m0[i][1] * vh[1] + m0[i][2] * vh[2] for i in range(3)),
+            *(q[i] + dt * v[i] + h2 * dt * a0[i] for i in range(3)),
+            *lam0,
+        ]
+        p_scale = max(max(abs(c) for c in p0), s.params.m3 * s.params.r1 * s.params.r1 * 1e-3)
         # λ is resolved only to (round-off in p) / (h/2 · |Φ_q|): scale it by what one step's impulse can carry
         lam_scale = max(abs(lam0[0]), abs(lam0[1]), p_scale / (h2 * s.params.r1))
         scale = np.array([p_scale] * 3 + [1.0] * 3 + [lam_scale] * 2)
 
-        def residual(x: np.ndarray) -> np.ndarray:
-            ph, q1, lam = x[:3], x[3:6], x[6:]
-            v_a = m0_inv @ ph
-            q1t = (float(q1[0]), float(q1[1]), float(q1[2]))
-            v_b = np.linalg.solve(np.array(s.mass_matrix(q1t)), ph)
-            return np.concatenate(
-                [
-                    ph - p0 - h2 * (kick0 - self._h_q(q, v_a) + g0.T @ lam),
-                    q1 - np.array(q) - h2 * (v_a + v_b),
-                    s.constraint(q1t),
-                ]
-            )
+        def residual(x: list[float]) -> list[float]:
+            ph = (x[0], x[1], x[2])
+            q1 = (x[3], x[4], x[5])
+            va, vb = s.mass_solve(q, ph), s.mass_solve(q1, ph)
+            dt0 = s.kinetic_gradient(q, va)  # −H_q at (q₀, p½)
+            return [
+                *(ph[i] - p0[i] - h2 * (k0[i] + dt0[i] + g01[i] * x[6] + g02[i] * x[7]) for i in range(3)),
+                *(q1[i] - q[i] - h2 * (va[i] + vb[i]) for i in range(3)),
+                *s.constraint(q1),
+            ]
 
         x = self._newton(residual, x, scale, dt)
         if x is None:
             raise SimulationDiverged(f"rattle: Newton did not converge at t = {t:.6f} s (dt = {dt} s)")
-        p_half, q1 = x[:3], (float(x[3]), float(x[4]), float(x[5]))
+        p_half, q1 = (x[0], x[1], x[2]), (x[3], x[4], x[5])
         # second half: linear in (v₁, μ) since Q is affine in q'
         t1 = t + dt
         tau1 = torque(t1)
@@ -93,50 +100,44 @@ class Rattle(Integrator):
         damping = np.column_stack(
             [np.array(s.generalized_force(t1, q1, e, tau1)) - f0 for e in ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))]
         )
-        m1 = np.array(s.mass_matrix(q1))
         g1 = np.array(s.constraint_jacobian(q1))
-        rhs = p_half + h2 * (f0 - self._h_q(q1, np.linalg.solve(m1, p_half)))
+        rhs = np.array(p_half) + h2 * (f0 + np.array(s.kinetic_gradient(q1, s.mass_solve(q1, p_half))))
         kkt = np.zeros((5, 5))
-        kkt[:3, :3] = m1 - h2 * damping
+        kkt[:3, :3] = np.array(s.mass_matrix(q1)) - h2 * damping
         kkt[:3, 3:] = -h2 * g1.T
         kkt[3:, :3] = g1
-        sol = np.linalg.solve(kkt, np.concatenate([rhs, [0.0, 0.0]]))
-        v1 = (float(sol[0]), float(sol[1]), float(sol[2]))
+        w1, w2, w3, _, _ = np.linalg.solve(kkt, np.concatenate([rhs, [0.0, 0.0]])).tolist()
+        v1 = (w1, w2, w3)
         if not all(math.isfinite(c) for c in q1 + v1):
             raise SimulationDiverged(f"rattle: non-finite state at t = {t1:.6f} s")
         return q1, v1
 
-    def _newton(self, residual, x: np.ndarray, scale: np.ndarray, dt: float) -> np.ndarray | None:  # type: ignore[no-untyped-def]
-        """Simplified Newton: the Jacobian of an earlier step is reused while it still converges fast."""
-        fresh = self._jac is None or self._jac_dt != dt
-        for attempt in range(2):
+    def _newton(self, residual, x: list[float], scale: np.ndarray, dt: float) -> list[float] | None:  # type: ignore[no-untyped-def]
+        """Simplified Newton: the LU of an earlier step's Jacobian is reused while it still converges fast."""
+        # sub-steps (breakpoints, stops) differ from dt in the last bits: compare relatively
+        fresh = self._lu is None or abs(self._jac_dt - dt) > JAC_REUSE_RTOL * dt
+        for _ in range(2):
             if fresh:
-                self._jac, self._jac_dt = self._jacobian(residual, x, scale), dt
+                self._lu, self._jac_dt = lu_factor(self._jacobian(residual, x, scale), check_finite=False), dt
             xk = x
-            for k in range(MAX_NEWTON_ITERATIONS if fresh else REUSE_ITERATIONS):
-                dx = np.linalg.solve(self._jac, -residual(xk))
-                xk = xk + dx
+            for _ in range(MAX_NEWTON_ITERATIONS if fresh else REUSE_ITERATIONS):
+                dx = lu_solve(self._lu, -np.array(residual(xk)), check_finite=False)
+                xk = [a + b for a, b in zip(xk, dx.tolist())]
                 if np.max(np.abs(dx) / scale) < NEWTON_TOLERANCE:
                     return xk
             fresh = True
         return None
 
-    def _h_q(self, q: Vec3 | np.ndarray, v: np.ndarray) -> np.ndarray:
-        """∂H/∂q at fixed p, = −½ vᵀ (∂M/∂q) v; only M13 = c cos(θ1 − θ3 − α) depends on q."""
-        s = self.system
-        u = float(q[0]) - float(q[2]) - s.alpha
-        w = s._c * math.sin(u) * float(v[0]) * float(v[2])  # −½·2·v1 v3 ∂M13/∂θ1, ∂M13/∂θ1 = −c sin u
-        return np.array([w, 0.0, -w])
-
     @staticmethod
-    def _jacobian(residual, x: np.ndarray, scale: np.ndarray) -> np.ndarray:  # type: ignore[no-untyped-def]
-        r0 = residual(x)
-        jac = np.empty((x.size, x.size))
-        for j in range(x.size):
+    def _jacobian(residual, x: list[float], scale: np.ndarray) -> np.ndarray:  # type: ignore[no-untyped-def]
+        """Forward-difference Jacobian of the 8×8 first-half system."""
+        r0 = np.array(residual(x))
+        jac = np.empty((len(x), len(x)))
+        for j in range(len(x)):
             dxj = FD_STEP * max(abs(x[j]), scale[j])
-            xp = x.copy()
+            xp = list(x)
             xp[j] += dxj
-            jac[:, j] = (residual(xp) - r0) / dxj
+            jac[:, j] = (np.array(residual(xp)) - r0) / dxj
         return jac
 
     @classmethod
