@@ -1,0 +1,1 @@
+"""ROS 2 adapters over the core: the node, its controller, message conversions and log replay."""

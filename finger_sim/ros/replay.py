@@ -1,0 +1,708 @@
+"""`finger_replay LOG.mcap`: republish a log's topics with their recorded timing, like `ros2 bag play`.
+
+For machines without rosbag2. Usage (`finger_replay --help` for the details):
+
+    finger_replay LOG.mcap [--rate R] [--loop] [--topics T [T ...]] [--start-offset S]
+                  [--clock [HZ] | --no-clock] [--delay S] [--wait-for-subscribers S]
+                  [--wait-for-all-acked S] [--ros-args ...]
+
+Messages: the recorded CDR bytes are published as they are, through rclpy's
+`Publisher.publish(bytes)` (rmw_publish_serialized_message), which is what `ros2 bag play`
+does. There is no decode and re-encode: subscribers receive exactly the recorded bytes, every
+message type in the installed packages works without per-field conversion code, and a message
+costs one C call. A publisher's class comes from the schema name ('sensor_msgs/msg/JointState'
+→ `sensor_msgs.msg.JointState`; rosidl_runtime_py is not in the PyPI wheels). The bytes are only
+read right if the installed definition is the recorded one, so a topic whose recorded schema
+text differs from the installed `.msg` files gets a warning.
+
+Clock: exactly one source of /clock, so that `use_sim_time` nodes never see two interleaved
+time lines. By default a recorded /clock topic (the node publishes and logs its own) is
+replayed like any other topic: it carries the node's sim time exactly. `--clock [HZ]`
+publishes a /clock generated from the log time at HZ wall hertz instead (the recorded /clock
+is then not replayed); a log without /clock gets a generated one at DEFAULT_CLOCK_HZ. A
+generated tick carries the log time of its wall time, never later than the next message to be
+published, and the last message's time ends each pass. `--no-clock` publishes no /clock.
+`--topics` selects data topics only: /clock follows these clock options. With `--loop` the
+clock jumps back at each pass, as with `ros2 bag play --loop`.
+
+Timing: message i is due at t0 + (log_time_i − origin) / rate on time.monotonic(), where origin
+is the log's first log time plus `--start-offset` and t0 the start of the pass. The player
+sleeps until each due time (in slices of at most WAIT_SLICE_S, so that a signal delivered to
+a DDS thread is acted on promptly), never spins, and publishes late messages at once, so a
+slow stretch does not accumulate delay. Messages come in log-time order (mcap's indexed
+reader); a truncated log is read in file order, which is recording order. A reader thread
+decompresses chunks ahead of the player (ReadAhead), so that reading a chunk does not delay
+the messages due meanwhile. docs/replay_performance.md has measured figures.
+
+QoS: data topics reliable, volatile, keep-last QOS_DEPTH (bursts and slow subscribers are
+absorbed without blocking the player); /clock best effort, keep-last 1 (rclcpp's ClockQoS,
+what rosbag2's player and rclpy's TimeSource use).
+
+Delivery: volatile topics reach only subscribers that are matched when a message goes out, so
+`--wait-for-subscribers S` holds the start until every publisher has one (or S passes), and
+`--delay S` adds a pause as `ros2 bag play --delay` does. After the last message the writers
+stay LINGER_S, so that subscribers take the tail before the participant leaves. Otherwise the
+last messages can be lost, as in ros2/rosbag2#571. `--wait-for-all-acked S` waits until reliable
+subscribers acknowledge everything. With Fast DDS that takes up to its 3 s heartbeat period.
+
+Exit status: 0 replayed to the end, or stopped by SIGINT/SIGTERM; 1 the log cannot be read, or
+only in part (a truncated log's intact prefix is replayed after a warning, then exit 1); 2 bad
+arguments. Errors are one line on stderr; the summary line goes to stdout.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import math
+import queue
+import signal
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from dataclasses import dataclass
+from enum import Enum
+from pathlib import Path
+from types import FrameType
+from typing import Any
+
+import rclpy
+from mcap.reader import SeekingReader
+from mcap.records import Channel, Message, Schema
+from mcap.stream_reader import StreamReader
+from rclpy.duration import Duration
+from rclpy.node import Node
+from rclpy.publisher import Publisher
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
+from rclpy.utilities import remove_ros_args
+
+from finger_sim.errors import FingerSimError
+from finger_sim.log import (
+    CorruptLogError,
+    LogArgumentError,
+    LogError,
+    LogFileError,
+    LogReader,
+    MessageDefinitionNotFoundError,
+    MissingTopicsError,
+    read_log,
+)
+from finger_sim.log.definitions import message_definition, normalize_type_name
+
+PROG = "finger_replay"
+CLOCK_TOPIC = "/clock"
+CLOCK_TYPE = "rosgraph_msgs/msg/Clock"
+DEFAULT_CLOCK_HZ = 100.0  # generated /clock rate, wall Hz: 10 ms steps, finer than a control loop's timers
+QOS_DEPTH = 1000  # keep-last depth of data publishers: 1 s of a 1 kHz topic, 0.1 s of it at --rate 10
+WAIT_SLICE_S = 0.1  # longest single sleep; a signal that lands on a DDS thread is seen after at most this
+MATCH_POLL_S = 0.01  # poll period while waiting for subscribers (rclpy has no blocking wait for matches)
+# After the last message the writers stay this long, so that subscribers take the tail out of shared
+# memory before the participant goes (else the last messages can be lost: ros2/rosbag2#571).
+LINGER_S = 0.25
+READ_AHEAD_BATCH = 256  # messages handed from the reader thread to the player at a time
+READ_AHEAD_BATCHES = 16  # batches the reader thread may hold ready (~4k messages, a few MB at most)
+# GIL hand-over interval while the reader thread runs: a player waking at a due time waits at most
+# this long for the reader to let go (Python's default, 5 ms, would show up as lateness).
+SWITCH_INTERVAL_S = 0.0002
+
+EXIT_OK = 0
+EXIT_LOG = 1  # the log cannot be read, or only in part
+EXIT_USAGE = 2  # argparse's status for bad arguments
+
+DATA_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=QOS_DEPTH,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
+CLOCK_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1,
+    reliability=ReliabilityPolicy.BEST_EFFORT,
+    durability=DurabilityPolicy.VOLATILE,
+)
+
+
+class MessageTypeNotFoundError(FingerSimError, LookupError):
+    """A topic's recorded type has no Python message class in this installation."""
+
+    def __init__(self, topic: str, type_name: str, reason: str) -> None:
+        self.topic, self.type_name = topic, type_name
+        super().__init__(f"{topic}: cannot publish {type_name}: {reason}")
+
+
+class ClockSource(Enum):
+    """Where the /clock published during a replay comes from."""
+
+    RECORDED = "the log's /clock topic"
+    GENERATED = "generated from the log time"
+    NONE = "not published"
+
+
+@dataclass(frozen=True)
+class ReplayPlan:
+    """What to replay, decided from the log's index and the options before any ROS call.
+
+    topics: recorded topics to republish, with their types ('pkg/msg/Type'); holds /clock
+    when clock is RECORDED. origin_ns: log time played at the start of a pass.
+    clock_hz: wall rate of the generated /clock (GENERATED only).
+    """
+
+    topics: dict[str, str]
+    clock: ClockSource
+    clock_hz: float | None
+    origin_ns: int
+    message_count: int  # recorded messages on `topics` (before --start-offset)
+
+
+def plan_replay(
+    reader: LogReader,
+    *,
+    topics: Iterable[str] | None = None,
+    start_offset_s: float = 0.0,
+    clock_hz: float | None = None,
+    no_clock: bool = False,
+) -> ReplayPlan:
+    """Decide topics, clock source and start time (see the module docstring for the clock rules).
+
+    Raises LogFileError for a log without messages, with a /clock that is not
+    rosgraph_msgs/msg/Clock or a selected topic that is not CDR; MissingTopicsError for unknown
+    `topics`; LogArgumentError for a start offset past the end or if nothing would be published.
+    """
+    if reader.start_ns is None or reader.end_ns is None or reader.message_count == 0:
+        raise LogFileError(reader.path, "no messages to replay")
+    recorded = reader.topics.get(CLOCK_TOPIC)
+    if recorded is not None and recorded.type != CLOCK_TYPE:
+        raise LogFileError(reader.path, f"{CLOCK_TOPIC} has type {recorded.type}, not {CLOCK_TYPE}")
+    if topics is None:
+        selected = set(reader.topics)
+    else:
+        selected = set(topics)
+        reader.require_topics(selected)
+    selected.discard(CLOCK_TOPIC)  # /clock follows the clock options
+    if no_clock:
+        clock = ClockSource.NONE
+    elif recorded is not None and clock_hz is None:
+        clock, selected = ClockSource.RECORDED, selected | {CLOCK_TOPIC}
+    else:
+        clock, clock_hz = ClockSource.GENERATED, DEFAULT_CLOCK_HZ if clock_hz is None else clock_hz
+    if not (math.isfinite(start_offset_s) and 0 <= start_offset_s <= reader.duration_s):
+        expected = f"seconds from 0 to the log's duration, {reader.duration_s:.6g}"
+        raise LogArgumentError("--start-offset", expected, start_offset_s)
+    for topic in sorted(selected):
+        if reader.topics[topic].encoding != "cdr":
+            problem = f"{topic} is encoded as {reader.topics[topic].encoding!r}, not ROS 2 CDR"
+            raise LogFileError(reader.path, problem)
+    count = sum(reader.topics[t].count for t in selected)
+    if count == 0:
+        expected = "topics with messages (the selected ones have none)"
+        raise LogArgumentError("--topics", expected, sorted(selected))
+    return ReplayPlan(
+        topics={t: reader.topics[t].type for t in sorted(selected)},
+        clock=clock,
+        clock_hz=clock_hz if clock is ClockSource.GENERATED else None,
+        origin_ns=reader.start_ns + round(start_offset_s * 1e9),
+        message_count=count,
+    )
+
+
+def raw_messages(
+    reader: LogReader, topics: Iterable[str], start_ns: int
+) -> Iterator[tuple[Schema | None, Channel, Message]]:
+    """The recorded (schema, channel, message) records of `topics` logged at or after `start_ns`.
+
+    Log-time order for a complete log (mcap's indexed reader; it reads a log without an index
+    linearly); file order, up to the cut, for a truncated one. Message.data is the CDR bytes.
+    A record that cannot be read raises CorruptLogError after the records before it.
+    """
+    wanted = frozenset(topics)
+    try:
+        file = reader.path.open("rb")
+    except OSError as exc:
+        raise LogFileError(reader.path, f"cannot open ({exc.strerror or exc})") from exc
+    with file:
+        try:
+            if reader.truncated:
+                yield from _stream_messages(file, reader, wanted, start_ns)
+            else:
+                mcap = SeekingReader(file, validate_crcs=True, record_size_limit=reader.size)
+                yield from mcap.iter_messages(topics=wanted, starting_at=start_ns, log_time_order=True)
+        except FingerSimError:
+            raise
+        except Exception as exc:  # mcap raises assorted types on damaged records
+            raise CorruptLogError(reader.path, None, f"cannot read a message ({_describe(exc)})") from exc
+
+
+def _stream_messages(
+    file: Any, reader: LogReader, wanted: frozenset[str], start_ns: int
+) -> Iterator[tuple[Schema | None, Channel, Message]]:
+    """Records in file order, stopping after the last message the reader's scan found intact."""
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, Channel] = {}
+    remaining = reader.message_count
+    if remaining == 0:
+        return
+    for record in StreamReader(file, record_size_limit=reader.size).records:
+        if isinstance(record, Schema):
+            schemas[record.id] = record
+        elif isinstance(record, Channel):
+            channels[record.id] = record
+        elif isinstance(record, Message):
+            channel = channels[record.channel_id]
+            if channel.topic in wanted and record.log_time >= start_ns:
+                yield schemas.get(channel.schema_id), channel, record
+            remaining -= 1
+            if remaining == 0:
+                return  # the next record is the cut one
+
+
+def message_class(topic: str, type_name: str) -> type:
+    """The rclpy message class of 'pkg/msg/Type' (importlib: rosidl_runtime_py is not in the wheels)."""
+    try:
+        package, _, name = normalize_type_name(type_name).split("/")
+    except LogArgumentError:
+        raise MessageTypeNotFoundError(topic, type_name, "not a ROS 2 message type name") from None
+    try:
+        return getattr(importlib.import_module(f"{package}.msg"), name)
+    except (ImportError, AttributeError):
+        hint = f"install its package (pip: ros-jazzy-{package.replace('_', '-')}) or source a ROS setup"
+        reason = f"no Python class {package}.msg.{name}; {hint}"
+        raise MessageTypeNotFoundError(topic, type_name, reason) from None
+
+
+class ReadAhead:
+    """Iterates `source` on a thread, up to READ_AHEAD_BATCHES batches ahead of the consumer.
+
+    mcap reads a whole chunk (~1500 messages of a 1 kHz log, 5 ms) at the first next() into it;
+    on the player's thread that stall would delay every message due meanwhile. The thread does
+    that work while the player sleeps, as rosbag2's player does with its read-ahead queue. An
+    exception in `source` is raised by the consumer's next(), after the items before it.
+    A context manager: leaving it stops the thread, also when the consumer stops early.
+    """
+
+    _END = object()
+
+    def __init__(self, source: Iterator[Any]) -> None:
+        self._source = source
+        self._queue: queue.Queue[Any] = queue.Queue(maxsize=READ_AHEAD_BATCHES)
+        self._cancelled = threading.Event()
+        self._thread = threading.Thread(target=self._read, name="finger_replay read-ahead", daemon=True)
+        self._thread.start()
+
+    def __enter__(self) -> ReadAhead:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    def __iter__(self) -> Iterator[Any]:
+        while True:
+            batch = self._queue.get()
+            if batch is self._END:
+                return
+            if isinstance(batch, BaseException):
+                raise batch
+            yield from batch
+
+    def close(self) -> None:
+        """Stop the thread (it may be blocked on a full queue) and wait for it."""
+        self._cancelled.set()
+        while self._thread.is_alive():
+            try:
+                self._queue.get(timeout=WAIT_SLICE_S)
+            except queue.Empty:
+                pass
+
+    def _read(self) -> None:
+        batch: list[Any] = []
+        try:
+            for item in self._source:
+                batch.append(item)
+                if len(batch) >= READ_AHEAD_BATCH:
+                    self._put(batch)
+                    batch = []
+                if self._cancelled.is_set():
+                    return
+            self._put(batch)
+            self._put(self._END)
+        except BaseException as exc:  # handed to the consumer, raised there; it must not wait forever
+            self._put(batch)
+            self._put(exc)
+        finally:
+            close = getattr(self._source, "close", None)
+            if close is not None:
+                close()  # a generator closes its file
+
+    def _put(self, item: Any) -> None:
+        while not self._cancelled.is_set():
+            try:
+                self._queue.put(item, timeout=WAIT_SLICE_S)
+                return
+            except queue.Full:
+                pass
+
+
+@dataclass
+class ReplayStats:
+    """What a replay did; times on time.monotonic(), s."""
+
+    published: int = 0
+    clock_ticks: int = 0  # generated /clock messages
+    passes: int = 0  # passes through the log that published a message (the last one may be cut short)
+    first_due: float | None = None
+    last_due: float | None = None
+    last_wall: float | None = None
+    total_late_s: float = 0.0
+    max_late_s: float = 0.0
+    stopped_by: str | None = None  # name of the signal that stopped the replay
+
+    def record(self, due: float, wall: float) -> None:
+        if self.first_due is None:
+            self.first_due = due
+        self.last_due, self.last_wall = due, wall
+        late = wall - due
+        self.total_late_s += late
+        self.max_late_s = max(self.max_late_s, late)
+        self.published += 1
+
+    @property
+    def wall_s(self) -> float:
+        """Wall time from the first message's due time to the last publication, s."""
+        return 0.0 if self.first_due is None else self.last_wall - self.first_due
+
+    def achieved_rate(self, rate: float) -> float | None:
+        """Log time played per wall second (at most the requested rate); None below 2 messages.
+
+        Counted from the first message's due time, so a late start or end lowers it.
+        """
+        if self.wall_s <= 0:
+            return None
+        return rate * (self.last_due - self.first_due) / self.wall_s
+
+    def summary(self, rate: float, topics: int) -> str:
+        achieved = self.achieved_rate(rate)
+        text = f"{PROG}: published {self.published} messages on {topics} topics in {self.wall_s:.3f} s"
+        if achieved is not None:
+            text += f" ({self.published / self.wall_s:.0f} msg/s): {achieved:.4g}x recorded time"
+        text += f" (requested {rate:g}x)"
+        if self.published:
+            text += (f", lateness mean {1e3 * self.total_late_s / self.published:.3f} ms"
+                     f" max {1e3 * self.max_late_s:.3f} ms")
+        if self.clock_ticks:
+            text += f", {self.clock_ticks} /clock ticks generated"
+        if self.passes > 1:
+            text += f", {self.passes} passes"
+        if self.stopped_by:
+            text += f", stopped by {self.stopped_by}"
+        return text
+
+
+class Player:
+    """Publishers for a plan, and the timed loop that feeds them the log's bytes."""
+
+    def __init__(
+        self,
+        node: Node,
+        reader: LogReader,
+        plan: ReplayPlan,
+        *,
+        rate: float,
+        stop: threading.Event,
+        warn: Callable[[str], None],
+    ) -> None:
+        self._reader, self._plan, self._rate, self._stop, self._warn = reader, plan, rate, stop, warn
+        self._publishers: dict[str, Publisher] = {
+            topic: node.create_publisher(
+                message_class(topic, type_name), topic, CLOCK_QOS if topic == CLOCK_TOPIC else DATA_QOS
+            )
+            for topic, type_name in plan.topics.items()
+        }
+        self._clock_publisher: Publisher | None = None
+        if plan.clock is ClockSource.GENERATED:
+            self._clock_publisher = node.create_publisher(message_class(CLOCK_TOPIC, CLOCK_TYPE),
+                                                          CLOCK_TOPIC, CLOCK_QOS)
+        self._by_channel: dict[int, Publisher] = {}
+        self.stats = ReplayStats()
+
+    @property
+    def publishers(self) -> list[Publisher]:
+        every = list(self._publishers.values())
+        return every + [self._clock_publisher] if self._clock_publisher is not None else every
+
+    def wait_for_subscribers(self, timeout_s: float) -> None:
+        """Wait until every publisher has a matched subscription, at most `timeout_s` (then warn)."""
+        deadline = time.monotonic() + timeout_s
+        while not self._stop.is_set():
+            missing = [p.topic_name for p in self.publishers if p.get_subscription_count() == 0]
+            if not missing:
+                return
+            if time.monotonic() >= deadline:
+                self._warn(f"no subscriber on {', '.join(missing)} after {timeout_s:g} s; replaying anyway")
+                return
+            self._stop.wait(MATCH_POLL_S)
+
+    def sleep(self, duration_s: float) -> None:
+        """Sleep `duration_s` wall seconds unless stopped."""
+        self._wait_until(time.monotonic() + duration_s)
+
+    def play(self, *, loop: bool = False) -> ReplayStats:
+        """Publish the plan's messages on schedule, once or until stopped; returns the stats."""
+        start = time.monotonic()
+        while not self._stop.is_set():
+            end = self._play_pass(start)
+            if end is None or not loop:  # None: the pass published nothing; looping would spin
+                break
+            start = end
+        return self.stats
+
+    def wait_for_acks(self, timeout_s: float) -> bool:
+        """Give subscribers up to `timeout_s` to acknowledge every message; False if some did not.
+
+        Only reliable publishers wait. Fast DDS readers acknowledge when the writer's periodic
+        heartbeat asks (every 3 s by default), so this usually takes up to that long.
+        """
+        deadline = time.monotonic() + timeout_s
+        reliable = ReliabilityPolicy.RELIABLE
+        pending = [p for p in self._publishers.values() if p.qos_profile.reliability is reliable]
+        while pending and not self._stop.is_set():
+            slice_s = min(WAIT_SLICE_S, max(0.0, deadline - time.monotonic()))
+            pending = [p for p in pending if not p.wait_for_all_acked(Duration(seconds=slice_s))]
+            if time.monotonic() >= deadline:
+                break
+        return not pending
+
+    # -- internals ----------------------------------------------------------------------------
+
+    def _play_pass(self, start: float) -> float | None:
+        """One pass through the log from the origin; returns the last message's due time."""
+        plan, stats = self._plan, self.stats
+        origin, scale = plan.origin_ns, 1e-9 / self._rate
+        period = None if plan.clock_hz is None else 1.0 / plan.clock_hz
+        next_tick = start
+        last_due: float | None = None
+        last_ns = origin
+        with ReadAhead(raw_messages(self._reader, plan.topics, origin)) as records:
+            for schema, channel, message in records:
+                due = start + (message.log_time - origin) * scale
+                if period is not None:
+                    while next_tick <= due:
+                        now = self._wait_until(next_tick)
+                        if now is None:
+                            return None
+                        self._publish_clock(origin + round((next_tick - start) / scale))
+                        next_tick = max(next_tick + period, now)  # behind schedule: skip ticks, no burst
+                now = self._wait_until(due)
+                if now is None:
+                    return None
+                publisher = self._by_channel.get(channel.id) or self._publisher_for(schema, channel)
+                data = message.data
+                publisher.publish(data if type(data) is bytes else bytes(data))
+                stats.record(due, now)
+                if last_due is None:
+                    stats.passes += 1
+                last_due, last_ns = due, message.log_time
+        if last_due is None:
+            return None
+        if period is not None:
+            self._publish_clock(last_ns)  # the pass ends at the last message's time
+        return last_due
+
+    def _wait_until(self, due: float) -> float | None:
+        """Sleep until time.monotonic() >= due; returns that time, or None if stopped first."""
+        while not self._stop.is_set():
+            now = time.monotonic()
+            if now >= due:
+                return now
+            self._stop.wait(min(due - now, WAIT_SLICE_S))
+        return None
+
+    def _publish_clock(self, log_ns: int) -> None:
+        assert self._clock_publisher is not None
+        msg = self._clock_publisher.msg_type()
+        msg.clock.sec, msg.clock.nanosec = divmod(log_ns, 10**9)
+        self._clock_publisher.publish(msg)
+        self.stats.clock_ticks += 1
+
+    def _publisher_for(self, schema: Schema | None, channel: Channel) -> Publisher:
+        """The publisher of a channel met for the first time; warns if its definition differs."""
+        publisher = self._publishers[channel.topic]
+        self._by_channel[channel.id] = publisher
+        if schema is not None and schema.encoding == "ros2msg":
+            try:
+                installed = message_definition(schema.name)
+            except (MessageDefinitionNotFoundError, LogArgumentError):
+                return publisher  # the class imported, its .msg text is just not installed
+            if schema.data.decode(errors="replace").strip() != installed.strip():
+                self._warn(f"{channel.topic}: the log's definition of {schema.name} differs from the "
+                           "installed one; subscribers may misread the recorded bytes")
+        return publisher
+
+
+# -- command line -----------------------------------------------------------------------------
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with a one-line error (no usage block), exit status EXIT_USAGE."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see --help)\n")
+
+
+def _number(*, minimum: float, inclusive: bool) -> Callable[[str], float]:
+    relation = ">=" if inclusive else ">"
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not (math.isfinite(value) and (value >= minimum if inclusive else value > minimum)):
+            expected = f"expected a finite number {relation} {minimum:g}"
+            raise argparse.ArgumentTypeError(f"{expected}, got {text!r}")
+        return value
+
+    return parse
+
+
+_positive = _number(minimum=0.0, inclusive=False)
+_non_negative = _number(minimum=0.0, inclusive=True)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(
+        prog=PROG,
+        description="Republish the topics of an MCAP log with their recorded timing (ros2 bag play "
+        "for machines without rosbag2), and /clock from the log's time for use_sim_time nodes.",
+        epilog="ROS arguments go after --ros-args (e.g. --ros-args -r /joint_states:=/replayed). "
+        "Exit status: 0 done or stopped by SIGINT/SIGTERM, 1 unreadable or truncated log "
+        "(the intact part is replayed), 2 bad arguments.",
+    )
+    parser.add_argument("log", type=Path, help="the .mcap file")
+    parser.add_argument("--rate", type=_positive, default=1.0, metavar="R",
+                        help="playback speed factor, e.g. 10 for ten times faster (default 1)")
+    parser.add_argument("--loop", action="store_true", help="replay again from the start until stopped")
+    parser.add_argument("--topics", nargs="+", metavar="TOPIC",
+                        help="replay only these topics (default: all); /clock follows --clock/--no-clock")
+    parser.add_argument("--start-offset", type=_non_negative, default=0.0, metavar="S",
+                        help="skip the first S seconds of log time (default 0)")
+    clock = parser.add_mutually_exclusive_group()
+    clock.add_argument("--clock", type=_positive, nargs="?", const=DEFAULT_CLOCK_HZ, metavar="HZ",
+                       help="publish /clock generated from the log time at HZ wall hertz (default "
+                       f"{DEFAULT_CLOCK_HZ:g}) instead of the log's own /clock; a log without /clock "
+                       "always gets a generated one")
+    clock.add_argument("--no-clock", action="store_true", help="publish no /clock at all")
+    parser.add_argument("--delay", type=_non_negative, default=0.0, metavar="S",
+                        help="sleep S wall seconds before playing (default 0)")
+    parser.add_argument("--wait-for-subscribers", type=_non_negative, default=0.0, metavar="S",
+                        help="before playing, wait up to S s until every replayed topic has a "
+                        "subscriber (default 0: do not wait)")
+    parser.add_argument("--wait-for-all-acked", type=_non_negative, default=0.0, metavar="S",
+                        help="after the last message, wait up to S s until reliable subscribers have "
+                        "acknowledged every message (default 0: do not wait; with Fast DDS this takes "
+                        "up to its 3 s heartbeat period)")
+    return parser
+
+
+def _describe(exc: Exception) -> str:
+    text = str(exc)
+    return f"{type(exc).__name__}: {text}" if text else repr(exc)
+
+
+def _rcl_message(exc: Exception) -> str:
+    """rcl's message without its trail of C source locations ('..., at src/rcl/x.c:42')."""
+    text = (str(exc).splitlines() or [repr(exc)])[0]
+    return text.split(". Error:")[0].split(", at ")[0]
+
+
+def _print_error(text: str) -> None:
+    print(f"{PROG}: error: {text}", file=sys.stderr, flush=True)
+
+
+def _print_warning(text: str) -> None:
+    print(f"{PROG}: warning: {text}", file=sys.stderr, flush=True)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line (`argv` without the program name; default sys.argv); returns the exit status."""
+    full_argv = list(sys.argv) if argv is None else [PROG, *argv]
+    try:
+        own_argv = remove_ros_args(args=full_argv)[1:]
+    except Exception as exc:  # rcl's RCLInvalidROSArgsError for a bad --ros-args section
+        _print_error(_rcl_message(exc))
+        return EXIT_USAGE
+    args = build_parser().parse_args(own_argv)
+
+    stop = threading.Event()
+    received: list[str] = []
+
+    def on_signal(signum: int, _frame: FrameType | None) -> None:
+        received.append(signal.Signals(signum).name)
+        stop.set()
+
+    previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    previous_interval = sys.getswitchinterval()
+    sys.setswitchinterval(SWITCH_INTERVAL_S)  # see ReadAhead
+    try:
+        return _run(args, full_argv, stop, received)
+    finally:
+        sys.setswitchinterval(previous_interval)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+
+
+def _run(args: argparse.Namespace, full_argv: list[str], stop: threading.Event, received: list[str]) -> int:
+    try:
+        reader = read_log(args.log)
+        plan = plan_replay(reader, topics=args.topics, start_offset_s=args.start_offset,
+                           clock_hz=args.clock, no_clock=args.no_clock)
+        for topic, type_name in plan.topics.items():
+            message_class(topic, type_name)  # before any ROS call: a missing package is one line
+    except (MissingTopicsError, LogArgumentError) as exc:  # the arguments do not fit this log
+        _print_error(str(exc))
+        return EXIT_USAGE
+    except (LogError, MessageTypeNotFoundError) as exc:
+        _print_error(str(exc))
+        return EXIT_LOG
+    if reader.truncation is not None:
+        _print_warning(f"{reader.truncation}; replaying those")
+
+    try:
+        rclpy.init(args=full_argv, signal_handler_options=SignalHandlerOptions.NO)
+    except Exception as exc:  # rcl's own exception types (the --ros-args were checked above)
+        _print_error(f"cannot initialise ROS: {_rcl_message(exc)}")
+        return EXIT_LOG
+    topic_count = len(plan.topics) + (1 if plan.clock is ClockSource.GENERATED else 0)
+    node: Node | None = None
+    player: Player | None = None
+    try:
+        node = Node(PROG, start_parameter_services=False)
+        player = Player(node, reader, plan, rate=args.rate, stop=stop, warn=_print_warning)
+        if args.wait_for_subscribers > 0:
+            player.wait_for_subscribers(args.wait_for_subscribers)
+        player.sleep(args.delay)
+        try:
+            player.play(loop=args.loop)
+        finally:
+            timeout_s = args.wait_for_all_acked
+            if timeout_s > 0 and not stop.is_set() and not player.wait_for_acks(timeout_s):
+                _print_warning(f"some subscribers had not acknowledged every message after {timeout_s:g} s")
+            if player.stats.published:
+                player.sleep(LINGER_S)  # returns at once after a signal
+    except FingerSimError as exc:  # a damaged record mid-log, a type that is not installed
+        if player is not None and player.stats.published:
+            print(player.stats.summary(args.rate, topic_count), flush=True)  # what got out before it
+        _print_error(str(exc))
+        return EXIT_LOG
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    player.stats.stopped_by = received[0] if received else None
+    print(player.stats.summary(args.rate, topic_count), flush=True)
+    return EXIT_LOG if reader.truncation is not None else EXIT_OK
+
+
+if __name__ == "__main__":
+    sys.exit(main())
