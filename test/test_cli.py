@@ -59,10 +59,10 @@ def test_simulate_prints_the_spec_check_values(paper_cli):
     # the same digits from the independent reference
     y = ref.solve_scene(yaml.safe_load(PAPER.read_text())).y(0.3)
     assert tuple(round(math.degrees(a), 2) for a in y[:3]) == (34.34, 54.39, -53.02)
-    assert "t = 0.3 s" in first and "steps = 300" in first and "method = rk4" in first
+    assert "t = 0.3 s" in first and "steps = 300" in first and "method = rk6" in first
     assert float(re.search(r"max\|Φ\| = (\S+) m", first).group(1)) < 1e-10
     assert float(re.search(r"ΔE = (\S+) J", first).group(1)) == pytest.approx(1.868e-3, abs=5e-7)
-    assert "method auto → rk4" in proc.stdout
+    assert "method auto → rk6" in proc.stdout
 
 
 def test_simulate_csv_is_the_trajectory(paper_cli):

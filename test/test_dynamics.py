@@ -289,4 +289,4 @@ def test_time_grid_is_n_dt_exactly(paper_run):
     n = len(paper_run.t) - 1
     assert n == 300
     assert np.array_equal(paper_run.t, np.arange(n + 1) * 0.001)
-    assert paper_run.method == "rk4"  # auto on a smooth scene
+    assert paper_run.method == "rk6"  # auto on a smooth scene at 1 kHz

@@ -80,10 +80,10 @@ def toggle_run():
 
 
 def test_core_passes_the_toggle_at_the_spec_times(toggle_run, toggle_events):
-    """Event times of the default run (auto → rk4, 1 ms), from cubic Hermite interpolation
+    """Event times of the default run (auto → rk6, 1 ms), from cubic Hermite interpolation
     between samples: measured t90 off the reference's by 5e-11 s, the toggle by 6e-8 s."""
     traj = toggle_run
-    assert traj.method == "rk4"
+    assert traj.method == "rk6"
     system = load_scene(ref.CONFIG / "toggle_passage.yaml").build_system()
     th, w = traj.q[:, 0], traj.v[:, 0]
     i = int(np.argmax(th >= HALF_PI)) - 1
@@ -103,12 +103,12 @@ def test_core_passes_the_toggle_at_the_spec_times(toggle_run, toggle_events):
 #: 7.5e-6 (rk4), 1.7e-8 (radau), 7.3e-12 (adaptive), 1.3e-3 (rattle, order 2). RK4's error is
 #: made at the toggle, where θ3' ≈ 34 rad/s; it converges at order ≈ 4.2 there
 #: (3.9e-7 at 0.5 ms, 2.2e-8 at 0.25 ms).
-TOGGLE_BOUNDS = {"rk4": 2e-5, "radau": 5e-8, "adaptive": 3e-11, "rattle": 4e-3}
+TOGGLE_BOUNDS = {"rk4": 2e-5, "rk6": 3e-8, "radau": 5e-8, "adaptive": 3e-11, "rattle": 4e-3}
 
 
 @pytest.mark.parametrize("method", sorted(TOGGLE_BOUNDS))
 def test_toggle_passage_tracks_the_reference(method, toggle_ref, toggle_run):
-    traj = toggle_run if method == "rk4" else simulate(load_scene(ref.CONFIG / "toggle_passage.yaml").with_overrides(method=method))
+    traj = toggle_run if method == "rk6" else simulate(load_scene(ref.CONFIG / "toggle_passage.yaml").with_overrides(method=method))
     assert np.all(np.isfinite(traj.q)) and np.all(np.isfinite(traj.v))
     assert traj.residual.max() < 1e-10
     y = toggle_ref.y(traj.t)

@@ -17,7 +17,8 @@ from finger_sim.kinematics import assembly_range
 from finger_sim.model import FingerParams
 from finger_sim.scene import Scene, load_scene, scene_from_dict
 
-SHIPPED = sorted(ref.CONFIG.glob("*.yaml"))
+#: Every scene in config/ (finger_node.yaml there is the node's ROS parameter file).
+SHIPPED = sorted(p for p in ref.CONFIG.glob("*.yaml") if p.name != "finger_node.yaml")
 LO, HI = assembly_range(FingerParams())
 
 

@@ -1,0 +1,201 @@
+"""Reference solutions of the bench scenes: scipy at its tightest tolerance, checked by a second method.
+
+A reference integrates the same index-1 equations as every method under test
+(`FingerSystem.accelerations`), one smooth piece at a time: the solver restarts at each
+torque switch (`Profile.breakpoints`) and at each joint-stop impact (located as a
+solve_ivp event, then v⁺ = −e v⁻, or rest on the stop while the free acceleration pushes
+into it and release where it stops pushing — the rules `finger_sim.simulate.Simulator` applies). Each piece keeps scipy's
+dense output, so the reference is evaluated at any sample time.
+
+The check: the same pieces by a second, independent method: scipy's Radau IIA (implicit,
+order 5) for smooth scenes, LSODA (Adams/BDF) for stiff ones, where scipy's Radau at a
+tight tolerance needs tens of millions of evaluations. Their largest difference on the
+sample grid bounds the reference's own error; errors of the methods under test below
+about that bound are at the reference floor and are shown as such.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.integrate import solve_ivp
+from scipy.optimize import brentq
+
+from finger_sim.errors import SimulationDiverged
+from finger_sim.scene import Scene
+from finger_sim.stability import fastest_mode
+from finger_sim import kinematics
+
+#: Tolerance of the reference, DOP853 (the `adaptive` method's scheme): scipy warns below
+#: rtol = 100·eps ≈ 2.2e-14.
+REFERENCE_RTOL = 1e-13
+#: On a stiff scene DOP853 at 1e-13 sits at its stability boundary rejecting steps (1e6
+#: evaluations, 10 s on stiff_spring); at 1e-11 it takes 1e4 and agrees with LSODA at
+#: 1e-12 to 5e-13 rad, so this is the tightest tolerance that is practical there.
+STIFF_REFERENCE_RTOL = 1e-11
+#: Absolute tolerance per unit rtol: angles are O(1) rad and rates O(1-10) rad/s.
+ATOL_PER_RTOL = 1e-2
+#: The checking method's tolerance (full run / --quick).
+CHECK_RTOL = 1e-12
+CHECK_RTOL_QUICK = 1e-10
+#: A scene whose fastest mode has |s|·duration above this is stiff for an explicit
+#: reference (DOP853 needs at least ~|s|·duration / 3 steps at its stability limit).
+STIFF_REFERENCE = 1e3
+#: While resting on a stop, the free acceleration is probed at this many times per piece
+#: to find where it stops pushing into the stop (then located by brentq): the release.
+CONTACT_PROBES = 17
+#: Times closer than this (s) to a piece's end count as on it.
+TIME_EPS = 1e-12
+
+ZERO = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class _Piece:
+    """One smooth piece [t0, t1]: dense scipy output, or a state held on a stop when `sol` is None."""
+
+    t0: float
+    t1: float
+    sol: Callable[[np.ndarray], np.ndarray] | None
+    held: tuple[float, ...]
+
+
+@dataclass(frozen=True)
+class Solution:
+    """A piecewise dense solution of one scene by one scipy method."""
+
+    method: str
+    rtol: float
+    pieces: tuple[_Piece, ...]
+    cpu_time: float  # s, process time of the solve
+    nfev: int
+
+    def states(self, times: Sequence[float]) -> np.ndarray:
+        """(N, 6) array of (θ1, θ2, θ3, θ1', θ2', θ3') at `times` (s, within the run)."""
+        times = np.asarray(times, dtype=float)
+        out = np.empty((times.size, 6))
+        starts = np.array([p.t0 for p in self.pieces])
+        # a time on a boundary belongs to the later piece (the state after a switch or impact)
+        index = np.clip(np.searchsorted(starts, times + TIME_EPS, side="right") - 1, 0, len(self.pieces) - 1)
+        for k in np.unique(index):
+            piece = self.pieces[k]
+            sel = index == k
+            if piece.sol is None:
+                out[sel] = piece.held
+            else:
+                out[sel] = piece.sol(np.clip(times[sel], piece.t0, piece.t1)).T
+        return out
+
+
+@dataclass(frozen=True)
+class Reference:
+    """The reference of one scene and its check (max |θ_ref − θ_check| in rad on the sample grid)."""
+
+    scene: str
+    solution: Solution
+    check: Solution
+    check_difference: float
+
+    def theta(self, times: Sequence[float]) -> np.ndarray:
+        """(N, 3) reference angles, rad."""
+        return self.solution.states(times)[:, :3]
+
+
+def sample_times(duration: float, spacing: float) -> np.ndarray:
+    """k·spacing for k = 0..round(duration / spacing), s: the grid errors are measured on."""
+    n = round(duration / spacing)
+    return np.arange(n + 1) * spacing
+
+
+def solve(scene: Scene, *, method: str, rtol: float) -> Solution:
+    """`scene` by scipy `method` at `rtol` (atol = ATOL_PER_RTOL·rtol), piece by piece."""
+    system = scene.build_system()
+    acc = system.accelerations
+    profile = scene.torque
+    duration = scene.duration
+    q, v = scene.initial_state()
+    y = [*q, *v]
+    t = 0.0
+    cuts = sorted(profile.breakpoints(0.0, duration))
+    limits = scene.mcp_limits
+    contact = 0
+    pieces: list[_Piece] = []
+    nfev = 0
+    start = time.process_time()
+    while t < duration - TIME_EPS:
+        end = next((b for b in cuts if b > t + TIME_EPS), duration)
+        torque = profile.on_segment(t, end)
+        if contact:  # resting on a stop: held until the free acceleration stops pushing into it
+            qs = (y[0], y[1], y[2])
+
+            def push(s: float, qs=qs, torque=torque) -> float:  # type: ignore[no-untyped-def]
+                return acc(s, qs, ZERO, torque(s))[0][0] * contact
+
+            probes = np.linspace(t, end, CONTACT_PROBES)
+            pushing = [push(s) > 0.0 for s in probes]
+            if all(pushing):
+                pieces.append(_Piece(t, end, None, tuple(y)))
+                t = end
+                continue
+            k = pushing.index(False)
+            release = t if k == 0 else brentq(push, probes[k - 1], probes[k], xtol=TIME_EPS, rtol=4e-16)
+            if release > t:
+                pieces.append(_Piece(t, release, None, tuple(y)))
+            t, contact = release, 0
+
+        def rhs(s: float, z: np.ndarray, torque=torque) -> list[float]:  # type: ignore[no-untyped-def]
+            qs, vs = (z[0], z[1], z[2]), (z[3], z[4], z[5])
+            return [*vs, *acc(s, qs, vs, torque(s))[0]]
+
+        events = []
+        if limits is not None:
+            upper = lambda s, z: z[0] - limits[1]  # noqa: E731
+            lower = lambda s, z: z[0] - limits[0]  # noqa: E731
+            upper.terminal, upper.direction = True, 1.0  # type: ignore[attr-defined]
+            lower.terminal, lower.direction = True, -1.0  # type: ignore[attr-defined]
+            events = [upper, lower]
+        sol = solve_ivp(
+            rhs, (t, end), y, method=method, rtol=rtol, atol=ATOL_PER_RTOL * rtol, dense_output=True,
+            events=events or None,
+        )
+        if not sol.success:
+            raise SimulationDiverged(f"reference {method} on {scene.name}: {sol.message} at t = {sol.t[-1]:.6f} s")
+        nfev += sol.nfev
+        t_hit = float(sol.t[-1])
+        pieces.append(_Piece(t, t_hit, sol.sol, ()))
+        y = sol.y[:, -1].tolist()
+        t = t_hit
+        if sol.status == 1:  # a stop was reached: the impact rule of Simulator._impact
+            side = +1 if sol.t_events[0].size else -1
+            qs = (y[0], y[1], y[2])
+            e = scene.restitution
+            v_plus = [-e * w for w in y[3:]]
+            a_free = acc(t, qs, ZERO, torque(t))[0][0]
+            if a_free * side > 0.0 and v_plus[0] == 0.0:
+                contact = side
+            y = [*qs, *v_plus]
+    return Solution(method, rtol, tuple(pieces), time.process_time() - start, nfev)
+
+
+def is_stiff(scene: Scene) -> bool:
+    """Whether an explicit reference would crawl: |s|·duration of the fastest mode above STIFF_REFERENCE."""
+    system = scene.build_system()
+    root = fastest_mode(system, scene.mcp_limits or kinematics.assembly_range(scene.params))
+    return abs(root) * scene.duration > STIFF_REFERENCE
+
+
+def build_reference(scene: Scene, *, quick: bool, spacing: float) -> Reference:
+    """DOP853 at its tightest practical tolerance, checked by Radau (LSODA on a stiff scene)."""
+    stiff = is_stiff(scene)
+    solution = solve(scene, method="DOP853", rtol=STIFF_REFERENCE_RTOL if stiff else REFERENCE_RTOL)
+    check_rtol = CHECK_RTOL_QUICK if quick else CHECK_RTOL
+    check = solve(scene, method="LSODA" if stiff else "Radau", rtol=check_rtol)
+    times = sample_times(scene.duration, spacing)
+    diff = float(np.max(np.abs(solution.states(times)[:, :3] - check.states(times)[:, :3])))
+    if not math.isfinite(diff):
+        raise SimulationDiverged(f"reference of {scene.name}: non-finite check difference")
+    return Reference(scene.name, solution, check, diff)

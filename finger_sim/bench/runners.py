@@ -1,0 +1,420 @@
+"""Timed runs of one scene by one method: the project's integrators, scipy's solve_ivp and MuJoCo.
+
+Every runner returns a `Run`: the error against the scene's reference (max over the sample
+grid of |θ − θ_ref| on the three angles, rad), the largest loop-closure residual |Φ| (m),
+the relative energy drift where energy is conserved, and the CPU time of the stepping
+alone: `time.process_time`, median of the repeats, with setup (model building, stability
+checks, MJCF compiling) outside it. A run whose first repeat takes longer than
+LONG_RUN_SECONDS is timed once: its relative timing noise is already small.
+"""
+
+from __future__ import annotations
+
+import math
+import statistics
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from finger_sim import kinematics
+from finger_sim.bench.reference import Reference, sample_times
+from finger_sim.errors import FingerSimError, SimulationDiverged, StabilityError
+from finger_sim.inputs import Constant
+from finger_sim.scene import Scene
+from finger_sim.simulate import Simulator
+
+#: Runs whose first repeat takes longer than this (s of CPU) are not repeated.
+LONG_RUN_SECONDS = 2.0
+#: A scipy run that asks for more right-hand-side evaluations than this is given up
+#: (scipy's Radau at rtol 1e-12 on stiff_spring would take ~2e7 evaluations, 10 minutes).
+MAX_SCIPY_EVALUATIONS = 300_000
+FAMILY_PROJECT, FAMILY_SCIPY, FAMILY_MUJOCO = "finger_sim", "scipy", "MuJoCo"
+
+OK, REFUSED, DIVERGED, GAVE_UP, SKIPPED = "ok", "refused", "diverged", "gave up", "skipped"
+
+
+@dataclass
+class Run:
+    """One timed run. Times in s, error in rad, |Φ| in m; NaN where a figure does not apply."""
+
+    scene: str
+    family: str
+    method: str  # row label, e.g. "rk4", "scipy DOP853", "MuJoCo RK4 tight"
+    knob: str  # "dt", "rtol" or "timestep"
+    value: float  # the knob's value
+    duration: float  # simulated s
+    status: str = OK
+    note: str = ""
+    error: float = math.nan
+    final_error: float = math.nan  # rad, |θ − θ_ref| at the run's end
+    max_phi: float = math.nan
+    energy_drift: float = math.nan
+    penetration: float = math.nan
+    cpu: float = math.nan  # median CPU s of the stepping
+    repeats: int = 0
+    steps: int = 0
+    nfev: int = 0
+
+    @property
+    def ok(self) -> bool:
+        return self.status == OK
+
+    @property
+    def us_per_step(self) -> float:
+        return 1e6 * self.cpu / self.steps if self.ok and self.steps else math.nan
+
+    @property
+    def cpu_per_second(self) -> float:
+        """CPU s per simulated s."""
+        return self.cpu / self.duration if self.ok else math.nan
+
+    @property
+    def realtime_factor(self) -> float:
+        """Simulated s per CPU s."""
+        return self.duration / self.cpu if self.ok and self.cpu > 0 else math.nan
+
+
+def conserves_energy(scene: Scene) -> bool:
+    """τ ≡ 0, no damping and no stops that could absorb energy: T + V is a constant of motion."""
+    no_torque = isinstance(scene.torque, Constant) and scene.torque.value == 0.0
+    elastic = scene.mcp_limits is None or scene.restitution == 1.0
+    return no_torque and scene.damping == 0.0 and elastic
+
+
+def _timed(fn: Callable[[], object], repeats: int) -> tuple[object, float, int]:
+    """(first result, median CPU s, repeats done) of fn(); stops repeating after a long first run."""
+    results, cpus = None, []
+    for k in range(repeats):
+        start = time.process_time()
+        out = fn()
+        cpus.append(time.process_time() - start)
+        if k == 0:
+            results = out
+            if cpus[0] > LONG_RUN_SECONDS:
+                break
+    return results, statistics.median(cpus), len(cpus)
+
+
+def _fill_accuracy(run: Run, scene: Scene, reference: Reference, times: np.ndarray, q: np.ndarray, v: np.ndarray | None) -> None:
+    """Error, |Φ|, energy drift and stop penetration from states q (N, 3), v (N, 3) at `times`."""
+    if not (np.all(np.isfinite(q)) and (v is None or np.all(np.isfinite(v)))):
+        run.status, run.note = DIVERGED, "non-finite state"
+        return
+    deviation = np.abs(q - reference.theta(times))
+    run.error = float(np.max(deviation))
+    run.final_error = float(np.max(deviation[-1]))
+    run.max_phi = max(kinematics.constraint_norm(scene.params, tuple(row)) for row in q)
+    if v is not None and conserves_energy(scene):
+        system = scene.build_system()
+        energy = np.array([system.energy(tuple(a), tuple(b)) for a, b in zip(q, v)])
+        run.energy_drift = float(np.max(np.abs(energy - energy[0])) / abs(energy[0]))
+    if scene.mcp_limits is not None:
+        lo, hi = scene.mcp_limits
+        run.penetration = float(max(0.0, np.max(q[:, 0] - hi), np.max(lo - q[:, 0])))
+
+
+# -- the project's integrators ---------------------------------------------------------------
+
+
+def run_method(scene: Scene, method: str, dt: float, reference: Reference, *, spacing: float, repeats: int) -> Run:
+    """`scene` stepped by the project's `method` at `dt` through `Simulator` (the node's path)."""
+    family = FAMILY_PROJECT
+    run = Run(scene.name, family, method, "dt", dt, scene.duration)
+    n = round(scene.duration / dt)
+    try:
+        resolved = scene.with_overrides(method=method, dt=dt)
+        Simulator(resolved)  # the stability check, outside the timing
+    except StabilityError as exc:
+        run.status, run.note = REFUSED, str(exc).split(";")[0].split(": ", 1)[-1]
+        return run
+
+    def timed_once() -> tuple[list, float]:
+        sim = Simulator(resolved)
+        states = [sim.state]
+        step, append = sim.step, states.append
+        start = time.process_time()
+        for _ in range(n):
+            append(step())
+        return states, time.process_time() - start
+
+    cpus: list[float] = []
+    states: list = []
+    try:
+        for k in range(repeats):
+            out, cpu = timed_once()
+            cpus.append(cpu)
+            if k == 0:
+                states = out
+                if cpu > LONG_RUN_SECONDS:
+                    break
+    except (SimulationDiverged, ZeroDivisionError, OverflowError, ValueError, np.linalg.LinAlgError) as exc:
+        run.status, run.note = DIVERGED, f"{type(exc).__name__}: {exc}"[:160]
+        return run
+    run.cpu, run.repeats, run.steps, run.nfev = statistics.median(cpus), len(cpus), n, 0
+    stride = max(1, round(spacing / dt))
+    picked = states[::stride]
+    times = np.array([s.t for s in picked])
+    q = np.array([s.q for s in picked])
+    v = np.array([s.v for s in picked])
+    _fill_accuracy(run, scene, reference, times, q, v)
+    # |Φ| and stop penetration over every step, not only the samples
+    if run.ok:
+        run.max_phi = max(kinematics.constraint_norm(scene.params, s.q) for s in states)
+        if scene.mcp_limits is not None:
+            lo, hi = scene.mcp_limits
+            run.penetration = max(0.0, max(max(s.q[0] - hi, lo - s.q[0]) for s in states))
+    return run
+
+
+# -- scipy ------------------------------------------------------------------------------------
+
+
+class _GaveUp(Exception):
+    pass
+
+
+def scalar_rhs(scene: Scene) -> Callable[[Callable[[float], float]], Callable[[float, np.ndarray], list[float]]]:
+    """y' = f(t, y) on y = (q, q') with the project's scalar `FingerSystem.accelerations`, per torque piece."""
+    acc = scene.build_system().accelerations
+
+    def make(torque: Callable[[float], float]) -> Callable[[float, np.ndarray], list[float]]:
+        def rhs(t: float, y: np.ndarray) -> list[float]:
+            q, v = (y[0], y[1], y[2]), (y[3], y[4], y[5])
+            return [*v, *acc(t, q, v, torque(t))[0]]
+
+        return rhs
+
+    return make
+
+
+def numpy_rhs(scene: Scene) -> Callable[[Callable[[float], float]], Callable[[float, np.ndarray], np.ndarray]]:
+    """The same equations as a user would first write them: numpy arrays and a 5×5 `np.linalg.solve`."""
+    system = scene.build_system()
+    p = scene.params
+    r = np.array([p.r1, p.r2, p.r3])
+    forces = [e.force for e in system.elements]
+
+    def make(torque: Callable[[float], float]) -> Callable[[float, np.ndarray], np.ndarray]:
+        def rhs(t: float, y: np.ndarray) -> np.ndarray:
+            q, v = y[:3], y[3:]
+            m = np.array(system.mass_matrix(tuple(q)))
+            u = q[0] - q[2] - system.alpha
+            h = system._c * np.sin(u) * np.array([v[2] ** 2, 0.0, -v[0] ** 2])
+            f = np.array([torque(t), 0.0, 0.0]) + sum(np.array(fn(t, tuple(q), tuple(v))) for fn in forces)
+            s, c = np.sin(q), np.cos(q)
+            jac = np.array([[-r[0] * s[0], r[1] * s[1], r[2] * s[2]], [r[0] * c[0], -r[1] * c[1], -r[2] * c[2]]])
+            gamma = np.array([r[0] * c[0], -r[1] * c[1], -r[2] * c[2]]) @ v**2, np.array([r[0] * s[0], -r[1] * s[1], -r[2] * s[2]]) @ v**2
+            kkt = np.zeros((5, 5))
+            kkt[:3, :3], kkt[:3, 3:], kkt[3:, :3] = m, -jac.T, jac
+            x = np.linalg.solve(kkt, np.concatenate([f - h, gamma]))
+            return np.concatenate([v, x[:3]])
+
+        return rhs
+
+    return make
+
+
+def run_scipy(
+    scene: Scene, method: str, rtol: float, reference: Reference, *, spacing: float, repeats: int, rhs: str = "scalar"
+) -> Run:
+    """solve_ivp(method, rtol, atol = 1e-2·rtol) on the index-1 equations, output on the sample grid.
+
+    Restarted at each torque switch, as `Simulator` and the reference are. rhs "scalar" is
+    the project's `FingerSystem.accelerations` (integrator against integrator on the same
+    equations); "numpy" is the naive numpy right-hand side.
+    """
+    label = f"scipy {method}" + (" (numpy RHS)" if rhs == "numpy" else "")
+    run = Run(scene.name, FAMILY_SCIPY, label, "rtol", rtol, scene.duration)
+    if scene.mcp_limits is not None:
+        run.status, run.note = SKIPPED, "joint stops need event handling a plain solve_ivp script does not have"
+        return run
+    make = (scalar_rhs if rhs == "scalar" else numpy_rhs)(scene)
+    profile = scene.torque
+    edges = [0.0, *profile.breakpoints(0.0, scene.duration), scene.duration]
+    grid = sample_times(scene.duration, spacing)
+    q0, v0 = scene.initial_state()
+    pieces = []
+    for a, b in zip(edges, edges[1:]):
+        inside = grid[(grid >= a - 1e-12) & (grid <= b + 1e-12)]
+        pieces.append((a, b, make(profile.on_segment(a, b)), inside))
+    count = [0]
+
+    def counted(fn):  # type: ignore[no-untyped-def]
+        def wrapped(t, y):  # type: ignore[no-untyped-def]
+            count[0] += 1
+            if count[0] > MAX_SCIPY_EVALUATIONS:
+                raise _GaveUp
+            return fn(t, y)
+
+        return wrapped
+
+    def solve_all(t_eval: bool) -> tuple[np.ndarray, np.ndarray, int]:
+        count[0] = 0
+        y = [*q0, *v0]
+        ts, ys, steps = [], [], 0
+        for a, b, fn, inside in pieces:
+            # the piece's end is always evaluated, to carry the state on; off the grid it is dropped
+            ends_on_grid = bool(inside.size) and abs(inside[-1] - b) < 1e-12
+            wanted = (inside if ends_on_grid else np.append(inside, b)) if t_eval else None
+            sol = solve_ivp(counted(fn), (a, b), y, method=method, rtol=rtol, atol=1e-2 * rtol, t_eval=wanted)
+            if not sol.success:
+                raise SimulationDiverged(sol.message)
+            y = sol.y[:, -1]
+            if t_eval:
+                keep = slice(None) if ends_on_grid else slice(0, -1)
+                ts.append(sol.t[keep])
+                ys.append(sol.y[:, keep])
+            else:
+                steps += sol.t.size - 1
+        if t_eval:
+            t_all = np.concatenate(ts)
+            y_all = np.concatenate(ys, axis=1)
+            keep = np.concatenate([[True], np.diff(t_all) > 1e-12])  # a switch on the grid is sampled twice
+            return t_all[keep], y_all[:, keep], count[0]
+        return np.array([]), np.array([]), steps
+
+    try:
+        _, _, steps = solve_all(False)  # untimed: the step count (t_eval does not change the steps)
+        (times, y, nfev), cpu, done = _timed(lambda: solve_all(True), repeats)  # type: ignore[misc]
+    except _GaveUp:
+        run.status, run.note = GAVE_UP, f"more than {MAX_SCIPY_EVALUATIONS:,} evaluations"
+        return run
+    except (SimulationDiverged, ZeroDivisionError, OverflowError, ValueError, np.linalg.LinAlgError) as exc:
+        run.status, run.note = DIVERGED, f"{type(exc).__name__}: {exc}"[:160]
+        return run
+    run.cpu, run.repeats, run.steps, run.nfev = cpu, done, steps, nfev
+    _fill_accuracy(run, scene, reference, times, y[:3].T, y[3:].T)
+    return run
+
+
+# -- MuJoCo -------------------------------------------------------------------------------
+
+
+def mujoco_available() -> tuple[bool, str]:
+    """(available, note): whether `mujoco` and the peer model import."""
+    try:
+        import mujoco  # noqa: F401
+
+        from finger_sim.bench import mujoco_peer  # noqa: F401
+    except ImportError as exc:
+        return False, f"MuJoCo rows skipped: {exc} (install with `pip install .[bench]` or `pip install mujoco`)"
+    return True, ""
+
+
+@contextmanager
+def _mujoco_warnings(sink: list[str]) -> Iterator[None]:
+    """Collect MuJoCo's warnings in `sink` instead of stderr and MUJOCO_LOG.TXT in the cwd.
+
+    A diverging run still raises (the peer checks MuJoCo's warning counters); the text
+    goes into the run's note.
+    """
+    import mujoco
+
+    previous = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(sink.append)
+    try:
+        yield
+    finally:
+        mujoco.set_mju_user_warning(previous)
+
+
+def run_mujoco_peer(
+    scene: Scene, integrator: str, timestep: float, setting: str, reference: Reference, *, spacing: float, repeats: int
+) -> Run:
+    """The MJCF peer (finger_sim.bench.mujoco_peer) with MuJoCo's `integrator` at `timestep`.
+
+    setting "default": MuJoCo's default solref/solimp on the loop-closing connect;
+    "tight": the peer's `tight_equality(timestep)` (the stiffest stable loop).
+    """
+    label = f"MuJoCo {integrator} {setting}"
+    run = Run(scene.name, FAMILY_MUJOCO, label, "timestep", timestep, scene.duration)
+    available, note = mujoco_available()
+    if not available:
+        run.status, run.note = SKIPPED, note
+        return run
+    from finger_sim.bench import mujoco_peer as mp
+
+    if scene.mcp_limits is not None or any(scene.gravity) or any(scene.tip_force):
+        run.status, run.note = SKIPPED, "the MJCF peer models neither joint stops, gravity nor tip forces"
+        return run
+    equality = mp.DEFAULT_EQUALITY if setting == "default" else mp.tight_equality(timestep)
+    times = sample_times(scene.duration, max(spacing, timestep))
+    q0, v0 = scene.initial_state()
+    plain = scene.theta1 == 0.0 and scene.theta1_dot == 0.0 and scene.damping == 0.0
+
+    def once() -> tuple[np.ndarray, np.ndarray | None, float, int]:
+        if plain:  # the peer's own runner
+            res = mp.run_mujoco(
+                scene.params, torque=scene.torque, t_end=scene.duration, timestep=timestep, integrator=integrator,
+                equality=equality, spring_stiffness=scene.spring_stiffness, sample_times=times,
+            )
+            return res.theta, None, res.cpu_time, res.n_steps
+        return _mujoco_general(mp, scene, integrator, timestep, equality, times, q0, v0)
+
+    warnings: list[str] = []
+    try:
+        cpus = []
+        first = None
+        with _mujoco_warnings(warnings):
+            for k in range(repeats):
+                out = once()
+                cpus.append(out[2])
+                if k == 0:
+                    first = out
+                    if out[2] > LONG_RUN_SECONDS:
+                        break
+    except (SimulationDiverged, FingerSimError, ValueError) as exc:
+        said = f" (MuJoCo: {warnings[0]})" if warnings else ""
+        run.status, run.note = DIVERGED, (str(exc).split(":", 1)[-1].strip() + said)[:200]
+        return run
+    assert first is not None
+    theta, theta_dot, _, n_steps = first
+    run.cpu, run.repeats, run.steps = statistics.median(cpus), len(cpus), n_steps
+    _fill_accuracy(run, scene, reference, times, theta, theta_dot)
+    return run
+
+
+def _mujoco_general(mp, scene, integrator, timestep, equality, times, q0, v0):  # type: ignore[no-untyped-def]
+    """run_mujoco's loop for what it does not take (an initial rate, joint damping): same timing, same checks.
+
+    Joint damping c on MuJoCo's hinges (mcp, coupler, pip) is the spec's Rayleigh damping
+    R = ½ c (θ1'² + θ2'² + β'²) exactly, since the pip hinge turns by β.
+    """
+    import mujoco
+
+    finger = mp.MujocoFinger(
+        scene.params, timestep=timestep, integrator=integrator, equality=equality, spring_stiffness=scene.spring_stiffness
+    )
+    model = finger.model
+    model.dof_damping[finger.dof_index] = scene.damping
+    data = finger.make_data(q0, v0)
+    n_steps = round(scene.duration / timestep)
+    samples = np.rint(times / timestep).astype(int)
+    offset = mp.TORQUE_TIME_IN_STEP[integrator]
+    taus = [float(scene.torque((k + offset) * timestep)) for k in range(n_steps)]
+    chunks = [taus[a:b] for a, b in zip([0, *samples[1:-1].tolist()], samples[1:].tolist())]
+    qpos = np.empty((samples.size, model.nq))
+    qvel = np.empty((samples.size, model.nv))
+    qpos[0], qvel[0] = data.qpos, data.qvel
+    ctrl, motor, step = data.ctrl, finger.motor_id, mujoco.mj_step
+    start = time.process_time()
+    for j, chunk in enumerate(chunks, start=1):
+        for tau in chunk:
+            ctrl[motor] = tau
+            step(model, data)
+        qpos[j], qvel[j] = data.qpos, data.qvel
+    cpu = time.process_time() - start
+    theta = finger.to_paper(qpos)
+    w = qvel[:, finger.dof_index]
+    theta_dot = np.column_stack([w[:, 0], w[:, 1], w[:, 0] + w[:, 2]])
+    loop = finger.loop_violation(theta) if np.all(np.isfinite(theta)) else np.array([math.inf])
+    bad = data.warning[mujoco.mjtWarning.mjWARN_BADQACC]
+    if bad.number > 0 or not np.all(np.isfinite(theta)) or loop.max() > mp.DIVERGED_LOOP_FRACTION * scene.params.r3:
+        raise SimulationDiverged(
+            f"MuJoCo {integrator}: {bad.number} bad-acceleration reset(s), largest loop violation {loop.max():.3g} m"
+        )
+    return theta, theta_dot, cpu, n_steps

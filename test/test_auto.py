@@ -1,0 +1,106 @@
+"""`method: auto`: the kind and rate of a scene, the table's pick, stability, and the stated reason."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import pytest
+
+from finger_sim import auto
+from finger_sim.errors import StabilityError
+from finger_sim.integrators import METHODS
+from finger_sim.scene import load_scene
+from finger_sim.simulate import Simulator, simulate
+from finger_sim.stability import fastest_mode, stable_at
+from finger_sim import kinematics
+
+CONFIG = Path(__file__).resolve().parent.parent / "config"
+SHIPPED = sorted(p.stem for p in CONFIG.glob("*.yaml") if p.stem != "finger_node")
+
+
+def scene(name: str, **overrides):
+    return load_scene(CONFIG / f"{name}.yaml").with_overrides(method="auto", **overrides)
+
+
+def root_of(s) -> complex:
+    return fastest_mode(s.build_system(), s.mcp_limits or kinematics.assembly_range(s.params))
+
+
+def test_stiff_spring_at_1ms_gets_an_implicit_method():
+    method, reason = auto.choose_method(scene("stiff_spring", dt=1e-3))
+    assert METHODS[method].implicit
+    assert METHODS[method].is_stable(complex(-1e6, 1e6))  # stable on any mode
+    assert reason.startswith("stiff scene (fastest mode |s|·dt = 10.8 > 1, not resolved by the step)")
+    assert "1000 Hz" in reason and method in reason
+    # every explicit method is unstable there: the reason says so
+    assert "unstable here: " in reason or not any(not METHODS[m].implicit for m, *_ in auto.RECOMMENDATION["stiff"][1000])
+
+
+def test_paper_flexion_at_1ms_gets_an_explicit_method_within_the_target():
+    method, reason = auto.choose_method(scene("paper_flexion", dt=1e-3))
+    assert not METHODS[method].implicit
+    assert reason.startswith("smooth scene (smooth ramp torque, no stops, fastest mode |s|·dt = 0.0108)")
+    assert f"at 1000 Hz the bench measured {method} as the cheapest method within 1e-06 rad" in reason
+    row = dict((m, e) for m, e, _ in auto.RECOMMENDATION["smooth"][1000])
+    assert row[method] <= auto.AUTO_TARGET
+
+
+def test_the_simulator_stores_and_the_run_reports_the_reason(caplog):
+    s = scene("paper_flexion", dt=1e-3, duration=0.01)
+    method, reason = auto.choose_method(s)
+    with caplog.at_level(logging.INFO, logger="finger_sim.auto"):
+        sim = Simulator(s)
+    assert sim.method == method and sim.method_reason == reason
+    assert f"method auto → {method}: {reason}" in caplog.text
+    traj = simulate(s)
+    assert traj.method == method and traj.method_reason == reason
+
+
+def test_a_named_method_has_no_reason():
+    sim = Simulator(scene("paper_flexion").with_overrides(method="rk4"))
+    assert sim.method == "rk4" and sim.method_reason == ""
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+@pytest.mark.parametrize("dt", [1e-2, 1e-3, 1e-4])
+def test_auto_always_picks_a_method_the_stability_check_accepts(name, dt):
+    s = scene(name, dt=dt)
+    method, reason = auto.choose_method(s)
+    assert stable_at(METHODS[method], root_of(s), dt)
+    Simulator(s)  # no StabilityError
+    assert method in reason
+
+
+def test_scene_kinds():
+    assert auto.scene_kind(scene("bang_bang"), root_of(scene("bang_bang")))[0] == "discontinuous"
+    assert auto.scene_kind(scene("paper_to_stop"), root_of(scene("paper_to_stop")))[0] == "stops"
+    assert auto.scene_kind(scene("toggle_passage"), root_of(scene("toggle_passage")))[0] == "smooth"
+    # the same spring is resolved by a step of 10 µs (|s|·dt = 0.108): no longer stiff
+    fine = scene("stiff_spring", dt=1e-5)
+    kind, why = auto.scene_kind(fine, root_of(fine))
+    assert kind == "smooth" and "0.108" in why
+
+
+def test_rate_row_is_the_tabulated_rate_at_or_below_the_scene_rate():
+    assert auto.table_rate([100, 1000, 10000], 1e-3) == (1000, "1000 Hz")
+    assert auto.table_rate([100, 1000, 10000], 3e-3)[0] == 100  # accuracy measured at a larger step
+    assert auto.table_rate([100, 1000, 10000], 5e-4)[0] == 1000
+    rate, text = auto.table_rate([100, 1000], 0.05)
+    assert rate == 100 and "slower than any measured rate" in text
+
+
+def test_the_table_is_bench_data_auto_can_use():
+    assert set(auto.RECOMMENDATION) == {"smooth", "discontinuous", "stiff", "stops"}
+    for kind, rows in auto.RECOMMENDATION.items():
+        assert 1000 in rows, kind
+        for rate, cands in rows.items():
+            assert all(m in METHODS for m, _, _ in cands), (kind, rate)
+            costs = [c for _, _, c in cands]
+            assert costs == sorted(costs), (kind, rate)  # cheapest first
+            assert all(e >= 0.0 for _, e, _ in cands)
+
+
+def test_explicit_methods_stay_refused_where_auto_is_not_used():
+    with pytest.raises(StabilityError):
+        Simulator(scene("stiff_spring", dt=1e-3).with_overrides(method="rk4"))
