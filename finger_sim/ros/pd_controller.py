@@ -1,0 +1,128 @@
+"""`finger_pd_controller`: PD control of the MCP angle — how a controller drives the simulated finger.
+
+Subscribes `joint_states` (sensor_msgs/JointState, from finger_node) and `mcp_setpoint`
+(std_msgs/Float64, rad, the spec §6 `mcp_joint` position: 0 at extension, flexion positive);
+publishes `motor_torque` (std_msgs/Float64, N·m) once for every joint state it receives:
+
+    τ = clamp(kp·(θ* − θ) − kd·θ', ±max_torque)
+
+Event-driven, no timer: the loop closes at the node's publish rate whatever its
+realtime_factor, and each torque answers the newest state (keep-last-1 subscription).
+The derivative acts on the measured rate, not on the error, so a setpoint step gives no kick.
+
+The PIP spring pulls the finger back, so PD settles slightly short of θ*: where
+kp·(θ* − θ) = kβ·dβ/dθ1 (5 mrad short at θ* = 0.8 rad with the defaults).
+
+Run it beside the node (same namespace), then command a setpoint:
+
+    ros2 run finger_sim finger_node
+    ros2 run finger_sim finger_pd_controller --ros-args -p setpoint:=0.8
+    ros2 topic pub --once /mcp_setpoint std_msgs/msg/Float64 "{data: 1.2}"
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+
+import rclpy
+from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64
+
+NODE_NAME = "finger_pd_controller"
+#: Defaults: critically damped-ish on the paper's finger (no overshoot, |θ − θ_eq| < 5 mrad
+#: within 0.25 s of a 0.8 rad step with up to 10 ms of loop delay; see test_pd_controller).
+KP = 0.2  # N·m/rad
+KD = 0.01  # N·m·s/rad
+MAX_TORQUE = 0.05  # N·m, as finger_node's default saturation
+#: Newest state only: a controller should answer the latest state, not work off a backlog.
+STATE_QOS = QoSProfile(depth=1)
+COMMAND_QOS = QoSProfile(depth=10)
+EXIT_CONFIG = 2
+
+
+class ParameterError(ValueError):
+    """A parameter has the wrong type or is out of range."""
+
+
+def pd_torque(setpoint: float, position: float, velocity: float, kp: float, kd: float, limit: float) -> float:
+    """τ = clamp(kp (setpoint − position) − kd velocity, ±limit), N·m (rad, rad/s in)."""
+    tau = kp * (setpoint - position) - kd * velocity
+    return min(max(tau, -limit), limit)
+
+
+class PdController(Node):
+    def __init__(self, **kwargs) -> None:
+        super().__init__(NODE_NAME, **kwargs)
+        self.kp = self._declare("kp", KP, "proportional gain, N·m/rad", (0.0, 100.0))
+        self.kd = self._declare("kd", KD, "derivative gain on the measured rate, N·m·s/rad", (0.0, 100.0))
+        self.setpoint = self._declare("setpoint", 0.0, "initial MCP setpoint, rad (then the mcp_setpoint topic)", (-math.pi, math.pi))
+        self.max_torque = self._declare("max_torque", MAX_TORQUE, "output saturation, N·m", (0.0, 100.0))
+        self.joint = self._declare("joint", "mcp_joint", "the controlled joint's name in joint_states (with the node's frame_prefix)")
+        self._index: int | None = None
+        self._warned = False
+        self._pub = self.create_publisher(Float64, "motor_torque", COMMAND_QOS)
+        self.create_subscription(JointState, "joint_states", self._on_state, STATE_QOS)
+        self.create_subscription(Float64, "mcp_setpoint", self._on_setpoint, COMMAND_QOS)
+        self.get_logger().info(f"PD on {self.joint}: kp {self.kp:g} N·m/rad, kd {self.kd:g} N·m·s/rad, "
+                               f"|τ| ≤ {self.max_torque:g} N·m, setpoint {self.setpoint:g} rad")
+
+    def _declare(self, name: str, default, description: str, bounds: tuple[float, float] | None = None):
+        descriptor = ParameterDescriptor(description=description)
+        if bounds is not None:
+            descriptor.floating_point_range = [FloatingPointRange(from_value=bounds[0], to_value=bounds[1], step=0.0)]
+        try:
+            return self.declare_parameter(name, default, descriptor).value
+        except ParameterException as exc:
+            raise ParameterError(f"parameter '{name}': {str(exc).removesuffix(f': {name}')}") from None
+
+    def _on_setpoint(self, msg: Float64) -> None:
+        if math.isfinite(msg.data):
+            self.setpoint = msg.data
+        else:
+            self.get_logger().warning(f"ignored a non-finite setpoint {msg.data!r}", throttle_duration_sec=1.0)
+
+    def _on_state(self, msg: JointState) -> None:
+        i = self._index
+        if i is None or i >= len(msg.name) or msg.name[i] != self.joint:
+            try:
+                i = self._index = list(msg.name).index(self.joint)
+            except ValueError:
+                if not self._warned:
+                    self.get_logger().warning(f"joint_states has no joint '{self.joint}' (got {list(msg.name)})")
+                    self._warned = True
+                return
+        tau = pd_torque(self.setpoint, msg.position[i], msg.velocity[i], self.kp, self.kd, self.max_torque)
+        self._pub.publish(Float64(data=tau))
+
+
+def main(args: list[str] | None = None) -> int:
+    rclpy.init(args=args)
+    node = None
+    status = 0
+    try:
+        node = PdController()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except _rclpy.RCLError:
+        if rclpy.ok():
+            raise
+    except ParameterError as exc:
+        rclpy.logging.get_logger(NODE_NAME).error(f"cannot start: {exc}")
+        status = EXIT_CONFIG
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return status
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,229 @@
+"""ROS isolation for the tests that start nodes: a DDS domain per test, loopback discovery,
+child processes that always stop, and waiting on conditions with deadlines (never sleep-then-assert).
+
+rclpy is imported lazily, inside the fixtures: the core's tests (test_core_isolation) must not
+find ROS in sys.modules because this file was collected.
+
+Domain ids: TEST_DOMAINS (60-99), from a per-process counter offset by the pid, so that two
+pytest sessions running at the same time rarely share one, and never with the ids used by
+hand (20-49) or test_replay's share (50-59). Discovery stays on the loopback interface.
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+
+TEST_DOMAINS = range(60, 100)
+_counter = itertools.count((os.getpid() * 7) % len(TEST_DOMAINS))
+
+#: Wall-clock deadlines, s. Generous: two shared cores, other sessions running.
+START_TIMEOUT = 20.0
+STOP_TIMEOUT = 10.0
+WAIT_TIMEOUT = 20.0
+SPIN_SLICE = 0.01
+
+
+def allocate_domain_id() -> int:
+    return TEST_DOMAINS[next(_counter) % len(TEST_DOMAINS)]
+
+
+def ros_environment(domain_id: int) -> dict[str, str]:
+    """Environment of a child ROS process: its domain, loopback discovery only, unbuffered logs."""
+    env = dict(os.environ)
+    for key in ("ROS_LOCALHOST_ONLY", "ROS_STATIC_PEERS", "ROS_DISCOVERY_SERVER", "FASTRTPS_DEFAULT_PROFILES_FILE"):
+        env.pop(key, None)
+    env.update(
+        ROS_DOMAIN_ID=str(domain_id),
+        ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+        PYTHONUNBUFFERED="1",
+        RCUTILS_COLORIZED_OUTPUT="0",
+        RCUTILS_LOGGING_BUFFERED_STREAM="0",
+    )
+    return env
+
+
+def wait_until(condition: Callable[[], Any], timeout: float, what: str, *, spin: Callable[[float], None] | None = None,
+               poll: float = SPIN_SLICE) -> Any:
+    """Return condition()'s first truthy value; AssertionError naming `what` at the deadline.
+
+    spin(dt): called between checks (e.g. an executor's spin_once) instead of sleeping.
+    """
+    deadline = time.monotonic() + timeout
+    while True:
+        value = condition()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout:g} s waiting for {what}")
+        if spin is not None:
+            spin(poll)
+        else:
+            time.sleep(poll)
+
+
+class RosProcess:
+    """A child process in its own process group, its output in a file; stop() is safe to repeat."""
+
+    def __init__(self, argv: list[str], env: dict[str, str], log_path: Path, cwd: Path | None = None) -> None:
+        self.argv = argv
+        self.log_path = log_path
+        self._log = open(log_path, "wb")
+        self.proc = subprocess.Popen(argv, env=env, cwd=cwd, stdout=self._log, stderr=subprocess.STDOUT,
+                                     stdin=subprocess.DEVNULL, start_new_session=True)
+
+    @property
+    def pid(self) -> int:
+        return self.proc.pid
+
+    def running(self) -> bool:
+        return self.proc.poll() is None
+
+    def output(self) -> str:
+        self._log.flush()
+        return self.log_path.read_text(errors="replace")
+
+    def wait(self, timeout: float) -> int:
+        """Exit status; AssertionError with the output if it does not exit in time."""
+        try:
+            return self.proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            raise AssertionError(f"{self.argv[:4]} did not exit within {timeout:g} s; output:\n{self.output()}") from None
+
+    def stop(self) -> int | None:
+        """SIGINT to the group, then SIGKILL after STOP_TIMEOUT; returns the exit status."""
+        if self.proc.poll() is None:
+            self._signal(signal.SIGINT)
+            try:
+                self.proc.wait(STOP_TIMEOUT)
+            except subprocess.TimeoutExpired:
+                self._signal(signal.SIGKILL)
+                self.proc.wait(STOP_TIMEOUT)
+        else:  # the leader is gone; make sure nothing it started lingers
+            self._signal(signal.SIGKILL)
+        self._log.close()
+        return self.proc.returncode
+
+    def _signal(self, sig: int) -> None:
+        try:
+            os.killpg(self.proc.pid, sig)
+        except (ProcessLookupError, PermissionError):
+            pass
+
+
+class Launcher:
+    """Starts nodes and scripts for one test; the fixture stops every one of them."""
+
+    def __init__(self, env: dict[str, str], tmp: Path) -> None:
+        self.env = env
+        self.tmp = tmp
+        self.processes: list[RosProcess] = []
+
+    def start(self, argv: list[str], name: str) -> RosProcess:
+        proc = RosProcess(argv, self.env, self.tmp / f"{name}.log", cwd=self.tmp)
+        self.processes.append(proc)
+        return proc
+
+    def node(self, module: str, params: dict[str, Any] | None = None, *, name: str | None = None,
+             ros_args: list[str] = ()) -> RosProcess:
+        """`python -m module --ros-args --params-file <params> [ros_args]`; floats stay floats (YAML)."""
+        name = name or module.rsplit(".", 1)[-1]
+        argv = [sys.executable, "-m", module, "--ros-args"]
+        if params:
+            path = self.tmp / f"{name}.params.yaml"
+            path.write_text(yaml.safe_dump({"/**": {"ros__parameters": params}}))
+            argv += ["--params-file", str(path)]
+        return self.start(argv + list(ros_args), name)
+
+    def stop_all(self) -> None:
+        for proc in reversed(self.processes):
+            proc.stop()
+
+
+class RosClient:
+    """The test's own ROS node in a private context on the test's domain; spun only while waiting."""
+
+    def __init__(self, domain_id: int) -> None:
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, domain_id=domain_id)
+        self.node = rclpy.create_node("test_client", context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+
+    def spin(self, timeout: float = SPIN_SLICE) -> None:
+        self.executor.spin_once(timeout_sec=timeout)
+
+    def wait_for(self, condition: Callable[[], Any], what: str, timeout: float = WAIT_TIMEOUT) -> Any:
+        return wait_until(condition, timeout, what, spin=self.spin)
+
+    def collect(self, msg_type: type, topic: str, qos: Any = None) -> list:
+        """Every message received on `topic`, in arrival order (reliable, deep history by default)."""
+        from rclpy.qos import QoSProfile
+
+        received: list = []
+        self.node.create_subscription(msg_type, topic, received.append, qos if qos is not None else QoSProfile(depth=10_000))
+        return received
+
+    def publisher(self, msg_type: type, topic: str, qos: Any = 10):
+        return self.node.create_publisher(msg_type, topic, qos)
+
+    def call(self, srv_type: type, name: str, request: Any = None, timeout: float = WAIT_TIMEOUT) -> Any:
+        """Call a service and return its response (waits for the server first)."""
+        client = self.node.create_client(srv_type, name)
+        try:
+            self.wait_for(lambda: client.service_is_ready(), f"service {name}", timeout)
+            future = client.call_async(request if request is not None else srv_type.Request())
+            self.wait_for(future.done, f"a response from {name}", timeout)
+            return future.result()
+        finally:
+            self.node.destroy_client(client)
+
+    def close(self) -> None:
+        import rclpy
+
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+
+
+@pytest.fixture
+def ros_domain(monkeypatch: pytest.MonkeyPatch) -> int:
+    """A DDS domain for this test alone; this process's environment is set for it too."""
+    domain = allocate_domain_id()
+    for key, value in ros_environment(domain).items():
+        if os.environ.get(key) != value:
+            monkeypatch.setenv(key, value)
+    for key in ("ROS_LOCALHOST_ONLY", "ROS_STATIC_PEERS", "ROS_DISCOVERY_SERVER", "FASTRTPS_DEFAULT_PROFILES_FILE"):
+        monkeypatch.delenv(key, raising=False)
+    return domain
+
+
+@pytest.fixture
+def launcher(ros_domain: int, tmp_path: Path) -> Iterator[Launcher]:
+    launcher = Launcher(ros_environment(ros_domain), tmp_path)
+    try:
+        yield launcher
+    finally:
+        launcher.stop_all()
+
+
+@pytest.fixture
+def ros_client(ros_domain: int) -> Iterator[RosClient]:
+    client = RosClient(ros_domain)
+    try:
+        yield client
+    finally:
+        client.close()
