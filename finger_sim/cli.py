@@ -14,6 +14,11 @@ from finger_sim.integrators import METHODS
 from finger_sim.model import FingerParams
 from finger_sim.scene import AUTO, load_scene
 
+#: Exit status of a command whose log was truncated (its intact part was used).
+EXIT_TRUNCATED = 3
+#: Exit status of `resim` when the re-simulation deviates from the log.
+EXIT_DEVIATION = 4
+
 #: MCP range of a real finger (the paper's Table I): the range `kinematics` sweeps, rad.
 MCP_RANGE = (0.0, math.pi / 2)
 
@@ -57,6 +62,52 @@ def _kinematics(args: argparse.Namespace) -> int:
     return 0
 
 
+def _open_log(path: Path):  # type: ignore[no-untyped-def]
+    """A log reader; a truncated log is read up to its intact part, with a warning."""
+    from finger_sim.log import read_log
+
+    reader = read_log(path)
+    if reader.truncated:
+        print(f"finger-sim: warning: {reader.truncation}; reading the intact part", file=sys.stderr)
+    return reader
+
+
+def _info(args: argparse.Namespace) -> int:
+    reader = _open_log(args.log)
+    print(reader.info())
+    return EXIT_TRUNCATED if reader.truncated else 0
+
+
+def _export(args: argparse.Namespace) -> int:
+    from finger_sim.log.tools import load_run, trajectory_from_log
+
+    reader = _open_log(args.log)
+    run = load_run(reader)
+    traj = trajectory_from_log(run)
+    print(f"{args.log}: {len(traj.t)} joint states of scene '{run.scene.name}' ({run.torque_source} torque), "
+          f"t = {traj.t[0]:.4g} .. {traj.t[-1]:.4g} s" if len(traj.t) else f"{args.log}: no joint states")
+    if args.csv:
+        traj.write_csv(args.csv)
+        print(f"wrote {args.csv}")
+    if args.plot and len(traj.t):
+        from finger_sim.plots import plot_angles
+
+        plot_angles(traj.t, traj.q, args.plot, f"{run.scene.name}: logged by finger_node ({traj.method})")
+        print(f"wrote {args.plot}")
+    return EXIT_TRUNCATED if reader.truncated else 0
+
+
+def _resim(args: argparse.Namespace) -> int:
+    from finger_sim.log.tools import load_run, resimulate
+
+    reader = _open_log(args.log)
+    result = resimulate(load_run(reader))
+    print(result.summary())
+    if reader.truncated:
+        return EXIT_TRUNCATED
+    return 0 if result.exact else EXIT_DEVIATION
+
+
 def _bench(args: argparse.Namespace) -> int:
     from finger_sim.bench.report import run_bench
 
@@ -80,6 +131,20 @@ def build_parser() -> argparse.ArgumentParser:
     kin = sub.add_parser("kinematics", help="fingertip trajectory, postures, toggle angles, PIP range")
     kin.add_argument("--plot", type=Path, help="write a PNG of the trajectory and postures")
     kin.set_defaults(func=_kinematics)
+
+    info = sub.add_parser("info", help="topics, counts, duration and scene of a node's MCAP log (like ros2 bag info)")
+    info.add_argument("log", type=Path)
+    info.set_defaults(func=_info)
+
+    export = sub.add_parser("export", help="a node's MCAP log as the simulate CSV and plot")
+    export.add_argument("log", type=Path)
+    export.add_argument("--csv", type=Path, help="write the logged joint states in the paper's coordinates")
+    export.add_argument("--plot", type=Path, help="write a PNG of θ1, θ2, θ3 against time")
+    export.set_defaults(func=_export)
+
+    resim = sub.add_parser("resim", help="re-simulate a node's MCAP log and report the deviation from it")
+    resim.add_argument("log", type=Path)
+    resim.set_defaults(func=_resim)
 
     bench = sub.add_parser("bench", help="work-precision and hard-case report with peers, written to docs/")
     bench.add_argument("--quick", action="store_true", help="a reduced grid for CI (under two minutes)")

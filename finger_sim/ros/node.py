@@ -53,6 +53,7 @@ from __future__ import annotations
 
 import collections
 import concurrent.futures
+import itertools
 import math
 import sys
 import threading
@@ -60,6 +61,7 @@ import time
 import traceback
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from datetime import datetime, timezone
 from enum import Enum
 from pathlib import Path
 from typing import Any
@@ -85,6 +87,8 @@ from visualization_msgs.msg import MarkerArray
 
 from finger_sim import kinematics
 from finger_sim.errors import ConfigError, FingerSimError, SimulationDiverged, StabilityError
+from finger_sim.log import FINGER_SIM_METADATA, McapRecorder
+from finger_sim.log.tools import run_metadata
 from finger_sim.ros import conversions
 from finger_sim.scene import Scene, load_scene
 from finger_sim.simulate import BREAK_EPS, Simulator, State
@@ -173,6 +177,9 @@ PARAMETERS = (
     _Param("steps_per_trigger", 1, "steps that one ~/step call advances while paused", (1, 1_000_000)),
     _Param("start_paused", False, "start paused; ~/pause false or ~/step to advance"),
     _Param("publish_clock", True, "publish /clock; with several fingers let exactly one node do it"),
+    _Param("record", True, "log every message the node publishes and receives to <record_dir>/<scene>_<UTC start>.mcap"),
+    _Param("record_dir", "bags", "folder of the MCAP logs (created if missing)"),
+    _Param("record_chunk_interval", 0.5, "sim seconds after which the log's open chunk is closed: what a kill -9 can lose", (0.01, 60.0)),
 )
 
 
@@ -193,6 +200,9 @@ class NodeSettings:
     steps_per_trigger: int
     start_paused: bool
     publish_clock: bool
+    record: bool
+    record_dir: str
+    record_chunk_interval: float
 
 
 @dataclass(frozen=True)
@@ -332,7 +342,51 @@ class FingerNode(Node):
         self._diag_name = f"{self.get_fully_qualified_name()}: simulation"
         self._event_name = f"{self.get_fully_qualified_name()}: command"
         self._hardware_id = s.frame_prefix + "finger"
+        self.recorder = self._open_recorder() if s.record else None
         self._log_start()
+
+    def _open_recorder(self) -> McapRecorder:
+        """The run's MCAP log: every channel registered, the resolved scene in its metadata.
+
+        A log that cannot be written (unwritable folder, full disk) is reported once; the
+        node keeps simulating and counts what it dropped (see /diagnostics).
+        """
+        s = self.settings
+        namespace = self.get_namespace().strip("/").replace("/", "_")
+        started = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%S.%f")[:-3] + "Z"
+        stem = "_".join(part for part in (self.scene.name, namespace, started) if part)
+        path = Path(s.record_dir) / f"{stem}.mcap"
+        for i in itertools.count(1):  # two fingers started in the same millisecond
+            if not path.exists():
+                break
+            path = path.with_name(f"{stem}_{i}.mcap")
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError:
+            pass  # the recorder reports the failure once, and counts the messages it drops
+        rec = McapRecorder(path, chunk_interval_s=s.record_chunk_interval, on_problem=self.get_logger().error).open()
+        self._record_topics = {}
+        for endpoint, msg_type in (
+            (self._clock_pub, Clock), (self._joint_pub, JointState), (self._pose_pub, PoseStamped),
+            (self._marker_pub, MarkerArray), (self._diag_pub, DiagnosticArray), (self._event_pub, DiagnosticStatus),
+            (self._torque_sub, Float64), (self._effort_sub, Float64MultiArray),
+        ):
+            if endpoint is not None:
+                rec.register_channel(endpoint.topic_name, msg_type)
+                self._record_topics[endpoint] = endpoint.topic_name
+        parameters = {p.name: getattr(s, p.name) for p in PARAMETERS}
+        parameters["torque_source"] = s.torque_source.value
+        rec.add_metadata(FINGER_SIM_METADATA, run_metadata(
+            self.scene, method=self.sim.method, method_reason=self.sim.method_reason,
+            torque_source=s.torque_source.value, parameters=parameters))
+        return rec
+
+    def close_log(self) -> None:
+        """Close the MCAP log with its summary and index; safe to call twice."""
+        if self.recorder is not None:
+            self.recorder.close()
+            self.get_logger().info(f"log {self.recorder.path}: {self.recorder.written} messages written, "
+                                   f"{self.recorder.dropped} dropped")
 
     def _publisher(self, msg_type: type, topic: str, qos: QoSProfile):
         """A publisher without rclpy's default QoS-event handlers: each is one more entity the
@@ -586,9 +640,11 @@ class FingerNode(Node):
 
     # -- the executor's side: hand over, never touch the simulator -------------------------
     def _on_motor_torque(self, msg: Float64) -> None:
+        self._record(self._torque_sub, msg)
         self._received(self._torque_sub.topic_name, (msg.data,))
 
     def _on_effort_commands(self, msg: Float64MultiArray) -> None:
+        self._record(self._effort_sub, msg)
         self._received(self._effort_sub.topic_name, tuple(msg.data))
 
     def _received(self, source: str, values: tuple[float, ...]) -> None:
@@ -675,6 +731,12 @@ class FingerNode(Node):
     def _publish(self, publisher, msg) -> None:
         """Every outgoing message passes here, from the stepping thread, at sim time self.stamp_ns."""
         publisher.publish(msg)
+        self._record(publisher, msg)
+
+    def _record(self, endpoint, msg) -> None:
+        """Log a published or received message at the current sim time (never blocks)."""
+        if self.recorder is not None:
+            self.recorder.write(self._record_topics[endpoint], msg, self.stamp_ns)
 
     def _publish_diagnostics(self) -> None:
         now = time.perf_counter()
@@ -720,6 +782,9 @@ class FingerNode(Node):
             "refused_commands": self.counts["refused"],
             "saturated_commands": self.counts["saturated"],
             "command_timeouts": self.counts["timeouts"],
+            "log_file": str(self.recorder.path) if self.recorder is not None else "off",
+            "log_messages_written": self.recorder.written if self.recorder is not None else 0,
+            "log_messages_dropped": self.recorder.dropped if self.recorder is not None else 0,
         }
         status = conversions.status(self._diag_name, self._hardware_id, level, message, values)
         self._publish(self._diag_pub, conversions.diagnostic_array(self.stamp_ns, [status]))
@@ -777,6 +842,7 @@ def main(args: list[str] | None = None) -> int:
     finally:
         if node is not None:
             node.stop()
+            node.close_log()
             node.destroy_node()
         rclpy.try_shutdown()
     return status
