@@ -84,8 +84,9 @@ def _export(args: argparse.Namespace) -> int:
     reader = _open_log(args.log)
     run = load_run(reader)
     traj = trajectory_from_log(run)
-    print(f"{args.log}: {len(traj.t)} joint states of scene '{run.scene.name}' ({run.torque_source} torque), "
-          f"t = {traj.t[0]:.4g} .. {traj.t[-1]:.4g} s" if len(traj.t) else f"{args.log}: no joint states")
+    print(f"{args.log}: {len(traj.t)} joint states of scene '{run.scene.name}' ({run.torque_source} torque)")
+    if len(traj.t):
+        print(traj.summary())
     if args.csv:
         traj.write_csv(args.csv)
         print(f"wrote {args.csv}")

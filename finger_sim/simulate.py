@@ -226,7 +226,8 @@ class Trajectory:
         return (
             f"t = {self.t[-1]:.4g} s  θ = ({deg[0]:.2f}°, {deg[1]:.2f}°, {deg[2]:.2f}°)  "
             f"max|Φ| = {self.residual.max():.2e} m  ΔE = {self.energy[-1] - self.energy[0]:+.3e} J  "
-            f"method = {self.method}  steps = {len(self.t) - 1}  wall = {self.wall_time:.3f} s"
+            f"method = {self.method}  steps = {len(self.t) - 1}"
+            + (f"  wall = {self.wall_time:.3f} s" if math.isfinite(self.wall_time) else "")
         )
 
 
