@@ -75,6 +75,8 @@ class Simulator:
         self.step_index = 0
         self.q, self.v = self.scene.initial_state()
         self._contact = 0  # +1 resting on the upper MCP stop, −1 on the lower, 0 free
+        #: the motor torque at the end of the last step (N·m): what a JointState effort reports
+        self.torque = self.scene.torque(0.0)
         self.impacts = 0
 
     @property
@@ -95,9 +97,11 @@ class Simulator:
             cuts = [b for b in profile.breakpoints(t0, t1) if t0 + eps < b < t1 - eps]
             edges = [t0, *cuts, t1]
             for a, b in zip(edges, edges[1:]):
-                self._advance(a, b, profile.on_segment(a, b))
+                segment = profile.on_segment(a, b)
+                self._advance(a, b, segment)
+            self.torque = segment(t1)
         else:
-            value = float(profile)
+            value = self.torque = float(profile)
             self._advance(t0, t1, lambda s: value)
         if not all(math.isfinite(c) for c in self.q + self.v):
             raise SimulationDiverged(f"{self.method}: non-finite state at t = {t1:.6f} s (step {self.step_index + 1})")

@@ -477,6 +477,10 @@ class FingerNode(Node):
             # else: the context was shut down under a publish (SIGINT, SIGTERM): a clean stop
         except Exception:  # noqa: BLE001 - a bug must not leave a node that silently stopped
             self._crashed()
+        if not self.context.ok() and not self.done.done():
+            # SIGTERM shuts the context down without waking the executor (rclpy wakes it for
+            # SIGINT only): end main()'s spin, so that it closes the log with its summary.
+            self.done.set_result(0)
 
     def _crashed(self) -> None:
         self.get_logger().fatal(f"the stepping loop failed:\n{traceback.format_exc()}")
@@ -536,7 +540,7 @@ class FingerNode(Node):
         except SimulationDiverged as exc:
             self._diverged(exc)
             return False
-        self.applied = self._scene_torque(n) if torque is None else torque
+        self.applied = sim.torque
         self.steps_total += 1
         residual = kinematics.constraint_norm(sim.system.params, state.q)
         if residual > self.max_residual:
@@ -591,14 +595,6 @@ class FingerNode(Node):
         self.get_logger().warning(f"refused command [{requested}] on {source}: {reason} "
                                   f"({self.counts['refused']} refused so far)", throttle_duration_sec=WARN_THROTTLE_S)
         self._event("refused", self.sim.step_index, requested=requested, source=source, reason=reason, level=WARN)
-
-    def _scene_torque(self, n: int) -> float:
-        """The scripted torque at the end of step n, over its last smooth piece, N·m."""
-        profile = self.scene.torque
-        t0, t1 = n * self.dt, (n + 1) * self.dt
-        eps = BREAK_EPS * self.dt
-        cuts = [b for b in profile.breakpoints(t0, t1) if t0 + eps < b < t1 - eps]
-        return profile.on_segment(cuts[-1] if cuts else t0, t1)(t1)
 
     def _end_of_scene(self) -> None:
         self._set_state(RunState.FINISHED)
