@@ -132,6 +132,14 @@ def fingertip_jacobian(p: FingerParams, q: Vec3, alpha: float) -> tuple[Vec3, Ve
     )
 
 
+def fingertip_trajectory(p: FingerParams, mcp_range: tuple[float, float], samples: int = 181) -> list[Pose]:
+    """Fingertip poses over evenly spaced MCP angles in mcp_range (rad): the finger's workspace
+    curve (the paper's Fig. 4; the finger has one degree of freedom)."""
+    alpha = distal_offset(p)
+    lo, hi = mcp_range
+    return [fingertip(p, assemble(p, lo + (hi - lo) * i / (samples - 1)), alpha) for i in range(samples)]
+
+
 def pip_angle(q: Vec3, alpha: float) -> float:
     """PIP flexion β = θ3 + α − θ1, rad (0 at extension, positive in flexion)."""
     return q[2] + alpha - q[0]

@@ -35,8 +35,7 @@ def plot_angles(t: np.ndarray, q: np.ndarray, path: str | Path, title: str) -> N
 def plot_kinematics(p: FingerParams, mcp_range: tuple[float, float], path: str | Path) -> None:
     """Fingertip trajectory over the MCP range (paper Fig. 4) and a few postures (Fig. 5), mm."""
     alpha = kinematics.distal_offset(p)
-    theta1 = np.linspace(*mcp_range, 181)
-    tips = np.array([kinematics.fingertip(p, kinematics.assemble(p, a), alpha)[:2] for a in theta1]) * 1e3
+    tips = np.array([pose[:2] for pose in kinematics.fingertip_trajectory(p, mcp_range)]) * 1e3
     fig, ax = plt.subplots(figsize=(6.5, 6))
     # the paper draws Y downward: flexion curls the finger down the page
     ax.plot(tips[:, 0], tips[:, 1], "k--", label="fingertip trajectory")

@@ -151,3 +151,17 @@ def test_points_have_the_link_lengths():
         assert dist("D", "A") == pytest.approx(P.r4, rel=1e-14)
         assert dist("B", "tip") == pytest.approx(P.L3, rel=1e-14)
         np.testing.assert_allclose(pts["tip"], ref.tip(q), rtol=0, atol=1e-15)
+
+
+def test_fingertip_trajectory_spans_the_mcp_range():
+    """The workspace curve starts at the extended tip (0.0885, 0) m and ends at the θ1 = 90°
+    pose computed independently by the reference's Newton assembly."""
+    from finger_sim.kinematics import fingertip_trajectory
+
+    poses = fingertip_trajectory(FingerParams(), (0.0, math.pi / 2), samples=31)
+    assert len(poses) == 31
+    assert (poses[0].x, poses[0].y, poses[0].psi) == pytest.approx((0.0885, 0.0, 0.0), abs=1e-15)
+    q90 = ref.assemble(math.pi / 2)
+    psi = q90[2] + ref.ALPHA
+    tip = (ref.R1 * math.cos(q90[0]) + ref.L3 * math.cos(psi), ref.R1 * math.sin(q90[0]) + ref.L3 * math.sin(psi))
+    assert (poses[-1].x, poses[-1].y) == pytest.approx(tip, abs=1e-12)
