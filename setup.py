@@ -30,7 +30,7 @@ setup(
             "ros-jazzy-diagnostic-msgs",
             "ros-jazzy-visualization-msgs",
         ],
-        "test": ["pytest", "pytest-timeout", "rosbags"],
+        "test": ["pytest", "pytest-timeout", "rosbags", "colcon-common-extensions"],
         "bench": ["mujoco"],
     },
     zip_safe=True,
