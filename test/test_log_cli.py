@@ -1,0 +1,272 @@
+"""`finger-sim info | export | resim` on a real node log and on every kind of bad log.
+
+References: the node log read by mcap + mcap_ros2 (not finger_sim's reader); spec §6 for the
+paper coordinates of the logged joint states (θ1 = mcp + θ1_ext, θ2 = coupler + θ2_ext,
+θ3 = pip + θ1 − α, rates likewise); spec §5 for θ(0.3 s) = (34.34°, 54.39°, −53.02°); and
+`finger-sim simulate` of the same scene. Every command runs as the installed console script in
+a subprocess, as a user would run it. The node runs once per module, on a domain of its own.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+from mcap_ros2.writer import Writer as Ros2Writer
+
+from conftest import Launcher, allocate_domain_id, ros_environment
+from finger_sim import kinematics
+from finger_sim.log import message_definition
+from finger_sim.scene import load_scene
+
+NODE = "finger_sim.ros.node"
+ROOT = Path(__file__).resolve().parents[1]
+PAPER = ROOT / "config" / "paper_flexion.yaml"
+FINGER_SIM = Path(sys.executable).with_name("finger-sim")  # the venv's console script
+CSV_HEADER = "t,theta1,theta2,theta3,theta1_dot,theta2_dot,theta3_dot,energy,constraint_residual"
+JOINTS = ["mcp_joint", "coupler_joint", "pip_joint"]
+PAPER_DEG = (34.34, 54.39, -53.02)  # spec §5: θ at t = 0.3 s, to the digits shown
+CHUNK_S = 0.05  # record_chunk_interval of the node run: six chunks in 0.3 s, to cut and corrupt
+NODE_TIMEOUT_S = 60.0
+SUBPROCESS_TIMEOUT_S = 60.0
+TOL = 1e-12  # rad, rad/s, J: against `finger-sim simulate`
+EXIT_ERROR, EXIT_TRUNCATED = 2, 3
+
+
+@dataclass(frozen=True)
+class NodeLog:
+    path: Path
+    stamps: list[int]  # ns, of the joint states, in file order
+    positions: np.ndarray  # (n, 3), JOINTS order
+    velocities: np.ndarray
+    chunks: list  # mcap ChunkIndex records, by offset
+    counts: dict[str, int]  # topic → messages, from the summary
+    types: dict[str, str]  # topic → schema name
+
+
+def run_cli(*args: str | Path) -> subprocess.CompletedProcess:
+    return subprocess.run([str(FINGER_SIM), *map(str, args)], capture_output=True, text=True,
+                          timeout=SUBPROCESS_TIMEOUT_S, check=False)
+
+
+def read_csv(path: Path) -> tuple[str, np.ndarray]:
+    text = path.read_text()
+    header, _, body = text.partition("\n")
+    rows = [[float(x) for x in row] for row in csv.reader(io.StringIO(body)) if row]
+    return header, np.array(rows).reshape(-1, 9)
+
+
+def paper_coordinates(positions: np.ndarray, velocities: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Spec §6 inverted, written out here: (θ, θ') from (mcp, coupler, pip) and their rates."""
+    p = load_scene(PAPER).params
+    ext = kinematics.extended_pose(p)  # θ_ext: the assembly at θ1 = 0
+    alpha = ext[0] - ext[2]  # α = θ1_ext − θ3_ext
+    mcp, coupler, pip = positions.T
+    t1 = mcp + ext[0]
+    theta = np.column_stack([t1, coupler + ext[1], pip + t1 - alpha])
+    w1, w2, wp = velocities.T
+    return theta, np.column_stack([w1, w2, wp + w1])
+
+
+def single_error_line(done: subprocess.CompletedProcess) -> str:
+    assert "Traceback" not in done.stdout + done.stderr, done.stderr
+    lines = done.stderr.splitlines()
+    assert len(lines) == 1, done.stderr
+    return lines[0]
+
+
+@pytest.fixture(scope="module")
+def node_log(tmp_path_factory: pytest.TempPathFactory) -> NodeLog:
+    """The paper's run through finger_node (scene torque, as fast as possible), logged once."""
+    pytest.importorskip("rclpy")
+    tmp = tmp_path_factory.mktemp("node_log")
+    launcher = Launcher(ros_environment(allocate_domain_id()), tmp)
+    try:
+        node = launcher.node(NODE, dict(scene=str(PAPER), torque_source="scene", realtime_factor=0.0,
+                                        record_dir=str(tmp / "bags"), record_chunk_interval=CHUNK_S))
+        assert node.wait(NODE_TIMEOUT_S) == 0, node.output()
+    finally:
+        launcher.stop_all()
+    (path,) = sorted((tmp / "bags").glob("*.mcap"))
+    stamps, positions, velocities = [], [], []
+    with path.open("rb") as file:
+        reader = make_reader(file, decoder_factories=[DecoderFactory()])
+        summary = reader.get_summary()
+        for _, _, message, js in reader.iter_decoded_messages(topics=["/joint_states"], log_time_order=False):
+            order = [list(js.name).index(n) for n in JOINTS]
+            stamps.append(js.header.stamp.sec * 1_000_000_000 + js.header.stamp.nanosec)
+            assert stamps[-1] == message.log_time
+            positions.append([js.position[i] for i in order])
+            velocities.append([js.velocity[i] for i in order])
+    assert summary is not None and summary.statistics is not None
+    counts = {c.topic: summary.statistics.channel_message_counts.get(c.id, 0) for c in summary.channels.values()}
+    types = {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()}
+    chunks = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+    assert len(stamps) == 301 and len(chunks) >= 4, (len(stamps), len(chunks))
+    return NodeLog(path, stamps, np.array(positions), np.array(velocities), chunks, counts, types)
+
+
+@pytest.fixture(scope="module")
+def simulated(tmp_path_factory: pytest.TempPathFactory) -> np.ndarray:
+    """`finger-sim simulate` of the same scene (its dt is the node's 1 kHz)."""
+    csv_path = tmp_path_factory.mktemp("simulate") / "sim.csv"
+    done = run_cli("simulate", PAPER, "--csv", csv_path)
+    assert done.returncode == 0, done.stderr
+    header, rows = read_csv(csv_path)
+    assert header == CSV_HEADER
+    return rows
+
+
+# -- good logs ----------------------------------------------------------------------------------
+def test_info_lists_what_mcap_reads(node_log: NodeLog) -> None:
+    done = run_cli("info", node_log.path)
+    assert (done.returncode, done.stderr) == (0, ""), done.stderr
+    lines = done.stdout.splitlines()
+    assert lines[0] == f"File:     {node_log.path}"
+    assert "Status:   complete" in lines and "Duration: 0.300000000 s" in lines
+    assert f"Messages: {sum(node_log.counts.values())} in {len(node_log.chunks)} chunks" in lines
+    topic_lines = [line.removeprefix("Topics:").strip() for line in lines if " | " in line]
+    assert topic_lines == [f"{topic} | {node_log.types[topic]} | {node_log.counts[topic]} msgs | cdr"
+                           for topic in sorted(node_log.counts)]
+    assert "Metadata: finger_sim" in lines and "            torque_source: scene" in lines
+
+
+def test_export_is_the_logged_states_in_paper_coordinates(node_log: NodeLog, simulated: np.ndarray,
+                                                          tmp_path: Path) -> None:
+    out = tmp_path / "export.csv"
+    done = run_cli("export", node_log.path, "--csv", out)
+    assert (done.returncode, done.stderr) == (0, ""), done.stderr
+    assert done.stdout.splitlines()[0] == f"{node_log.path}: 301 joint states of scene 'paper_flexion' (scene torque)"
+    header, rows = read_csv(out)
+    assert header == CSV_HEADER
+    theta, rates = paper_coordinates(node_log.positions, node_log.velocities)
+    np.testing.assert_array_equal(rows[:, 0], np.array(node_log.stamps) / 1e9)
+    np.testing.assert_array_equal(rows[:, 1:4], theta)
+    np.testing.assert_array_equal(rows[:, 4:7], rates)
+    # the whole table, energy and residual included, is the offline run's
+    assert rows.shape == simulated.shape
+    np.testing.assert_allclose(rows, simulated, rtol=0, atol=TOL)
+    assert np.all(rows[:, 8] < 1e-12)  # |Φ| stays at round-off
+
+
+def test_export_reaches_the_papers_angles(node_log: NodeLog, simulated: np.ndarray, tmp_path: Path) -> None:
+    out = tmp_path / "export.csv"
+    assert run_cli("export", node_log.path, "--csv", out).returncode == 0
+    _, rows = read_csv(out)
+    final = rows[-1]
+    assert final[0] == pytest.approx(0.3, abs=1e-15)
+    assert tuple(round(math.degrees(a), 2) for a in final[1:4]) == PAPER_DEG
+    np.testing.assert_allclose(final[1:4], simulated[-1, 1:4], rtol=0, atol=TOL)
+    assert simulated[-1, 0] == pytest.approx(0.3, abs=1e-15)
+
+
+def test_resim_reproduces_the_scene_run(node_log: NodeLog) -> None:
+    done = run_cli("resim", node_log.path)
+    assert (done.returncode, done.stderr) == (0, ""), done.stderr
+    assert done.stdout.strip() == "resim: 301 recorded states reproduced bit for bit (max deviation 0)"
+
+
+# -- bad logs -----------------------------------------------------------------------------------
+RANDOM = bytes([0x8F]) + np.random.default_rng(7).bytes(4095)
+TEXT = b"# finger_node log of Tuesday\nt,theta1\n0,0\n"
+
+
+@pytest.mark.parametrize("command", ["info", "export", "resim"])
+@pytest.mark.parametrize(
+    ("content", "problem"),
+    [
+        (None, "no such file"),
+        (b"", "not an MCAP file (the file is empty)"),
+        (RANDOM, f"not an MCAP file (it starts with {RANDOM[:16]!r})"),
+        (TEXT, "not an MCAP file (it starts with b'# finger_node lo')"),
+    ],
+    ids=["missing", "empty", "random", "text"],
+)
+def test_not_a_log(tmp_path: Path, command: str, content: bytes | None, problem: str) -> None:
+    path = tmp_path / "run.mcap"
+    if content is not None:
+        path.write_bytes(content)
+    done = run_cli(command, path)
+    assert done.returncode == EXIT_ERROR
+    assert single_error_line(done) == f"finger-sim {command}: error: {path}: {problem}"
+    assert done.stdout == ""
+
+
+@pytest.mark.parametrize("command", ["info", "export", "resim"])
+def test_truncated_log_is_read_up_to_the_cut(node_log: NodeLog, tmp_path: Path, command: str) -> None:
+    """Cut inside the fourth chunk (as a kill -9 leaves it): a warning, the intact part, exit 3."""
+    k = 3
+    chunk = node_log.chunks[k]
+    cut = chunk.chunk_start_offset + chunk.chunk_length // 2
+    path = tmp_path / "cut.mcap"
+    path.write_bytes(node_log.path.read_bytes()[:cut])
+    out = tmp_path / "cut.csv"
+    done = run_cli(command, path, *(["--csv", out] if command == "export" else []))
+    assert done.returncode == EXIT_TRUNCATED
+    line = single_error_line(done)
+    assert line.startswith(f"finger-sim: warning: {path}: truncated at byte {chunk.chunk_start_offset} of {cut}: "), line
+    assert line.endswith("; reading the intact part")
+    intact = sum(t <= node_log.chunks[k - 1].message_end_time for t in node_log.stamps)
+    assert 0 < intact < len(node_log.stamps)
+    if command == "export":
+        _, rows = read_csv(out)
+        theta, _ = paper_coordinates(node_log.positions[:intact], node_log.velocities[:intact])
+        np.testing.assert_array_equal(rows[:, 1:4], theta)  # the prefix, and only it
+    elif command == "resim":
+        assert done.stdout.strip() == f"resim: {intact} recorded states reproduced bit for bit (max deviation 0)"
+    else:
+        assert f"Status:   TRUNCATED, truncated at byte {chunk.chunk_start_offset} of {cut}" in done.stdout
+
+
+@pytest.mark.parametrize("command", ["export", "resim"])
+def test_corrupt_chunk(node_log: NodeLog, tmp_path: Path, command: str) -> None:
+    """Bytes overwritten inside a chunk of a complete log. (`info` reads only the summary, like
+    `ros2 bag info` and `mcap info`: the damage shows when the messages are read.)"""
+    chunk = node_log.chunks[2]
+    data = bytearray(node_log.path.read_bytes())
+    middle = chunk.chunk_start_offset + chunk.chunk_length // 2
+    data[middle:middle + 16] = b"\xff" * 16
+    path = tmp_path / "corrupt.mcap"
+    path.write_bytes(bytes(data))
+    done = run_cli(command, path)
+    assert done.returncode == EXIT_ERROR
+    line = single_error_line(done)
+    assert line.startswith(f"finger-sim {command}: error: {path}: corrupt record at byte {chunk.chunk_start_offset}: "
+                           "chunk does not decompress or fails its CRC"), line
+
+
+@pytest.fixture
+def foreign_log(tmp_path: Path) -> Path:
+    """An MCAP from another program: mcap_ros2's own writer, joint states, no 'finger_sim' record."""
+    path = tmp_path / "foreign.mcap"
+    with path.open("wb") as file, Ros2Writer(file) as writer:
+        schema = writer.register_msgdef("sensor_msgs/msg/JointState", message_definition("sensor_msgs/msg/JointState"))
+        for k in range(3):
+            writer.write_message("/joint_states", schema, {"name": JOINTS, "position": [k / 4, 0.0, 0.0],
+                                                            "velocity": [0.0] * 3}, log_time=k * 1_000_000)
+    return path
+
+
+@pytest.mark.parametrize("command", ["export", "resim"])
+def test_log_from_another_program(foreign_log: Path, command: str) -> None:
+    done = run_cli(command, foreign_log)
+    assert done.returncode == EXIT_ERROR
+    assert single_error_line(done) == (f"finger-sim {command}: error: {foreign_log}: no metadata record 'finger_sim' "
+                                       "(records present: none)")
+
+
+def test_info_describes_a_log_from_another_program(foreign_log: Path) -> None:
+    """A valid MCAP is not an error for `info` (as for `ros2 bag info`): it says what is there."""
+    done = run_cli("info", foreign_log)
+    assert (done.returncode, done.stderr) == (0, "")
+    assert "Topics:   /joint_states | sensor_msgs/msg/JointState | 3 msgs | cdr" in done.stdout.splitlines()
+    assert "Metadata: none" in done.stdout.splitlines()
