@@ -60,9 +60,8 @@ class Simulator:
         method = scene.method
         if method == AUTO:
             method, self.method_reason = choose_method(scene)
-        cls = METHODS[method]
-        self._check_stability(cls)
-        self.integrator: Integrator = cls(self.system)
+        self._method_cls = METHODS[method]
+        self._check_stability(self._method_cls)
         self.method = method
         self._limits = scene.mcp_limits
         self.reset()
@@ -71,7 +70,7 @@ class Simulator:
         """Back to the scene's initial state at t = 0."""
         # A fresh integrator: a warm start kept from the last run (adaptive's step size,
         # rattle's Jacobian) would make the rerun differ in the last bits.
-        self.integrator = type(self.integrator)(self.system)
+        self.integrator: Integrator = self._method_cls(self.system)
         self.step_index = 0
         self.q, self.v = self.scene.initial_state()
         self._contact = 0  # +1 resting on the upper MCP stop, −1 on the lower, 0 free

@@ -343,6 +343,13 @@ def report(rt: Run, fast: Run, fast_decimated: Run, parts: dict, info: dict[str,
     ])
 
 
+def isolate_dds(domain_id: int) -> None:
+    """Keep this process's DDS traffic on loopback, in its own domain (children inherit it)."""
+    os.environ["ROS_DOMAIN_ID"] = str(domain_id)
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    os.environ.pop("ROS_LOCALHOST_ONLY", None)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="node_bench", description=__doc__.split("\n\n")[0])
     parser.add_argument("--duration", type=float, default=60.0, help="measured real-time run, s")
@@ -350,8 +357,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--domain-id", type=int, default=DEFAULT_DOMAIN_ID)
     parser.add_argument("--out", type=Path, default=ROOT / "docs" / "node_performance.md")
     args = parser.parse_args(argv)
-    os.environ["ROS_DOMAIN_ID"] = str(args.domain_id)
-    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    isolate_dds(args.domain_id)
     command = "python -m finger_sim.bench.node_bench " + " ".join(argv if argv is not None else sys.argv[1:])
     load0 = os.getloadavg()
     with tempfile.TemporaryDirectory(prefix="node_bench_") as tmp:

@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
 
-from finger_sim.bench.node_bench import ROOT, _cpu_seconds, _start_node, _stop, machine
+from finger_sim.bench.node_bench import ROOT, _cpu_seconds, _start_node, _stop, isolate_dds, machine
 
 DEFAULT_DOMAIN_ID = 74  # the range 70-79 is for benchmarks and runs by hand
 WARMUP_S = 3.0
@@ -511,9 +511,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--domain-id", type=int, default=DEFAULT_DOMAIN_ID)
     parser.add_argument("--out", type=Path, default=ROOT / "docs" / "recording_performance.md")
     args = parser.parse_args(argv)
-    os.environ["ROS_DOMAIN_ID"] = str(args.domain_id)
-    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-    os.environ.pop("ROS_LOCALHOST_ONLY", None)
+    isolate_dds(args.domain_id)
     command = ("python -m finger_sim.bench.recording_bench " + " ".join(argv if argv is not None else sys.argv[1:])).strip()
     started, t_start, load0 = datetime.now(timezone.utc), time.perf_counter(), os.getloadavg()
     runs: list[CpuRun] = []
