@@ -1,0 +1,325 @@
+"""Contact of the phalanges with the scene's objects: the force element of spec §7.
+
+Each phalanx is a capsule in the model plane: the proximal one the segment A→B swept by ρ1,
+the distal one B→tip (tip = B + L3 e(ψ), ψ = θ3 + α) swept by ρ3. A *candidate* is one place
+where a phalanx may touch an object:
+
+- a circle (centre c, radius R) and a phalanx: p is the point of the phalanx's axis segment
+  closest to c, δ = ρ + R − |p − c|, n_c = (p − c)/|p − c|;
+- a plane (point o, outward normal n) and one end of a phalanx's axis segment (B for either
+  phalanx, the tip for the distal one; A is fixed, so its force does no work and is left out):
+  p is that end, δ = ρ − n·(p − o), n_c = n. Both ends of a segment are candidates and their
+  forces add up, so V_c stays smooth when a phalanx lies flat on the plane.
+
+Contact while δ > 0: F_n = max(0, k δ^e (1 + d δ')) (Hunt–Crossley), δ' = −n_c·ṗ with ṗ the
+velocity of the phalanx's material point at p; F_t = −μ F_n tanh(v_t / v_s) along t_c = n_c
+turned by +90°; F = F_n n_c + F_t t_c on the phalanx at p; Q_c = J_pᵀ F with J_p = ∂p/∂q of
+that material point (virtual work). For a circle, p slides along the segment, but the sliding
+is normal to n_c (or p is clamped at an end), so J_pᵀ n_c F_n = −∂V_c/∂q exactly with
+V_c = k δ^(e+1)/(e+1). J_p has no θ2 column: the coupler touches nothing.
+
+Scalar `math` throughout: `force` runs in every stage of every step. Candidates that cannot
+touch anywhere are dropped when the element is built; the rest are skipped by a cheap bound
+(the distal segment lies within L3 of B) before the distal direction e(ψ) is evaluated.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, ClassVar
+
+from finger_sim.effects.base import Vec3, effect
+from finger_sim.effects.contact_geometry import PHALANX_RADII, Circle, ContactParams, Plane, SceneObject, Vec2
+from finger_sim.errors import ConfigError
+from finger_sim.kinematics import distal_offset
+from finger_sim.model import FingerParams
+
+if TYPE_CHECKING:
+    from finger_sim.scene import Scene
+
+PHALANGES = ("proximal", "distal")
+PROXIMAL, DISTAL = 0, 1
+#: An object may overlap a phalanx this much (m) at a scene's initial state: round-off in
+#: hand-placed coordinates, not a contact that would start with a jolt.
+OVERLAP_TOLERANCE = 1e-4
+#: The contact force (N) at which `modal` sizes the contact mode when the pose presses less
+#: (or not at all): a firm grip, about the force of the default k_c = 1e5 at δ = 1 mm (3.2 N).
+#: The stability check samples poses along the whole range, mostly out of contact; this floor
+#: lets it see the stiff contact mode there (spec §7: ≈700 rad/s at k_c = 1e5, a few
+#: thousand rad/s at k_c = 1e7, the same force needing a much smaller δ).
+DESIGN_FORCE = 3.0
+#: Below this distance (m) from a circle's centre the phalanx axis has no closest direction;
+#: the normal then falls back to the phalanx's own normal (only reachable deep inside an object).
+MIN_DISTANCE = 1e-12
+
+
+@dataclass(frozen=True)
+class ContactPoint:
+    """One active contact: where, along which normal, and the force on the phalanx (model plane)."""
+
+    phalanx: str  # "proximal" or "distal"
+    object: str  # the object's name
+    point: Vec2  # p on the phalanx's axis, m
+    normal: Vec2  # n_c, from the object towards p
+    penetration: float  # δ, m
+    normal_force: float  # F_n, N
+    force: Vec2  # F = F_n n_c + F_t t_c on the phalanx, N
+
+
+# One evaluated candidate: (phalanx, object index, δ, px, py, nx, ny, j1x, j1y, j3x, j3y).
+_Hit = tuple[int, int, float, float, float, float, float, float, float, float, float]
+
+
+class Contact:
+    """Hunt–Crossley contact with regularized Coulomb friction between the phalanx capsules and
+    fixed circles and planes (spec §7). Immutable after construction."""
+
+    #: Q depends on q' through δ' δ^e and tanh(v_t / v_s): not affine in q'.
+    affine_in_velocity: ClassVar[bool] = False
+    #: F_n ∝ δ^e is not smooth at onset: onset and release are events (see `gaps`).
+    smooth: ClassVar[bool] = False
+
+    def __init__(
+        self,
+        params: FingerParams,
+        alpha: float,
+        radii: Vec2 = PHALANX_RADII,
+        contact: ContactParams = ContactParams(),
+        objects: Sequence[SceneObject] = (),
+    ) -> None:
+        self.params, self.alpha, self.radii, self.contact = params, alpha, tuple(radii), contact
+        self.objects = tuple(objects)
+        r1, l3 = params.r1, params.L3
+        rho1, rho3 = radii
+        self._r1, self._l3 = r1, l3
+        self._k, self._e, self._d = contact.stiffness, contact.exponent, contact.damping
+        self._mu, self._vs = contact.friction, contact.slip_velocity
+        # Stiffness and damping of the contact law at DESIGN_FORCE: δ_d = (F_d / k)^(1/e).
+        delta_d = (DESIGN_FORCE / self._k) ** (1.0 / self._e)
+        self._k_design = self._k * self._e * delta_d ** (self._e - 1.0)
+        self._c_design = self._d * DESIGN_FORCE
+        self._friction_design = self._mu * DESIGN_FORCE / self._vs
+        # Candidates, kept only where some pose can reach them (|p − A| ≤ r1 on the proximal
+        # phalanx, ≤ r1 + L3 on the distal one).
+        prox_circles, dist_circles, ends, tips = [], [], [], []
+        for i, obj in enumerate(self.objects):
+            if isinstance(obj, Circle):
+                cx, cy = obj.center
+                if math.hypot(cx, cy) <= r1 + rho1 + obj.radius:
+                    prox_circles.append((i, cx, cy, rho1 + obj.radius))
+                if math.hypot(cx, cy) <= r1 + l3 + rho3 + obj.radius:
+                    reach = l3 + rho3 + obj.radius
+                    dist_circles.append((i, cx, cy, rho3 + obj.radius, reach * reach))
+            else:
+                (ox, oy), (nx, ny) = obj.point, obj.normal
+                height_a = -(nx * ox + ny * oy)  # n·(A − o)
+                for phalanx, rho in ((PROXIMAL, rho1), (DISTAL, rho3)):
+                    if height_a - r1 < rho:
+                        ends.append((phalanx, i, ox, oy, nx, ny, rho))
+                if height_a - r1 - l3 < rho3:
+                    tips.append((i, ox, oy, nx, ny, rho3, l3 + rho3))
+        self._prox_circles = tuple(prox_circles)
+        self._dist_circles = tuple(dist_circles)
+        self._ends = tuple(ends)
+        self._tips = tuple(tips)
+
+    # -- geometry ------------------------------------------------------------------------
+    def _hits(self, q: Vec3, all_candidates: bool) -> list[_Hit]:
+        """The evaluated candidates at q: those with δ > 0, or every one (for gaps and modal).
+
+        J_p has two non-zero columns, returned as vectors j1 = ∂p/∂θ1 and j3 = ∂p/∂θ3 (m/rad).
+        """
+        r1, l3 = self._r1, self._l3
+        c1, s1 = math.cos(q[0]), math.sin(q[0])
+        bx, by = r1 * c1, r1 * s1
+        out: list[_Hit] = []
+        for i, cx, cy, rad in self._prox_circles:
+            # p = s B (material coordinate s along A→B), ∂p/∂θ1 = s r1 e'(θ1)
+            s = (cx * bx + cy * by) / (r1 * r1)
+            s = 0.0 if s < 0.0 else (1.0 if s > 1.0 else s)
+            px, py = s * bx, s * by
+            dx, dy = px - cx, py - cy
+            dist = math.hypot(dx, dy)
+            d = rad - dist
+            if d > 0.0 or all_candidates:
+                nx, ny = (dx / dist, dy / dist) if dist > MIN_DISTANCE else (-s1, c1)
+                out.append((PROXIMAL, i, d, px, py, nx, ny, -s * by, s * bx, 0.0, 0.0))
+        ux = uy = 0.0
+        have_u = False
+        for i, cx, cy, rad, reach2 in self._dist_circles:
+            dx, dy = cx - bx, cy - by
+            if dx * dx + dy * dy > reach2 and not all_candidates:
+                continue  # the distal segment lies within L3 of B
+            if not have_u:
+                psi = q[2] + self.alpha
+                ux, uy, have_u = math.cos(psi), math.sin(psi), True
+            # p = B + ℓ e(ψ), ∂p/∂θ1 = r1 e'(θ1), ∂p/∂θ3 = ℓ e'(ψ)
+            ell = dx * ux + dy * uy
+            ell = 0.0 if ell < 0.0 else (l3 if ell > l3 else ell)
+            px, py = bx + ell * ux, by + ell * uy
+            dx, dy = px - cx, py - cy
+            dist = math.hypot(dx, dy)
+            d = rad - dist
+            if d > 0.0 or all_candidates:
+                nx, ny = (dx / dist, dy / dist) if dist > MIN_DISTANCE else (-uy, ux)
+                out.append((DISTAL, i, d, px, py, nx, ny, -by, bx, -ell * uy, ell * ux))
+        for phalanx, i, ox, oy, nx, ny, rho in self._ends:
+            d = rho - (nx * (bx - ox) + ny * (by - oy))
+            if d > 0.0 or all_candidates:
+                out.append((phalanx, i, d, bx, by, nx, ny, -by, bx, 0.0, 0.0))
+        for i, ox, oy, nx, ny, rho, reach in self._tips:
+            height_b = nx * (bx - ox) + ny * (by - oy)
+            if height_b - reach >= 0.0 and not all_candidates:
+                continue  # the tip is within L3 of B
+            if not have_u:
+                psi = q[2] + self.alpha
+                ux, uy, have_u = math.cos(psi), math.sin(psi), True
+            px, py = bx + l3 * ux, by + l3 * uy
+            d = rho - (nx * (px - ox) + ny * (py - oy))
+            if d > 0.0 or all_candidates:
+                out.append((DISTAL, i, d, px, py, nx, ny, -by, bx, -l3 * uy, l3 * ux))
+        return out
+
+    def _forces(self, hit: _Hit, v: Vec3) -> tuple[float, float, float]:
+        """(F_n, Fx, Fy), N, of one candidate in contact: Hunt–Crossley normal force plus friction."""
+        _, _, d, _, _, nx, ny, j1x, j1y, j3x, j3y = hit
+        vx, vy = j1x * v[0] + j3x * v[2], j1y * v[0] + j3y * v[2]
+        fn = self._k * d**self._e * (1.0 - self._d * (nx * vx + ny * vy))  # δ' = −n_c·ṗ
+        if fn <= 0.0:
+            return (0.0, 0.0, 0.0)
+        fx, fy = fn * nx, fn * ny
+        if self._mu:
+            ft = -self._mu * fn * math.tanh((nx * vy - ny * vx) / self._vs)  # v_t = t_c·ṗ, t_c = (−ny, nx)
+            fx -= ft * ny
+            fy += ft * nx
+        return (fn, fx, fy)
+
+    # -- the ForceElement protocol -------------------------------------------------------
+    def force(self, t: float, q: Vec3, v: Vec3) -> Vec3:
+        """Q_c = Σ J_pᵀ F over the candidates in contact, N·m."""
+        q1 = q3 = 0.0
+        for hit in self._hits(q, False):
+            _, fx, fy = self._forces(hit, v)
+            q1 += hit[7] * fx + hit[8] * fy
+            q3 += hit[9] * fx + hit[10] * fy
+        return (q1, 0.0, q3)
+
+    def potential(self, q: Vec3) -> float:
+        """V_c = Σ k δ^(e+1)/(e+1), J."""
+        e1 = self._e + 1.0
+        return sum(self._k * hit[2] ** e1 / e1 for hit in self._hits(q, False))
+
+    def modal(self, q: Vec3, n: Vec3) -> tuple[float, float]:
+        """(nᵀKn, nᵀCn): the contact's stiffness and damping along a direction n of q.
+
+        Per candidate, with a = n_c·J_p n and b = t_c·J_p n (m per unit of n): stiffness
+        k e δ^(e−1) a², damping k d δ^e a² (Hunt–Crossley) + (μ F_n / v_s) b² (the slope of
+        the regularized friction at v_t = 0), at the δ of q. The geometric term k δ^e n_cᵀ
+        (∂²p/∂q²)[n, n] is left out (it is F_n times a curvature: small beside k e δ^(e−1)).
+        Each sum is then bounded below by the stiffest single candidate at DESIGN_FORCE, so
+        the stability check sees the contact mode at poses out of contact too.
+        """
+        k, e, n1, n3 = self._k, self._e, n[0], n[2]
+        stiff = damp = stiff_floor = damp_floor = 0.0
+        for hit in self._hits(q, True):
+            _, _, d, _, _, nx, ny, j1x, j1y, j3x, j3y = hit
+            jx, jy = j1x * n1 + j3x * n3, j1y * n1 + j3y * n3
+            a2 = (nx * jx + ny * jy) ** 2
+            b2 = (nx * jy - ny * jx) ** 2
+            if d > 0.0:
+                fn = k * d**e
+                stiff += k * e * d ** (e - 1.0) * a2
+                damp += self._d * fn * a2 + self._mu * fn / self._vs * b2
+            stiff_floor = max(stiff_floor, self._k_design * a2)
+            damp_floor = max(damp_floor, self._c_design * a2 + self._friction_design * b2)
+        return (max(stiff, stiff_floor), max(damp, damp_floor))
+
+    def gaps(self, q: Vec3) -> tuple[float, ...]:
+        """−δ of every candidate (m), in a fixed order: onset and release where one changes sign."""
+        return tuple(-hit[2] for hit in self._hits(q, True))
+
+    def impact(self, index: int) -> None:
+        """None: onset and release only make Q_c change non-smoothly (a kink, no velocity jump)."""
+        return None
+
+    def gap_gradient(self, index: int, q: Vec3) -> Vec3:
+        """∂gap/∂q = n_cᵀ J_p of candidate `index` (m/rad): gap = −δ, δ' = −n_c·J_p q'."""
+        _, _, _, _, _, nx, ny, j1x, j1y, j3x, j3y = self._hits(q, True)[index]
+        return (nx * j1x + ny * j1y, 0.0, nx * j3x + ny * j3y)
+
+    def outputs(self, t: float, q: Vec3, v: Vec3) -> Mapping[str, float]:
+        """grip_force = Σ F_n (N) and the force on each phalanx, N, model plane (sum over objects)."""
+        grip, (prox, dist) = self._totals(q, v)
+        return {
+            "grip_force": grip,
+            "contact_force_proximal_x": prox[0],
+            "contact_force_proximal_y": prox[1],
+            "contact_force_distal_x": dist[0],
+            "contact_force_distal_y": dist[1],
+        }
+
+    # -- reports -------------------------------------------------------------------------
+    def wrenches(self, t: float, q: Vec3, v: Vec3) -> tuple[Vec3, Vec3]:
+        """(Fx, Fy, Mz) on the proximal and on the distal phalanx: the contact force (N, model
+        plane, sum over objects) and its moment about the frame origin A (N·m, about +Z of the
+        model plane), each force acting at its contact point p on the phalanx's axis."""
+        return self._totals(q, v)[1]
+
+    def contacts(self, t: float, q: Vec3, v: Vec3) -> tuple[ContactPoint, ...]:
+        """Every active contact (δ > 0) with its point, normal and force."""
+        out = []
+        for hit in self._hits(q, False):
+            fn, fx, fy = self._forces(hit, v)
+            phalanx, i, d, px, py, nx, ny = hit[:7]
+            out.append(ContactPoint(PHALANGES[phalanx], self.objects[i].name, (px, py), (nx, ny), d, fn, (fx, fy)))
+        return tuple(out)
+
+    def check_clearance(self, q: Vec3, tolerance: float = OVERLAP_TOLERANCE) -> None:
+        """ConfigError naming `objects[i]` if an object overlaps a phalanx at q by more than
+        `tolerance` (m), e.g. at a scene's initial state. Also covers the fixed end A."""
+        for phalanx, i, d, *_ in self._hits(q, True):
+            if d > tolerance:
+                self._refuse_overlap(i, PHALANGES[phalanx], d, tolerance)
+        rho1 = self.radii[0]
+        for i, obj in enumerate(self.objects):
+            if isinstance(obj, Plane):
+                d = rho1 + (obj.normal[0] * obj.point[0] + obj.normal[1] * obj.point[1])  # ρ1 − n·(A − o)
+                if d > tolerance:
+                    self._refuse_overlap(i, "proximal", d, tolerance)
+
+    def _refuse_overlap(self, i: int, phalanx: str, depth: float, tolerance: float) -> None:
+        raise ConfigError(
+            f"objects[{i}]",
+            f"an object clear of the phalanges at the initial state (overlap ≤ {tolerance:g} m)",
+            f"'{self.objects[i].name}' overlaps the {phalanx} phalanx by {depth:.4g} m",
+        )
+
+    def _totals(self, q: Vec3, v: Vec3) -> tuple[float, tuple[Vec3, Vec3]]:
+        """Σ F_n, N, and per phalanx (Fx, Fy, Mz about A)."""
+        grip = 0.0
+        sums = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]
+        for hit in self._hits(q, False):
+            fn, fx, fy = self._forces(hit, v)
+            grip += fn
+            acc, px, py = sums[hit[0]], hit[3], hit[4]
+            acc[0] += fx
+            acc[1] += fy
+            acc[2] += px * fy - py * fx
+        return grip, (tuple(sums[0]), tuple(sums[1]))  # type: ignore[return-value]
+
+
+@effect("contact", "Hunt–Crossley contact of the phalanx capsules with the scene's objects (spec §7)")
+def build_contact(scene: "Scene") -> Contact | None:
+    """The contact element of a scene with objects; None (no element, no cost) without any."""
+    objects = tuple(getattr(scene, "objects", ()) or ())
+    if not objects:
+        return None
+    return Contact(
+        scene.params,
+        distal_offset(scene.params),
+        getattr(scene, "phalanx_radius", PHALANX_RADII),
+        getattr(scene, "contact", ContactParams()),
+        objects,
+    )

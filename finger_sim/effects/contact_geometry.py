@@ -1,0 +1,167 @@
+"""What a scene says about contact (spec §7): its objects, the contact law's parameters and
+the phalanx radii, validated with errors that name the key.
+
+Objects are fixed in the model plane (m, origin at the MCP pivot A, spec §1). A *circle* is a
+cylinder whose axis is normal to the plane; a *plane* is a half-plane through `point` with
+outward unit `normal`, the object on the side of −normal.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from typing import Any
+
+from finger_sim.errors import ConfigError
+
+Vec2 = tuple[float, float]
+
+#: Phalanx capsule radii ρ1 (proximal, A→B) and ρ3 (distal, B→tip), m (spec §7 assumption).
+PHALANX_RADII: Vec2 = (0.008, 0.007)
+#: A plane normal shorter than this (in the scene's units, m) has no direction.
+MIN_NORMAL_NORM = 1e-9
+
+OBJECT_TYPES = ("circle", "plane")
+_OBJECT_KEYS = {"circle": {"name", "type", "center", "radius"}, "plane": {"name", "type", "point", "normal"}}
+
+
+@dataclass(frozen=True)
+class Circle:
+    """A cylinder normal to the model plane: centre (m, model plane) and radius R > 0 (m)."""
+
+    name: str
+    center: Vec2
+    radius: float
+
+    def __post_init__(self) -> None:
+        _check_name(self.name)
+        object.__setattr__(self, "center", _vec2(self.center, "center"))
+        if not (isinstance(self.radius, (int, float)) and math.isfinite(self.radius) and self.radius > 0.0):
+            raise ConfigError("radius", "a finite radius > 0 (m)", self.radius)
+        object.__setattr__(self, "radius", float(self.radius))
+
+
+@dataclass(frozen=True)
+class Plane:
+    """A half-plane through `point` (m) with outward unit `normal`; the object lies on the side of −normal.
+
+    A non-unit normal is normalized (its direction is what it means); a zero one is refused.
+    """
+
+    name: str
+    point: Vec2
+    normal: Vec2
+
+    def __post_init__(self) -> None:
+        _check_name(self.name)
+        object.__setattr__(self, "point", _vec2(self.point, "point"))
+        nx, ny = _vec2(self.normal, "normal")
+        norm = math.hypot(nx, ny)
+        if norm < MIN_NORMAL_NORM:
+            raise ConfigError("normal", f"a non-zero direction (|n| ≥ {MIN_NORMAL_NORM:g}; it is normalized)", list(self.normal))
+        object.__setattr__(self, "normal", (nx / norm, ny / norm))
+
+
+SceneObject = Circle | Plane
+
+
+@dataclass(frozen=True)
+class ContactParams:
+    """The contact law of spec §7: F_n = max(0, k δ^e (1 + d δ')), F_t = −μ F_n tanh(v_t / v_s)."""
+
+    stiffness: float = 1.0e5  # k_c, N/m^e
+    exponent: float = 1.5  # e, ≥ 1 (below 1 the stiffness k e δ^(e−1) is infinite at onset)
+    damping: float = 1.5  # d_c, s/m (Hunt–Crossley)
+    friction: float = 0.0  # μ, Coulomb coefficient
+    slip_velocity: float = 1.0e-3  # v_s, m/s, regularization of the Coulomb law
+
+    def __post_init__(self) -> None:
+        minima = {"stiffness": (0.0, True), "exponent": (1.0, False), "damping": (0.0, False), "friction": (0.0, False), "slip_velocity": (0.0, True)}
+        for f in fields(self):
+            value = getattr(self, f.name)
+            low, strict = minima[f.name]
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < low or (strict and value == low):
+                raise ConfigError(f"model.contact.{f.name}", f"a finite number {'>' if strict else '≥'} {low:g}", value)
+            object.__setattr__(self, f.name, float(value))
+
+
+def objects_from_list(value: Any, key: str = "objects") -> tuple[SceneObject, ...]:
+    """Validate a scene's `objects:` list (None or [] = no objects) into Circle and Plane objects.
+
+    ConfigError names the offending key, e.g. `objects[1].radius`.
+    """
+    if value is None:
+        return ()
+    if not isinstance(value, list):
+        raise ConfigError(key, "a list of objects ({name, type: circle|plane, ...})", value)
+    out: list[SceneObject] = []
+    names: set[str] = set()
+    for i, item in enumerate(value):
+        where = f"{key}[{i}]"
+        if not isinstance(item, dict):
+            raise ConfigError(where, "a mapping {name, type, ...}", item)
+        kind = item.get("type")
+        if kind not in OBJECT_TYPES:
+            raise ConfigError(f"{where}.type", f"one of {list(OBJECT_TYPES)}", kind)
+        allowed = _OBJECT_KEYS[kind]
+        unknown = sorted(set(item) - allowed)
+        if unknown:
+            raise ConfigError(where, f"only the keys {sorted(allowed)} for a {kind}", unknown[0])
+        missing = sorted(allowed - set(item))
+        if missing:
+            raise ConfigError(f"{where}.{missing[0]}", f"a value (required for a {kind})", None)
+        try:
+            obj: SceneObject = (
+                Circle(item["name"], item["center"], item["radius"])
+                if kind == "circle"
+                else Plane(item["name"], item["point"], item["normal"])
+            )
+        except ConfigError as exc:
+            raise ConfigError(f"{where}.{exc.key}", exc.allowed, exc.got) from None
+        if obj.name in names:
+            raise ConfigError(f"{where}.name", "a name no other object uses", obj.name)
+        names.add(obj.name)
+        out.append(obj)
+    return tuple(out)
+
+
+def contact_params_from_dict(value: Any, key: str = "model.contact") -> ContactParams:
+    """Validate `model.contact` (None = the spec's defaults); keys as in ContactParams."""
+    if value is None:
+        return ContactParams()
+    allowed = {f.name for f in fields(ContactParams)}
+    if not isinstance(value, dict):
+        raise ConfigError(key, f"a mapping with the keys {sorted(allowed)}", value)
+    unknown = sorted(set(value) - allowed)
+    if unknown:
+        raise ConfigError(key, f"only the keys {sorted(allowed)}", unknown[0])
+    try:
+        return ContactParams(**value)
+    except ConfigError as exc:
+        raise ConfigError(exc.key.replace("model.contact", key, 1), exc.allowed, exc.got) from None
+
+
+def phalanx_radii_from_value(value: Any, key: str = "model.phalanx_radius") -> Vec2:
+    """Validate `model.phalanx_radius` = [ρ1, ρ3], m, both > 0 (None = the spec's defaults)."""
+    if value is None:
+        return PHALANX_RADII
+    if not isinstance(value, (list, tuple)) or len(value) != 2:
+        raise ConfigError(key, "[proximal, distal] capsule radii (m)", value)
+    for i, r in enumerate(value):
+        if isinstance(r, bool) or not isinstance(r, (int, float)) or not (math.isfinite(r) and r > 0.0):
+            raise ConfigError(f"{key}[{i}]", "a finite radius > 0 (m)", r)
+    return (float(value[0]), float(value[1]))
+
+
+def _check_name(name: Any) -> None:
+    if not isinstance(name, str) or not name:
+        raise ConfigError("name", "a non-empty string", name)
+
+
+def _vec2(value: Any, key: str) -> Vec2:
+    if not isinstance(value, (list, tuple)) or len(value) != 2:
+        raise ConfigError(key, "a list of two numbers (m)", value)
+    for i, x in enumerate(value):
+        if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
+            raise ConfigError(f"{key}[{i}]", "a finite number (m)", x)
+    return (float(value[0]), float(value[1]))
