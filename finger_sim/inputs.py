@@ -14,8 +14,18 @@ from dataclasses import MISSING, asdict, dataclass
 from typing import Any, ClassVar
 
 from finger_sim.errors import ConfigError
+from finger_sim.scene_yaml import magnitude
 
 TorqueFn = Callable[[float], float]
+
+#: A constant torque is split nowhere: a break closer than this (relative to dt) to a
+#: step's end is taken as lying on it. Also the slack of the step count ceil(T/dt − ε).
+BREAK_EPS = 1e-9
+#: Largest torque level a profile may name, N·m (a finger motor gives ~0.05; this only keeps
+#: the arithmetic finite).
+MAX_TORQUE = 1e3
+#: Largest ramp slope, N·m/s.
+MAX_SLOPE = 1e6
 
 
 @dataclass(frozen=True)
@@ -34,6 +44,12 @@ class Profile:
     def on_segment(self, a: float, b: float) -> TorqueFn:
         """τ on the closed segment [a, b], which holds no switch inside it."""
         return self
+
+    def shortest_interval(self) -> float:
+        """The shortest time a fixed step must resolve, s: between two switches, or half a
+        period; inf for a profile with no such scale. A step longer than this would hold more
+        than one switch (or sample a periodic input below its Nyquist rate)."""
+        return math.inf
 
     def to_dict(self) -> dict[str, Any]:
         return {"type": self.kind, **asdict(self)}
@@ -74,6 +90,9 @@ class Sine(Profile):
     def __call__(self, t: float) -> float:
         return self.offset + self.amplitude * math.sin(2.0 * math.pi * self.frequency * t)
 
+    def shortest_interval(self) -> float:
+        return 0.5 / self.frequency
+
 
 @dataclass(frozen=True)
 class _PiecewiseConstant(Profile):
@@ -113,6 +132,9 @@ class Square(_PiecewiseConstant):
         phase = (t * self.frequency) % 1.0
         return self.offset + (self.amplitude if phase < 0.5 else -self.amplitude)
 
+    def shortest_interval(self) -> float:
+        return 0.5 / self.frequency
+
     def breakpoints(self, t0: float, t1: float) -> list[float]:
         half = 0.5 / self.frequency
         k = math.floor(t0 / half) + 1
@@ -126,27 +148,30 @@ class Square(_PiecewiseConstant):
 PROFILES: dict[str, type[Profile]] = {cls.kind: cls for cls in (Constant, Ramp, Step, Square, Sine)}
 
 
+#: Bound on each field of a profile (by name), in its unit: N·m, N·m/s, s.
+_LIMITS = {"slope": MAX_SLOPE, "at": math.inf, "frequency": math.inf}
+
+
 def profile_from_dict(data: Any, key: str = "input.torque") -> Profile:
     """A profile from its scene mapping, e.g. {type: ramp, offset: 0.001, slope: 0.01}."""
     if not isinstance(data, dict):
         raise ConfigError(key, f"a mapping with 'type' in {sorted(PROFILES)}", data)
     kind = data.get("type")
-    if kind not in PROFILES:
+    if not isinstance(kind, str) or kind not in PROFILES:
         raise ConfigError(f"{key}.type", f"one of {sorted(PROFILES)}", kind)
     cls = PROFILES[kind]
     names = [f for f in cls.__dataclass_fields__ if f != "kind"]
     required = [f for f in names if cls.__dataclass_fields__[f].default is MISSING]
-    unknown = sorted(set(data) - set(names) - {"type"})
+    unknown = sorted((k for k in data if k not in names and k != "type"), key=str)
     if unknown:
         raise ConfigError(f"{key}.{unknown[0]}", f"only keys {names} for type {kind}", data[unknown[0]])
+    values = {}
     for name in names:
         if name not in data:
             if name in required:
                 raise ConfigError(f"{key}.{name}", f"a number (required for type {kind})", None)
             continue
-        value = data[name]
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise ConfigError(f"{key}.{name}", "a finite number", value)
-    if kind in ("square", "sine") and not data["frequency"] > 0:
+        values[name] = magnitude(data[name], f"{key}.{name}", _LIMITS.get(name, MAX_TORQUE))
+    if "frequency" in values and not values["frequency"] > 0:
         raise ConfigError(f"{key}.frequency", "a number > 0 (Hz)", data["frequency"])
-    return cls(**{n: float(data[n]) for n in names if n in data})
+    return cls(**values)

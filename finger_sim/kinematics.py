@@ -18,6 +18,9 @@ Vec3 = tuple[float, float, float]
 #: Assembly branch of spec §1 (the distal phalanx flexes with the proximal one):
 #: θ2 = φ + BRANCH·acos(...), where φ is the direction of D→B.
 BRANCH = +1
+#: |sin(θ3 − θ2)| below which a pose counts as the toggle (θ2 ∥ θ3), where the dependent
+#: rates are singular: the rates' condition number there exceeds 1e12.
+TOGGLE_SINE = 1e-12
 
 
 class Pose(NamedTuple):
@@ -66,7 +69,7 @@ def dependent_rates(p: FingerParams, q: Vec3, theta1_dot: float) -> Vec3:
     _, t2, t3 = q
     # Φ_q[:, 1:] (θ2', θ3')ᵀ = −Φ_q[:, 0] θ1'; its determinant is r2 r3 sin(θ3 − θ2).
     det = p.r2 * p.r3 * math.sin(t3 - t2)
-    if abs(det) < 1e-12 * p.r2 * p.r3:
+    if abs(det) < TOGGLE_SINE * p.r2 * p.r3:
         raise ConfigError("initial.theta1", "a pose away from the toggle (θ2 ∥ θ3)", q[0])
     b1 = p.r1 * math.sin(q[0]) * theta1_dot
     b2 = -p.r1 * math.cos(q[0]) * theta1_dot
@@ -79,22 +82,40 @@ def dependent_rates(p: FingerParams, q: Vec3, theta1_dot: float) -> Vec3:
 
 
 def assembly_range(p: FingerParams) -> tuple[float, float]:
-    """The MCP interval (lo, hi), rad, on which the linkage assembles: the two toggle angles.
+    """The MCP interval (lo, hi) around extension (θ1 = 0), rad, on which the linkage assembles.
 
-    Toggles are where r2 and r3 are collinear (|D→B| = r2 + r3); spec §1 gives
-    104.2116° and −160.3615° for the paper's geometry.
+    Its ends are toggles, where r2 and r3 are collinear: stretched (|D→B| = r2 + r3) or
+    folded (|D→B| = |r2 − r3|). Spec §1 gives 104.2116° and −160.3615° (both stretched) for
+    the paper's geometry; with r1 below r4 + |r2 − r3| (45.2 mm) a folded toggle bounds the
+    extension side instead. (−inf, inf) when the crank turns fully.
     """
-    # |D→B|² = r1² + r4² + 2 r1 r4 cos(θ1 − θ4) = (r2 + r3)²
-    reach = p.r2 + p.r3
-    c = (reach * reach - p.r1 * p.r1 - p.r4 * p.r4) / (2.0 * p.r1 * p.r4)
-    if c >= 1.0:  # the dyad reaches every D→B distance: the crank turns fully
+    # |D→B|² = r1² + r4² + 2 r1 r4 cos φ with φ = θ1 − θ4: the dyad reaches B where
+    # cos φ lies in [c_folded, c_stretched], i.e. |φ| in [a_stretched, a_folded].
+    a_stretched = _limit_angle(p, p.r2 + p.r3, 0.0)
+    a_folded = _limit_angle(p, abs(p.r2 - p.r3), math.pi)
+    if a_stretched == 0.0 and a_folded == math.pi:  # the dyad reaches every D→B distance
         return (-math.inf, math.inf)
-    delta = math.acos(max(c, -1.0))
-    hi = _wrap(p.theta4 - delta)
-    lo = _wrap(p.theta4 + delta)
-    if lo > hi:
-        lo -= 2.0 * math.pi
+    side = 1.0 if _wrap(-p.theta4) >= 0.0 else -1.0  # φ at extension lies on this side
+    if a_folded == math.pi:  # one interval through φ = π (the paper's linkage)
+        hi, lo = _wrap(p.theta4 - a_stretched), _wrap(p.theta4 + a_stretched)
+    elif a_stretched == 0.0:  # one interval through φ = 0
+        hi, lo = _wrap(p.theta4 + a_folded), _wrap(p.theta4 - a_folded)
+    elif side > 0:  # φ in [a_stretched, a_folded]
+        hi, lo = _wrap(p.theta4 + a_folded), _wrap(p.theta4 + a_stretched)
+    else:  # φ in [−a_folded, −a_stretched]
+        hi, lo = _wrap(p.theta4 - a_stretched), _wrap(p.theta4 - a_folded)
+    if lo > hi:  # the interval crosses θ1 = ±π: unwrap the end on the far side of 0
+        if hi >= 0.0:
+            lo -= 2.0 * math.pi
+        else:
+            hi += 2.0 * math.pi
     return (lo, hi)
+
+
+def _limit_angle(p: FingerParams, length: float, unreached: float) -> float:
+    """|φ| in [0, π] at which |D→B| = length; `unreached` when no φ gives that length."""
+    c = (length * length - p.r1 * p.r1 - p.r4 * p.r4) / (2.0 * p.r1 * p.r4)
+    return unreached if not -1.0 < c < 1.0 else math.acos(c)
 
 
 def toggle_angles(p: FingerParams) -> tuple[float, float]:

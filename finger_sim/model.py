@@ -13,6 +13,11 @@ from finger_sim.errors import ConfigError
 
 #: The paper's ground-link angle θ4 = π − 0.49 rad (equations 2-3).
 PAPER_THETA4 = math.pi - 0.49
+#: Link lengths allowed, m: a finger-sized linkage with wide margins (the paper's are 7.7-46 mm);
+#: the bounds keep inertias (m r²) and forces far from float under- and overflow.
+LENGTH_RANGE = (1e-4, 1.0)
+#: Link masses allowed, kg (the paper's are 0.9-17 g).
+MASS_RANGE = (1e-6, 10.0)
 
 
 @dataclass(frozen=True)
@@ -35,21 +40,35 @@ class FingerParams:
 
     def __post_init__(self) -> None:
         for f in fields(self):
-            value = getattr(self, f.name)
+            value, key = getattr(self, f.name), f"model.geometry.{f.name}"
             if f.name == "theta4":
                 if not math.isfinite(value):
-                    raise ConfigError(f"model.{f.name}", "a finite angle in rad", value)
-            elif not (math.isfinite(value) and value > 0.0):
-                raise ConfigError(f"model.{f.name}", "a finite value > 0", value)
-        # The linkage assembles somewhere iff the D→B distance range meets the
-        # coupler dyad's reach |r2 − r3| .. r2 + r3.
-        if self.r1 + self.r4 < abs(self.r2 - self.r3) or abs(self.r1 - self.r4) > self.r2 + self.r3:
+                    raise ConfigError(key, "a finite angle in rad", value)
+                continue
+            lo, hi = MASS_RANGE if f.name.startswith("m") else LENGTH_RANGE
+            if not (math.isfinite(value) and value > 0.0):
+                raise ConfigError(key, "a finite value > 0", value)
+            if not lo <= value <= hi:
+                raise ConfigError(key, f"a value in [{lo:g}, {hi:g}] {'kg' if f.name.startswith('m') else 'm'}", value)
+        # The model is built around the extended pose θ1 = 0 (spec §1: the distal offset α
+        # is taken there), so the coupler dyad r2, r3 must reach B there: the distance D→B
+        # must lie strictly between the dyad's folded and stretched lengths.
+        reach = self.extension_reach()
+        shortest, longest = abs(self.r2 - self.r3), self.r2 + self.r3
+        if not shortest < reach < longest:
+            limit = f"below the dyad's folded length |r2 − r3| = {shortest * 1e3:.4g} mm" if reach <= shortest else (
+                f"beyond the dyad's stretched length r2 + r3 = {longest * 1e3:.4g} mm")
             raise ConfigError(
-                "model.r1..r4",
-                f"lengths with which the four-bar assembles (|r1 − r4| ≤ r2 + r3 and "
-                f"r1 + r4 ≥ |r2 − r3|)",
-                (self.r1, self.r2, self.r3, self.r4),
+                "model.geometry",
+                "r1, r2, r3, r4, theta4 with |r2 − r3| < |D→B| < r2 + r3 at θ1 = 0",
+                {"r1": self.r1, "r2": self.r2, "r3": self.r3, "r4": self.r4, "theta4": self.theta4},
+                problem=f"the linkage cannot be assembled: at extension (θ1 = 0) the distance D→B is "
+                f"{reach * 1e3:.4g} mm, {limit}",
             )
+
+    def extension_reach(self) -> float:
+        """|D→B| at θ1 = 0, m: D = −r4 e(θ4), B = (r1, 0)."""
+        return math.hypot(self.r1 + self.r4 * math.cos(self.theta4), self.r4 * math.sin(self.theta4))
 
     @property
     def inertia_A(self) -> float:

@@ -16,7 +16,11 @@ Schema (every key optional; omitted = the spec's default):
       torque: {type: ramp, offset: 0.001, slope: 0.01}   # N·m, see finger_sim.inputs
     initial: {theta1: 0.0, theta1_dot: 0.0}             # rad, rad/s
     duration: 0.3                # s
-    integrator: {method: rk4, dt: 0.001}                # method: a name in METHODS, or auto
+    integrator: {method: auto, dt: 0.001}               # method: a name in METHODS, or auto
+
+Files are YAML 1.2 (`1e-3` is a number) read by `finger_sim.scene_yaml`: no duplicate keys,
+anchors, aliases or tags. Values are bounded to what a finger can be (the MAX_* constants),
+which also keeps every product finite; a run is at most MAX_STEPS steps.
 
 Only the effects a scene turns on become force elements, so an absent effect costs
 nothing per step.
@@ -25,21 +29,38 @@ nothing per step.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from finger_sim import kinematics
 from finger_sim.dynamics import FingerSystem
 from finger_sim.errors import ConfigError
-from finger_sim.forces import ForceElement, Gravity, JointDamping, PipSpring, TipForce
-from finger_sim.inputs import Profile, Ramp, profile_from_dict
+from finger_sim.effects import ForceElement, build_elements
+from finger_sim.inputs import BREAK_EPS, Profile, Ramp, profile_from_dict
 from finger_sim.integrators import METHODS
 from finger_sim.model import FingerParams
+from finger_sim.scene_yaml import dump_scene, magnitude, mapping, number, pair, parse_scene_text, read_scene_file, text
 
 AUTO = "auto"
+#: A scene name is one safe file-name component (it names log files): these characters,
+#: not starting with a dot, at most NAME_LENGTH of them.
+NAME_PATTERN = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*")
+NAME_LENGTH = 64
+#: Longest description, characters (it is stored in every log's metadata).
+DESCRIPTION_LENGTH = 4096
+#: Bounds of the model's values: far beyond any finger (the paper's spring is 1e-3 N·m/rad,
+#: the stiff scene's 1e3), and small enough that the modal arithmetic (C², K·I) stays finite.
+MAX_SPRING_STIFFNESS = 1e6  # N·m/rad
+MAX_DAMPING = 1e3  # N·m·s/rad
+MAX_GRAVITY = 1e4  # m/s², each component (~1000 g)
+MAX_TIP_FORCE = 1e4  # N, each component
+MAX_RATE = 1e4  # rad/s, the initial θ1'
+MAX_DT = 1.0  # s
+#: Most steps a scene may ask for: 1e12 steps of float64 states are ~100 TB, and
+#: step·dt stops being exact well before 2⁵³.
+MAX_STEPS = 10**12
 _TOP_KEYS = {"name", "description", "model", "input", "initial", "duration", "integrator"}
 _MODEL_KEYS = {"spring_stiffness", "damping", "gravity", "tip_force", "joint_limits", "restitution", "geometry"}
 
@@ -61,25 +82,21 @@ class Scene:
     theta1: float = 0.0
     theta1_dot: float = 0.0
     duration: float = 0.3
-    method: str = "rk4"
+    method: str = AUTO
     dt: float = 0.001
 
+    @property
+    def step_count(self) -> int:
+        """Steps of dt that cover the duration: ceil(duration/dt), a step ending within
+        BREAK_EPS·dt of the duration counting as ending on it."""
+        return math.ceil(self.duration / self.dt - BREAK_EPS)
+
     def force_elements(self) -> list[ForceElement]:
-        """The active effects only."""
-        alpha = kinematics.distal_offset(self.params)
-        elements: list[ForceElement] = []
-        if self.spring_stiffness:
-            elements.append(PipSpring(self.spring_stiffness, alpha))
-        if self.damping:
-            elements.append(JointDamping(self.damping))
-        if any(self.gravity):
-            elements.append(Gravity(*self.gravity, self.params, alpha))
-        if any(self.tip_force):
-            elements.append(TipForce(*self.tip_force, self.params, alpha))
-        return elements
+        """The elements of the effects the scene turns on (finger_sim.effects), in summation order."""
+        return build_elements(self)
 
     def build_system(self) -> FingerSystem:
-        return FingerSystem(self.params, self.force_elements())
+        return FingerSystem(self.params, build_elements(self))
 
     def initial_state(self) -> tuple[kinematics.Vec3, kinematics.Vec3]:
         """(q, q') at t = 0 on the spec's branch; ConfigError if θ1 cannot be assembled."""
@@ -109,7 +126,8 @@ class Scene:
         }
 
     def to_yaml(self) -> str:
-        return yaml.safe_dump(self.to_dict(), sort_keys=False)
+        """The resolved scene as YAML 1.2 that `load_scene` and `scene_from_yaml` read back."""
+        return dump_scene(self.to_dict())
 
     def with_overrides(self, *, method: str | None = None, dt: float | None = None, duration: float | None = None) -> Scene:
         """A copy with command-line overrides, validated like the file's values."""
@@ -126,89 +144,91 @@ class Scene:
 def load_scene(path: str | Path) -> Scene:
     """Read and validate a scene file; ConfigError names the file, key, allowed values and value."""
     path = Path(path)
+    data = read_scene_file(path)
     try:
-        text = path.read_text()
-    except OSError as exc:
-        raise ConfigError("scene", "a readable scene file", f"{path} ({exc.strerror})") from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise ConfigError("scene", "valid YAML", f"{path}: {exc}") from None
-    if data is None:
-        data = {}
-    try:
-        return scene_from_dict(data, default_name=path.stem)
+        return scene_from_dict({} if data is None else data, default_name=safe_name(path.stem))
     except ConfigError as exc:
-        raise ConfigError(f"{path.name}: {exc.key}", exc.allowed, exc.got) from None
+        raise exc.within(path.name) from None
+
+
+def scene_from_yaml(text: str, source: str = "scene") -> Scene:
+    """A scene from YAML text (e.g. a log's metadata record), read like a scene file."""
+    data = parse_scene_text(text, source)
+    return scene_from_dict({} if data is None else data)
+
+
+def safe_name(stem: str) -> str:
+    """A valid scene name made from a file stem: other characters become '_', a leading dot too."""
+    name = re.sub(r"[^A-Za-z0-9_.-]", "_", stem)[:NAME_LENGTH]
+    name = "_" + name[1:] if name.startswith(".") else name
+    return name or Scene.name
 
 
 def scene_from_dict(data: Any, *, default_name: str = "scene") -> Scene:
     """Validate a scene mapping (as loaded from YAML) into a Scene."""
-    data = _mapping(data, "scene", _TOP_KEYS)
-    model = _mapping(data.get("model", {}), "model", _MODEL_KEYS)
-    geometry = _mapping(model.get("geometry", {}), "model.geometry", {f.name for f in fields(FingerParams)})
-    params = FingerParams(**{k: _number(v, f"model.geometry.{k}") for k, v in geometry.items()})
-    inp = _mapping(data.get("input", {}), "input", {"torque"})
-    initial = _mapping(data.get("initial", {}), "initial", {"theta1", "theta1_dot"})
-    integ = _mapping(data.get("integrator", {}), "integrator", {"method", "dt"})
+    data = mapping(data, "scene", _TOP_KEYS)
+    model = mapping(data.get("model", {}), "model", _MODEL_KEYS)
+    geometry = mapping(model.get("geometry", {}), "model.geometry", {f.name for f in fields(FingerParams)})
+    params = FingerParams(**{k: number(v, f"model.geometry.{k}") for k, v in geometry.items()})
+    inp = mapping(data.get("input", {}), "input", {"torque"})
+    initial = mapping(data.get("initial", {}), "initial", {"theta1", "theta1_dot"})
+    integ = mapping(data.get("integrator", {}), "integrator", {"method", "dt"})
     method = integ.get("method", Scene.method)
-    if method not in METHODS and method != AUTO:
+    if not isinstance(method, str) or (method not in METHODS and method != AUTO):
         raise ConfigError("integrator.method", f"one of {sorted(METHODS) + [AUTO]}", method)
-    limits = _mapping(model.get("joint_limits", {}), "model.joint_limits", {"mcp"})
+    name = text(data.get("name", default_name), "name", NAME_LENGTH)
+    if not NAME_PATTERN.fullmatch(name):
+        raise ConfigError("name", "a file-name component of letters, digits, '_', '.' and '-', not starting with '.'", name)
+    limits = mapping(model.get("joint_limits", {}), "model.joint_limits", {"mcp"})
     mcp = None
     if "mcp" in limits:
-        mcp = _pair(limits["mcp"], "model.joint_limits.mcp")
+        mcp = pair(limits["mcp"], "model.joint_limits.mcp")
         if not mcp[0] < mcp[1]:
             raise ConfigError("model.joint_limits.mcp", "[lower, upper] with lower < upper (rad)", list(mcp))
         lo, hi = kinematics.assembly_range(params)
         if not (lo < mcp[0] and mcp[1] < hi):
             raise ConfigError("model.joint_limits.mcp", f"limits inside the assemblable range ({lo:.6f}, {hi:.6f}) rad", list(mcp))
+    duration = number(data.get("duration", Scene.duration), "duration", minimum=0.0, strict=True)
+    dt = number(integ.get("dt", Scene.dt), "integrator.dt", minimum=0.0, maximum=MAX_DT, strict=True)
+    _check_steps(duration, dt)
     scene = Scene(
-        name=str(data.get("name", default_name)),
-        description=str(data.get("description", "")),
+        name=name,
+        description=text(data.get("description", ""), "description", DESCRIPTION_LENGTH),
         params=params,
-        spring_stiffness=_number(model.get("spring_stiffness", Scene.spring_stiffness), "model.spring_stiffness", minimum=0.0),
-        damping=_number(model.get("damping", Scene.damping), "model.damping", minimum=0.0),
-        gravity=_pair(model.get("gravity", [0.0, 0.0]), "model.gravity"),
-        tip_force=_pair(model.get("tip_force", [0.0, 0.0]), "model.tip_force"),
+        spring_stiffness=number(model.get("spring_stiffness", Scene.spring_stiffness), "model.spring_stiffness", minimum=0.0, maximum=MAX_SPRING_STIFFNESS),
+        damping=number(model.get("damping", Scene.damping), "model.damping", minimum=0.0, maximum=MAX_DAMPING),
+        gravity=pair(model.get("gravity", [0.0, 0.0]), "model.gravity", MAX_GRAVITY),
+        tip_force=pair(model.get("tip_force", [0.0, 0.0]), "model.tip_force", MAX_TIP_FORCE),
         mcp_limits=mcp,
-        restitution=_number(model.get("restitution", Scene.restitution), "model.restitution", minimum=0.0, maximum=1.0),
+        restitution=number(model.get("restitution", Scene.restitution), "model.restitution", minimum=0.0, maximum=1.0),
         torque=profile_from_dict(inp["torque"]) if "torque" in inp else Ramp(offset=0.001, slope=0.01),
-        theta1=_number(initial.get("theta1", Scene.theta1), "initial.theta1"),
-        theta1_dot=_number(initial.get("theta1_dot", Scene.theta1_dot), "initial.theta1_dot"),
-        duration=_number(data.get("duration", Scene.duration), "duration", minimum=0.0, strict=True),
+        theta1=number(initial.get("theta1", Scene.theta1), "initial.theta1"),
+        theta1_dot=magnitude(initial.get("theta1_dot", Scene.theta1_dot), "initial.theta1_dot", MAX_RATE),
+        duration=duration,
         method=method,
-        dt=_number(integ.get("dt", Scene.dt), "integrator.dt", minimum=0.0, strict=True),
+        dt=dt,
     )
     scene.initial_state()  # refuses a θ1 outside the assemblable range, or at a toggle
     if mcp is not None and not (mcp[0] <= scene.theta1 <= mcp[1]):
         raise ConfigError("initial.theta1", f"an angle within model.joint_limits.mcp {list(mcp)} rad", scene.theta1)
     if scene.dt > scene.duration:
         raise ConfigError("integrator.dt", f"a step no longer than duration ({scene.duration} s)", scene.dt)
+    if scene.dt > scene.torque.shortest_interval():
+        raise ConfigError(
+            "input.torque.frequency",
+            f"at most {0.5 / scene.dt:g} Hz at integrator.dt = {scene.dt:g} s (a step of at most half a period: "
+            f"a faster {scene.torque.kind} wave changes direction more than once per step, which the step cannot resolve)",
+            scene.torque.to_dict()["frequency"],  # only periodic profiles have a shortest interval
+        )
     return scene
 
 
-def _mapping(value: Any, key: str, allowed: set[str]) -> dict[str, Any]:
-    if not isinstance(value, dict):
-        raise ConfigError(key, "a mapping", value)
-    unknown = sorted(set(value) - allowed)
-    if unknown:
-        raise ConfigError(key, f"only the keys {sorted(allowed)}", unknown[0])
-    return value
-
-
-def _number(value: Any, key: str, *, minimum: float | None = None, maximum: float | None = None, strict: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ConfigError(key, "a finite number", value)
-    if minimum is not None and (value < minimum or (strict and value == minimum)):
-        raise ConfigError(key, f"a number {'>' if strict else '≥'} {minimum:g}" + (f" and ≤ {maximum:g}" if maximum is not None else ""), value)
-    if maximum is not None and value > maximum:
-        raise ConfigError(key, f"a number ≥ {minimum:g} and ≤ {maximum:g}", value)
-    return float(value)
-
-
-def _pair(value: Any, key: str) -> tuple[float, float]:
-    if not isinstance(value, (list, tuple)) or len(value) != 2:
-        raise ConfigError(key, "a list of two numbers", value)
-    return (_number(value[0], f"{key}[0]"), _number(value[1], f"{key}[1]"))
-
+def _check_steps(duration: float, dt: float) -> None:
+    """Refuse a run of more than MAX_STEPS steps, stating the count."""
+    steps = duration / dt  # a float: may be far beyond any int a run could reach, or inf
+    if steps > MAX_STEPS:
+        raise ConfigError(
+            "duration",
+            f"a run of at most {MAX_STEPS:.0e} steps (duration ≤ {MAX_STEPS * dt:.3g} s at integrator.dt = {dt:g} s)",
+            f"{duration:g} s = {steps:.3g} steps",
+        )

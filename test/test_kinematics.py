@@ -165,3 +165,37 @@ def test_fingertip_trajectory_spans_the_mcp_range():
     psi = q90[2] + ref.ALPHA
     tip = (ref.R1 * math.cos(q90[0]) + ref.L3 * math.cos(psi), ref.R1 * math.sin(q90[0]) + ref.L3 * math.sin(psi))
     assert (poses[-1].x, poses[-1].y) == pytest.approx(tip, abs=1e-12)
+
+
+# -- geometries whose folded toggle bounds the range (issue 8.4) -----------------------
+@pytest.mark.parametrize("r1", [0.0451, 0.045, 0.0448])
+def test_assembly_range_is_bounded_by_the_folded_toggle_when_r1_is_short(r1):
+    """Below r1 = r4 + |r2 − r3| = 45.2 mm the dyad cannot fold short enough near θ1 = θ4 − π:
+    the extension side ends where |D→B| = |r2 − r3|. The range used to ignore that limit
+    (r1 = 45 mm failed late, inside the stability check's assembly)."""
+    from scipy.optimize import brentq
+
+    p = FingerParams(r1=r1)
+    lo, hi = kin.assembly_range(p)
+
+    def distance(theta1: float) -> float:  # |B − D| from the points, m
+        b, d = (r1 * math.cos(theta1), r1 * math.sin(theta1)), (-p.r4 * math.cos(p.theta4), -p.r4 * math.sin(p.theta4))
+        return math.dist(b, d)
+
+    folded, stretched = abs(p.r2 - p.r3), p.r2 + p.r3
+    # independent ends: the roots of |D→B| − limit between extension and the shortest (θ1 = θ4 − π)
+    # and the longest (θ1 = θ4) distance
+    ref_lo = brentq(lambda a: distance(a) - folded, p.theta4 - math.pi, 0.0, xtol=1e-14)
+    ref_hi = brentq(lambda a: distance(a) - stretched, 0.0, p.theta4, xtol=1e-14)
+    assert (lo, hi) == pytest.approx((ref_lo, ref_hi), abs=1e-9)
+    for end in (lo, hi):  # assembles just inside, not just outside, and is a toggle there
+        q = kin.assemble(p, end + math.copysign(1e-7, -end))
+        assert abs(math.sin(q[2] - q[1])) < 1e-3
+        with pytest.raises(ConfigError):
+            kin.assemble(p, end + math.copysign(1e-7, end))
+    # the whole range assembles now, e.g. for the stability check's sweep
+    from finger_sim.scene import scene_from_dict
+    from finger_sim.stability import fastest_mode
+
+    scene = scene_from_dict({"model": {"geometry": {"r1": r1}, "spring_stiffness": 0.001}})
+    assert abs(fastest_mode(scene.build_system(), (lo, hi))) > 0.0

@@ -73,12 +73,12 @@ def test_params_are_frozen():
 def test_refuses_non_positive_or_non_finite_values(field, value):
     with pytest.raises(ConfigError) as info:
         FingerParams(**{field: value})
-    assert info.value.key == f"model.{field}"
-    assert str(info.value) == f"model.{field}: expected a finite value > 0, got {value!r}"
+    assert info.value.key == f"model.geometry.{field}"
+    assert str(info.value) == f"model.geometry.{field}: expected a finite value > 0, got {value!r}"
 
 
 def test_refuses_non_finite_ground_angle_but_takes_any_finite_one():
-    with pytest.raises(ConfigError, match=r"^model\.theta4: expected a finite angle in rad, got nan$"):
+    with pytest.raises(ConfigError, match=r"^model\.geometry\.theta4: expected a finite angle in rad, got nan$"):
         FingerParams(theta4=math.nan)
     assert FingerParams(theta4=-3.0).theta4 == -3.0
 
@@ -88,14 +88,40 @@ def test_refuses_non_finite_ground_angle_but_takes_any_finite_one():
     [
         {"r2": 0.010, "r3": 0.001},  # |r1 − r4| = 37.5 mm > r2 + r3 = 11 mm: the dyad never reaches B
         {"r1": 0.002, "r4": 0.002, "r2": 0.05, "r3": 0.005},  # r1 + r4 = 4 mm < |r2 − r3| = 45 mm
+        {"r1": 0.03},  # assembles only far from extension: |D→B| at θ1 = 0 is below |r2 − r3|
     ],
 )
-def test_refuses_a_linkage_that_cannot_assemble(lengths):
+def test_refuses_a_linkage_that_cannot_assemble_at_extension(lengths):
     p = {**dataclasses.asdict(FingerParams()), **lengths}
-    # triangle inequality on D→B (length between |r1 − r4| and r1 + r4) against the dyad's reach
-    assert p["r1"] + p["r4"] < abs(p["r2"] - p["r3"]) or abs(p["r1"] - p["r4"]) > p["r2"] + p["r3"]
+    # D = −r4 e(θ4), B = (r1, 0): the dyad r2, r3 must span D→B at θ1 = 0 (triangle inequality)
+    reach = math.hypot(p["r1"] + p["r4"] * math.cos(p["theta4"]), p["r4"] * math.sin(p["theta4"]))
+    assert not abs(p["r2"] - p["r3"]) < reach < p["r2"] + p["r3"]
     with pytest.raises(ConfigError) as info:
         FingerParams(**lengths)
-    assert info.value.key == "model.r1..r4"
-    assert "assembles" in str(info.value)
-    assert str((p["r1"], p["r2"], p["r3"], p["r4"])) in str(info.value)
+    msg = str(info.value)
+    assert info.value.key == "model.geometry"
+    assert msg.startswith(f"model.geometry: the linkage cannot be assembled: at extension (θ1 = 0) the distance D→B is {reach * 1e3:.4g} mm, ")
+    assert "r2 + r3" in msg if reach >= p["r2"] + p["r3"] else "|r2 − r3|" in msg
+    assert msg.endswith(f"got {dict((k, p[k]) for k in ('r1', 'r2', 'r3', 'r4', 'theta4'))!r}")
+
+
+def test_r1_of_30_mm_names_the_real_problem():
+    """Issue 8.4: `geometry: {r1: 0.03}` used to report an assemblable range [-inf, inf] rad."""
+    with pytest.raises(ConfigError) as info:
+        FingerParams(r1=0.03)
+    assert str(info.value) == (
+        "model.geometry: the linkage cannot be assembled: at extension (θ1 = 0) the distance D→B is 22.85 mm, "
+        "below the dyad's folded length |r2 − r3| = 36.7 mm; expected r1, r2, r3, r4, theta4 with "
+        f"|r2 − r3| < |D→B| < r2 + r3 at θ1 = 0, got {{'r1': 0.03, 'r2': 0.0444, 'r3': 0.0077, 'r4': 0.0085, 'theta4': {PAPER_THETA4!r}}}"
+    )
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "allowed"),
+    [("r1", 1e200, "[0.0001, 1] m"), ("r3", 1e-300, "[0.0001, 1] m"), ("m2", 1e300, "[1e-06, 10] kg"), ("m1", 1e-12, "[1e-06, 10] kg")],
+)
+def test_refuses_lengths_and_masses_beyond_any_finger(field, value, allowed):
+    """r1 = 1e200 used to overflow in r1² (an OverflowError traceback); 1e-300 made the inertias 0."""
+    with pytest.raises(ConfigError) as info:
+        FingerParams(**{field: value})
+    assert str(info.value) == f"model.geometry.{field}: expected a value in {allowed}, got {value!r}"

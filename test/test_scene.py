@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 
 import pytest
 import yaml
@@ -87,7 +88,7 @@ def test_round_trip_of_every_effect_and_profile():
         assert scene_from_dict(scene.to_dict()) == scene
         assert scene.params.r1 == 0.047 and scene.params.m3 == 0.015 and scene.params.r2 == 0.0444
         assert scene.mcp_limits == (-0.1, 1.5)
-        assert len(scene.force_elements()) == 4
+        assert len(scene.force_elements()) == 5  # spring, damping, gravity, tip force, MCP stops
 
 
 def test_defaults_are_the_papers_run():
@@ -127,30 +128,30 @@ def refusal(data) -> str:
         # wrong types
         ([1, 2], "scene: expected a mapping, got [1, 2]"),
         ({"model": [1.0]}, "model: expected a mapping, got [1.0]"),
-        ({"model": {"damping": "0.1"}}, "model.damping: expected a finite number, got '0.1'"),
+        ({"model": {"damping": "0.1"}}, "model.damping: expected a finite number (YAML 1.2 float syntax, e.g. 1.0e-3), got '0.1'"),
         ({"model": {"spring_stiffness": True}}, "model.spring_stiffness: expected a finite number, got True"),
         ({"model": {"gravity": [0.0, -9.81, 0.0]}}, "model.gravity: expected a list of two numbers, got [0.0, -9.81, 0.0]"),
-        ({"model": {"tip_force": [0.0, "x"]}}, "model.tip_force[1]: expected a finite number, got 'x'"),
+        ({"model": {"tip_force": [0.0, "x"]}}, "model.tip_force[1]: expected a finite number (YAML 1.2 float syntax, e.g. 1.0e-3), got 'x'"),
         ({"model": {"geometry": {"r1": None}}}, "model.geometry.r1: expected a finite number, got None"),
         ({"duration": float("nan")}, "duration: expected a finite number, got nan"),
-        ({"initial": {"theta1": "0"}}, "initial.theta1: expected a finite number, got '0'"),
+        ({"initial": {"theta1": "0"}}, "initial.theta1: expected a finite number (YAML 1.2 float syntax, e.g. 1.0e-3), got '0'"),
         ({"integrator": {"method": "rk5"}}, f"integrator.method: expected one of {sorted(METHODS) + ['auto']}, got 'rk5'"),
         # out of range
         ({"model": {"damping": -0.01}}, "model.damping: expected a number ≥ 0, got -0.01"),
         ({"model": {"spring_stiffness": -1.0}}, "model.spring_stiffness: expected a number ≥ 0, got -1.0"),
-        ({"model": {"restitution": 1.5}}, "model.restitution: expected a number ≥ 0 and ≤ 1, got 1.5"),
-        ({"model": {"restitution": -0.5}}, "model.restitution: expected a number ≥ 0 and ≤ 1, got -0.5"),
+        ({"model": {"restitution": 1.5}}, "model.restitution: expected a number ≤ 1, got 1.5"),
+        ({"model": {"restitution": -0.5}}, "model.restitution: expected a number ≥ 0, got -0.5"),
         ({"integrator": {"dt": 0}}, "integrator.dt: expected a number > 0, got 0"),
         ({"integrator": {"dt": -0.001}}, "integrator.dt: expected a number > 0, got -0.001"),
         ({"duration": 0.0}, "duration: expected a number > 0, got 0.0"),
         ({"duration": 0.01, "integrator": {"dt": 0.02}}, "integrator.dt: expected a step no longer than duration (0.01 s), got 0.02"),
-        ({"model": {"geometry": {"r3": -0.0077}}}, "model.r3: expected a finite value > 0, got -0.0077"),
+        ({"model": {"geometry": {"r3": -0.0077}}}, "model.geometry.r3: expected a finite value > 0, got -0.0077"),
         # torque profiles
         ({"input": {"torque": {"type": "triangle"}}}, "input.torque.type: expected one of ['constant', 'ramp', 'sine', 'square', 'step'], got 'triangle'"),
         ({"input": {"torque": 0.01}}, "input.torque: expected a mapping with 'type' in ['constant', 'ramp', 'sine', 'square', 'step'], got 0.01"),
         ({"input": {"torque": {"type": "ramp", "offset": 0.001}}}, "input.torque.slope: expected a number (required for type ramp), got None"),
         ({"input": {"torque": {"type": "step", "before": 0.0, "after": 1.0}}}, "input.torque.at: expected a number (required for type step), got None"),
-        ({"input": {"torque": {"type": "constant", "value": "high"}}}, "input.torque.value: expected a finite number, got 'high'"),
+        ({"input": {"torque": {"type": "constant", "value": "high"}}}, "input.torque.value: expected a finite number (YAML 1.2 float syntax, e.g. 1.0e-3), got 'high'"),
         ({"input": {"torque": {"type": "square", "amplitude": 0.004, "frequency": 0.0}}}, "input.torque.frequency: expected a number > 0 (Hz), got 0.0"),
         ({"input": {"torque": {"type": "sine", "amplitude": 0.004, "frequency": -5.0}}}, "input.torque.frequency: expected a number > 0 (Hz), got -5.0"),
         # joint limits
@@ -210,8 +211,8 @@ def test_load_scene_refuses_invalid_yaml(tmp_path, text):
     with pytest.raises(ConfigError) as info:
         load_scene(path)
     msg = str(info.value)
-    assert msg.startswith(f"scene: expected valid YAML, got '{path}: ")
-    assert "line" in msg  # the YAML error's position is kept
+    assert re.match(rf"^scene: expected valid YAML, got [\"']{re.escape(str(path))}: line \d+, column \d+: ", msg)
+    assert "\n" not in msg
 
 
 def test_empty_file_is_the_default_scene(tmp_path):
@@ -231,3 +232,91 @@ def test_refusals_are_value_errors_too():
     """ConfigError subclasses ValueError, so generic callers can catch it."""
     with pytest.raises(ValueError):
         scene_from_dict({"duration": -1})
+
+
+# -- issue 8: names, bounds, resources, defaults -------------------------------------------
+@pytest.mark.parametrize("name", ["../X", "/tmp/X", ".hidden", "a/b", "", "x" * 65, "tab\there", "..", "naïve"])
+def test_a_name_must_be_a_safe_file_name_component(name):
+    """The name becomes the log's file name: `../X` and `/tmp/X` wrote outside record_dir."""
+    msg = refusal({"name": name})
+    if len(name) > 64:
+        assert msg == "name: expected a string of at most 64 characters, got '65 characters'"
+    else:
+        assert msg == f"name: expected a file-name component of letters, digits, '_', '.' and '-', not starting with '.', got {name!r}"
+
+
+def test_names_that_are_not_strings_are_refused():
+    assert refusal({"name": ["x"]}) == "name: expected a string, got ['x']"
+    assert refusal({"description": {"a": 1}}) == "description: expected a string, got {'a': 1}"
+    assert scene_from_dict({"name": "finger-2_v1.0"}).name == "finger-2_v1.0"
+
+
+def test_default_name_from_a_file_stem_is_made_safe(tmp_path):
+    for stem, name in [("my scene (copy)", "my_scene__copy_"), (".hidden", "_hidden"), ("ok-1.2", "ok-1.2")]:
+        path = tmp_path / f"{stem}.yaml"
+        path.write_text("duration: 0.1\n")
+        assert load_scene(path).name == name
+
+
+def test_an_unhashable_method_names_the_key():
+    """`integrator: {method: [rk4]}` raised TypeError: unhashable type: 'list'."""
+    assert refusal({"integrator": {"method": ["rk4"]}}) == f"integrator.method: expected one of {sorted(METHODS) + ['auto']}, got ['rk4']"
+    assert refusal({"input": {"torque": {"type": ["ramp"]}}}).startswith("input.torque.type: expected one of")
+
+
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        # damping 1e300 used to end in the stability check's "… or dt ≤ nan s"
+        ({"model": {"damping": 1e300}}, "model.damping: expected a number ≤ 1000, got 1e+300"),
+        ({"model": {"spring_stiffness": 1e7}}, "model.spring_stiffness: expected a number ≤ 1e+06, got 10000000.0"),
+        ({"model": {"gravity": [0.0, -1e300]}}, "model.gravity[1]: expected a number with magnitude ≤ 10000, got -1e+300"),
+        ({"model": {"tip_force": [1e5, 0.0]}}, "model.tip_force[0]: expected a number with magnitude ≤ 10000, got 100000.0"),
+        ({"initial": {"theta1_dot": 1e300}}, "initial.theta1_dot: expected a number with magnitude ≤ 10000, got 1e+300"),
+        ({"input": {"torque": {"type": "constant", "value": 1e300}}}, "input.torque.value: expected a number with magnitude ≤ 1000, got 1e+300"),
+        ({"input": {"torque": {"type": "ramp", "offset": 0.0, "slope": -1e9}}}, "input.torque.slope: expected a number with magnitude ≤ 1e+06, got -1000000000.0"),
+        ({"duration": 10**400}, f"duration: expected a finite number, got {10**400!r}"),
+        ({"integrator": {"dt": 2.0}, "duration": 10.0}, "integrator.dt: expected a number ≤ 1, got 2.0"),
+    ],
+)
+def test_physically_absurd_values_are_refused_with_their_bound(data, message):
+    assert refusal(data) == message
+
+
+def test_a_run_beyond_the_step_ceiling_is_refused_with_its_step_count():
+    """`duration: 1e38` ran until the machine ran out of memory."""
+    assert refusal({"duration": 1e38}) == (
+        "duration: expected a run of at most 1e+12 steps (duration ≤ 1e+09 s at integrator.dt = 0.001 s), got '1e+38 s = 1e+41 steps'"
+    )
+    assert refusal({"integrator": {"dt": 1e-320}}).endswith("got '0.3 s = inf steps'")  # no OverflowError in ceil(inf)
+
+
+def test_a_square_wave_faster_than_the_step_is_refused():
+    """A 1e9 Hz square wave put 2e6 switches into each 1 ms step."""
+    square = {"type": "square", "amplitude": 0.004, "frequency": 1e9}
+    assert refusal({"input": {"torque": square}}) == (
+        "input.torque.frequency: expected at most 500 Hz at integrator.dt = 0.001 s (a step of at most half a period: "
+        "a faster square wave changes direction more than once per step, which the step cannot resolve), got 1000000000.0"
+    )
+    # the limit is one switch per step; it moves with dt (e.g. the node's physics_rate_hz)
+    scene = scene_from_dict({"input": {"torque": {**square, "frequency": 500.0}}})  # at the limit
+    slower = scene_from_dict({"input": {"torque": {**square, "frequency": 400.0}}})
+    assert max(len(slower.torque.breakpoints(k * 0.001, (k + 1) * 0.001)) for k in range(300)) == 1
+    with pytest.raises(ConfigError, match=r"^input\.torque\.frequency: expected at most 250 Hz at integrator\.dt = 0\.002 s"):
+        scene.with_overrides(dt=0.002)
+    sine = {"type": "sine", "amplitude": 0.004, "frequency": 600.0}
+    assert refusal({"input": {"torque": sine}}).startswith("input.torque.frequency: expected at most 500 Hz")
+
+
+@pytest.mark.parametrize(("duration", "dt", "steps"), [(0.3, 0.001, 300), (0.3, 0.0007, 429), (1.0, 0.1, 10), (2.0, 0.001, 2000), (0.1, 0.03, 4)])
+def test_step_count_covers_the_duration(duration, dt, steps):
+    scene = scene_from_dict({"duration": duration, "integrator": {"dt": dt}})
+    assert scene.step_count == steps
+    # the smallest whole number of steps reaching the duration, up to BREAK_EPS of a step
+    assert (steps - 1) * dt < duration * (1 - 1e-12) and steps * dt >= duration * (1 - 1e-12)
+
+
+def test_the_default_method_is_auto():
+    """Issue 8.7: a scene that named no method stepped with rk4."""
+    assert Scene().method == "auto" and scene_from_dict({}).method == "auto"
+    assert scene_from_dict({"integrator": {"dt": 0.002}}).to_dict()["integrator"]["method"] == "auto"
