@@ -9,9 +9,9 @@ hot path of every integrator.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
-from finger_sim.forces import ForceElement
+from finger_sim.effects.base import ForceElement
 from finger_sim.kinematics import Vec3, constraint, distal_offset
 from finger_sim.model import FingerParams
 
@@ -124,6 +124,13 @@ class FingerSystem:
         """∂T/∂q at fixed q', J/rad: only M13 = c cos(θ1 − θ3 − α) depends on q."""
         w = self._c * math.sin(q[0] - q[2] - self.alpha) * v[0] * v[2]
         return (-w, 0.0, w)
+
+    def rhs(self, t: float, y: Sequence[float], torque: Callable[[float], float]) -> list[float]:
+        """The first-order form y' = f(t, y), y = (θ1, θ2, θ3, θ1', θ2', θ3') (rad, rad/s), under a
+        motor torque τ(t) (N·m): [q', q''] as six floats. The one right-hand side every
+        first-order solver (adaptive, radau, the bench's peers and reference) calls."""
+        q, v = (y[0], y[1], y[2]), (y[3], y[4], y[5])
+        return [*v, *self.accelerations(t, q, v, torque(t))[0]]
 
     # -- energy ------------------------------------------------------------------------
     def kinetic_energy(self, q: Vec3, v: Vec3) -> float:

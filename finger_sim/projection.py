@@ -17,6 +17,9 @@ from finger_sim.model import FingerParams
 POSITION_TOLERANCE = 1e-15
 #: Gauss-Newton converges quadratically; more iterations than this means q is far off.
 MAX_ITERATIONS = 8
+#: Without reaching POSITION_TOLERANCE, a residual up to this many times it (scaled by the
+#: angles' size) is still round-off of the last iteration; beyond it q was too far off.
+ACCEPTED_RESIDUAL_FACTOR = 1e3
 
 
 def project(p: FingerParams, q: Vec3, v: Vec3) -> tuple[Vec3, Vec3]:
@@ -45,7 +48,7 @@ def project(p: FingerParams, q: Vec3, v: Vec3) -> tuple[Vec3, Vec3]:
     else:
         if not (math.isfinite(t1) and math.isfinite(t2) and math.isfinite(t3)):
             raise SimulationDiverged(f"state became non-finite: q = {q}")
-        if math.hypot(f1, f2) > 1e3 * POSITION_TOLERANCE * (1.0 + max(abs(t1), abs(t2), abs(t3))):
+        if math.hypot(f1, f2) > ACCEPTED_RESIDUAL_FACTOR * POSITION_TOLERANCE * (1.0 + max(abs(t1), abs(t2), abs(t3))):
             raise SimulationDiverged(f"projection did not converge: |Φ| = {math.hypot(f1, f2):.3e} m at q = {q}")
     # velocity: v ← v − Φ_qᵀ (Φ_q Φ_qᵀ)⁻¹ Φ_q v, with Φ_q at the projected q
     a11 = g11 * g11 + g12 * g12 + g13 * g13

@@ -1,8 +1,8 @@
 """Linear stability of a method on a scene: the fastest mode against dt.
 
 The finger has one degree of freedom; along the null-space direction n of Φ_q
-(n = g₁ × g₂) its linearization is I s² + C s + K = 0 with I = nᵀMn, K = nᵀ(∂²V)n
-from the spring and C = nᵀ C n from the joint dampers. A method is stable at dt when
+(n = g₁ × g₂) its linearization is I s² + C s + K = 0 with I = nᵀMn and (K, C) summed
+over the force elements' `modal(q, n)` (the spring's stiffness, the dampers' damping). A method is stable at dt when
 both roots s·dt lie in its stability region; this is checked over the reachable range.
 """
 
@@ -10,12 +10,15 @@ from __future__ import annotations
 
 import cmath
 import math
+from typing import TYPE_CHECKING
 
 from finger_sim import kinematics
 from finger_sim.dynamics import FingerSystem
-from finger_sim.forces import JointDamping, PipSpring
 from finger_sim.integrators.base import Integrator
 from finger_sim.kinematics import Vec3
+
+if TYPE_CHECKING:
+    from finger_sim.scene import Scene
 
 #: Poses sampled across the reachable MCP range when looking for the stiffest one.
 SAMPLES = 33
@@ -29,16 +32,25 @@ def modal_roots(system: FingerSystem, q: Vec3) -> tuple[complex, complex]:
     n = (g1[1] * g2[2] - g1[2] * g2[1], g1[2] * g2[0] - g1[0] * g2[2], g1[0] * g2[1] - g1[1] * g2[0])
     m = system.mass_matrix(q)
     inertia = sum(n[i] * m[i][j] * n[j] for i in range(3) for j in range(3))
-    stiffness = sum(e.stiffness_along(n) for e in system.elements if isinstance(e, PipSpring))
-    damping = sum(e.damping_along(n) for e in system.elements if isinstance(e, JointDamping))
+    stiffness, damping = 0.0, 0.0
+    for element in system.elements:
+        k, c = element.modal(q, n)
+        stiffness += k
+        damping += c
     disc = cmath.sqrt(damping * damping - 4.0 * inertia * stiffness)
     return ((-damping + disc) / (2.0 * inertia), (-damping - disc) / (2.0 * inertia))
 
 
-def fastest_mode(system: FingerSystem, mcp_range: tuple[float, float]) -> complex:
-    """The modal root of largest magnitude over poses θ1 in mcp_range (rad), 1/s."""
+def mcp_range(scene: Scene) -> tuple[float, float]:
+    """The MCP interval the finger can reach, rad: its stops if it has them, else the assemblable
+    range (the two toggles). The one range the stability check and `auto` sample."""
+    return scene.mcp_limits or kinematics.assembly_range(scene.params)
+
+
+def fastest_mode(system: FingerSystem, theta1_range: tuple[float, float]) -> complex:
+    """The modal root of largest magnitude over poses θ1 in theta1_range (rad, e.g. `mcp_range`), 1/s."""
     lo, hi = kinematics.assembly_range(system.params)
-    lo, hi = max(mcp_range[0], lo + TOGGLE_MARGIN), min(mcp_range[1], hi - TOGGLE_MARGIN)
+    lo, hi = max(theta1_range[0], lo + TOGGLE_MARGIN), min(theta1_range[1], hi - TOGGLE_MARGIN)
     worst = 0j
     for i in range(SAMPLES):
         q = kinematics.assemble(system.params, lo + (hi - lo) * i / (SAMPLES - 1))

@@ -12,8 +12,7 @@ from finger_sim.errors import StabilityError
 from finger_sim.integrators import METHODS
 from finger_sim.scene import load_scene
 from finger_sim.simulate import Simulator, simulate
-from finger_sim.stability import fastest_mode, stable_at
-from finger_sim import kinematics
+from finger_sim.stability import fastest_mode, mcp_range, stable_at
 
 CONFIG = Path(__file__).resolve().parent.parent / "config"
 SHIPPED = sorted(p.stem for p in CONFIG.glob("*.yaml") if p.stem != "finger_node")
@@ -24,7 +23,7 @@ def scene(name: str, **overrides):
 
 
 def root_of(s) -> complex:
-    return fastest_mode(s.build_system(), s.mcp_limits or kinematics.assembly_range(s.params))
+    return fastest_mode(s.build_system(), mcp_range(s))
 
 
 def test_stiff_spring_at_1ms_gets_an_implicit_method():
@@ -101,6 +100,27 @@ def test_the_table_is_bench_data_auto_can_use():
             assert all(e >= 0.0 for _, e, _ in cands)
 
 
+def test_the_table_is_package_data_that_round_trips(tmp_path):
+    assert auto.RECOMMENDATION_FILE.parent.name == "data"
+    path = tmp_path / "recommendation.json"
+    auto.save_recommendation(auto.RECOMMENDATION, "test", path)
+    assert auto.load_recommendation(path) == auto.load_recommendation() == auto.RECOMMENDATION
+
+
+def test_pick_is_the_cheapest_stable_row_within_the_target():
+    rows = (("rk4", 7.5e-6, 15.0), ("rk6", 9e-9, 25.0), ("radau", 1e-8, 190.0))
+    slow, fast = -10j, -1e4 + 0j  # a slow oscillation; a mode no explicit method resolves at 1 ms
+    assert auto.pick(rows, slow, 1e-3)[0] == "rk6"
+    assert "cheaper rk4 missed it" in auto.pick(rows, slow, 1e-3)[1]
+    assert auto.pick(rows, fast, 1e-3)[0] == "radau"  # the explicit ones are unstable there
+    assert auto.pick((("rk4", 1e-3, 15.0),), slow, 1e-3)[0] == "rk4"  # none within: the most accurate
+    assert auto.pick((("rk4", 1e-9, 15.0),), fast, 1e-3) == (auto.FALLBACK, f"no tabulated method is stable; unstable here: rk4: {auto.FALLBACK}, L-stable")
+
+
 def test_explicit_methods_stay_refused_where_auto_is_not_used():
-    with pytest.raises(StabilityError):
+    with pytest.raises(StabilityError) as info:
         Simulator(scene("stiff_spring", dt=1e-3).with_overrides(method="rk4"))
+    err = info.value
+    assert (err.method, err.scene, err.dt) == ("rk4", "stiff_spring", 1e-3)
+    assert abs(err.mode) * err.dt > 2.8 and stable_at(METHODS["rk4"], err.mode, err.safe_dt)
+    assert f"or dt ≤ {err.safe_dt:.3g} s" in str(err)

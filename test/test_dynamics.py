@@ -22,7 +22,10 @@ from scipy.integrate import quad
 
 import reference as ref
 from finger_sim.dynamics import FingerSystem
-from finger_sim.forces import Gravity, JointDamping, PipSpring, TipForce
+from finger_sim.effects.damping import JointDamping
+from finger_sim.effects.gravity import Gravity
+from finger_sim.effects.spring import PipSpring
+from finger_sim.effects.tip_force import TipForce
 from finger_sim.kinematics import assemble, assembly_range, distal_offset
 from finger_sim.model import FingerParams
 from finger_sim.scene import load_scene

@@ -6,6 +6,7 @@ import math
 
 from scipy.integrate import solve_ivp
 
+from finger_sim.dynamics import FingerSystem
 from finger_sim.errors import SimulationDiverged
 from finger_sim.integrators.base import Integrator, TorqueFn
 from finger_sim.kinematics import Vec3
@@ -30,27 +31,23 @@ class AdaptiveReference(Integrator):
     order = 8
     keeps_constraints = True
 
-    def __init__(self, system, *, rtol: float = REFERENCE_RTOL, atol: float = REFERENCE_ATOL, method: str = "DOP853") -> None:  # type: ignore[no-untyped-def]
+    def __init__(self, system: FingerSystem, *, rtol: float = REFERENCE_RTOL, atol: float = REFERENCE_ATOL,
+                 method: str = "DOP853") -> None:
         super().__init__(system)
         self.rtol, self.atol, self.method = rtol, atol, method
         self._h: float | None = None
 
     def step(self, t: float, q: Vec3, v: Vec3, dt: float, torque: TorqueFn) -> tuple[Vec3, Vec3]:
-        acc = self.system.accelerations
-
-        def rhs(s: float, y: list[float]) -> list[float]:
-            qs, vs = (y[0], y[1], y[2]), (y[3], y[4], y[5])
-            return [*vs, *acc(s, qs, vs, torque(s))[0]]
-
+        rhs = self.system.rhs
         first = min(self._h, dt) if self._h else None
-        sol = solve_ivp(rhs, (t, t + dt), [*q, *v], method=self.method, rtol=self.rtol, atol=self.atol, first_step=first)
+        sol = solve_ivp(lambda s, y: rhs(s, y, torque), (t, t + dt), [*q, *v], method=self.method, rtol=self.rtol, atol=self.atol, first_step=first)
         if not sol.success:
-            raise SimulationDiverged(f"adaptive: {sol.message} at t = {t:.6f} s")
+            raise SimulationDiverged(sol.message, method=self.name, t=t)
         if sol.t.size >= 2:
             self._h = float(sol.t[-1] - sol.t[-2])
         t1, t2, t3, w1, w2, w3 = sol.y[:, -1].tolist()
         if not all(math.isfinite(c) for c in (t1, t2, t3, w1, w2, w3)):
-            raise SimulationDiverged(f"adaptive: non-finite state at t = {t + dt:.6f} s")
+            raise SimulationDiverged("non-finite state", method=self.name, t=t + dt)
         return project(self.system.params, (t1, t2, t3), (w1, w2, w3))
 
     @classmethod

@@ -46,7 +46,3 @@ class Integrator(ABC):
     @abstractmethod
     def is_stable(cls, z: complex) -> bool:
         """Whether the method is stable on y' = λy for z = λ·dt (linear stability region)."""
-
-    def describe(self) -> str:
-        """The first line of the method's docstring."""
-        return (type(self).__doc__ or self.name).strip().splitlines()[0]

@@ -5,6 +5,7 @@ from __future__ import annotations
 import cmath
 from typing import ClassVar
 
+from finger_sim.dynamics import FingerSystem
 from finger_sim.integrators.base import STABILITY_SLACK, Integrator, TorqueFn
 from finger_sim.kinematics import Vec3
 from finger_sim.projection import project
@@ -52,7 +53,7 @@ class ExplicitRungeKutta(Integrator):
     B: ClassVar[tuple[float, ...]]
     C: ClassVar[tuple[float, ...]]
 
-    def __init__(self, system) -> None:  # type: ignore[no-untyped-def]
+    def __init__(self, system: FingerSystem) -> None:
         super().__init__(system)
         # keep only the non-zero tableau entries: the step loop then skips nothing
         self._stages = tuple(

@@ -11,10 +11,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.linalg import lu_factor, lu_solve
 
 from finger_sim.errors import SimulationDiverged
 from finger_sim.integrators.base import Integrator, TorqueFn
+from finger_sim.integrators.newton import factor, forward_jacobian, simplified_newton
 from finger_sim.kinematics import Vec3
 from finger_sim.projection import project
 
@@ -33,7 +33,8 @@ NEWTON_TOLERANCE = 1e-12
 MAX_NEWTON_ITERATIONS = 10
 #: A step whose Newton iteration fails is retried as two half steps, at most this deep.
 MAX_HALVINGS = 6
-FD_STEP = 1.5e-8
+#: Size of (θ, θ') below which the Jacobian's difference steps and Newton's scale stop shrinking (rad, rad/s).
+UNIT_SCALE = (1.0,) * 6
 
 
 class RadauIIA(Integrator):
@@ -52,49 +53,35 @@ class RadauIIA(Integrator):
         return self._step(t, q, v, dt, torque, 0)
 
     def _step(self, t: float, q: Vec3, v: Vec3, dt: float, torque: TorqueFn, depth: int) -> tuple[Vec3, Vec3]:
-        y = np.array(q + v)
+        y = [*q, *v]
         result = self._solve_stages(t, y, dt, torque)
         if result is None:
             if depth >= MAX_HALVINGS:
-                raise SimulationDiverged(f"radau: Newton did not converge at t = {t:.6f} s even at dt = {dt:.3g} s")
+                raise SimulationDiverged(f"Newton did not converge even at dt = {dt:.3g} s", method=self.name, t=t)
             half = 0.5 * dt
             qm, vm = self._step(t, q, v, half, torque, depth + 1)
             return self._step(t + half, qm, vm, half, torque, depth + 1)
-        t1, t2, t3, w1, w2, w3 = (y + result).tolist()
+        t1, t2, t3, w1, w2, w3 = (a + b for a, b in zip(y, result))
         return project(self.system.params, (t1, t2, t3), (w1, w2, w3))
 
-    def _rhs(self, t: float, y: np.ndarray, torque: TorqueFn) -> np.ndarray:
-        t1, t2, t3, w1, w2, w3 = y.tolist()
-        q, v = (t1, t2, t3), (w1, w2, w3)
-        a, _ = self.system.accelerations(t, q, v, torque(t))
-        return np.array(v + a)
-
-    def _solve_stages(self, t: float, y: np.ndarray, dt: float, torque: TorqueFn) -> np.ndarray | None:
+    def _solve_stages(self, t: float, y: list[float], dt: float, torque: TorqueFn) -> list[float] | None:
         """Last stage increment Z₃ = y₁ − y₀ (stiffly accurate), or None when Newton fails."""
-        f0 = self._rhs(t, y, torque)
-        jac = np.empty((6, 6))
-        for j in range(6):
-            dyj = FD_STEP * max(abs(y[j]), 1.0)
-            yp = y.copy()
-            yp[j] += dyj
-            jac[:, j] = (self._rhs(t, yp, torque) - f0) / dyj
-        lu = lu_factor(np.eye(18) - dt * np.kron(A, jac))
-        z = np.outer(C * dt, f0)  # explicit guess: Z_i ≈ c_i h f(y₀)
-        scale = np.maximum(np.abs(np.concatenate([y[:3], y[3:]])), 1.0)
+        rhs = self.system.rhs
+        f0 = np.array(rhs(t, y, torque))
+        jac = forward_jacobian(lambda yp: rhs(t, yp, torque), y, UNIT_SCALE, f0)
+        lu = factor(np.eye(18) - dt * np.kron(A, jac))
+        y0 = np.array(y)
         times = t + C * dt
-        previous = math.inf
-        for _ in range(MAX_NEWTON_ITERATIONS):
-            f = np.array([self._rhs(ts, y + zi, torque) for ts, zi in zip(times, z)])
-            g = z - dt * (A @ f)
-            dz = lu_solve(lu, -g.ravel()).reshape(3, 6)
-            z = z + dz
-            size = float(np.max(np.abs(dz) / scale))
-            if not math.isfinite(size) or size > previous:  # diverging: let the caller halve dt
-                return None
-            if size < NEWTON_TOLERANCE:
-                return z[2]
-            previous = size
-        return None
+
+        def residual(z: np.ndarray) -> np.ndarray:
+            stages = z.reshape(3, 6)
+            f = np.array([rhs(ts, (y0 + zi).tolist(), torque) for ts, zi in zip(times, stages)])
+            return (stages - dt * (A @ f)).ravel()
+
+        guess = np.outer(C * dt, f0).ravel()  # explicit guess: Z_i ≈ c_i h f(y₀)
+        scale = np.tile(np.maximum(np.abs(y0), 1.0), 3)
+        z = simplified_newton(residual, guess, lu, scale, NEWTON_TOLERANCE, MAX_NEWTON_ITERATIONS, stop_when_growing=True)
+        return None if z is None else z[12:].tolist()
 
     @classmethod
     def is_stable(cls, z: complex) -> bool:

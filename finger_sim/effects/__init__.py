@@ -1,0 +1,20 @@
+"""Force elements, one module per effect, registered by their scene key (see `base`).
+
+Importing this package registers every effect. The five below come first, in this order,
+because the order the elements are summed in fixes the last bits of every run (old logs
+re-simulate bit for bit); any other module in this folder registers after them, in name
+order, so a new effect needs only its module and its schema entry.
+"""
+
+import importlib
+import pkgutil
+
+from finger_sim.effects.base import EFFECTS, Effect, ForceElement, Smooth, build_elements, effect
+
+#: The original effects, in their summation order.
+_FIRST = ("spring", "damping", "gravity", "tip_force", "stops")
+
+for _name in (*_FIRST, *sorted(m.name for m in pkgutil.iter_modules(__path__) if m.name not in (*_FIRST, "base"))):
+    importlib.import_module(f"{__name__}.{_name}")
+
+__all__ = ["EFFECTS", "Effect", "ForceElement", "Smooth", "build_elements", "effect"]

@@ -1,0 +1,138 @@
+"""The protocol every force element implements, and the registry that builds them from a scene.
+
+Like Drake's `ForceElement` or MuJoCo's passive forces: the system adds the elements up
+without asking what class each one is. Every question the rest of the code has about an
+effect (is it affine in q'? smooth? how stiff along the linkage? what energy does it store?
+what does it report?) is a member of `ForceElement`. An element exists only when the scene
+turns its effect on, so an absent effect costs nothing per step.
+
+Adding an effect takes its module (a class implementing `ForceElement` and a builder
+decorated with `@effect("scene_key", ...)`) and its schema entry (the keys it reads).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol
+
+if TYPE_CHECKING:
+    from finger_sim.scene import Scene
+
+Vec3 = tuple[float, float, float]
+
+
+class ForceElement(Protocol):
+    """One effect acting on the finger: generalized forces on q = (θ1, θ2, θ3), N·m."""
+
+    #: Q(t, q, q') = Q₀(t, q) + D(q) q': RATTLE's second half is then a linear solve.
+    affine_in_velocity: ClassVar[bool]
+    #: Q is smooth in t and q over the whole run. False when it has events (a stop, a
+    #: contact onset) that a high-order step must not straddle: see `gaps`.
+    smooth: ClassVar[bool]
+
+    def force(self, t: float, q: Vec3, v: Vec3) -> Vec3:
+        """Generalized force Q(t, q, q'), N·m (rad, rad/s in)."""
+        ...
+
+    def potential(self, q: Vec3) -> float:
+        """Potential energy stored by the element, J; 0 for a non-conservative one."""
+        ...
+
+    def modal(self, q: Vec3, n: Vec3) -> tuple[float, float]:
+        """(nᵀKn, nᵀCn) at q along a direction n of q: stiffness N·m and damping N·m·s
+        that the element adds to the linkage's one mode (the stability check)."""
+        ...
+
+    def gaps(self, q: Vec3) -> tuple[float, ...]:
+        """Event functions of q: an event (stop crossing, contact onset or release) lies
+        where one changes sign; open ≥ 0, closed < 0. Always the same number, in the same
+        order (the Simulator indexes them). () for a smooth element."""
+        ...
+
+    def outputs(self, t: float, q: Vec3, v: Vec3) -> Mapping[str, float]:
+        """Quantities the element reports (e.g. grip_force, N); {} for none."""
+        ...
+
+    def impact(self, index: int) -> float | None:
+        """What happens when gap `index` closes: the restitution coefficient e ∈ [0, 1] of an
+        impact (a stop: q' jumps to −e q', and the finger may come to rest on it), or None when
+        the crossing only makes Q change non-smoothly (a kink: contact onset or release).
+
+        The Simulator locates every crossing inside a step and ends the step there; only an
+        impact changes the velocity.
+        """
+        ...
+
+    def gap_gradient(self, index: int, q: Vec3) -> Vec3:
+        """∂gap/∂q of gap `index` at q (gap units per rad). Asked only for impact gaps: the finger
+        resting on a closed gap stays while its free acceleration a pushes into it (∇gap·a < 0)."""
+        ...
+
+    # Optional: the compiled form (finger_sim.kernel). An element without these two members
+    # makes the Simulator step its scene in Python.
+    #: which compiled force law (a code of finger_sim.kernel.layout) computes `force`
+    kernel_code: ClassVar[int]
+
+    def kernel_params(self) -> tuple[float, ...]:
+        """The numbers the compiled law `kernel_code` reads (pure data, SI), in its order."""
+        ...
+
+
+#: Builds the element of one effect from a resolved scene, or None when the scene leaves it off.
+Builder = Callable[["Scene"], "ForceElement | None"]
+
+
+@dataclass(frozen=True)
+class Effect:
+    """A registered effect: its scene key (under `model:`) and its builder."""
+
+    key: str
+    build: Builder
+    description: str
+
+
+#: scene key → effect, in registration order (the order elements are summed in).
+EFFECTS: dict[str, Effect] = {}
+
+
+def effect(key: str, description: str) -> Callable[[Builder], Builder]:
+    """Register the builder of the effect switched on by `model.<key>` in a scene."""
+
+    def register(build: Builder) -> Builder:
+        if key in EFFECTS:
+            raise ValueError(f"effect '{key}' registered twice")
+        EFFECTS[key] = Effect(key, build, description)
+        return build
+
+    return register
+
+
+def build_elements(scene: "Scene") -> list[ForceElement]:
+    """The elements of every effect the scene turns on, in registration order."""
+    return [e for e in (eff.build(scene) for eff in EFFECTS.values()) if e is not None]
+
+
+NO_OUTPUTS: Mapping[str, Any] = {}
+
+
+class Smooth:
+    """Defaults of the event members for an element with no events (`smooth = True`).
+
+    An element class may inherit these instead of writing the three trivial methods;
+    `force`, `potential`, `modal` and the class constants stay its own.
+    """
+
+    smooth: ClassVar[bool] = True
+
+    def gaps(self, q: Vec3) -> tuple[float, ...]:
+        return ()
+
+    def impact(self, index: int) -> float | None:
+        raise IndexError(f"{type(self).__name__} has no gaps, got gap index {index}")
+
+    def gap_gradient(self, index: int, q: Vec3) -> Vec3:
+        raise IndexError(f"{type(self).__name__} has no gaps, got gap index {index}")
+
+    def outputs(self, t: float, q: Vec3, v: Vec3) -> Mapping[str, float]:
+        return NO_OUTPUTS

@@ -1,0 +1,42 @@
+"""Viscous joint damping (scene key `damping`, N·m·s/rad at each joint; 0 removes it). Spec §3."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, ClassVar
+
+from finger_sim.effects.base import Smooth, Vec3, effect
+from finger_sim.kernel.layout import DAMPING
+
+if TYPE_CHECKING:
+    from finger_sim.scene import Scene
+
+
+@dataclass(frozen=True)
+class JointDamping(Smooth):
+    """Viscous damping at the MCP, coupler and PIP joints: R = ½ c (θ1'² + θ2'² + β'²)."""
+
+    coefficient: float  # N·m·s/rad
+
+    affine_in_velocity: ClassVar[bool] = True
+    kernel_code: ClassVar[int] = DAMPING
+
+    def kernel_params(self) -> tuple[float, ...]:
+        return (self.coefficient,)
+
+    def force(self, t: float, q: Vec3, v: Vec3) -> Vec3:
+        c = self.coefficient
+        beta_dot = v[2] - v[0]
+        return (-c * v[0] + c * beta_dot, -c * v[1], -c * beta_dot)
+
+    def potential(self, q: Vec3) -> float:
+        return 0.0
+
+    def modal(self, q: Vec3, n: Vec3) -> tuple[float, float]:
+        """(0, c (n1² + n2² + (n3 − n1)²)): the damping along n, N·m·s; no stiffness."""
+        return (0.0, self.coefficient * (n[0] ** 2 + n[1] ** 2 + (n[2] - n[0]) ** 2))
+
+
+@effect("damping", "viscous damping at each joint, N·m·s/rad")
+def build(scene: Scene) -> JointDamping | None:
+    return JointDamping(scene.damping) if scene.damping else None

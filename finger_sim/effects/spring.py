@@ -1,0 +1,46 @@
+"""The PIP spring (scene key `spring_stiffness`, N·m/rad; 0 removes it). Spec §3."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, ClassVar
+
+from finger_sim.effects.base import Smooth, Vec3, effect
+from finger_sim.kernel.layout import SPRING
+from finger_sim.kinematics import distal_offset
+
+if TYPE_CHECKING:
+    from finger_sim.scene import Scene
+
+
+@dataclass(frozen=True)
+class PipSpring(Smooth):
+    """Torsional PIP spring, V = ½ k β², β = θ3 + α − θ1; Q = (kβ, 0, −kβ) (spec §3, energy-consistent sign)."""
+
+    stiffness: float  # N·m/rad
+    alpha: float  # rad, distal offset
+
+    affine_in_velocity: ClassVar[bool] = True
+    kernel_code: ClassVar[int] = SPRING
+
+    def kernel_params(self) -> tuple[float, ...]:
+        return (self.stiffness, self.alpha)
+
+    def force(self, t: float, q: Vec3, v: Vec3) -> Vec3:
+        kb = self.stiffness * (q[2] + self.alpha - q[0])
+        return (kb, 0.0, -kb)
+
+    def potential(self, q: Vec3) -> float:
+        beta = q[2] + self.alpha - q[0]
+        return 0.5 * self.stiffness * beta * beta
+
+    def modal(self, q: Vec3, n: Vec3) -> tuple[float, float]:
+        """(k (n3 − n1)², 0): the spring's stiffness along n, N·m; no damping."""
+        return (self.stiffness * (n[2] - n[0]) ** 2, 0.0)
+
+
+@effect("spring_stiffness", "torsional PIP spring, N·m/rad (spec §3)")
+def build(scene: Scene) -> PipSpring | None:
+    if not scene.spring_stiffness:
+        return None
+    return PipSpring(scene.spring_stiffness, distal_offset(scene.params))

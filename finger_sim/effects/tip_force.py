@@ -1,0 +1,59 @@
+"""A constant force at the fingertip (scene key `tip_force`, (FX, FY) N; zero removes it)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, ClassVar
+
+from finger_sim.effects.base import Smooth, Vec3, effect
+from finger_sim.kernel.layout import TIP_FORCE
+from finger_sim.kinematics import distal_offset
+from finger_sim.model import FingerParams
+
+if TYPE_CHECKING:
+    from finger_sim.scene import Scene
+
+
+@dataclass(frozen=True)
+class TipForce(Smooth):
+    """A constant force F = (FX, FY), N, at the fingertip: Q = J_tipᵀ F, V = −F·tip."""
+
+    fx: float
+    fy: float
+    params: FingerParams
+    alpha: float
+
+    affine_in_velocity: ClassVar[bool] = True
+    kernel_code: ClassVar[int] = TIP_FORCE
+
+    def kernel_params(self) -> tuple[float, ...]:
+        return (self.fx, self.fy, self.params.r1, self.params.L3, self.alpha)
+
+    def force(self, t: float, q: Vec3, v: Vec3) -> Vec3:
+        p = self.params
+        psi = q[2] + self.alpha
+        return (
+            p.r1 * (-math.sin(q[0]) * self.fx + math.cos(q[0]) * self.fy),
+            0.0,
+            p.L3 * (-math.sin(psi) * self.fx + math.cos(psi) * self.fy),
+        )
+
+    def potential(self, q: Vec3) -> float:
+        p = self.params
+        psi = q[2] + self.alpha
+        x = p.r1 * math.cos(q[0]) + p.L3 * math.cos(psi)
+        y = p.r1 * math.sin(q[0]) + p.L3 * math.sin(psi)
+        return -(self.fx * x + self.fy * y)
+
+    def modal(self, q: Vec3, n: Vec3) -> tuple[float, float]:
+        """(0, 0): a constant tip force's geometric stiffness (|F| r1 ≲ 1e-2 N·m for a few N) is
+        left out of the stability check, as gravity's is."""
+        return (0.0, 0.0)
+
+
+@effect("tip_force", "constant force at the fingertip, (FX, FY) N")
+def build(scene: Scene) -> TipForce | None:
+    if not any(scene.tip_force):
+        return None
+    return TipForce(*scene.tip_force, scene.params, distal_offset(scene.params))
