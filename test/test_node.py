@@ -396,3 +396,95 @@ def test_a_bad_parameter_stops_the_start(launcher, tmp_path, params, names):
     assert "cannot start" in out and "Traceback" not in out, out
     for name in names:
         assert name in out, out
+
+
+# -- the log's place, its failures, command QoS, a second clock (issue 8) --------------------
+def last_status(diagnostics: list, condition) -> DiagnosticStatus | None:
+    for d in reversed(diagnostics):
+        if condition(d.status[0]):
+            return d.status[0]
+    return None
+
+
+@pytest.mark.parametrize("name", ["../X", "/tmp/X", "paper.run-1"])
+def test_scene_name_cannot_put_the_log_outside_record_dir(launcher, tmp_path, name):
+    """A scene named "../X" or "/tmp/X" is refused (or would log to a safe name inside
+    record_dir, see test_runtime); a record_dir through a missing folder and '..' creates only
+    the folder it normalizes to, and the log lands there."""
+    data = load_scene(PAPER).to_dict()
+    data["name"] = name
+    scene = tmp_path / "hostile.yaml"
+    scene.write_text(__import__("yaml").safe_dump(data))
+    before = set(Path("/tmp").glob("X*"))
+    node = launcher.node(NODE, dict(scene=str(scene), torque_source="scene", realtime_factor=0.0,
+                                    record_dir="missing/../bags"))
+    status = node.wait(30.0)
+    assert "Traceback" not in node.output()
+    if name == "paper.run-1":
+        assert status == 0, node.output()
+        logs = list((tmp_path / "bags").iterdir())
+        assert len(logs) == 1 and re.fullmatch(r"paper\.run-1_\d{8}T\d{6}\.\d{3}Z\.mcap", logs[0].name), logs
+        assert logs[0].read_bytes()[:8] == b"\x89MCAP0\r\n"
+    else:
+        assert status == 2 and "cannot start" in node.output() and repr(name) in node.output(), node.output()
+        assert not (tmp_path / "bags").exists()
+    assert not (tmp_path / "missing").exists() and not (tmp_path.parent / "X").exists()
+    assert set(Path("/tmp").glob("X*")) == before
+
+
+def test_an_unwritable_record_dir_turns_diagnostics_to_error(launcher, ros_client, tmp_path):
+    """record_dir under a regular file: the node simulates on, /diagnostics says ERROR with what was lost."""
+    (tmp_path / "afile").write_text("not a folder")
+    node = launcher.node(NODE, dict(scene=str(PAPER), realtime_factor=0.0, start_paused=True, record_dir="afile/bags"))
+    diagnostics = ros_client.collect(DiagnosticArray, "/diagnostics")
+    states = ros_client.collect(JointState, "/joint_states")
+    start_when_heard(ros_client, "/finger_node", states)
+    status = ros_client.wait_for(lambda: last_status(diagnostics, lambda s: int(values(s)["log_messages_dropped"]) > 3),
+                                 "diagnostics counting lost log messages")
+    v = values(status)
+    assert status.level == DiagnosticStatus.ERROR
+    assert status.message.startswith("paused; log failed: cannot create a log in record_dir 'afile/bags': ")
+    assert status.message.endswith(f"; {v['log_messages_dropped']} messages lost")
+    assert v["log_messages_written"] == "0" and "Not a directory" in v["log_error"]
+    assert node.running() and "Traceback" not in node.output()
+    assert [p for p in tmp_path.iterdir() if p.is_dir()] == []  # no folder made, no file left
+
+
+def test_reliable_command_qos_receives_a_burst_in_full(launcher, ros_client):
+    """command_qos reliable, depth 1000: every command of a burst arrives (commands_received == sent)."""
+    burst = 500
+    launcher.node(NODE, dict(scene=str(PAPER), realtime_factor=0.0, start_paused=True, command_qos="reliable",
+                             command_depth=1000, record=False))
+    diagnostics = ros_client.collect(DiagnosticArray, "/diagnostics")
+    reliable = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+    torque_pub = ros_client.publisher(Float64, "/motor_torque", reliable)
+    ros_client.wait_for(lambda: torque_pub.get_subscription_count(), "the command subscription")
+
+    def received() -> int:
+        return max((int(values(d.status[0])["commands_received"]) for d in diagnostics), default=-1)
+
+    torque_pub.publish(Float64(data=0.0))  # matched both ways once the node counts it
+    ros_client.wait_for(lambda: received() == 1, "the first command counted")
+    for i in range(burst):
+        torque_pub.publish(Float64(data=1e-6 * i))
+    ros_client.wait_for(lambda: received() >= 1 + burst, f"{burst} more commands counted")
+    status = last_status(diagnostics, lambda s: True)
+    assert (received(), int(values(status)["commands_accepted"])) == (1 + burst, 1 + burst)
+
+
+def test_a_second_clock_publisher_is_warned_about(launcher, ros_client):
+    """Two fingers in namespaces, both with publish_clock true: each warns, and says WARN in /diagnostics."""
+    common = dict(scene=str(PAPER), realtime_factor=0.0, start_paused=True, record=False)
+    index = launcher.node(NODE, dict(common, frame_prefix="index/"), name="index", ros_args=["-r", "__ns:=/index"])
+    middle = launcher.node(NODE, dict(common, frame_prefix="middle/"), name="middle", ros_args=["-r", "__ns:=/middle"])
+    diagnostics = ros_client.collect(DiagnosticArray, "/diagnostics")
+
+    def warned(name: str):
+        return last_status(diagnostics, lambda s: s.name.startswith(f"/{name}/finger_node")
+                           and values(s)["clock_publishers"] == "2")
+
+    for name, proc in (("index", index), ("middle", middle)):
+        status = ros_client.wait_for(lambda: warned(name), f"{name} seeing two /clock publishers")
+        assert status.level == DiagnosticStatus.WARN and "2 publishers on /clock" in status.message
+        ros_client.wait_for(lambda: "2 publishers on /clock" in proc.output(), f"{name}'s warning")
+        assert proc.output().count("publishers on /clock") == 1  # once

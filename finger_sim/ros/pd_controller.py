@@ -26,14 +26,15 @@ import math
 import sys
 
 import rclpy
-from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
-from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
+
+from finger_sim.ros import parameters
+from finger_sim.runtime.parameters import Param, ParameterError
 
 NODE_NAME = "finger_pd_controller"
 #: Defaults: critically damped-ish on the paper's finger (no overshoot, |θ − θ_eq| < 5 mrad
@@ -47,8 +48,14 @@ COMMAND_QOS = QoSProfile(depth=10)
 EXIT_CONFIG = 2
 
 
-class ParameterError(ValueError):
-    """A parameter has the wrong type or is out of range."""
+#: The controller's parameters (read once at start).
+PARAMETERS = (
+    Param("kp", KP, "proportional gain, N·m/rad", (0.0, 100.0)),
+    Param("kd", KD, "derivative gain on the measured rate, N·m·s/rad", (0.0, 100.0)),
+    Param("setpoint", 0.0, "initial MCP setpoint, rad (then the mcp_setpoint topic)", (-math.pi, math.pi)),
+    Param("max_torque", MAX_TORQUE, "output saturation, N·m", (0.0, 100.0)),
+    Param("joint", "mcp_joint", "the controlled joint's name in joint_states (with the node's frame_prefix)"),
+)
 
 
 def pd_torque(setpoint: float, position: float, velocity: float, kp: float, kd: float, limit: float) -> float:
@@ -60,11 +67,9 @@ def pd_torque(setpoint: float, position: float, velocity: float, kp: float, kd: 
 class PdController(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__(NODE_NAME, **kwargs)
-        self.kp = self._declare("kp", KP, "proportional gain, N·m/rad", (0.0, 100.0))
-        self.kd = self._declare("kd", KD, "derivative gain on the measured rate, N·m·s/rad", (0.0, 100.0))
-        self.setpoint = self._declare("setpoint", 0.0, "initial MCP setpoint, rad (then the mcp_setpoint topic)", (-math.pi, math.pi))
-        self.max_torque = self._declare("max_torque", MAX_TORQUE, "output saturation, N·m", (0.0, 100.0))
-        self.joint = self._declare("joint", "mcp_joint", "the controlled joint's name in joint_states (with the node's frame_prefix)")
+        values = parameters.declare(self, PARAMETERS)
+        self.kp, self.kd, self.setpoint = values["kp"], values["kd"], values["setpoint"]
+        self.max_torque, self.joint = values["max_torque"], values["joint"]
         self._index: int | None = None
         self._warned = False
         self._pub = self.create_publisher(Float64, "motor_torque", COMMAND_QOS)
@@ -72,15 +77,6 @@ class PdController(Node):
         self.create_subscription(Float64, "mcp_setpoint", self._on_setpoint, COMMAND_QOS)
         self.get_logger().info(f"PD on {self.joint}: kp {self.kp:g} N·m/rad, kd {self.kd:g} N·m·s/rad, "
                                f"|τ| ≤ {self.max_torque:g} N·m, setpoint {self.setpoint:g} rad")
-
-    def _declare(self, name: str, default, description: str, bounds: tuple[float, float] | None = None):
-        descriptor = ParameterDescriptor(description=description)
-        if bounds is not None:
-            descriptor.floating_point_range = [FloatingPointRange(from_value=bounds[0], to_value=bounds[1], step=0.0)]
-        try:
-            return self.declare_parameter(name, default, descriptor).value
-        except ParameterException as exc:
-            raise ParameterError(f"parameter '{name}': {str(exc).removesuffix(f': {name}')}") from None
 
     def _on_setpoint(self, msg: Float64) -> None:
         if math.isfinite(msg.data):

@@ -1,0 +1,157 @@
+"""Torque commands of a topic-driven run: hand-over, refusal, saturation, hold and timeout.
+
+A command received between two steps takes effect at the next step and is held; it is
+saturated to ±max_torque; after command_timeout s of sim time without a command the torque falls to
+0. Non-finite values and wrong lengths are refused (counted, and each refusal is an event);
+when the scene's scripted profile drives the finger (`accepting=False`) every command is
+refused. Each change of the applied torque (accepted, timeout) and each refusal is a
+run_log.CommandEvent, so re-applying the events reproduces the run bit for bit.
+
+Threads: `Inbox.put` is called by the executor thread, everything else by the stepping loop.
+"""
+
+from __future__ import annotations
+
+import collections
+import math
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+
+from finger_sim.run_log import CommandEvent
+from finger_sim.runtime.timeline import Timeline
+
+#: Slack of the float comparison on the step grid, in steps.
+STEP_EPS = 1e-9
+#: Refusal reasons (the `reason` of a 'refused' event).
+REFUSED_SCENE = "torque_source is 'scene'"
+REFUSED_NOT_FINITE = "not a finite number"
+
+
+def timeout_steps(command_timeout: float, dt: float) -> int | None:
+    """Steps of silence after which a held command times out: ceil(timeout/dt); None for 0 (never)."""
+    return math.ceil(command_timeout / dt - STEP_EPS) if command_timeout > 0 else None
+
+
+def same(a: float, b: float) -> bool:
+    """Bitwise-equal floats (0.0 and −0.0 differ)."""
+    return a == b and math.copysign(1.0, a) == math.copysign(1.0, b)
+
+
+class Inbox:
+    """Commands handed from the executor thread to the stepping loop; counts what arrived."""
+
+    def __init__(self) -> None:
+        self._queue: collections.deque[tuple[str, tuple[float, ...]]] = collections.deque()
+        self.received = 0
+
+    def put(self, source: str, values: Sequence[float]) -> None:
+        self.received += 1
+        self._queue.append((source, tuple(values)))
+
+    def __bool__(self) -> bool:
+        return bool(self._queue)
+
+    def drain(self) -> Iterator[tuple[str, tuple[float, ...]]]:
+        while self._queue:
+            yield self._queue.popleft()
+
+    def clear(self) -> None:
+        self._queue.clear()
+
+
+@dataclass(frozen=True)
+class _Pending:
+    torque: float  # N·m, after saturation
+    requested: float  # N·m, as received
+    source: str  # resolved topic name
+    saturated: bool
+
+
+@dataclass
+class CommandCounts:
+    accepted: int = 0
+    refused: int = 0
+    saturated: int = 0
+    timeouts: int = 0
+
+
+class TorqueCommands:
+    """The held motor torque of a run and the events that change it.
+
+    max_torque: saturation, N·m; command_timeout: sim s without a command before the torque
+    falls to 0 (0: hold forever); accepting: False when the scene's profile drives the finger.
+    Both limits may be changed between steps; they apply from the next command or step.
+    """
+
+    def __init__(self, timeline: Timeline, *, max_torque: float, command_timeout: float, accepting: bool) -> None:
+        self.timeline = timeline
+        self.max_torque = max_torque
+        self.command_timeout = command_timeout
+        self.accepting = accepting
+        self.counts = CommandCounts()
+        self.held = 0.0  # the command in force, N·m
+        self.command_step: int | None = None  # step of this episode at which the last command took effect
+        self._pending: _Pending | None = None
+
+    @property
+    def command_timeout(self) -> float:
+        return self._command_timeout
+
+    @command_timeout.setter
+    def command_timeout(self, seconds: float) -> None:
+        self._command_timeout = seconds
+        self.timeout_steps = timeout_steps(seconds, self.timeline.dt)
+
+    def take(self, source: str, values: Sequence[float], step: int) -> CommandEvent | None:
+        """Check one received command (between steps; `step` is the next step's index): None
+        if accepted (it takes effect at the next step), else the 'refused' event."""
+        if not self.accepting:
+            return self.refuse(source, values, REFUSED_SCENE, step)
+        if len(values) != 1:
+            return self.refuse(source, values, f"expected exactly 1 element, got {len(values)}", step)
+        value = float(values[0])
+        if not math.isfinite(value):
+            return self.refuse(source, values, REFUSED_NOT_FINITE, step)
+        limit = self.max_torque
+        torque = min(max(value, -limit), limit)
+        saturated = torque != value
+        self.counts.accepted += 1
+        self.counts.saturated += saturated
+        self._pending = _Pending(torque, value, source, saturated)
+        return None
+
+    def refuse(self, source: str, values: Sequence[float], reason: str, step: int) -> CommandEvent:
+        """Count and describe a refused command (also for refusals an adapter decides itself)."""
+        self.counts.refused += 1
+        requested = ", ".join(repr(float(v)) for v in values)
+        return self._event("refused", step, requested=requested, source=source, reason=reason)
+
+    def torque_for_step(self, n: int) -> tuple[float | None, CommandEvent | None]:
+        """The torque of step n (None: the scene's profile), N·m, and the event if it changed."""
+        if not self.accepting:
+            return None, None
+        cmd, self._pending = self._pending, None
+        event = None
+        if cmd is not None:
+            self.command_step = n
+            if not same(cmd.torque, self.held):
+                self.held = cmd.torque
+                event = self._event("accepted", n, requested=repr(cmd.requested), source=cmd.source,
+                                    saturated=cmd.saturated)
+        elif (self.timeout_steps is not None and self.command_step is not None
+              and n - self.command_step >= self.timeout_steps and not same(self.held, 0.0)):
+            self.held = 0.0
+            self.counts.timeouts += 1
+            event = self._event("timeout", n, reason=f"no command for {self.command_timeout:g} s of sim time")
+        return self.held, event
+
+    def reset(self, reason: str) -> CommandEvent:
+        """A new episode: no command pending or held; the 'reset' event at its step 0."""
+        self._pending, self.held, self.command_step = None, 0.0, None
+        return self._event("reset", 0, reason=reason)
+
+    def _event(self, event: str, step: int, *, requested: str = "", source: str = "", saturated: bool = False,
+               reason: str = "") -> CommandEvent:
+        t = self.timeline
+        return CommandEvent(event=event, step=step, episode=t.episode, stamp_ns=t.stamp(step), torque=float(self.held),
+                            requested=requested, source=source, saturated=saturated, reason=reason)

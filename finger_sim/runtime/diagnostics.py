@@ -1,0 +1,146 @@
+"""finger_node's /diagnostics status: the key/values and the level, from plain numbers.
+
+Level, most severe first:
+- ERROR: the run diverged, or the log failed (the recorder could not write: nothing more is
+  logged); the message says why and how many messages were lost.
+- WARN: the log dropped messages (it has gaps: stays WARN for the rest of the run), another
+  node publishes /clock too, or commands were refused or steps dropped in the last window.
+- OK otherwise. The message starts with the run state (running, paused, finished, diverged).
+Windows are the spans between two reports (about 1 s of wall time).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import IntEnum
+
+from finger_sim.runtime.commands import TorqueCommands
+from finger_sim.runtime.pacing import Lateness, Pacer
+
+
+class Level(IntEnum):
+    """diagnostic_msgs/DiagnosticStatus levels."""
+
+    OK = 0
+    WARN = 1
+    ERROR = 2
+
+
+@dataclass(frozen=True)
+class LogStatus:
+    """What the run's log did so far; path None: not recording."""
+
+    path: str | None
+    written: int = 0
+    dropped: int = 0
+    error: str | None = None  # the first failure (unwritable folder, full disk)
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """The node's state at one report (everything the status says)."""
+
+    state: str  # running, paused, finished, diverged
+    diverged: bool
+    scene: str
+    scene_file: str
+    method: str
+    dt: float  # s
+    dt_source: str
+    torque_source: str
+    clock_s: float  # s, as on /clock
+    time_s: float  # s, the scene's own time in this episode
+    step: int
+    episode: int
+    realtime_factor_target: float
+    steps_total: int
+    run_wall_s: float  # wall s spent running
+    max_residual_m: float  # max |Φ| since start
+    torque: float  # N·m, applied over the last step
+    commands_received: int
+    log: LogStatus
+    clock_publishers: int | None = None  # publishers of /clock seen, when this node publishes it
+
+
+class DiagnosticsWindow:
+    """Turns snapshots into (level, message, values), keeping the counts of the last report."""
+
+    def __init__(self, now: float) -> None:
+        self.wall = now  # wall s at the start of the current window
+        self._steps, self._refused, self._dropped_steps = 0, 0, 0
+
+    def restart(self, now: float) -> None:
+        """Start the first window at `now` (when stepping begins)."""
+        self.wall = now
+
+    def report(self, snap: Snapshot, commands: TorqueCommands, pacer: Pacer | None,
+               now: float) -> tuple[Level, str, dict[str, object]]:
+        """The status at wall time `now` (s); starts the next window (and the pacer's)."""
+        window = now - self.wall
+        counts = commands.counts
+        dropped_steps = pacer.dropped_steps if pacer is not None else 0
+        refused_new = counts.refused - self._refused
+        dropped_new = dropped_steps - self._dropped_steps
+        log = snap.log
+        lost = f"{log.dropped} messages lost"
+        level, problems = Level.OK, []
+        if snap.diverged:
+            level = Level.ERROR
+        if log.error is not None:
+            level = Level.ERROR
+            problems.append(f"log failed: {log.error}; {lost}")
+        elif log.dropped:
+            level = max(level, Level.WARN)
+            problems.append(f"log incomplete: {lost}")
+        if snap.clock_publishers is not None and snap.clock_publishers > 1:
+            level = max(level, Level.WARN)
+            problems.append(f"{snap.clock_publishers} publishers on /clock: sim time jumps; "
+                            "set publish_clock false on all fingers but one")
+        if refused_new or dropped_new:
+            level = max(level, Level.WARN)
+            problems.append(f"{refused_new} commands refused, {dropped_new} steps dropped in the last {window:.1f} s")
+        message = "; ".join([snap.state, *problems])
+        late_w = pacer.window if pacer is not None else Lateness()  # at realtime_factor 0: no wake-ups
+        late = pacer.lateness if pacer is not None else late_w
+        age: object = (snap.step - commands.command_step) * snap.dt if commands.command_step is not None else "none"
+        values: dict[str, object] = {
+            "scene": snap.scene,
+            "scene_file": snap.scene_file,
+            "method": snap.method,
+            "dt": snap.dt,
+            "dt_source": snap.dt_source,
+            "torque_source": snap.torque_source,
+            "clock": snap.clock_s,
+            "time": snap.time_s,
+            "step": snap.step,
+            "episode": snap.episode,
+            "realtime_factor_target": snap.realtime_factor_target,
+            "realtime_factor": (snap.steps_total - self._steps) * snap.dt / window if window > 0 else 0.0,  # this window
+            "realtime_factor_mean": snap.steps_total * snap.dt / snap.run_wall_s if snap.run_wall_s > 0 else 0.0,
+            "overruns": pacer.overruns if pacer is not None else 0,
+            "dropped_steps": dropped_steps,
+            "late_wakeup_p99_ms": late_w.percentile(99) * 1e3,
+            "late_wakeup_max_ms": late_w.max * 1e3,
+            "late_wakeup_p99_ms_total": late.percentile(99) * 1e3,
+            "late_wakeup_max_ms_total": late.max * 1e3,
+            "late_wakeups_total": late.n,
+            "max_constraint_residual_m": snap.max_residual_m,
+            "torque": float(snap.torque),
+            "command_age_s": age,  # sim s since the last command took effect
+            "command_step": commands.command_step if commands.command_step is not None else "none",
+            "commands_received": snap.commands_received,
+            "commands_accepted": counts.accepted,
+            "refused_commands": counts.refused,
+            "saturated_commands": counts.saturated,
+            "command_timeouts": counts.timeouts,
+            "log_file": log.path if log.path is not None else "off",
+            "log_messages_written": log.written,
+            "log_messages_dropped": log.dropped,
+            "log_error": log.error if log.error is not None else "none",
+            "clock_publishers": snap.clock_publishers if snap.clock_publishers is not None else "not publishing",
+        }
+        self.wall, self._steps = now, snap.steps_total
+        self._refused, self._dropped_steps = counts.refused, dropped_steps
+        if pacer is not None:
+            pacer.new_window()
+        return level, message, values
