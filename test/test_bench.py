@@ -1,27 +1,49 @@
 """`finger-sim bench --quick`: every method and peer has a row with finite numbers; the analysis is right.
 
-The bench runs once (module fixture, ~30 s); nothing here is timed. The MuJoCo rows are
-present when `mujoco` imports, and skipped with a note saying how to install it when not.
+The bench runs once (module fixture, ~30 s); nothing here is timed. The tests read the
+report's tables as data (`finger_sim.bench.tables`), not the Markdown they are written as.
+The MuJoCo rows are present when `mujoco` imports, and skipped with a note saying how to
+install it when not.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import math
-import re
+import os
+import time
 from pathlib import Path
 
 import pytest
 
+from finger_sim import auto
 from finger_sim.bench import analysis as an
-from finger_sim.bench import runners
+from finger_sim.bench import processes, runners
+from finger_sim.bench.markdown import render_scene
+from finger_sim.bench.plan import (
+    ALL_SCENES,
+    HARD_SCENES,
+    KINDS,
+    MUJOCO_INTEGRATORS,
+    MUJOCO_SETTINGS,
+    NUMPY_RHS_METHOD,
+    NUMPY_RHS_SCENE,
+    RATES,
+    SCIPY_METHODS,
+    WP_SCENES,
+    project_methods,
+)
 from finger_sim.bench.reference import build_reference
-from finger_sim.bench.report import MUJOCO_INTEGRATORS, MUJOCO_SETTINGS, SCIPY_METHODS, WP_SCENES, ALL_SCENES, project_methods, run_bench
-from finger_sim.bench.runners import Run
+from finger_sim.bench.report import measure, write_report
+from finger_sim.bench.runners import FAMILY_MUJOCO, FAMILY_PROJECT, FAMILY_SCIPY, Run
+from finger_sim.bench.tables import auto_pick, same_choices, shipped_pick
 from finger_sim.integrators import METHODS
 from finger_sim.scene import load_scene
 
 CONFIG = Path(__file__).resolve().parent.parent / "config"
-ROW = re.compile(r"^\| (finger_sim|scipy|MuJoCo) \| ([^|]+) \| (dt|rtol|timestep) (\S+) \| ([^|]+) \|(.*)$")
+#: Figures of every run that succeeded must be finite.
+FIGURES = ("error", "max_phi", "us_per_step", "cpu", "realtime_factor")
 
 try:
     import mujoco  # noqa: F401
@@ -33,62 +55,52 @@ except ImportError:
 
 @pytest.fixture(scope="module")
 def bench(tmp_path_factory):
+    """(out folder, the measurements, the report's tables) of one --quick run."""
     out = tmp_path_factory.mktemp("bench")
-    code = run_bench(quick=True, out=out, argv=["finger-sim", "bench", "--quick", "--out", str(out)])
-    assert code == 0
-    return out, (out / "performance.md").read_text()
+    measured = measure(quick=True, argv=["finger-sim", "bench", "--quick", "--out", str(out)])
+    tables = write_report(measured, out)
+    return out, measured, tables
 
 
-def scene_rows(text: str, scene: str) -> list[dict]:
-    """The rows of one scene's work-precision table."""
-    section = text.split(f"\n### {scene}\n", 1)[1].split("\n### ", 1)[0]
-    rows = []
-    for line in section.splitlines():
-        m = ROW.match(line)
-        if m:
-            cells = [c.strip() for c in m.group(6).split("|")]
-            rows.append(
-                {
-                    "family": m.group(1),
-                    "method": m.group(2).strip(),
-                    "knob": m.group(3),
-                    "value": float(m.group(4)),
-                    "status": m.group(5).strip(),
-                    "error": cells[0],
-                    "phi": cells[1],
-                    "drift": cells[2],
-                    "us": cells[3],
-                    "cpu": cells[4],
-                    "rtf": cells[5],
-                    "note": cells[6],
-                }
-            )
-    return rows
+def finite(run: Run) -> bool:
+    return all(math.isfinite(getattr(run, key)) for key in FIGURES)
 
 
-def test_report_has_the_command_machine_and_date(bench):
-    out, text = bench
-    assert f"- Command: `finger-sim bench --quick --out {out}`" in text
-    assert re.search(r"- Date: \d{4}-\d\d-\d\d \d\d:\d\d UTC", text)
-    assert "- CPU: " in text and "logical cores" in text and "Python 3." in text
+def test_report_and_figures_are_written_with_the_command(bench):
+    out, measured, tables = bench
+    assert measured.info.command == f"finger-sim bench --quick --out {out}" and measured.info.quick
+    text = (out / "performance.md").read_text()
+    assert f"- Command: `{measured.info.command}`" in text
     for name in ALL_SCENES:
         assert (out / f"wp_{name}.png").stat().st_size > 10_000
         assert f"![{name}](wp_{name}.png)" in text
+    assert not list(out.glob("*.json"))  # a quick run writes no recommendation data
+
+
+def test_every_run_is_in_its_scene_table_once_and_rendered_as_one_row(bench):
+    _, measured, tables = bench
+    assert set(tables.scenes) == set(ALL_SCENES)
+    assert sum(len(rows) for rows in tables.scenes.values()) == len(measured.runs)
+    for name, rows in tables.scenes.items():
+        families = [r.family for r in rows]
+        assert families == sorted(families, key=[FAMILY_PROJECT, FAMILY_SCIPY, FAMILY_MUJOCO].index)
+        section = render_scene(measured.scenes[name], measured.refs[name], f"wp_{name}.png", rows)
+        body = [line for line in section if line.startswith("| ")][1:]  # after the header
+        assert [line.split(" | ")[:2] for line in body] == [[f"| {r.family}", r.method] for r in rows]
 
 
 @pytest.mark.parametrize("scene", ALL_SCENES)
 def test_every_project_method_has_rows_with_finite_numbers(bench, scene):
-    rows = [r for r in scene_rows(bench[1], scene) if r["family"] == "finger_sim"]
-    assert {r["method"] for r in rows} == set(project_methods()) == set(METHODS)
+    rows = [r for r in bench[2].scenes[scene] if r.family == FAMILY_PROJECT]
+    assert {r.method for r in rows} == set(project_methods()) == set(METHODS)
     for r in rows:
-        assert r["status"] in ("ok", "refused", "diverged"), r
-        if r["status"] == "ok":
-            for key in ("error", "phi", "us", "cpu", "rtf"):
-                assert math.isfinite(float(r[key])), (key, r)
+        assert r.status in ("ok", "refused", "diverged"), r
+        if r.ok:
+            assert finite(r), r
         else:
-            assert r["note"], r  # a refusal or divergence says why
+            assert r.note, r  # a refusal or divergence says why
     # at 1 ms every method is either measured or refused by the stability check
-    at_1ms = {r["method"]: r["status"] for r in rows if r["value"] == 1e-3}
+    at_1ms = {r.method: r.status for r in rows if r.value == 1e-3}
     assert set(at_1ms) == set(METHODS)
     if scene == "stiff_spring":
         assert at_1ms["rk4"] == at_1ms["euler"] == "refused" and at_1ms["radau"] == "ok"
@@ -98,35 +110,35 @@ def test_every_project_method_has_rows_with_finite_numbers(bench, scene):
 
 @pytest.mark.parametrize("scene", WP_SCENES)
 def test_every_peer_has_rows(bench, scene):
-    rows = scene_rows(bench[1], scene)
-    scipy_rows = [r for r in rows if r["family"] == "scipy"]
-    assert {r["method"] for r in scipy_rows} >= {f"scipy {m}" for m in SCIPY_METHODS}
+    rows = bench[2].scenes[scene]
+    scipy_rows = [r for r in rows if r.family == FAMILY_SCIPY]
+    assert {r.method for r in scipy_rows} >= {f"scipy {m}" for m in SCIPY_METHODS}
     for r in scipy_rows:
-        assert r["status"] in ("ok", "gave up"), r
-        if r["status"] == "ok":
-            assert all(math.isfinite(float(r[k])) for k in ("error", "phi", "us", "cpu", "rtf")), r
-    assert any(r["status"] == "ok" for r in scipy_rows)
-    mj = [r for r in rows if r["family"] == "MuJoCo"]
-    assert {r["method"] for r in mj} == {f"MuJoCo {i} {s}" for i in MUJOCO_INTEGRATORS for s in MUJOCO_SETTINGS}
+        assert r.status in ("ok", "gave up"), r
+        if r.ok:
+            assert finite(r), r
+    assert any(r.ok for r in scipy_rows)
+    mj = [r for r in rows if r.family == FAMILY_MUJOCO]
+    assert {r.method for r in mj} == {f"MuJoCo {i} {s}" for i in MUJOCO_INTEGRATORS for s in MUJOCO_SETTINGS}
     for r in mj:
         if not HAVE_MUJOCO:
-            assert r["status"] == "skipped" and "pip install" in r["note"], r
-        elif r["status"] == "ok":
-            assert all(math.isfinite(float(r[k])) for k in ("error", "phi", "us", "cpu", "rtf")), r
+            assert r.status == "skipped" and "pip install" in r.note, r
+        elif r.ok:
+            assert finite(r), r
         else:
-            assert r["status"] == "diverged" and r["note"], r
+            assert r.status == "diverged" and r.note, r
     if HAVE_MUJOCO and scene == "paper_flexion":
         # the peer runs the paper's case with every integrator and setting
-        assert all(r["status"] == "ok" for r in mj)
+        assert all(r.ok for r in mj)
 
 
 def test_numpy_rhs_variant_is_shown_on_the_paper_run(bench):
-    rows = scene_rows(bench[1], "paper_flexion")
-    naive = [r for r in rows if r["method"] == "scipy DOP853 (numpy RHS)"]
-    fast = {r["value"]: r for r in rows if r["method"] == "scipy DOP853"}
-    assert naive and all(r["status"] == "ok" for r in naive)
+    rows = bench[2].scenes[NUMPY_RHS_SCENE]
+    naive = [r for r in rows if r.method == f"scipy {NUMPY_RHS_METHOD} (numpy RHS)"]
+    fast = {r.value: r for r in rows if r.method == f"scipy {NUMPY_RHS_METHOD}"}
+    assert naive and all(r.ok for r in naive)
     for r in naive:  # the same equations and steps: the same error, only slower
-        assert float(r["error"]) == pytest.approx(float(fast[r["value"]]["error"]), rel=1e-3)
+        assert r.error == pytest.approx(fast[r.value].error, rel=1e-3)
 
 
 def test_mujoco_rows_are_skipped_with_a_note_when_it_is_missing(monkeypatch):
@@ -138,20 +150,99 @@ def test_mujoco_rows_are_skipped_with_a_note_when_it_is_missing(monkeypatch):
     assert run.status == "skipped" and run.note == note and math.isnan(run.error)
 
 
-def test_sections_goals_hard_cases_and_recommendation(bench):
-    text = bench[1]
-    for heading in ("## Goals", "## Recommendation", "## Hard cases at dt = 1 ms", "### The table behind `method: auto`"):
-        assert heading in text
-    hard = text.split("## Hard cases at dt = 1 ms", 1)[1].split("\n## ", 1)[0]
-    for name in an.HARD_SCENES:
-        line = next(l for l in hard.splitlines() if l.startswith(f"| {name} |"))
-        assert "**pass**" in line  # at least one method passes each hard case
-    stiff = next(l for l in hard.splitlines() if l.startswith("| stiff_spring |"))
-    assert "refused" in stiff and "| radau |" in stiff  # explicit methods refused, auto picks radau
-    rec = text.split("## Recommendation", 1)[1].split("\n## ", 1)[0]
-    for kind in an.KINDS:
-        assert f"| {kind} | 1000 Hz | " in rec
-    assert "RECOMMENDATION: dict[str, dict[int, tuple[tuple[str, float, float], ...]]] = {" in rec
+def test_hard_cases_table(bench):
+    hard = {row.scene: row for row in bench[2].hard}
+    assert list(hard) == list(HARD_SCENES)
+    for name, row in hard.items():
+        assert list(row.results) == project_methods()  # every method was measured at HARD_DT
+        assert row.passing, name  # at least one method passes each hard case
+    stiff = hard["stiff_spring"]
+    assert stiff.results["rk4"].status == stiff.results["euler"].status == "refused"  # explicit methods refused
+    assert stiff.auto_pick == "radau" and stiff.auto_passes
+    assert bench[2].hard_met == all(row.auto_passes for row in hard.values())
+
+
+def test_recommendation_table(bench):
+    tables = bench[2]
+    rows = {(row.kind, row.rate): row for row in tables.recommendation}
+    assert set(rows) == {(k, r) for k in KINDS for r in RATES}
+    for kind in KINDS:
+        row = rows[kind, 1000]
+        assert row.measured and len(row.cheapest) == len(an.TARGETS), kind
+        # the data for auto at this kind and rate: every candidate, cheapest first, the most accurate among them
+        data = tables.table[kind][1000]
+        assert [m for m, _, _ in data] == [c.method for c in an.candidates(bench[1].runs, kind, 1000)]
+        assert row.most_accurate.worst_error == min(c.worst_error for c in an.candidates(bench[1].runs, kind, 1000))
+        for target, c in zip(an.TARGETS, row.cheapest):
+            assert c is None or c.worst_error <= target
+        assert row.auto_pick == shipped_pick(kind, 1000) != "—"
+    assert not rows["smooth", 10000].measured  # --quick measures 100 Hz and 1 kHz only
+    assert not tables.matches_shipped  # so its table cannot stand for the shipped one
+
+
+def test_goals(bench):
+    tables = bench[2]
+    goal = tables.realtime
+    assert goal.method == auto.choose_method(bench[1].scenes["paper_flexion"].with_overrides(method="auto", dt=1e-3))[0]
+    assert goal.run is not None and goal.run.method == goal.method and goal.run.value == an.REALTIME_DT
+    assert [row.scene for row in tables.scipy] == list(KINDS["smooth"])
+    for row in tables.scipy:  # the dense-output comparison counts fewer project runs: never cheaper
+        assert row.dense.ours >= row.any_step.ours
+    assert tables.naive_scipy.scipy > 0.0
+    if HAVE_MUJOCO:
+        assert all(tables.mujoco[name] for name in KINDS["smooth"])
+
+
+def test_a_full_run_writes_the_table_auto_loads(bench, tmp_path):
+    out, measured, tables = bench
+    full = dataclasses.replace(measured, info=dataclasses.replace(measured.info, quick=False))
+    data = tmp_path / "recommendation.json"
+    write_report(full, tmp_path, recommendation_file=data)
+    loaded = auto.load_recommendation(data)
+    assert loaded == tables.table  # every kind, rate and candidate, to the digits the bench keeps
+    assert all(isinstance(rate, int) for rows in loaded.values() for rate in rows)
+    assert f"(full run of {measured.info.started:%Y-%m-%d %H:%M} UTC" in json.loads(data.read_text())["about"]
+
+
+# -- one pick rule ------------------------------------------------------------------------------
+
+
+def test_the_report_and_auto_pick_by_the_same_rule():
+    """What the report says auto picks from its table is what auto picks where every method is stable."""
+    scene = load_scene(CONFIG / "paper_flexion.yaml").with_overrides(method="auto", dt=1e-3)
+    assert shipped_pick("smooth", 1000) == auto.choose_method(scene)[0]
+
+
+def test_tables_differ_when_auto_would_pick_another_method():
+    shipped = auto.RECOMMENDATION
+    assert same_choices(shipped, shipped)
+    rows = shipped["smooth"][1000]
+    chosen = auto_pick(rows, 1000)
+    worse = tuple(auto.Row(r.method, 1.0, r.cost) if r.method == chosen else r for r in rows)  # it now misses the target
+    changed = {**shipped, "smooth": {**shipped["smooth"], 1000: worse}}
+    assert auto_pick(worse, 1000) != chosen and not same_choices(changed, shipped)
+    assert not same_choices({k: v for k, v in shipped.items() if k != "stiff"}, shipped)  # a kind missing
+
+
+# -- process and machine helpers --------------------------------------------------------------
+
+
+def test_cpu_seconds_agree_with_the_process_clock():
+    start = time.process_time()
+    while time.process_time() - start < 0.2:  # burn some CPU
+        pass
+    # /proc counts in clock ticks (10 ms): both clocks agree to a few ticks
+    assert processes.cpu_seconds(os.getpid()) == pytest.approx(time.process_time(), abs=0.05)
+    threads = processes.thread_cpu(os.getpid())
+    assert os.getpid() in threads  # the main thread's tid is the pid
+    assert sum(cpu for _, cpu in threads.values()) <= processes.cpu_seconds(os.getpid()) + 0.05
+
+
+def test_ros_env_keeps_a_child_on_loopback_in_its_domain(monkeypatch):
+    monkeypatch.setenv("ROS_LOCALHOST_ONLY", "1")
+    env = processes.ros_env(73)
+    assert env["ROS_DOMAIN_ID"] == "73" and env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+    assert "ROS_LOCALHOST_ONLY" not in env
 
 
 # -- the analysis on known numbers -----------------------------------------------------------
@@ -177,7 +268,7 @@ def test_cost_at_interpolates_log_log_and_never_extrapolates():
 
 
 def test_recommendation_takes_the_worst_scene_of_a_kind_and_the_cheapest_method():
-    smooth = an.KINDS["smooth"]
+    smooth = KINDS["smooth"]
     runs = []
     for scene in smooth:
         runs.append(fake("rk4", 1.0, 1e-7 if scene != "toggle_passage" else 1e-5, scene=scene, steps=1000))

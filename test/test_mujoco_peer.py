@@ -20,7 +20,7 @@ from finger_sim.bench.mujoco_peer import (  # noqa: E402
 )
 from finger_sim.dynamics import FingerSystem  # noqa: E402
 from finger_sim.errors import ConfigError, SimulationDiverged  # noqa: E402
-from finger_sim.forces import PipSpring  # noqa: E402
+from finger_sim.effects.spring import PipSpring  # noqa: E402
 from finger_sim.kinematics import assemble, dependent_rates, distal_offset, extended_pose, points  # noqa: E402
 from finger_sim.model import FingerParams  # noqa: E402
 
@@ -50,12 +50,8 @@ def reference():
     """Dense tight solution of paper_flexion: DOP853 at rtol 1e-12 on the index-1 equations."""
     system = FingerSystem(P, [PipSpring(K_SPRING, distal_offset(P))])
 
-    def rhs(t: float, y: np.ndarray) -> list[float]:
-        acc, _ = system.accelerations(t, tuple(y[:3]), tuple(y[3:]), paper_torque(t))
-        return [*y[3:], *acc]
-
     y0 = [*extended_pose(P), 0.0, 0.0, 0.0]  # rest at θ_ext
-    sol = solve_ivp(rhs, (0.0, T_END), y0, method="DOP853", rtol=1e-12, atol=1e-14, dense_output=True)
+    sol = solve_ivp(system.rhs, (0.0, T_END), y0, args=(paper_torque,), method="DOP853", rtol=1e-12, atol=1e-14, dense_output=True)
     assert sol.success
     return sol.sol
 

@@ -1,8 +1,8 @@
 """What the bench's measurements say: Pareto fronts, the recommendation table, hard cases, goals.
 
 Pure functions over lists of `Run`; no timing and no I/O here, so the derivation of the
-recommendation (and from it `finger_sim.auto.RECOMMENDATION`) can be read and tested on
-its own.
+recommendation (the table `finger_sim.auto` loads, which a full bench run writes) can be
+read and tested on its own.
 """
 
 from __future__ import annotations
@@ -11,22 +11,14 @@ import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
+from finger_sim.auto import Row, Table
+from finger_sim.bench.plan import KINDS, RATES
 from finger_sim.bench.runners import FAMILY_MUJOCO, FAMILY_PROJECT, FAMILY_SCIPY, Run
 
 #: Not recommended, whatever it measures: `adaptive` restarts scipy's error-controlled
 #: DOP853 at every step (0.2-60 ms per step): the reference's scheme, not a fixed-rate method.
 NOT_RECOMMENDED = ("adaptive",)
 
-#: Scene kinds of the recommendation table and the scenes measured for each (the same
-#: kinds `finger_sim.auto.scene_kind` recognizes in a scene).
-KINDS: dict[str, tuple[str, ...]] = {
-    "smooth": ("paper_flexion", "free_swing", "toggle_passage"),
-    "discontinuous": ("bang_bang",),
-    "stiff": ("stiff_spring",),
-    "stops": ("paper_to_stop",),
-}
-#: Step rates of the recommendation table, Hz.
-RATES = (100, 1000, 10000)
 #: Error targets of the recommendation table, rad.
 TARGETS = (1e-6, 1e-9)
 #: Error at which the project is compared with scipy, rad (goal 2).
@@ -50,7 +42,6 @@ HARD_MATCH = 1e-6  # rad, max |θ − θ_ref|
 #: error is shown, not judged.
 HARD_SETTLED = 1e-9
 HARD_PENETRATION = 1e-9  # rad past a joint stop
-HARD_SCENES = ("toggle_passage", "free_swing", "bang_bang", "stiff_spring", "paper_to_stop")
 
 
 def pareto(runs: Iterable[Run]) -> list[tuple[float, float]]:
@@ -125,15 +116,15 @@ def cheapest(cands: Sequence[Candidate], target: float) -> Candidate | None:
     return next((c for c in cands if c.worst_error <= target), None)
 
 
-def recommendation(runs: Sequence[Run]) -> dict[str, dict[int, tuple[tuple[str, float, float], ...]]]:
-    """kind → rate → ((method, worst error rad, µs/step), ...) cheapest first: the data of auto's table."""
-    table: dict[str, dict[int, tuple[tuple[str, float, float], ...]]] = {}
+def recommendation(runs: Sequence[Run]) -> Table:
+    """kind → rate → (Row(method, worst error rad, µs/step), ...) cheapest first, to 3 digits: auto's table."""
+    table: Table = {}
     for kind in KINDS:
         for rate in RATES:
             cands = candidates(runs, kind, rate)
             if cands:
                 table.setdefault(kind, {})[rate] = tuple(
-                    (c.method, float(f"{c.worst_error:.3g}"), float(f"{c.us_per_step:.3g}")) for c in cands
+                    Row(c.method, float(f"{c.worst_error:.3g}"), float(f"{c.us_per_step:.3g}")) for c in cands
                 )
     return table
 

@@ -27,9 +27,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
-import signal
-import subprocess
 import sys
 import tempfile
 import time
@@ -37,16 +34,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import yaml
+
+from finger_sim.bench.processes import ROOT, START_TIMEOUT_S, cpu_seconds, isolate_dds, machine, ros_env, start_node, stop
 
 DEFAULT_DOMAIN_ID = 31
 WARMUP_S = 3.0
 COMMAND_HZ = 100.0
 COMMAND_TORQUE = 2e-4  # N·m: small alternating torques keep the finger near extension
-START_TIMEOUT_S = 30.0
-STOP_TIMEOUT_S = 10.0
 TARGETS = dict(rtf=(0.99, 1.01), late_p99_ms=1.0, latency_p99_ms=3.0, cpu_cores=0.5, fast_rtf=20.0)
-ROOT = Path(__file__).resolve().parents[2]
 
 
 @dataclass
@@ -67,30 +62,6 @@ class Run:
         return self.sim_s / self.wall_s if self.wall_s else 0.0
 
 
-def _cpu_seconds(pid: int) -> float:
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime + stime
-
-
-def _start_node(params: dict, workdir: Path, env: dict[str, str]) -> subprocess.Popen:
-    tag = f"rtf{params['realtime_factor']:g}_pub{params['publish_rate_hz']:g}"
-    path = workdir / f"node_{tag}.yaml"
-    path.write_text(yaml.safe_dump({"/**": {"ros__parameters": params}}))
-    log = open(workdir / f"node_{tag}.log", "wb")
-    return subprocess.Popen([sys.executable, "-m", "finger_sim.ros.node", "--ros-args", "--params-file", str(path)],
-                            env=env, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True)
-
-
-def _stop(proc: subprocess.Popen) -> None:
-    if proc.poll() is None:
-        os.killpg(proc.pid, signal.SIGINT)
-        try:
-            proc.wait(STOP_TIMEOUT_S)
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
-
-
 def measure(realtime_factor: float, duration: float, domain_id: int, workdir: Path, *, commands: bool,
             publish_rate_hz: float = 1000.0) -> Run:
     import rclpy
@@ -100,10 +71,10 @@ def measure(realtime_factor: float, duration: float, domain_id: int, workdir: Pa
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64
 
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", PYTHONUNBUFFERED="1")
+    env = ros_env(domain_id)
     params = dict(scene="paper_flexion", torque_source="topic", physics_rate_hz=1000.0, publish_rate_hz=publish_rate_hz,
                   realtime_factor=realtime_factor, command_timeout=0.5)
-    proc = _start_node(params, workdir, env)
+    proc = start_node(params, workdir, env)
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain_id)
     node = rclpy.create_node("node_bench_client", context=context)
@@ -156,12 +127,12 @@ def measure(realtime_factor: float, duration: float, domain_id: int, workdir: Pa
         while time.monotonic() < end_warmup:
             executor.spin_once(timeout_sec=0.05)
         recording[0] = True
-        cpu0, wall0 = _cpu_seconds(proc.pid), time.perf_counter()
+        cpu0, wall0 = cpu_seconds(proc.pid), time.perf_counter()
         end = time.monotonic() + duration
         while time.monotonic() < end:
             executor.spin_once(timeout_sec=0.05)
         recording[0] = False
-        cpu1, wall1 = _cpu_seconds(proc.pid), time.perf_counter()
+        cpu1, wall1 = cpu_seconds(proc.pid), time.perf_counter()
         run.cpu_cores = (cpu1 - cpu0) / (wall1 - wall0)
         # one more diagnostics period, so that the node's totals cover the whole window
         n_diag = len(run.diagnostics)
@@ -174,7 +145,7 @@ def measure(realtime_factor: float, duration: float, domain_id: int, workdir: Pa
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown(context=context)
-        _stop(proc)
+        stop(proc)
     return run
 
 
@@ -187,7 +158,7 @@ def breakdown(domain_id: int, n: int = 5000) -> dict[str, float]:
     from sensor_msgs.msg import JointState
 
     from finger_sim.ros import conversions
-    from finger_sim.ros.node import resolve_scene
+    from finger_sim.scene_paths import resolve_scene
     from finger_sim.scene import load_scene
     from finger_sim.simulate import Simulator
 
@@ -220,34 +191,6 @@ def breakdown(domain_id: int, n: int = 5000) -> dict[str, float]:
         node.destroy_node()
         rclpy.try_shutdown(context=context)
     return {"method": sim.method, "physics": physics, "messages": messages, "publish": publish}
-
-
-def machine() -> dict[str, str]:
-    cpu = next((line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
-                if line.startswith("model name")), platform.processor())
-    try:
-        import rclpy
-
-        rmw = rclpy.get_rmw_implementation_identifier()
-    except Exception:  # noqa: BLE001 - informational only
-        rmw = "?"
-    return {
-        "cpu": cpu,
-        "cores": str(os.cpu_count()),
-        "os": f"{platform.system()} {platform.release()} ({_os_release()})",
-        "python": platform.python_version(),
-        "rmw": rmw,
-    }
-
-
-def _os_release() -> str:
-    try:
-        for line in Path("/etc/os-release").read_text().splitlines():
-            if line.startswith("PRETTY_NAME="):
-                return line.split("=", 1)[1].strip('"')
-    except OSError:
-        pass
-    return "?"
 
 
 def _p(values: list[float], q: float) -> float:
@@ -341,13 +284,6 @@ def report(rt: Run, fast: Run, fast_decimated: Run, parts: dict, info: dict[str,
         "client's executor). CPU: utime + stime of the node process over the measured wall time.",
         "",
     ])
-
-
-def isolate_dds(domain_id: int) -> None:
-    """Keep this process's DDS traffic on loopback, in its own domain (children inherit it)."""
-    os.environ["ROS_DOMAIN_ID"] = str(domain_id)
-    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-    os.environ.pop("ROS_LOCALHOST_ONLY", None)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -38,11 +38,20 @@ from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
 
-from finger_sim.bench.node_bench import ROOT, _cpu_seconds, _start_node, _stop, isolate_dds, machine
+from finger_sim.bench.processes import (
+    ROOT,
+    cpu_seconds,
+    isolate_dds,
+    machine,
+    ros_env,
+    start_node,
+    stop,
+    thread_cpu,
+    wait_for_line,
+)
 
 DEFAULT_DOMAIN_ID = 74  # the range 70-79 is for benchmarks and runs by hand
 WARMUP_S = 3.0
-START_TIMEOUT_S = 30.0
 PHYSICS_HZ = 1000.0
 SETPOINT = 0.8  # rad, the controller's MCP setpoint in the closed-loop scenario
 TARGETS = dict(cpu_overhead=0.20, replay_rate=10.0, resim_speed=50.0)
@@ -66,20 +75,6 @@ class CpuRun:
     log: Path | None = None
     written: int = 0
     dropped: int = 0
-
-
-def _thread_cpu(pid: int) -> dict[int, tuple[str, float]]:
-    """CPU seconds of every thread of `pid`: tid → (name, utime + stime)."""
-    out = {}
-    for task in Path(f"/proc/{pid}/task").iterdir():
-        try:
-            text = (task / "stat").read_text()
-        except OSError:  # the thread ended
-            continue
-        name = text[text.index("(") + 1:text.rindex(")")]
-        fields = text.rsplit(")", 1)[1].split()
-        out[int(task.name)] = (name, (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK"))
-    return out
 
 
 def thread_groups(pid: int, before: dict[int, tuple[str, float]], after: dict[int, tuple[str, float]],
@@ -106,39 +101,30 @@ def thread_groups(pid: int, before: dict[int, tuple[str, float]], after: dict[in
     return groups
 
 
-def _wait_for_line(path: Path, text: str, proc: subprocess.Popen, what: str) -> None:
-    deadline = time.monotonic() + START_TIMEOUT_S
-    while not (path.exists() and text in path.read_text(errors="replace")):
-        if time.monotonic() > deadline or proc.poll() is not None:
-            raise RuntimeError(f"{what} did not come up; see {path}")
-        time.sleep(0.1)
-
-
 def run_node(scenario: str, record: bool, duration: float, domain_id: int, workdir: Path, index: int) -> CpuRun:
     """Start the node (and the controller), measure the node's CPU over `duration`, stop them."""
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", PYTHONUNBUFFERED="1")
-    env.pop("ROS_LOCALHOST_ONLY", None)
+    env = ros_env(domain_id)
     params = dict(scene="paper_flexion", torque_source="topic", physics_rate_hz=PHYSICS_HZ, publish_rate_hz=0.0,
                   realtime_factor=1.0, record=record, record_dir=str(workdir / f"bags_{index}"))
-    node = _start_node(params, workdir, env)  # its output: node_rtf1_pub0.log (overwritten per run)
+    node = start_node(params, workdir, env)  # its output: node_rtf1_pub0.log (overwritten per run)
     node_log = workdir / "node_rtf1_pub0.log"
     controller = None
     try:
-        _wait_for_line(node_log, "realtime_factor 1;", node, "finger_node")
+        wait_for_line(node_log, "realtime_factor 1;", node, "finger_node")
         if scenario == "closed loop":
             out = open(workdir / "controller.log", "wb")
             controller = subprocess.Popen(
                 [sys.executable, "-m", "finger_sim.ros.pd_controller", "--ros-args", "-p", f"setpoint:={SETPOINT}"],
                 env=env, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True)
-            _wait_for_line(workdir / "controller.log", "PD on", controller, "finger_pd_controller")
+            wait_for_line(workdir / "controller.log", "PD on", controller, "finger_pd_controller")
         time.sleep(WARMUP_S)  # discovery, matching, first chunks: not what is measured
-        cpu0, threads0, wall0 = _cpu_seconds(node.pid), _thread_cpu(node.pid), time.perf_counter()
+        cpu0, threads0, wall0 = cpu_seconds(node.pid), thread_cpu(node.pid), time.perf_counter()
         time.sleep(duration)  # a measurement window, not a wait for a condition
-        cpu1, threads1, wall1 = _cpu_seconds(node.pid), _thread_cpu(node.pid), time.perf_counter()
+        cpu1, threads1, wall1 = cpu_seconds(node.pid), thread_cpu(node.pid), time.perf_counter()
     finally:
-        _stop(node)
+        stop(node)
         if controller is not None:
-            _stop(controller)
+            stop(controller)
     run = CpuRun(scenario, record, (cpu1 - cpu0) / (wall1 - wall0), wall1 - wall0,
                  thread_groups(node.pid, threads0, threads1, wall1 - wall0))
     if record:
@@ -173,7 +159,7 @@ def time_resim(path: Path) -> dict[str, float]:
     """Wall time of reading the log and of re-simulating it (best of TIGHT_REPEATS: both are
     deterministic, so the minimum is their cost on a shared machine); simulated s per wall s."""
     from finger_sim.log import read_log
-    from finger_sim.log.tools import load_run, resimulate
+    from finger_sim.run_log import load_run, resimulate
     from finger_sim.simulate import Simulator
 
     read_s = resim_s = step_s = float("inf")
@@ -203,7 +189,7 @@ def _messages():
     from visualization_msgs.msg import MarkerArray
 
     from finger_sim.ros import conversions
-    from finger_sim.ros.node import resolve_scene
+    from finger_sim.scene_paths import resolve_scene
     from finger_sim.scene import load_scene
     from finger_sim.simulate import Simulator
 

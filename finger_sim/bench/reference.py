@@ -1,11 +1,11 @@
 """Reference solutions of the bench scenes: scipy at its tightest tolerance, checked by a second method.
 
 A reference integrates the same index-1 equations as every method under test
-(`FingerSystem.accelerations`), one smooth piece at a time: the solver restarts at each
-torque switch (`Profile.breakpoints`) and at each joint-stop impact (located as a
-solve_ivp event, then v⁺ = −e v⁻, or rest on the stop while the free acceleration pushes
-into it and release where it stops pushing — the rules `finger_sim.simulate.Simulator` applies). Each piece keeps scipy's
-dense output, so the reference is evaluated at any sample time.
+(`FingerSystem.rhs`), one smooth piece at a time: the solver restarts at each torque switch
+(`Profile.breakpoints`) and at each joint-stop impact (located as a solve_ivp event, then
+v⁺ = −e v⁻, or rest on the stop while the free acceleration pushes into it and release
+where it stops pushing — the rules `finger_sim.simulate.Simulator` applies). Each piece
+keeps scipy's dense output, so the reference is evaluated at any sample time.
 
 The check: the same pieces by a second, independent method: scipy's Radau IIA (implicit,
 order 5) for smooth scenes, LSODA (Adams/BDF) for stiff ones, where scipy's Radau at a
@@ -16,6 +16,7 @@ about that bound are at the reference floor and are shown as such.
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -147,10 +148,7 @@ def solve(scene: Scene, *, method: str, rtol: float) -> Solution:
                 pieces.append(_Piece(t, release, None, tuple(y)))
             t, contact = release, 0
 
-        def rhs(s: float, z: np.ndarray, torque=torque) -> list[float]:  # type: ignore[no-untyped-def]
-            qs, vs = (z[0], z[1], z[2]), (z[3], z[4], z[5])
-            return [*vs, *acc(s, qs, vs, torque(s))[0]]
-
+        rhs = functools.partial(system.rhs, torque=torque)
         events = []
         if limits is not None:
             upper = lambda s, z: z[0] - limits[1]  # noqa: E731

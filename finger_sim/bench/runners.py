@@ -10,6 +10,7 @@ LONG_RUN_SECONDS is timed once: its relative timing noise is already small.
 
 from __future__ import annotations
 
+import functools
 import math
 import statistics
 import time
@@ -178,15 +179,11 @@ class _GaveUp(Exception):
 
 
 def scalar_rhs(scene: Scene) -> Callable[[Callable[[float], float]], Callable[[float, np.ndarray], list[float]]]:
-    """y' = f(t, y) on y = (q, q') with the project's scalar `FingerSystem.accelerations`, per torque piece."""
-    acc = scene.build_system().accelerations
+    """y' = f(t, y) on y = (q, q'): the project's own `FingerSystem.rhs` (scalar), per torque piece."""
+    rhs = scene.build_system().rhs
 
     def make(torque: Callable[[float], float]) -> Callable[[float, np.ndarray], list[float]]:
-        def rhs(t: float, y: np.ndarray) -> list[float]:
-            q, v = (y[0], y[1], y[2]), (y[3], y[4], y[5])
-            return [*v, *acc(t, q, v, torque(t))[0]]
-
-        return rhs
+        return functools.partial(rhs, torque=torque)
 
     return make
 
@@ -224,7 +221,7 @@ def run_scipy(
     """solve_ivp(method, rtol, atol = 1e-2·rtol) on the index-1 equations, output on the sample grid.
 
     Restarted at each torque switch, as `Simulator` and the reference are. rhs "scalar" is
-    the project's `FingerSystem.accelerations` (integrator against integrator on the same
+    the project's `FingerSystem.rhs` (integrator against integrator on the same
     equations); "numpy" is the naive numpy right-hand side.
     """
     label = f"scipy {method}" + (" (numpy RHS)" if rhs == "numpy" else "")

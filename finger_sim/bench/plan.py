@@ -1,0 +1,132 @@
+"""What `finger-sim bench` measures: the scenes, the methods and their grids, the peers, the rates.
+
+The project's integrators over a grid of dt, scipy's solve_ivp over rtol on the same index-1
+equations (and the same scalar right-hand side), MuJoCo's integrators over timestep on the
+MJCF peer; the scene kinds and step rates of the recommendation table; the hard cases.
+`tasks` turns this into the list of measurements, in the order they run.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import finger_sim
+from finger_sim.bench.reference import Reference
+from finger_sim.bench.runners import Run, run_method, run_mujoco_peer, run_scipy
+from finger_sim.integrators import METHODS
+from finger_sim.scene import Scene
+
+#: Scenes with a work-precision figure (peers included), then the scenes measured for the
+#: recommendation and hard cases only.
+WP_SCENES = ("paper_flexion", "toggle_passage", "free_swing", "bang_bang", "stiff_spring")
+ALL_SCENES = WP_SCENES + ("paper_to_stop",)
+#: Scene kinds of the recommendation table and the scenes measured for each (the same
+#: kinds `finger_sim.auto.scene_kind` recognizes in a scene).
+KINDS: dict[str, tuple[str, ...]] = {
+    "smooth": ("paper_flexion", "free_swing", "toggle_passage"),
+    "discontinuous": ("bang_bang",),
+    "stiff": ("stiff_spring",),
+    "stops": ("paper_to_stop",),
+}
+#: Step rates of the recommendation table, Hz.
+RATES = (100, 1000, 10000)
+#: Scenes judged as hard cases (at `analysis.HARD_DT`).
+HARD_SCENES = ("toggle_passage", "free_swing", "bang_bang", "stiff_spring", "paper_to_stop")
+#: Errors are measured on this grid (s), or on a method's own coarser step grid.
+SPACING = 1e-3
+#: Timing repeats (median); runs longer than runners.LONG_RUN_SECONDS are timed once.
+REPEATS = 3
+
+_COARSE = (1e-1, 5e-2, 2e-2)
+_DECADES = (1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4, 1e-4)
+_FINE = (5e-5, 2e-5, 1e-5)
+#: dt grid per project method (full run). Each dt divides every scene's duration and is
+#: a multiple or a divisor of SPACING. Cheap methods go down to 1e-5 s; the order-6 and
+#: order-8 methods and the implicit ones stop at 1e-4 s, where they are at the reference
+#: floor or their cost per run exceeds seconds; `adaptive` steps internally, its dt is only
+#: the output rate.
+FULL_DT: dict[str, tuple[float, ...]] = {
+    "euler": _DECADES + _FINE,
+    "rk4": _COARSE[1:] + _DECADES + _FINE,
+    "rk6": _COARSE + _DECADES,
+    "dop8": _COARSE + _DECADES,
+    "rattle": _DECADES,
+    "radau": _COARSE + _DECADES,
+    "adaptive": (1e-2, 1e-3),
+}
+#: dt grid of a method FULL_DT does not list.
+DEFAULT_DT = _DECADES
+QUICK_DT = (1e-2, 1e-3)
+FULL_RTOL = tuple(10.0**-k for k in range(3, 13))
+QUICK_RTOL = (1e-4, 1e-8)
+SCIPY_METHODS = ("RK45", "DOP853", "Radau", "LSODA")
+#: The naive numpy right-hand side is shown on the paper's run only, with DOP853.
+NUMPY_RHS_SCENE, NUMPY_RHS_METHOD = "paper_flexion", "DOP853"
+FULL_TIMESTEPS = (1e-3, 1e-4, 1e-5)
+QUICK_TIMESTEPS = (1e-3,)
+MUJOCO_INTEGRATORS = ("Euler", "RK4", "implicitfast")
+MUJOCO_SETTINGS = ("default", "tight")
+#: The report's order of the project's methods (the paper's Euler first); others follow, sorted.
+METHOD_ORDER = ("euler", "rk4", "rk6", "dop8", "rattle", "radau", "adaptive")
+
+
+def config_dir() -> Path:
+    """The scenes folder: `config/` beside the package (a source checkout), else under the cwd."""
+    for candidate in (Path(finger_sim.__file__).resolve().parent.parent / "config", Path.cwd() / "config"):
+        if (candidate / "paper_flexion.yaml").is_file():
+            return candidate
+    raise FileNotFoundError("finger-sim bench: no config/ folder with the scenes beside the package or in the cwd")
+
+
+@dataclass(frozen=True)
+class Task:
+    """One measurement: a label for the progress bar and the call that makes the Run."""
+
+    label: str
+    call: Callable[[], Run]
+
+
+def project_methods() -> list[str]:
+    """Every integrator `METHODS` has, in the report's order (METHOD_ORDER, then the rest sorted)."""
+    return [m for m in METHOD_ORDER if m in METHODS] + sorted(set(METHODS) - set(METHOD_ORDER))
+
+
+def dt_grid(method: str, *, quick: bool) -> tuple[float, ...]:
+    """The dt values (s) `method` is run at."""
+    return QUICK_DT if quick else FULL_DT.get(method, DEFAULT_DT)
+
+
+def tasks(scenes: dict[str, Scene], refs: dict[str, Reference], *, quick: bool) -> list[Task]:
+    """The measurements, in the order they run: per scene the project's methods, then scipy and MuJoCo."""
+    out: list[Task] = []
+    kw = {"spacing": SPACING, "repeats": REPEATS}
+    for name, scene in scenes.items():
+        ref = refs[name]
+        for method in project_methods():
+            for dt in dt_grid(method, quick=quick):
+                out.append(Task(f"{name} {method} dt={dt:g}", lambda s=scene, m=method, d=dt, r=ref: run_method(s, m, d, r, **kw)))
+        if name not in WP_SCENES:
+            continue
+        for method in SCIPY_METHODS:
+            for rtol in QUICK_RTOL if quick else FULL_RTOL:
+                out.append(Task(f"{name} scipy {method} rtol={rtol:g}", lambda s=scene, m=method, t=rtol, r=ref: run_scipy(s, m, t, r, **kw)))
+        if name == NUMPY_RHS_SCENE:
+            for rtol in QUICK_RTOL if quick else FULL_RTOL[1::2]:
+                out.append(
+                    Task(
+                        f"{name} scipy {NUMPY_RHS_METHOD} numpy rtol={rtol:g}",
+                        lambda s=scene, t=rtol, r=ref: run_scipy(s, NUMPY_RHS_METHOD, t, r, rhs="numpy", **kw),
+                    )
+                )
+        for integrator in MUJOCO_INTEGRATORS:
+            for setting in MUJOCO_SETTINGS:
+                for ts in QUICK_TIMESTEPS if quick else FULL_TIMESTEPS:
+                    out.append(
+                        Task(
+                            f"{name} MuJoCo {integrator} {setting} h={ts:g}",
+                            lambda s=scene, i=integrator, g=setting, h=ts, r=ref: run_mujoco_peer(s, i, h, g, r, **kw),
+                        )
+                    )
+    return out
