@@ -1,4 +1,5 @@
-"""The core imports nothing from ROS or MCAP (STYLE.md: data flows one way).
+"""The core imports nothing from ROS or MCAP (STYLE.md: data flows one way), and the MCAP
+library finger_sim.log imports nothing from the core.
 
 Checked twice: in a fresh interpreter after importing every core module *and running*
 a scene and the CLI (lazy imports included), and statically over every import statement
@@ -21,7 +22,7 @@ CORE_MODULES = [
     "finger_sim",
     "finger_sim.model",
     "finger_sim.kinematics",
-    "finger_sim.forces",
+    "finger_sim.effects",
     "finger_sim.dynamics",
     "finger_sim.projection",
     "finger_sim.inputs",
@@ -36,8 +37,13 @@ FORBIDDEN = ("rclpy", "mcap", "mcap_ros2", "rosbags", "finger_sim.ros", "finger_
 PACKAGE = Path(finger_sim.__file__).parent
 #: cli.py is the front-end of every subcommand: its log and bench commands import MCAP
 #: lazily, inside their handlers; the fresh-interpreter probe below checks that simulate
-#: and kinematics through it load no ROS or MCAP.
-CORE_FILES = sorted(p for p in PACKAGE.glob("*.py") if p.name != "cli.py") + sorted((PACKAGE / "integrators").glob("*.py"))
+#: and kinematics through it load no ROS or MCAP. run_log.py is the bridge between the core
+#: and the MCAP library (like ros/ is to ROS), so it is no core file either.
+ADAPTERS = ("cli.py", "run_log.py")
+CORE_FILES = (sorted(p for p in PACKAGE.glob("*.py") if p.name not in ADAPTERS)
+              + sorted((PACKAGE / "integrators").glob("*.py")) + sorted((PACKAGE / "effects").glob("*.py")))
+#: The MCAP library under finger_sim/log: it may import itself, never the core or ROS adapters.
+LOG_FILES = sorted((PACKAGE / "log").glob("*.py"))
 
 PROBE = f"""
 import contextlib, io, json, sys
@@ -85,3 +91,16 @@ def test_no_core_source_imports_ros_or_mcap():
         for path in CORE_FILES
     }
     assert {k: v for k, v in offenders.items() if v} == {}
+
+
+def test_log_library_imports_nothing_from_the_core():
+    assert len(LOG_FILES) >= 5
+    offenders = {
+        str(path.relative_to(PACKAGE)): sorted(n for n in imported_names(path)
+                                                 if n.startswith("finger_sim") and not n.startswith("finger_sim.log"))
+        for path in LOG_FILES
+    }
+    assert {k: v for k, v in offenders.items() if v} == {}
+    relative = [path.name for path in LOG_FILES
+                for node in ast.walk(ast.parse(path.read_text())) if isinstance(node, ast.ImportFrom) and node.level > 1]
+    assert relative == []  # no `from .. import` out of the package either

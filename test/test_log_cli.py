@@ -214,7 +214,7 @@ def test_truncated_log_is_read_up_to_the_cut(node_log: NodeLog, tmp_path: Path, 
     assert done.returncode == EXIT_TRUNCATED
     line = single_error_line(done)
     assert line.startswith(f"finger-sim: warning: {path}: truncated at byte {chunk.chunk_start_offset} of {cut}: "), line
-    assert line.endswith("; reading the intact part")
+    assert line.endswith(f"; reading the intact part (`finger-sim repair {path}` makes a complete copy)")
     intact = sum(t <= node_log.chunks[k - 1].message_end_time for t in node_log.stamps)
     assert 0 < intact < len(node_log.stamps)
     if command == "export":
@@ -270,3 +270,154 @@ def test_info_describes_a_log_from_another_program(foreign_log: Path) -> None:
     assert (done.returncode, done.stderr) == (0, "")
     assert "Topics:   /joint_states | sensor_msgs/msg/JointState | 3 msgs | cdr" in done.stdout.splitlines()
     assert "Metadata: none" in done.stdout.splitlines()
+
+
+# -- cut at the end, foreign schemas, garbled metadata ----------------------------------------------
+@pytest.mark.parametrize("missing", [1, 8, 9])
+def test_info_calls_a_log_without_its_end_truncated(node_log: NodeLog, tmp_path: Path, missing: int) -> None:
+    """Missing only the closing magic's last byte, all of it, or one byte more: not 'complete'."""
+    path = tmp_path / "end.mcap"
+    path.write_bytes(node_log.path.read_bytes()[:-missing])
+    done = run_cli("info", path)
+    assert done.returncode == EXIT_TRUNCATED, done.stdout
+    assert "Status:   complete" not in done.stdout
+    assert f"Messages: {sum(node_log.counts.values())} in {len(node_log.chunks)} chunks" in done.stdout.splitlines()
+    assert single_error_line(done).startswith(f"finger-sim: warning: {path}: truncated at byte ")
+
+
+def _rewritten(node_log: NodeLog, path: Path, *, schema_name: str, definition: str,
+               metadata: dict[str, str] | None = None) -> Path:
+    """The node log's metadata and one joint state on /joint_states, under another schema."""
+    from finger_sim.log import read_log
+    from finger_sim.run_log import FINGER_SIM_METADATA
+
+    record = read_log(node_log.path).metadata_record(FINGER_SIM_METADATA)
+    with path.open("wb") as file, Ros2Writer(file) as writer:
+        writer.add_metadata(FINGER_SIM_METADATA, {**record, **(metadata or {})})
+        schema = writer.register_msgdef(schema_name, definition)
+        writer.write_message("/joint_states", schema, {"data": 0.25, "name": JOINTS, "position": [0.0] * 3,
+                                                        "velocity": [0.0] * 3}, log_time=0)
+    return path
+
+
+@pytest.mark.parametrize("command", ["export", "resim"])
+@pytest.mark.parametrize(("schema_name", "definition", "problem"), [
+    ("std_msgs/msg/Float64", "float64 data", "topic /joint_states: expected schema sensor_msgs/msg/JointState, "
+                                             "got std_msgs/msg/Float64"),
+    ("sensor_msgs/msg/JointState", "float64 data\nstring[] name", "topic /joint_states: the sensor_msgs/msg/JointState "
+                                                                 "schema in the log lacks float64[] position, "
+                                                                 "float64[] velocity: a foreign definition"),
+])
+def test_foreign_joint_state_schema_is_refused(node_log: NodeLog, tmp_path: Path, command: str, schema_name: str,
+                                               definition: str, problem: str) -> None:
+    path = _rewritten(node_log, tmp_path / "foreign_schema.mcap", schema_name=schema_name, definition=definition)
+    done = run_cli(command, path)
+    assert done.returncode == EXIT_ERROR
+    assert single_error_line(done) == f"finger-sim {command}: error: {path}: {problem}"
+
+
+@pytest.mark.parametrize("command", ["export", "resim"])
+@pytest.mark.parametrize(("metadata", "problem"), [
+    ({"scene": "model: [unclosed"}, "metadata record 'finger_sim', key 'scene' does not parse as a scene: "),
+    ({"scene": "integrator: {method: [rk4]}"}, "metadata record 'finger_sim', key 'scene' does not parse as a scene: "),
+    ({"torque_source": "joystick"}, "metadata record 'finger_sim', key 'torque_source': expected one of "
+                                    "['topic', 'scene'], got 'joystick'"),
+])
+def test_metadata_that_does_not_parse_is_one_line(node_log: NodeLog, tmp_path: Path, command: str,
+                                                  metadata: dict[str, str], problem: str) -> None:
+    path = _rewritten(node_log, tmp_path / "bad_meta.mcap", schema_name="sensor_msgs/msg/JointState",
+                      definition=message_definition("sensor_msgs/msg/JointState"), metadata=metadata)
+    done = run_cli(command, path)
+    assert done.returncode == EXIT_ERROR
+    assert single_error_line(done).startswith(f"finger-sim {command}: error: {path}: {problem}")
+
+
+# -- repair -----------------------------------------------------------------------------------------
+def _independent_counts(path: Path) -> tuple[int, int]:
+    """Messages of a log as rosbags and as mcap's seeking reader (from the summary) read them."""
+    from rosbags.rosbag2 import Reader as RosbagsReader
+
+    with RosbagsReader(path) as bag:
+        by_rosbags = sum(1 for _ in bag.messages())
+    with path.open("rb") as file:
+        reader = make_reader(file)
+        assert reader.get_summary() is not None
+        by_mcap = sum(1 for _ in reader.iter_messages(log_time_order=False))
+    return by_rosbags, by_mcap
+
+
+def _cuts(node_log: NodeLog) -> dict[str, int]:
+    data = node_log.path.read_bytes()
+    size, header_end = len(data), 8 + 9 + int.from_bytes(data[9:17], "little")  # magic, opcode, length, body
+    third = node_log.chunks[2]
+    return {
+        "inside the header": header_end - 5,  # not from the recorder (see test_log_recorder), but repairable
+        "after the header": header_end,
+        "mid-chunk": third.chunk_start_offset + third.chunk_length // 2,
+        "at a chunk's start": third.chunk_start_offset,
+        "after a chunk": third.chunk_start_offset + third.chunk_length,
+        "in the summary": node_log.chunks[-1].chunk_start_offset + node_log.chunks[-1].chunk_length + 200,
+        "at the end magic": size - 8,
+        "one byte short": size - 1,
+    }
+
+
+@pytest.mark.parametrize("where", ["inside the header", "after the header", "mid-chunk", "at a chunk's start", "after a chunk",
+                                   "in the summary", "at the end magic", "one byte short"])
+def test_repair_makes_a_cut_log_whole(node_log: NodeLog, tmp_path: Path, where: str) -> None:
+    """Every message up to the last intact chunk, read by rosbags and by mcap's own reader."""
+    from rosbags.rosbag2 import Reader as RosbagsReader
+    from rosbags.rosbag2 import ReaderError
+
+    from finger_sim.log import read_log
+
+    cut = _cuts(node_log)[where]
+    path = tmp_path / "cut.mcap"
+    path.write_bytes(node_log.path.read_bytes()[:cut])
+    with pytest.raises(ReaderError):
+        RosbagsReader(path).open()  # the problem repair solves
+    ours = read_log(path)
+    intact_chunks = [c for c in node_log.chunks if c.chunk_start_offset + c.chunk_length <= cut]
+    last = max((c.message_end_time for c in intact_chunks), default=-1)
+    with node_log.path.open("rb") as file:
+        expected = sum(m.log_time <= last for _, _, m in make_reader(file).iter_messages(log_time_order=False))
+    assert ours.message_count == expected
+
+    done = run_cli("repair", path)
+    assert (done.returncode, done.stderr) == (0, ""), done.stderr
+    out = tmp_path / "cut.repaired.mcap"
+    assert done.stdout.startswith(f"repaired {path} → {out}: {expected} messages")
+    assert _independent_counts(out) == (expected, expected)
+    repaired = read_log(out)
+    assert not repaired.truncated and repaired.message_count == expected
+    assert repaired.metadata == ours.metadata and repaired.profile == "ros2"
+    assert [(t.topic, t.type, t.definition) for t in repaired.topics.values()] == \
+           [(t.topic, t.type, t.definition) for t in ours.topics.values()]
+    if expected:
+        done = run_cli("resim", out)
+        stamps = sum(s <= last for s in node_log.stamps)
+        assert done.stdout.strip() == f"resim: {stamps} recorded states reproduced bit for bit (max deviation 0)"
+
+
+def test_repair_keeps_every_message_of_a_complete_log(node_log: NodeLog, tmp_path: Path) -> None:
+    out = tmp_path / "copy.mcap"
+    done = run_cli("repair", node_log.path, "-o", out)
+    assert done.returncode == 0, done.stderr
+    total = sum(node_log.counts.values())
+    assert _independent_counts(out) == (total, total)
+    with node_log.path.open("rb") as a, out.open("rb") as b:
+        original = [(m.channel_id, m.log_time, m.publish_time, m.sequence, m.data)
+                    for _, _, m in make_reader(a).iter_messages(log_time_order=False)]
+        copied = [(m.channel_id, m.log_time, m.publish_time, m.sequence, m.data)
+                  for _, _, m in make_reader(b).iter_messages(log_time_order=False)]
+    assert [m[1:] for m in copied] == [m[1:] for m in original]
+
+
+def test_repair_refuses_to_overwrite_its_input(node_log: NodeLog, tmp_path: Path) -> None:
+    path = tmp_path / "log.mcap"
+    path.write_bytes(node_log.path.read_bytes()[:-100])
+    before = path.read_bytes()
+    done = run_cli("repair", path, "-o", tmp_path / "." / "log.mcap")
+    assert done.returncode == EXIT_ERROR
+    assert "out: expected a path other than the log being repaired" in single_error_line(done)
+    assert path.read_bytes() == before

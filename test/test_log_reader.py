@@ -21,7 +21,6 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
 from finger_sim.log import (
-    FINGER_SIM_METADATA,
     CorruptLogError,
     LogDecodeError,
     LogError,
@@ -34,6 +33,7 @@ from finger_sim.log import (
     message_definition,
     read_log,
 )
+from finger_sim.run_log import FINGER_SIM_METADATA
 
 ROS_ENV = {"ROS_DOMAIN_ID": "62", "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
 STEPS = 101  # 0 .. 2 s at 50 Hz
@@ -114,7 +114,7 @@ def test_index_agrees_with_mcap_summary(complete_log: Path) -> None:
     assert log.duration_s == 2.0
     assert log.size == complete_log.stat().st_size
     assert not log.truncated and log.truncation is None
-    assert log.metadata_record() == METADATA
+    assert log.metadata_record(FINGER_SIM_METADATA) == METADATA
     assert log.metadata == {FINGER_SIM_METADATA: METADATA, "operator_notes": {"note": "bench run"}}
 
 
@@ -135,7 +135,7 @@ def test_messages_decode_in_file_order_with_a_topic_filter(complete_log: Path) -
 
 def test_info_reads_like_ros2_bag_info(complete_log: Path) -> None:
     log = LogReader(complete_log)
-    lines = log.info().splitlines()  # labels padded to the longest, "Metadata:", plus one space
+    lines = log.info(FINGER_SIM_METADATA).splitlines()  # labels padded to the longest, "Metadata:", plus one space
     assert lines[0] == f"File:     {complete_log}"
     assert lines[1] == f"Size:     {complete_log.stat().st_size / 1024:.1f} KiB"
     assert lines[2:8] == [
@@ -212,9 +212,9 @@ def test_truncated_log_keeps_its_intact_prefix(complete_log: Path, tmp_path: Pat
     )
     assert [(m.topic, m.log_time_ns, fields(m.msg)) for m in log.messages()] == readable
     assert log.message_count == len(readable)
-    assert f"Status:   TRUNCATED, truncated at byte {offset} of {cut}" in log.info()
+    assert f"Status:   TRUNCATED, truncated at byte {offset} of {cut}" in log.info(FINGER_SIM_METADATA)
     if readable:
-        assert log.metadata_record() == METADATA  # written before the first chunk
+        assert log.metadata_record(FINGER_SIM_METADATA) == METADATA  # written before the first chunk
         assert {t: i.count for t, i in log.topics.items()} == {t: len(readable) // 3 for t in TOPICS}
 
 
@@ -255,9 +255,9 @@ def test_bad_record_length_in_a_complete_log_is_corruption_not_truncation(comple
 def test_missing_metadata_record(tmp_path: Path) -> None:
     path = write_log(tmp_path / "bare.mcap", metadata=False)
     with pytest.raises(MissingMetadataError) as err:
-        read_log(path).metadata_record()
+        read_log(path).metadata_record(FINGER_SIM_METADATA)
     assert str(err.value) == f"{path}: no metadata record 'finger_sim' (records present: none)"
-    assert "Metadata: none" in read_log(path).info().splitlines()
+    assert "Metadata: none" in read_log(path).info(FINGER_SIM_METADATA).splitlines()
 
 
 def test_missing_expected_topics(complete_log: Path) -> None:

@@ -350,6 +350,25 @@ def test_unwritable_path_or_full_disk_is_reported_once(tmp_path: Path, where: st
     assert (recorder.written, recorder.dropped) == (0, 50)
     assert len(problems) == 1
     assert str(path) in problems[0] and reason in problems[0]
+    assert recorder.error is not None and str(path) in recorder.error and reason in recorder.error
+
+
+def test_error_is_none_while_writing_works(tmp_path: Path) -> None:
+    with McapRecorder(tmp_path / "ok.mcap") as recorder:
+        recorder.register_channel("/motor_torque", Float64)
+        recorder.write("/motor_torque", Float64(data=1.0), 0)
+    assert recorder.error is None and (recorder.written, recorder.dropped) == (1, 0)
+    assert [p.name for p in tmp_path.iterdir()] == ["ok.mcap"]  # no temporary file left behind
+
+
+def test_metadata_is_bounded(tmp_path: Path) -> None:
+    """A record over 64 kB (e.g. an expanded YAML alias bomb) is refused at the call, naming its size."""
+    with McapRecorder(tmp_path / "meta.mcap") as recorder:
+        recorder.add_metadata("small", {"k": "v" * 1000})
+        with pytest.raises(LogArgumentError, match=r"metadata record 'big': expected at most 65536 bytes, "
+                                                   r"got '70001 bytes'"):
+            recorder.add_metadata("big", {"k": "v" * 70_000})
+    assert set(LogReader(tmp_path / "meta.mcap").metadata) == {"small"}
 
 
 def test_queue_overflow_drops_and_reports_once(tmp_path: Path) -> None:

@@ -46,8 +46,8 @@ from std_msgs.msg import Float64  # noqa: E402
 from std_srvs.srv import SetBool, Trigger  # noqa: E402
 
 import finger_sim  # noqa: E402
-from finger_sim.log import FINGER_SIM_METADATA, McapRecorder, read_log  # noqa: E402
-from finger_sim.log.tools import load_run, resimulate  # noqa: E402
+from finger_sim.log import McapRecorder, read_log  # noqa: E402
+from finger_sim.run_log import FINGER_SIM_METADATA, load_run, resimulate  # noqa: E402
 from finger_sim.scene import load_scene, scene_from_dict  # noqa: E402
 from finger_sim.simulate import Simulator  # noqa: E402
 
@@ -472,6 +472,39 @@ def test_kill_9_leaves_a_readable_prefix(launcher, ros_client, tmp_path):
     assert "Traceback" not in done.stderr + done.stdout
     assert "Status:   TRUNCATED" in done.stdout
 
+    # repaired, the same messages are read by rosbags, from the summary
+    assert_repairs(path, log.message_count)
+
+
+def assert_repairs(path: Path, count: int) -> None:
+    """`finger-sim repair` of `path` is a complete log with `count` messages for rosbags and mcap."""
+    done = run_cli("repair", str(path))
+    assert done.returncode == 0 and done.stderr == "", done
+    out = path.with_name(path.stem + ".repaired.mcap")
+    with AnyReader([out]) as bag:
+        assert sum(1 for _ in bag.messages()) == count
+    with out.open("rb") as file:
+        assert sum(1 for _ in make_reader(file).iter_messages(log_time_order=False)) == count
+    assert not read_log(out).truncated
+
+
+@pytest.mark.parametrize("after_s", [0.0, 0.5, 1.0, 1.5])
+def test_a_kill_at_any_moment_leaves_a_repairable_log(launcher, tmp_path, after_s):
+    """SIGKILL from process start through node start-up and log creation: every .mcap left in
+    record_dir is an MCAP prefix (never a partial header) that repair makes whole."""
+    bags = tmp_path / "bags"
+    node = launcher.node(NODE, dict(scene=str(PAPER), realtime_factor=1.0, record_dir=str(bags)))
+    deadline = time.monotonic() + after_s
+    while time.monotonic() < deadline and not list(bags.glob("*.mcap")):
+        time.sleep(0.001)  # kill as soon as the log file appears, or at after_s
+    os.killpg(node.pid, signal.SIGKILL)
+    assert node.wait(10.0) == -signal.SIGKILL
+    for path in sorted(bags.glob("*.mcap")):
+        head = path.read_bytes()[:8]
+        assert head in (b"", MCAP0_MAGIC), head  # empty (name reserved) or a whole header follows
+        count = read_log(path).message_count if head else 0
+        assert_repairs(path, count)
+
 
 def test_resim_of_a_controller_run_is_bit_for_bit(launcher, ros_client, tmp_path):
     """finger_node driven by finger_pd_controller in another process, with a reset half way:
@@ -530,7 +563,7 @@ def copy_log(source: Path, target: Path, view: McapView, event: dict[str, str], 
     with McapRecorder(target) as recorder:
         for topic, schema in view.schemas.items():
             recorder.register_channel(topic, schema.name, definition=schema.data.decode())
-        recorder.add_metadata(FINGER_SIM_METADATA, log.metadata_record())
+        recorder.add_metadata(FINGER_SIM_METADATA, log.metadata_record(FINGER_SIM_METADATA))
         for m in log.messages():
             if m.topic == "/finger_node/command_log":
                 kv = {v.key: v for v in m.msg.values}

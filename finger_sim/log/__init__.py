@@ -1,8 +1,8 @@
 """MCAP logging: a non-blocking rosbag2-compatible recorder and a ROS-free reader.
 
 Depends on mcap and mcap_ros2 only; rclpy is imported lazily, and only when the recorder is
-handed message objects instead of CDR bytes. Nothing else from finger_sim is imported here
-except the FingerSimError base class.
+handed message objects instead of CDR bytes. Nothing from the rest of finger_sim is imported
+here: what a finger_node run stores is finger_sim.run_log's business.
 """
 
 from mcap.writer import CompressionType
@@ -22,13 +22,12 @@ from .errors import (
     RecorderStateError,
     TruncatedLogError,
 )
-from .reader import FINGER_SIM_METADATA, LogMessage, LogReader, TopicInfo, read_log
+from .reader import LogMessage, LogReader, TopicInfo, read_log
 from .recorder import DEFAULT_CHUNK_INTERVAL_S, McapRecorder
 
 __all__ = [
     "DEFAULT_CHUNK_INTERVAL_S",
     "DEFINITION_SEPARATOR",
-    "FINGER_SIM_METADATA",
     "CompressionType",
     "CorruptLogError",
     "LogArgumentError",

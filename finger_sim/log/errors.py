@@ -13,11 +13,10 @@ from os import PathLike
 from pathlib import Path
 from typing import Any
 
-from finger_sim.errors import FingerSimError
 
 
-class LogError(FingerSimError):
-    """Base of every error raised by finger_sim.log."""
+class LogError(Exception):
+    """Base of every error raised by finger_sim.log (independent of the core's FingerSimError)."""
 
 
 class LogArgumentError(LogError, ValueError):

@@ -34,12 +34,20 @@ written as they are: rmw sizes that buffer by an estimate and leaves uninitialis
 and trailing bytes, so files would differ run to run and strict readers (rosbags) reject
 the trailing bytes.
 
-Threading: all file I/O runs on one writer thread fed by a queue; the caller only checks,
-serializes and enqueues. More than `queue_size` pending messages, an unwritable path or a
-full disk never raise: each kind of trouble is reported once through `on_problem` (default:
-logger 'finger_sim.log'; may be called from the writer thread) and the lost messages are
-counted in `dropped`. After an I/O error the recorder writes nothing more. After close(),
-written + dropped == the number of write() calls that did not raise.
+Threading: all file I/O runs on one writer thread. The caller only checks, serializes and
+appends to a buffer (a deque: no semaphore, no wake-up per message); the writer thread takes
+everything buffered once every `handover_s` wall seconds (earlier when half of `queue_size`
+is waiting, or at close), so a 1 kHz node hands over a batch of steps at a time. More than
+`queue_size` pending messages, an unwritable path or a full disk never raise and never block
+the caller: each kind of trouble is reported once through `on_problem` (default: logger
+'finger_sim.log'; may be called from the writer thread), the first I/O failure is kept in
+`error`, and the lost messages are counted in `dropped`. After an I/O error the recorder
+writes nothing more. After close(), written + dropped == the number of write() calls that
+did not raise.
+
+Creation: the file is created under a temporary name in the same folder, its header written
+and flushed, and only then renamed to `path`, so a kill at any moment leaves either no file
+or one that starts with a whole header (finger_sim.log.repair turns it into a valid log).
 """
 
 from __future__ import annotations
@@ -49,10 +57,11 @@ import logging
 import math
 import operator
 import os
-import queue
 import re
 import stat
 import threading
+import time
+from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from enum import Enum, auto
@@ -73,6 +82,8 @@ DEFAULT_CHUNK_INTERVAL_S = 0.5  # log-time span of one chunk: what a kill -9 may
 DEFAULT_CHUNK_SIZE = 1 << 20  # uncompressed bytes; bounds memory if an interval holds many messages
 DEFAULT_QUEUE_SIZE = 10_000  # pending messages (~1 s of a 1 kHz node's six topics) before dropping
 DEFAULT_IDLE_FLUSH_S = 1.0  # wall seconds without messages after which the open chunk is closed
+DEFAULT_HANDOVER_S = 0.05  # wall seconds between the writer thread's takes of the buffer
+MAX_METADATA_BYTES = 1 << 16  # UTF-8 bytes of one metadata record's keys and values
 _NO_SIZE_TRIGGER = 1 << 62  # chunk_size given to mcap's Writer so only this module closes chunks
 _MAX_TIME_NS = 1 << 64  # MCAP timestamps are uint64
 _SEQUENCE_MODULUS = 1 << 32  # MCAP sequence numbers are uint32: they wrap
@@ -110,7 +121,7 @@ class _Metadata:
     data: dict[str, str]
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)  # not frozen: built once per message on the caller's thread, kept cheap
 class _Message:
     topic: str
     data: bytes
@@ -119,7 +130,7 @@ class _Message:
     sequence: int
 
 
-_CLOSE = object()  # queue sentinel: finish the file and end the writer thread
+_CLOSE = object()  # buffer sentinel: finish the file and end the writer thread
 
 
 @dataclass(frozen=True, slots=True)
@@ -147,6 +158,7 @@ class McapRecorder:
     compression: chunk compression (mcap.writer.CompressionType).
     queue_size: messages that may wait for the writer thread before new ones are dropped.
     idle_flush_s: wall seconds without messages after which the open chunk is closed.
+    handover_s: wall seconds between the writer thread's takes of what the caller buffered.
     on_problem: called once per kind of trouble with a one-line description.
     """
 
@@ -159,6 +171,7 @@ class McapRecorder:
         compression: CompressionType = CompressionType.ZSTD,
         queue_size: int = DEFAULT_QUEUE_SIZE,
         idle_flush_s: float = DEFAULT_IDLE_FLUSH_S,
+        handover_s: float = DEFAULT_HANDOVER_S,
         on_problem: Callable[[str], None] | None = None,
     ) -> None:
         if not (math.isfinite(chunk_interval_s) and chunk_interval_s > 0):
@@ -169,6 +182,8 @@ class McapRecorder:
             raise LogArgumentError("queue_size", "an int >= 1", queue_size)
         if not (math.isfinite(idle_flush_s) and idle_flush_s > 0):
             raise LogArgumentError("idle_flush_s", "a finite number > 0", idle_flush_s)
+        if not (math.isfinite(handover_s) and handover_s > 0):
+            raise LogArgumentError("handover_s", "a finite number > 0", handover_s)
         if not isinstance(compression, CompressionType):
             raise LogArgumentError("compression", "a mcap.writer.CompressionType", compression)
         self._path = Path(path)
@@ -178,18 +193,26 @@ class McapRecorder:
         self._queue_size = queue_size
         self._idle_flush_s = idle_flush_s
         self._on_problem = on_problem if on_problem is not None else _logger.warning
-        self._queue: queue.SimpleQueue[object] = queue.SimpleQueue()
-        self._free_slots = threading.Semaphore(queue_size)
-        # Guards state, sequences, dropped, reported. Reentrant: a signal handler that calls
-        # close() while the interrupted main thread is inside write() must not deadlock.
+        self._handover_s = handover_s
+        # Items for the writer thread; deque.append and popleft are atomic, so neither side locks.
+        self._buffer: deque[object] = deque()
+        self._wake = threading.Event()  # set at close or when half of queue_size waits
+        self._queued = 0  # messages appended to the buffer (caller side, under _lock)
+        self._taken = 0  # messages taken from it (writer thread only)
+        # Guards state, sequences, dropped. Reentrant: a signal handler that calls close()
+        # while the interrupted main thread is inside write() must not deadlock. The writer
+        # thread never takes it.
         self._lock = threading.RLock()
+        self._report_lock = threading.Lock()
         self._state = _State.NEW
         self._thread: threading.Thread | None = None
         self._channels: dict[str, _Channel] = {}
         self._codecs: dict[str, _Codec] = {}
         self._reported: set[_Problem] = set()
         self._written = 0  # changed by the writer thread only
-        self._dropped = 0
+        self._dropped = 0  # caller side, under _lock
+        self._lost = 0  # writer side: handed over, then hit by an I/O error
+        self._error: str | None = None
 
     # -- life cycle -------------------------------------------------------------------------
 
@@ -215,7 +238,8 @@ class McapRecorder:
                 return
             was_open, self._state = self._state is _State.OPEN, _State.CLOSED
             if was_open:
-                self._queue.put(_CLOSE)
+                self._buffer.append(_CLOSE)
+                self._wake.set()
         if was_open and self._thread is not None:
             self._thread.join(timeout_s)
             if self._thread.is_alive():
@@ -258,24 +282,29 @@ class McapRecorder:
             self._require_open("register a channel")
             self._codecs[type_name] = codec
             self._channels[topic] = _Channel(type_name, codec)
-            self._queue.put(_Register(topic, type_name, codec.definition))
+            self._buffer.append(_Register(topic, type_name, codec.definition))
 
     def add_metadata(self, name: str, data: Mapping[str, str]) -> None:
-        """Queue a metadata record (e.g. name 'finger_sim': scene YAML, parameters, version)."""
+        """Queue a metadata record (e.g. scene YAML, parameters, version) of at most
+        MAX_METADATA_BYTES (UTF-8 bytes of keys and values); LogArgumentError if larger."""
         if not isinstance(name, str) or not name:
             raise LogArgumentError("name", "a non-empty str", name)
         if not all(isinstance(k, str) and isinstance(v, str) for k, v in data.items()):
             raise LogArgumentError("data", "a mapping of str to str", data)
+        size = sum(len(k.encode()) + len(v.encode()) for k, v in data.items())
+        if size > MAX_METADATA_BYTES:
+            raise LogArgumentError(f"metadata record {name!r}", f"at most {MAX_METADATA_BYTES} bytes", f"{size} bytes")
         with self._lock:
             self._require_open("add metadata")
-            self._queue.put(_Metadata(name, dict(data)))
+            self._buffer.append(_Metadata(name, dict(data)))
 
     # -- hot path -----------------------------------------------------------------------------
 
     def write(
         self, topic: str, message: Any, log_time_ns: int, *, publish_time_ns: int | None = None
     ) -> bool:
-        """Queue one message; True if queued, False if dropped. Never raises for I/O trouble.
+        """Buffer one message; True if buffered, False if dropped. Never blocks, never raises
+        for I/O trouble.
 
         message: CDR bytes, an rclpy message of the topic's type, or an object or dict with
         its fields. log_time_ns, publish_time_ns: ns on the caller's clock (sim time);
@@ -296,7 +325,7 @@ class McapRecorder:
             if self._state is not _State.OPEN or channel is None:  # closed, maybe meanwhile
                 self._dropped += 1
                 problem, text = _Problem.CLOSED, f"MCAP recorder {self._path} is closed; dropping messages"
-            elif not self._free_slots.acquire(blocking=False):
+            elif (waiting := self._queued - self._taken) >= self._queue_size:
                 self._dropped += 1
                 # The number is spent: the gap tells a reader where the drop was.
                 channel.last_sequence = (channel.last_sequence + 1) % _SEQUENCE_MODULUS
@@ -306,7 +335,10 @@ class McapRecorder:
                 )
             else:
                 channel.last_sequence = (channel.last_sequence + 1) % _SEQUENCE_MODULUS
-                self._queue.put(_Message(topic, data, log_ns, publish_ns, channel.last_sequence))
+                self._buffer.append(_Message(topic, data, log_ns, publish_ns, channel.last_sequence))
+                self._queued += 1
+                if waiting == self._queue_size // 2:
+                    self._wake.set()  # a burst: take it before the bound is reached
                 return True
         self._report(problem, text)
         return False
@@ -324,7 +356,15 @@ class McapRecorder:
     @property
     def dropped(self) -> int:
         """Messages lost: queue full, written after close, or hit by an I/O error."""
-        return self._dropped
+        return self._dropped + self._lost
+
+    @property
+    def error(self) -> str | None:
+        """The first failure to write the file (cannot create it, write failed, disk full), or None.
+
+        Set by the writer thread; from then on every message is dropped.
+        """
+        return self._error
 
     # -- internals ----------------------------------------------------------------------------
 
@@ -353,42 +393,52 @@ class McapRecorder:
             raise RecorderStateError(action, self._state.value)
 
     def _report(self, problem: _Problem, text: str) -> None:
-        with self._lock:
+        with self._report_lock:
             if problem in self._reported:
                 return
             self._reported.add(problem)
         self._on_problem(text)
 
-    def _drop(self, count: int) -> None:
-        with self._lock:
-            self._dropped += count
-
     def _run(self) -> None:
-        """Writer thread: drain the queue into the file until the close sentinel."""
+        """Writer thread: every handover_s, write what was buffered; end at the close sentinel."""
         file = self._create_file()
-        handed = 0  # messages given to the file; each one ends up written or dropped
+        handed = 0  # messages given to the file; each one ends up written or lost
+        last_message = time.monotonic()
         while True:
-            try:
-                timeout = self._idle_flush_s if file is not None and file.pending else None
-                item = self._queue.get(timeout=timeout)
-            except queue.Empty:
-                item = None  # idle: close the open chunk
-            if isinstance(item, _Message):
-                self._free_slots.release()
-                if file is None:
-                    self._drop(1)
-                    continue
-                handed += 1
-            if file is not None:
-                try:
-                    self._written += file.finish() if item is _CLOSE else file.handle(item)
-                except Exception as exc:  # OSError (disk full, I/O error) or a failure inside mcap
-                    self._fail(exc)
-                    self._drop(handed - self._written)
-                    file.abandon()
-                    file = None
-            if item is _CLOSE:
-                return
+            self._wake.wait(self._handover_s)
+            self._wake.clear()
+            got_messages = False
+            while self._buffer:
+                item = self._buffer.popleft()
+                if isinstance(item, _Message):
+                    self._taken += 1
+                    got_messages = True
+                    if file is None:
+                        self._lost += 1
+                        continue
+                    handed += 1
+                elif item is _CLOSE:
+                    if file is not None:
+                        file = self._apply(file, _CLOSE, handed)
+                    return
+                if file is not None:
+                    file = self._apply(file, item, handed)
+            now = time.monotonic()
+            if got_messages:
+                last_message = now
+            elif file is not None and file.pending and now - last_message >= self._idle_flush_s:
+                file = self._apply(file, None, handed)  # idle (a paused sim): close the open chunk
+
+    def _apply(self, file: _ChunkedFile, item: object, handed: int) -> _ChunkedFile | None:
+        """Hand one item (None: idle, _CLOSE: finish) to the file; None after an I/O failure."""
+        try:
+            self._written += file.finish() if item is _CLOSE else file.handle(item)
+            return file
+        except Exception as exc:  # OSError (disk full, I/O error) or a failure inside mcap
+            self._fail(exc)
+            self._lost += handed - self._written
+            file.abandon()
+            return None
 
     def _create_file(self) -> _ChunkedFile | None:
         try:
@@ -399,6 +449,8 @@ class McapRecorder:
             return None
 
     def _fail(self, exc: Exception) -> None:
+        if self._error is None:
+            self._error = f"cannot write {self._path}: {exc}"
         self._report(_Problem.IO, f"MCAP recorder cannot write {self._path}: {exc}; "
                      "dropping every further message")
 
@@ -409,14 +461,26 @@ class _ChunkedFile:
     def __init__(
         self, path: Path, *, interval_ns: int, chunk_size: int, compression: CompressionType
     ) -> None:
-        self._file = open(path, "wb")  # closed by finish() or abandon()
+        # A new or regular file is written under a temporary name until its header is out, so
+        # `path` never holds a partial header; a pipe or device is written in place.
+        temp = None if path.exists() and not path.is_file() else path.with_name(f".{path.name}.{os.urandom(4).hex()}.part")
+        # 0o666 less the umask, as open() would create `path`; closed by finish() or abandon().
+        self._file = open(path, "wb") if temp is None else os.fdopen(
+            os.open(temp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666), "wb")
         try:
             self._writer = Writer(self._file, chunk_size=_NO_SIZE_TRIGGER, compression=compression)
             self._writer.start(profile=Profile.ROS2, library=LIBRARY)
-            self._writer.flush()  # the header reaches the disk before any message
+            self._writer.flush()  # the header reaches the operating system before the name
+            if temp is not None:
+                os.replace(temp, path)
         except BaseException:
             self.abandon()
+            if temp is not None:
+                with contextlib.suppress(OSError):
+                    os.unlink(temp)
             raise
+        if temp is not None:
+            _sync_folder(path.parent)  # the name survives a power cut too
         self._interval_ns = interval_ns
         self._chunk_size = chunk_size
         self._schema_ids: dict[str, int] = {}
@@ -488,6 +552,16 @@ class _ChunkedFile:
         """Close the file after a failure, ignoring further errors; the file stays as it is."""
         with contextlib.suppress(OSError):  # closing flushes the buffer: fails again on a full disk
             self._file.close()
+
+
+def _sync_folder(folder: Path) -> None:
+    """fsync a folder so that a new name in it is on disk; skipped where folders cannot be opened."""
+    with contextlib.suppress(OSError):
+        fd = os.open(folder, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
 
 
 def _codec(type_name: str, definition: str) -> _Codec:

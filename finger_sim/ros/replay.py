@@ -68,9 +68,7 @@ from types import FrameType
 from typing import Any
 
 import rclpy
-from mcap.reader import SeekingReader
 from mcap.records import Channel, Message, Schema
-from mcap.stream_reader import StreamReader
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.publisher import Publisher
@@ -80,7 +78,6 @@ from rclpy.utilities import remove_ros_args
 
 from finger_sim.errors import FingerSimError
 from finger_sim.log import (
-    CorruptLogError,
     LogArgumentError,
     LogError,
     LogFileError,
@@ -211,51 +208,9 @@ def plan_replay(
 def raw_messages(
     reader: LogReader, topics: Iterable[str], start_ns: int
 ) -> Iterator[tuple[Schema | None, Channel, Message]]:
-    """The recorded (schema, channel, message) records of `topics` logged at or after `start_ns`.
-
-    Log-time order for a complete log (mcap's indexed reader; it reads a log without an index
-    linearly); file order, up to the cut, for a truncated one. Message.data is the CDR bytes.
-    A record that cannot be read raises CorruptLogError after the records before it.
-    """
-    wanted = frozenset(topics)
-    try:
-        file = reader.path.open("rb")
-    except OSError as exc:
-        raise LogFileError(reader.path, f"cannot open ({exc.strerror or exc})") from exc
-    with file:
-        try:
-            if reader.truncated:
-                yield from _stream_messages(file, reader, wanted, start_ns)
-            else:
-                mcap = SeekingReader(file, validate_crcs=True, record_size_limit=reader.size)
-                yield from mcap.iter_messages(topics=wanted, starting_at=start_ns, log_time_order=True)
-        except FingerSimError:
-            raise
-        except Exception as exc:  # mcap raises assorted types on damaged records
-            raise CorruptLogError(reader.path, None, f"cannot read a message ({_describe(exc)})") from exc
-
-
-def _stream_messages(
-    file: Any, reader: LogReader, wanted: frozenset[str], start_ns: int
-) -> Iterator[tuple[Schema | None, Channel, Message]]:
-    """Records in file order, stopping after the last message the reader's scan found intact."""
-    schemas: dict[int, Schema] = {}
-    channels: dict[int, Channel] = {}
-    remaining = reader.message_count
-    if remaining == 0:
-        return
-    for record in StreamReader(file, record_size_limit=reader.size).records:
-        if isinstance(record, Schema):
-            schemas[record.id] = record
-        elif isinstance(record, Channel):
-            channels[record.id] = record
-        elif isinstance(record, Message):
-            channel = channels[record.channel_id]
-            if channel.topic in wanted and record.log_time >= start_ns:
-                yield schemas.get(channel.schema_id), channel, record
-            remaining -= 1
-            if remaining == 0:
-                return  # the next record is the cut one
+    """The recorded (schema, channel, message) records of `topics` logged at or after `start_ns`:
+    `LogReader.raw_messages` (log-time order; file order up to the cut of a truncated log)."""
+    return reader.raw_messages(topics, start_ns=start_ns)
 
 
 def message_class(topic: str, type_name: str) -> type:
@@ -605,11 +560,6 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _describe(exc: Exception) -> str:
-    text = str(exc)
-    return f"{type(exc).__name__}: {text}" if text else repr(exc)
-
-
 def _rcl_message(exc: Exception) -> str:
     """rcl's message without its trail of C source locations ('..., at src/rcl/x.c:42')."""
     text = (str(exc).splitlines() or [repr(exc)])[0]
@@ -690,7 +640,7 @@ def _run(args: argparse.Namespace, full_argv: list[str], stop: threading.Event, 
                 _print_warning(f"some subscribers had not acknowledged every message after {timeout_s:g} s")
             if player.stats.published:
                 player.sleep(LINGER_S)  # returns at once after a signal
-    except FingerSimError as exc:  # a damaged record mid-log, a type that is not installed
+    except (LogError, FingerSimError) as exc:  # a damaged record mid-log, a type that is not installed
         if player is not None and player.stats.published:
             print(player.stats.summary(args.rate, topic_count), flush=True)  # what got out before it
         _print_error(str(exc))

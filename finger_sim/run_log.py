@@ -1,0 +1,407 @@
+"""The run-log contract: what a finger_node log holds beyond plain MCAP, and the tools over it.
+
+The node writes a metadata record `finger_sim` (`RunMetadata`, built by `run_metadata`) that
+holds the fully resolved scene as it ran, so the log alone is enough to rebuild the run. The
+command log (`<node>/command_log`, DiagnosticStatus key-values, one `CommandEvent` each) says
+from which step of which episode each torque was applied; re-applying them through the same
+`Simulator` reproduces the recorded states bit for bit on the same version and platform.
+Every state is stamped with `stamp_ns`, by the node and by resim alike.
+
+Reading goes through `finger_sim.log` (a pure MCAP library); every problem with a log's
+content raises RunLogError, one line naming the file and what is wrong.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from os import PathLike
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from finger_sim import __version__, kinematics
+from finger_sim.errors import FingerSimError
+from finger_sim.joints import JOINT_NAMES, joint_positions, joint_velocities, paper_coordinates
+from finger_sim.log.definitions import DEFINITION_SEPARATOR
+from finger_sim.log.reader import ROSBAGS, LogReader, TopicInfo
+from finger_sim.scene import Scene, scene_from_dict
+from finger_sim.simulate import Simulator, Trajectory
+
+#: Name of the metadata record the node writes.
+FINGER_SIM_METADATA = "finger_sim"
+#: Largest metadata record a run may store (UTF-8 bytes of its keys and values).
+MAX_METADATA_BYTES = 64 * 1024
+NS_PER_S = 1_000_000_000
+JOINT_STATE_TYPE = "sensor_msgs/msg/JointState"
+COMMAND_LOG_TYPE = "diagnostic_msgs/msg/DiagnosticStatus"
+#: Top-level fields (type, name) the tools need in each topic's schema.
+_NEEDED_FIELDS = {
+    JOINT_STATE_TYPE: {("string[]", "name"), ("float64[]", "position"), ("float64[]", "velocity")},
+    COMMAND_LOG_TYPE: {("KeyValue[]", "values")},
+}
+_FIELD_LINE = re.compile(r"^\s*([A-Za-z0-9_/]+(?:\[[^\]]*\])?)\s+([A-Za-z_][A-Za-z0-9_]*)\b(?!\s*=)")
+
+Vec6 = tuple[float, float, float, float, float, float]  # joint positions (rad) + rates (rad/s)
+
+
+class RunLogError(FingerSimError):
+    """A log lacks or garbles what a finger_node run needs: names the file and the problem."""
+
+    def __init__(self, path: str | PathLike[str], problem: str) -> None:
+        self.path, self.problem = Path(path), problem
+        super().__init__(f"{self.path}: {problem}")
+
+
+def stamp_ns(offset_ns: int, step: int, dt: float) -> int:
+    """Sim time of the state after `step` steps of `dt` s in an episode starting at `offset_ns`, ns.
+
+    The one timestamp rule: the node stamps its messages with it and resim compares by it.
+    """
+    return offset_ns + round(step * dt * 1e9)
+
+
+# -- the metadata record ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class RunMetadata:
+    """The `finger_sim` metadata record: the scene as it ran and how it was driven.
+
+    Stored as MCAP metadata (str → str); `extra` keeps keys this version does not know.
+    """
+
+    scene: Scene
+    torque_source: str  # 'topic' or 'scene'
+    version: str = ""
+    method: str = ""  # the method that stepped (auto resolved)
+    method_reason: str = ""  # why auto picked it; empty otherwise
+    parameters: Mapping[str, Any] = field(default_factory=dict)  # the node's ROS parameters
+    extra: Mapping[str, str] = field(default_factory=dict)
+
+    REQUIRED = ("scene", "torque_source")
+    TORQUE_SOURCES = ("topic", "scene")
+
+    def to_dict(self) -> dict[str, str]:
+        """The record as MCAP metadata; RunLogError-free, but see `check_size`."""
+        return {
+            **self.extra,
+            "version": self.version,
+            "scene": self.scene.to_yaml(),
+            "method": self.method,
+            "method_reason": self.method_reason,
+            "torque_source": self.torque_source,
+            "dt": repr(self.scene.dt),
+            "parameters": yaml.safe_dump(dict(self.parameters), sort_keys=True),
+        }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, str], path: str | PathLike[str] = "log") -> RunMetadata:
+        """Parse and validate a stored record; RunLogError names the key that does not parse."""
+        where = f"metadata record {FINGER_SIM_METADATA!r}"
+        missing = [k for k in cls.REQUIRED if k not in data]
+        if missing:
+            raise RunLogError(path, f"the {where} lacks {', '.join(missing)}: not a finger_node log?")
+        scene = _parse_scene(data["scene"], path, where)
+        if data["torque_source"] not in cls.TORQUE_SOURCES:
+            raise RunLogError(path, f"{where}, key 'torque_source': expected one of {list(cls.TORQUE_SOURCES)}, "
+                                    f"got {_short(data['torque_source'])}")
+        parameters: Any = {}
+        if data.get("parameters"):
+            try:
+                parameters = yaml.safe_load(data["parameters"])
+            except (yaml.YAMLError, RecursionError) as exc:
+                raise RunLogError(path, f"{where}, key 'parameters' is not YAML: {_first_line(exc)}") from None
+            if not isinstance(parameters, dict):
+                raise RunLogError(path, f"{where}, key 'parameters': expected a mapping, got {_short(parameters)}")
+        known = {"version", "scene", "method", "method_reason", "torque_source", "dt", "parameters"}
+        return cls(
+            scene=scene,
+            torque_source=data["torque_source"],
+            version=data.get("version", ""),
+            method=data.get("method", ""),
+            method_reason=data.get("method_reason", ""),
+            parameters=parameters,
+            extra={k: v for k, v in data.items() if k not in known},
+        )
+
+
+def run_metadata(scene: Scene, *, method: str, method_reason: str, torque_source: str,
+                 parameters: Mapping[str, Any]) -> dict[str, str]:
+    """The `finger_sim` metadata record of a run: strings only, as MCAP metadata wants.
+
+    Raises RunLogError if the record exceeds MAX_METADATA_BYTES (a scene that large is no scene).
+    """
+    record = RunMetadata(scene=scene, torque_source=torque_source, version=__version__, method=method,
+                         method_reason=method_reason, parameters=parameters).to_dict()
+    size = metadata_size(record)
+    if size > MAX_METADATA_BYTES:
+        raise RunLogError(scene.name, f"the {FINGER_SIM_METADATA!r} metadata record would take {size} bytes, "
+                                      f"more than the {MAX_METADATA_BYTES} bytes a log stores")
+    return record
+
+
+def metadata_size(record: Mapping[str, str]) -> int:
+    """UTF-8 bytes of a metadata record's keys and values."""
+    return sum(len(k.encode()) + len(v.encode()) for k, v in record.items())
+
+
+def _parse_scene(text: str, path: str | PathLike[str], where: str) -> Scene:
+    try:
+        data = yaml.safe_load(text)
+        return scene_from_dict(data)
+    except (yaml.YAMLError, FingerSimError, RecursionError, ValueError, TypeError) as exc:
+        raise RunLogError(path, f"{where}, key 'scene' does not parse as a scene: {_first_line(exc)}") from None
+
+
+def _first_line(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return text[:200] + ("…" if len(text) > 200 else "")
+
+
+def _short(value: Any) -> str:
+    text = repr(value)
+    return text[:80] + ("…" if len(text) > 80 else "")
+
+
+# -- the command log -------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class CommandEvent:
+    """One `~/command_log` entry: `torque` (N·m) is applied from `step` of `episode` on.
+
+    The state at that step is stamped `stamp_ns`. Events 'accepted', 'timeout' and 'reset'
+    change the applied torque; 'refused' only records a command that was not applied.
+    """
+
+    event: str
+    step: int
+    episode: int
+    stamp_ns: int
+    torque: float
+    requested: str = ""
+    source: str = ""
+    saturated: bool = False
+    reason: str = ""
+
+    APPLIES = ("accepted", "timeout", "reset")
+    EVENTS = (*APPLIES, "refused")
+
+    @property
+    def applies_torque(self) -> bool:
+        return self.event in self.APPLIES
+
+    def to_values(self) -> dict[str, str]:
+        """The DiagnosticStatus key-values; floats as repr() so that they round-trip exactly."""
+        return {"event": self.event, "step": str(self.step), "episode": str(self.episode),
+                "stamp_ns": str(self.stamp_ns), "torque": repr(self.torque), "requested": self.requested,
+                "source": self.source, "saturated": str(self.saturated), "reason": self.reason}
+
+    @classmethod
+    def from_values(cls, values: Mapping[str, str], path: str | PathLike[str] = "log") -> CommandEvent:
+        """Parse one entry's key-values; RunLogError names the key and the value."""
+        def get(key: str, convert: Any, expected: str) -> Any:
+            if key not in values:
+                raise RunLogError(path, f"command log entry {dict(values)!r:.120}: lacks {key!r}")
+            try:
+                return convert(values[key])
+            except (ValueError, OverflowError):
+                raise RunLogError(path, f"command log key {key!r}: expected {expected}, "
+                                        f"got {_short(values[key])}") from None
+
+        event = get("event", str, "")
+        if event not in cls.EVENTS:
+            raise RunLogError(path, f"command log key 'event': expected one of {list(cls.EVENTS)}, got {_short(event)}")
+        torque = get("torque", float, "a float") if event in cls.APPLIES or "torque" in values else 0.0
+        if not math.isfinite(torque):
+            raise RunLogError(path, f"command log key 'torque': expected a finite float, got {_short(values['torque'])}")
+        return cls(event=event, step=get("step", int, "an int"), episode=get("episode", int, "an int"),
+                   stamp_ns=get("stamp_ns", int, "an int (ns)"), torque=torque,
+                   requested=values.get("requested", ""), source=values.get("source", ""),
+                   saturated=values.get("saturated", "False") == "True", reason=values.get("reason", ""))
+
+
+# -- reading a run ---------------------------------------------------------------------------------
+
+
+@dataclass
+class RecordedRun:
+    """What a log says about one node run: its metadata, commands and recorded states."""
+
+    metadata: RunMetadata
+    joint_states: list[tuple[int, Vec6]] = field(default_factory=list)  # (stamp ns, positions + velocities)
+    events: list[CommandEvent] = field(default_factory=list)  # in recording order
+
+    @property
+    def scene(self) -> Scene:
+        return self.metadata.scene
+
+    @property
+    def torque_source(self) -> str:
+        return self.metadata.torque_source
+
+    @property
+    def dt(self) -> float:
+        return self.scene.dt
+
+
+def load_run(reader: LogReader, *, events: bool = True) -> RecordedRun:
+    """Metadata, command events (unless `events` is False) and joint states of a node's log.
+
+    RunLogError names what is missing or foreign (a topic whose schema is not the one expected).
+    """
+    meta = RunMetadata.from_dict(reader.metadata_record(FINGER_SIM_METADATA), reader.path)
+    run = RecordedRun(metadata=meta)
+    states = _states_topic(reader)
+    log_topics = [t for t in reader.topics if t.endswith("/command_log")] if events else []
+    for topic in log_topics:
+        check_schema(reader, reader.topics[topic], COMMAND_LOG_TYPE)
+    order: list[int] | None = None
+    # rosbags' deserializer: 1.5-2x faster than mcap_ros2's per JointState (measured on a node log).
+    for msg in reader.messages([states, *log_topics], decoder=ROSBAGS):
+        if msg.topic != states:
+            run.events.append(CommandEvent.from_values({kv.key: kv.value for kv in msg.msg.values}, reader.path))
+            continue
+        js = msg.msg
+        if order is None:
+            order = _joint_order(reader, list(js.name))
+        stamp = js.header.stamp.sec * NS_PER_S + js.header.stamp.nanosec
+        try:
+            state = tuple(float(js.position[i]) for i in order) + tuple(float(js.velocity[i]) for i in order)
+        except IndexError:
+            raise RunLogError(reader.path, f"{states} at {stamp} ns: fewer positions or velocities than "
+                                           f"joints {list(js.name)}") from None
+        run.joint_states.append((stamp, state))  # type: ignore[arg-type]
+    return run
+
+
+def _states_topic(reader: LogReader) -> str:
+    """The node's joint-state topic (`/joint_states`, maybe namespaced), its schema checked."""
+    found = sorted(t for t in reader.topics if t.rsplit("/", 1)[-1] == "joint_states")
+    if not found:
+        reader.require_topics(["/joint_states"])  # raises MissingTopicsError naming what is there
+    topic = "/joint_states" if "/joint_states" in found else found[0]
+    check_schema(reader, reader.topics[topic], JOINT_STATE_TYPE)
+    return topic
+
+
+def check_schema(reader: LogReader, topic: TopicInfo, type_name: str) -> None:
+    """RunLogError unless `topic` carries `type_name` in CDR with the fields the tools read."""
+    if topic.type != type_name:
+        raise RunLogError(reader.path, f"topic {topic.topic}: expected schema {type_name}, got {topic.type}")
+    if topic.encoding != "cdr":
+        raise RunLogError(reader.path, f"topic {topic.topic}: expected message encoding 'cdr', got {topic.encoding!r}")
+    top = topic.definition.split(f"\n{DEFINITION_SEPARATOR}\n", 1)[0]
+    declared = set()
+    for line in top.splitlines():
+        match = _FIELD_LINE.match(line.split("#", 1)[0])
+        if match:
+            declared.add((match[1].rsplit("/", 1)[-1], match[2]))
+    missing = _NEEDED_FIELDS[type_name] - declared
+    if missing:
+        fields = ", ".join(f"{t} {n}" for t, n in sorted(missing))
+        raise RunLogError(reader.path, f"topic {topic.topic}: the {type_name} schema in the log lacks {fields}: "
+                                       "a foreign definition")
+
+
+def _joint_order(reader: LogReader, names: list[str]) -> list[int]:
+    try:
+        return [names.index(n) for n in JOINT_NAMES]
+    except ValueError:
+        raise RunLogError(reader.path, f"joint states: expected joints {list(JOINT_NAMES)}, got {names}") from None
+
+
+# -- export ----------------------------------------------------------------------------------------
+
+
+def trajectory_from_log(run: RecordedRun) -> Trajectory:
+    """The recorded joint states as a Trajectory in the paper's coordinates (the simulate CSV's columns)."""
+    p = run.scene.params
+    q_ext, alpha = kinematics.extended_pose(p), kinematics.distal_offset(p)
+    system = run.scene.build_system()
+    t, qs, vs = [], [], []
+    for stamp, state in run.joint_states:
+        q, v = paper_coordinates(state[:3], state[3:], q_ext, alpha)
+        t.append(stamp / NS_PER_S)
+        qs.append(q)
+        vs.append(v)
+    return Trajectory(
+        t=np.array(t),
+        q=np.array(qs).reshape(-1, 3),
+        v=np.array(vs).reshape(-1, 3),
+        energy=np.array([system.energy(q, v) for q, v in zip(qs, vs)]),
+        residual=np.array([kinematics.constraint_norm(p, q) for q in qs]),
+        method=run.metadata.method or run.scene.method,
+        method_reason=run.metadata.method_reason,
+        wall_time=math.nan,
+    )
+
+
+# -- resim -----------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ResimResult:
+    """Largest deviation of the re-simulated joint states from the recorded ones."""
+
+    compared: int
+    max_deviation: float  # over positions (rad) and velocities (rad/s)
+    first_stamp_ns: int | None  # stamp of the first recorded state that differs, None if none
+
+    @property
+    def exact(self) -> bool:
+        return self.first_stamp_ns is None
+
+    def summary(self) -> str:
+        if self.exact:
+            return f"resim: {self.compared} recorded states reproduced bit for bit (max deviation 0)"
+        return (
+            f"resim: max deviation {self.max_deviation:.3e} over {self.compared} recorded states; "
+            f"first at t = {self.first_stamp_ns / NS_PER_S:.6f} s on /clock"
+        )
+
+
+def resimulate(run: RecordedRun) -> ResimResult:
+    """Re-run the log's scene, re-applying its torques at the steps they were applied, and
+    compare every recorded joint state with the re-simulated one (exact comparison).
+
+    Episodes: a reset restarts the scene at step 0; its states are stamped from the reset
+    event's stamp on (the node's sim time never runs backwards). In topic mode the torque of
+    step n is that of the last accepted/timeout/reset event of the episode with step ≤ n (0
+    before any); in scene mode the scene's profile drives every step, as in the node.
+    """
+    sim = Simulator(run.scene)
+    dt_ns = run.dt * NS_PER_S
+    q_ext, alpha = kinematics.extended_pose(run.scene.params), kinematics.distal_offset(run.scene.params)
+    offsets = [0] + [e.stamp_ns for e in run.events if e.event == "reset"]
+    changes: dict[int, list[tuple[int, float]]] = {}
+    for e in run.events:
+        if e.applies_torque:
+            changes.setdefault(e.episode, []).append((e.step, e.torque))
+    wanted: dict[int, dict[int, Vec6]] = {}  # episode → step → recorded state
+    for stamp, state in run.joint_states:
+        episode = max(i for i, off in enumerate(offsets) if off <= stamp)
+        wanted.setdefault(episode, {})[round((stamp - offsets[episode]) / dt_ns)] = state
+    compared, worst, first = 0, 0.0, None
+    for episode in sorted(wanted):
+        sim.reset()
+        torques = sorted(changes.get(episode, []))
+        held, k = 0.0, 0
+        for n in range(max(wanted[episode]) + 1):
+            if n in wanted[episode]:
+                mine = joint_positions(sim.q, q_ext, alpha) + joint_velocities(sim.v)
+                dev = max(abs(a - b) for a, b in zip(mine, wanted[episode][n]))
+                compared += 1
+                worst = max(worst, dev)
+                if dev > 0.0 and first is None:
+                    first = stamp_ns(offsets[episode], n, run.dt)
+            while k < len(torques) and torques[k][0] <= n:
+                held = torques[k][1]
+                k += 1
+            sim.step(None if run.torque_source == "scene" else held)
+    return ResimResult(compared, worst, first)
