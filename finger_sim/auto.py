@@ -13,6 +13,15 @@ Three steps, each stated in the reason `choose_method` returns (and logs):
    (`stability.stable_at`); if none reached the target, the most accurate stable one; if
    none is stable, FALLBACK (L-stable). The bench report calls the same `pick`.
 
+Contact (spec §7) adds a mode of 10²–10⁴ rad/s that exists only while a phalanx touches an
+object. Rather than an implicit method for the whole run, auto steps such a scene with the table's
+explicit choice and `contact_substeps` divides each step that is in contact (or closes a contact
+gap within it) into m equal substeps, m sized by the contact mode (CONTACT_SUBSTEP_MODE_DT):
+the Simulator already splits steps at contact onset and release, so the free flight keeps the
+plain step. Measured on grasp_impact and grasp_rigid at dt = 1 ms against a DOP853 solve at
+rtol 1e-12 restarted at the events (README "Grasping"): radau costs 10–30× the free step there,
+the substepped explicit step about 1–2×.
+
 The table is data produced by the bench: `finger-sim bench` (the full run) writes
 finger_sim/data/recommendation.json (`save_recommendation`), which `load_recommendation`
 reads.
@@ -27,6 +36,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import NamedTuple
 
+from finger_sim.dynamics import FingerSystem
 from finger_sim.effects import EFFECTS
 from finger_sim.integrators import METHODS
 from finger_sim.scene import Scene
@@ -43,6 +53,12 @@ AUTO_TARGET = 1e-6
 STIFF_MODE_DT = 1.0
 #: L-stable, stable on every scene at every dt: the choice when nothing else is.
 FALLBACK = "radau"
+#: In contact, each substep h = dt/m resolves the contact mode: |s|·h ≤ this. Measured at dt = 1 ms
+#: (README "Grasping", max θ1 error vs the tight reference / cost vs the free step): 1.0 → rk4×5 on
+#: grasp_rigid, 8e-5 rad on grasp_impact; 0.5 → 1e-5 / 3e-6 rad; 0.25 → 3e-6 / 8e-7 rad at ≤ 1.9×.
+CONTACT_SUBSTEP_MODE_DT = 0.25
+#: Most substeps per step in contact; a contact stiffer than that at dt gets FALLBACK.
+MAX_CONTACT_SUBSTEPS = 32
 #: The measured table, package data written by the bench.
 RECOMMENDATION_FILE = Path(__file__).parent / "data" / "recommendation.json"
 
@@ -88,15 +104,17 @@ def save_recommendation(table: Mapping[str, Mapping[int, Sequence[Sequence[objec
 RECOMMENDATION: Table = load_recommendation()
 
 
-def scene_kind(scene: Scene, root: complex) -> tuple[str, str]:
-    """(kind, why) of a scene at its dt, given its fastest mode `root` (1/s)."""
-    z = abs(root) * scene.dt
+def scene_kind(scene: Scene, root: complex, substeps: int = 1) -> tuple[str, str]:
+    """(kind, why) of a scene at its dt, given its fastest mode `root` (1/s) and the substeps
+    it takes in contact (`contact_substeps`)."""
+    z = abs(root) * scene.dt / substeps
+    split = f" in {substeps} substeps while in contact" if substeps > 1 else ""
     if z > STIFF_MODE_DT:
-        return "stiff", f"fastest mode |s|·dt = {z:.3g} > {STIFF_MODE_DT:g}, not resolved by the step"
+        return "stiff", f"fastest mode |s|·dt = {z:.3g}{split} > {STIFF_MODE_DT:g}, not resolved by the step"
     events = [key for key, eff in EFFECTS.items() if (e := eff.build(scene)) is not None and not e.smooth]
     if events:
         stops = f", MCP stops at {list(scene.mcp_limits)} rad" if scene.mcp_limits is not None else ""
-        return "stops", f"events of model.{', model.'.join(events)}{stops}"
+        return "stops", f"events of model.{', model.'.join(events)}{stops}{split}"
     switches = scene.torque.breakpoints(0.0, scene.duration)
     if switches:
         return "discontinuous", f"{scene.torque.kind} torque switching {len(switches)} times"
@@ -150,15 +168,34 @@ def pick(rows: Sequence[Sequence[object]], root: complex, dt: float) -> tuple[st
     return FALLBACK, f"no tabulated method is stable{unstable}: {FALLBACK}, L-stable"
 
 
+def contact_substeps(scene: Scene) -> int:
+    """Substeps m of a step in contact under `method: auto`: 1 without objects; else the fewest
+    with |s|·dt/m ≤ CONTACT_SUBSTEP_MODE_DT on the scene's fastest mode s (its contact mode, at the
+    contact element's design force). 1 when the scene is stiff without its contact too, or needs
+    more than MAX_CONTACT_SUBSTEPS: then the whole run wants an implicit method."""
+    system = scene.build_system()
+    q0, _ = scene.initial_state()
+    smooth = [e for e in system.elements if e.smooth or all(e.impact(i) is not None for i in range(len(e.gaps(q0))))]
+    if len(smooth) == len(system.elements):
+        return 1  # no contact
+    theta_range = mcp_range(scene)
+    if abs(fastest_mode(FingerSystem(scene.params, smooth), theta_range)) * scene.dt > STIFF_MODE_DT:
+        return 1
+    m = math.ceil(abs(fastest_mode(system, theta_range)) * scene.dt / CONTACT_SUBSTEP_MODE_DT)
+    return m if 1 <= m <= MAX_CONTACT_SUBSTEPS else 1
+
+
 def choose_method(scene: Scene) -> tuple[str, str]:
-    """(method, reason) for `method: auto`: the table's cheapest method within AUTO_TARGET that is stable at dt."""
+    """(method, reason) for `method: auto`: the table's cheapest method within AUTO_TARGET that is stable
+    at its step (dt, or dt/m in contact: `contact_substeps`)."""
     root = fastest_mode(scene.build_system(), mcp_range(scene))
-    kind, why = scene_kind(scene, root)
+    substeps = contact_substeps(scene)
+    kind, why = scene_kind(scene, root, substeps)
     rows = RECOMMENDATION.get(kind, {})
     if not rows:
         return FALLBACK, f"{kind} scene ({why}); no measurements for it: {FALLBACK}, stable at every dt"
     rate, rate_text = table_rate(list(rows), scene.dt)
-    method, because = pick(rows[rate], root, scene.dt)
+    method, because = pick(rows[rate], root, scene.dt / substeps)
     reason = f"{kind} scene ({why}); at {rate_text} {because}"
     LOG.info("method auto → %s: %s", method, reason)
     return method, reason

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from pathlib import Path
 
 import matplotlib
@@ -18,12 +19,22 @@ from finger_sim.model import FingerParams  # noqa: E402
 POSTURES_DEG = (0.0, 30.0, 60.0, 90.0)
 
 
-def plot_angles(t: np.ndarray, q: np.ndarray, path: str | Path, title: str) -> None:
-    """θ1, θ2, θ3 (degrees) against time, like the paper's Figs. 7-9."""
-    fig, axes = plt.subplots(3, 1, sharex=True, figsize=(7, 7))
-    for i, ax in enumerate(axes):
+def plot_angles(t: np.ndarray, q: np.ndarray, path: str | Path, title: str,
+                outputs: Mapping[str, np.ndarray] | None = None) -> None:
+    """θ1, θ2, θ3 (degrees) against time, like the paper's Figs. 7-9; with the force elements'
+    outputs (name → values, N: a run's `Trajectory.outputs`, e.g. contact forces) a fourth panel."""
+    forces = dict(outputs or {})
+    fig, axes = plt.subplots(3 + bool(forces), 1, sharex=True, figsize=(7, 7 + 2 * bool(forces)))
+    for i, ax in enumerate(axes[:3]):
         ax.plot(t, np.degrees(q[:, i]))
         ax.set_ylabel(f"θ{i + 1} (deg)")
+        ax.grid(True, alpha=0.3)
+    if forces:
+        ax = axes[3]
+        for name, values in forces.items():
+            ax.plot(t, values, label=name, lw=2.0 if name == "grip_force" else 1.0)
+        ax.set_ylabel("force (N)")
+        ax.legend(fontsize=7, ncol=2)
         ax.grid(True, alpha=0.3)
     axes[-1].set_xlabel("t (s)")
     axes[0].set_title(title)

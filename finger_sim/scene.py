@@ -12,6 +12,11 @@ Schema (every key optional; omitted = the spec's default):
       joint_limits: {mcp: [0.0, 1.5708]}   # rad; omit for no stops
       restitution: 0.0           # of the joint stops, in [0, 1]
       geometry: {r1: 0.046, ...} # FingerParams overrides (m, kg, rad)
+      phalanx_radius: [0.008, 0.007]   # m: proximal, distal capsule radii (spec §7)
+      contact: {stiffness: 1.0e5, exponent: 1.5, damping: 1.5, friction: 0.0, slip_velocity: 1.0e-3}
+    objects:                     # omitted or empty = no contact element, no cost (spec §7)
+      - {name: cup, type: circle, center: [0.065, 0.040], radius: 0.012}       # m, model plane
+      - {name: table, type: plane, point: [0.0, 0.045], normal: [0.0, -1.0]}   # object on the side of −normal
     input:
       torque: {type: ramp, offset: 0.001, slope: 0.01}   # N·m, see finger_sim.inputs
     initial: {theta1: 0.0, theta1_dot: 0.0}             # rad, rad/s
@@ -38,6 +43,17 @@ from finger_sim import kinematics
 from finger_sim.dynamics import FingerSystem
 from finger_sim.errors import ConfigError
 from finger_sim.effects import ForceElement, build_elements
+from finger_sim.effects.contact import build_contact
+from finger_sim.effects.contact_geometry import (
+    PHALANX_RADII,
+    Circle,
+    ContactParams,
+    SceneObject,
+    Vec2,
+    contact_params_from_dict,
+    objects_from_list,
+    phalanx_radii_from_value,
+)
 from finger_sim.inputs import BREAK_EPS, Profile, Ramp, profile_from_dict
 from finger_sim.integrators import METHODS
 from finger_sim.model import FingerParams
@@ -61,8 +77,19 @@ MAX_DT = 1.0  # s
 #: Most steps a scene may ask for: 1e12 steps of float64 states are ~100 TB, and
 #: step·dt stops being exact well before 2⁵³.
 MAX_STEPS = 10**12
-_TOP_KEYS = {"name", "description", "model", "input", "initial", "duration", "integrator"}
-_MODEL_KEYS = {"spring_stiffness", "damping", "gravity", "tip_force", "joint_limits", "restitution", "geometry"}
+#: Bounds of the contact law (spec §7; its default k_c is 1e5, the near-rigid scene's 1e7): they
+#: keep the stability check's contact mode finite (k_c e δ^(e−1), μ F / v_s).
+MAX_CONTACT_STIFFNESS = 1e12  # N/m^e
+MAX_CONTACT_EXPONENT = 4.0  # Hertz is 1.5
+MAX_CONTACT_DAMPING = 1e3  # s/m
+MAX_FRICTION = 10.0
+MIN_SLIP_VELOCITY = 1e-9  # m/s
+#: Largest object coordinate or radius, and phalanx radius, m (a finger is ~0.1 m).
+MAX_EXTENT = 10.0
+_TOP_KEYS = {"name", "description", "model", "input", "initial", "duration", "integrator", "objects"}
+_MODEL_KEYS = {
+    "spring_stiffness", "damping", "gravity", "tip_force", "joint_limits", "restitution", "geometry", "phalanx_radius", "contact",
+}
 
 
 @dataclass(frozen=True)
@@ -78,6 +105,9 @@ class Scene:
     tip_force: tuple[float, float] = (0.0, 0.0)
     mcp_limits: tuple[float, float] | None = None
     restitution: float = 0.0
+    phalanx_radius: Vec2 = PHALANX_RADII
+    contact: ContactParams = field(default_factory=ContactParams)
+    objects: tuple[SceneObject, ...] = ()
     torque: Profile = field(default_factory=lambda: Ramp(offset=0.001, slope=0.01))
     theta1: float = 0.0
     theta1_dot: float = 0.0
@@ -112,6 +142,8 @@ class Scene:
             "tip_force": list(self.tip_force),
             "restitution": self.restitution,
             "geometry": asdict(self.params),
+            "phalanx_radius": list(self.phalanx_radius),
+            "contact": asdict(self.contact),
         }
         if self.mcp_limits is not None:
             model["joint_limits"] = {"mcp": list(self.mcp_limits)}
@@ -123,6 +155,7 @@ class Scene:
             "initial": {"theta1": self.theta1, "theta1_dot": self.theta1_dot},
             "duration": self.duration,
             "integrator": {"method": self.method, "dt": self.dt},
+            "objects": [_object_dict(obj) for obj in self.objects],
         }
 
     def to_yaml(self) -> str:
@@ -201,6 +234,9 @@ def scene_from_dict(data: Any, *, default_name: str = "scene") -> Scene:
         tip_force=pair(model.get("tip_force", [0.0, 0.0]), "model.tip_force", MAX_TIP_FORCE),
         mcp_limits=mcp,
         restitution=number(model.get("restitution", Scene.restitution), "model.restitution", minimum=0.0, maximum=1.0),
+        phalanx_radius=_phalanx_radius(model.get("phalanx_radius")),
+        contact=_contact(model.get("contact")),
+        objects=_objects(data.get("objects")),
         torque=profile_from_dict(inp["torque"]) if "torque" in inp else Ramp(offset=0.001, slope=0.01),
         theta1=number(initial.get("theta1", Scene.theta1), "initial.theta1"),
         theta1_dot=magnitude(initial.get("theta1_dot", Scene.theta1_dot), "initial.theta1_dot", MAX_RATE),
@@ -208,7 +244,10 @@ def scene_from_dict(data: Any, *, default_name: str = "scene") -> Scene:
         method=method,
         dt=dt,
     )
-    scene.initial_state()  # refuses a θ1 outside the assemblable range, or at a toggle
+    q0, _ = scene.initial_state()  # refuses a θ1 outside the assemblable range, or at a toggle
+    contact = build_contact(scene)
+    if contact is not None:
+        contact.check_clearance(q0)  # an object overlapping a phalanx at the start: objects[i]
     if mcp is not None and not (mcp[0] <= scene.theta1 <= mcp[1]):
         raise ConfigError("initial.theta1", f"an angle within model.joint_limits.mcp {list(mcp)} rad", scene.theta1)
     if scene.dt > scene.duration:
@@ -221,6 +260,48 @@ def scene_from_dict(data: Any, *, default_name: str = "scene") -> Scene:
             scene.torque.to_dict()["frequency"],  # only periodic profiles have a shortest interval
         )
     return scene
+
+
+def _phalanx_radius(value: Any) -> Vec2:
+    """`model.phalanx_radius`, each radius at most MAX_EXTENT."""
+    radii = phalanx_radii_from_value(value)
+    for i, r in enumerate(radii):
+        number(r, f"model.phalanx_radius[{i}]", maximum=MAX_EXTENT)
+    return radii
+
+
+def _contact(value: Any) -> ContactParams:
+    """`model.contact` (spec §7 defaults), bounded by the MAX_CONTACT_* constants."""
+    params = contact_params_from_dict(value)
+    key = "model.contact."
+    number(params.stiffness, key + "stiffness", maximum=MAX_CONTACT_STIFFNESS)
+    number(params.exponent, key + "exponent", maximum=MAX_CONTACT_EXPONENT)
+    number(params.damping, key + "damping", maximum=MAX_CONTACT_DAMPING)
+    number(params.friction, key + "friction", maximum=MAX_FRICTION)
+    number(params.slip_velocity, key + "slip_velocity", minimum=MIN_SLIP_VELOCITY)
+    return params
+
+
+def _objects(value: Any) -> tuple[SceneObject, ...]:
+    """Top-level `objects` (omitted or [] = none): names at most NAME_LENGTH characters,
+    coordinates and radii within MAX_EXTENT."""
+    objects = objects_from_list(value)
+    for i, obj in enumerate(objects):
+        where = f"objects[{i}]"
+        text(obj.name, f"{where}.name", NAME_LENGTH)
+        if isinstance(obj, Circle):
+            pair(obj.center, f"{where}.center", MAX_EXTENT)
+            number(obj.radius, f"{where}.radius", maximum=MAX_EXTENT)
+        else:
+            pair(obj.point, f"{where}.point", MAX_EXTENT)
+    return objects
+
+
+def _object_dict(obj: SceneObject) -> dict[str, Any]:
+    """One object in the `objects:` schema."""
+    if isinstance(obj, Circle):
+        return {"name": obj.name, "type": "circle", "center": list(obj.center), "radius": obj.radius}
+    return {"name": obj.name, "type": "plane", "point": list(obj.point), "normal": list(obj.normal)}
 
 
 def _check_steps(duration: float, dt: float) -> None:

@@ -54,10 +54,23 @@ def fastest_mode(system: FingerSystem, theta1_range: tuple[float, float]) -> com
     worst = 0j
     for i in range(SAMPLES):
         q = kinematics.assemble(system.params, lo + (hi - lo) * i / (SAMPLES - 1))
+        if inside_object(system, q):
+            continue
         for s in modal_roots(system, q):
             if abs(s) > abs(worst):
                 worst = s
     return worst
+
+
+def inside_object(system: FingerSystem, q: Vec3) -> bool:
+    """Whether a phalanx overlaps an object at q (a kink gap, e.g. contact, is closed).
+
+    `fastest_mode` skips such poses: the finger stops at an object's surface, so a pose deep
+    inside it (the sampled range passes through every object) is never reached, and its contact
+    mode (k_c e δ^(e−1) at δ of centimetres, or Hunt–Crossley damping at kilonewtons) is not the
+    run's. The contact element shows its mode at the open poses through its design-force floor.
+    """
+    return any(g < 0.0 and e.impact(i) is None for e in system.elements if not e.smooth for i, g in enumerate(e.gaps(q)))
 
 
 def stable_at(method: type[Integrator], root: complex, dt: float) -> bool:

@@ -6,11 +6,14 @@ from __future__ import annotations
 import math
 import os
 import re
+from dataclasses import asdict
 
 import pytest
 import yaml
 
 import reference as ref
+from finger_sim.effects.contact import Contact
+from finger_sim.effects.contact_geometry import Circle, ContactParams, Plane
 from finger_sim.errors import ConfigError
 from finger_sim.inputs import Constant, Ramp, Sine, Square, Step
 from finger_sim.integrators import METHODS
@@ -23,8 +26,11 @@ SHIPPED = sorted(p for p in ref.CONFIG.glob("*.yaml") if p.name != "finger_node.
 LO, HI = assembly_range(FingerParams())
 
 
-def test_all_six_scenes_are_shipped():
-    assert [p.stem for p in SHIPPED] == ["bang_bang", "free_swing", "paper_flexion", "paper_to_stop", "stiff_spring", "toggle_passage"]
+def test_every_scene_is_shipped():
+    assert [p.stem for p in SHIPPED] == [
+        "bang_bang", "finger_default", "free_swing", "grasp_cylinder", "grasp_impact", "grasp_rigid",
+        "paper_flexion", "paper_to_stop", "press_table", "stiff_spring", "toggle_passage",
+    ]
 
 
 @pytest.mark.parametrize("path", SHIPPED, ids=lambda p: p.stem)
@@ -45,6 +51,11 @@ def test_shipped_scene_holds_the_numbers_in_its_file(path):
     assert scene.duration == raw["duration"]
     assert (scene.method, scene.dt) == (raw["integrator"]["method"], raw["integrator"]["dt"])
     assert scene.params == FingerParams()
+    assert scene.phalanx_radius == tuple(model.get("phalanx_radius", [0.008, 0.007]))
+    assert asdict(scene.contact) == {**asdict(ContactParams()), **model.get("contact", {})}
+    assert [_object_dict(obj) for obj in scene.objects] == raw.get("objects", [])
+    # a scene with objects has the contact element, one without has none
+    assert any(isinstance(e, Contact) for e in scene.force_elements()) == bool(raw.get("objects"))
 
 
 @pytest.mark.parametrize("path", SHIPPED, ids=lambda p: p.stem)
@@ -118,8 +129,8 @@ def refusal(data) -> str:
     ("data", "message"),
     [
         # unknown keys, top level and nested
-        ({"modle": {}}, "scene: expected only the keys ['description', 'duration', 'initial', 'input', 'integrator', 'model', 'name'], got 'modle'"),
-        ({"model": {"stiffness": 1.0}}, "model: expected only the keys ['damping', 'geometry', 'gravity', 'joint_limits', 'restitution', 'spring_stiffness', 'tip_force'], got 'stiffness'"),
+        ({"modle": {}}, "scene: expected only the keys ['description', 'duration', 'initial', 'input', 'integrator', 'model', 'name', 'objects'], got 'modle'"),
+        ({"model": {"stiffness": 1.0}}, "model: expected only the keys ['contact', 'damping', 'geometry', 'gravity', 'joint_limits', 'phalanx_radius', 'restitution', 'spring_stiffness', 'tip_force'], got 'stiffness'"),
         ({"model": {"geometry": {"r5": 0.01}}}, "model.geometry: expected only the keys ['L3', 'm1', 'm2', 'm3', 'r1', 'r2', 'r3', 'r4', 'theta4'], got 'r5'"),
         ({"model": {"joint_limits": {"pip": [0, 1]}}}, "model.joint_limits: expected only the keys ['mcp'], got 'pip'"),
         ({"initial": {"theta2": 0.1}}, "initial: expected only the keys ['theta1', 'theta1_dot'], got 'theta2'"),
@@ -320,3 +331,90 @@ def test_the_default_method_is_auto():
     """Issue 8.7: a scene that named no method stepped with rk4."""
     assert Scene().method == "auto" and scene_from_dict({}).method == "auto"
     assert scene_from_dict({"integrator": {"dt": 0.002}}).to_dict()["integrator"]["method"] == "auto"
+
+
+# -- issue 12: objects, contact law, phalanx radii ---------------------------------------------
+CUP = {"name": "cup", "type": "circle", "center": [0.065, 0.04], "radius": 0.012}
+TABLE = {"name": "table", "type": "plane", "point": [0.0, 0.045], "normal": [0.0, -1.0]}
+
+
+def _object_dict(obj) -> dict:
+    """An object back in the schema, written here independently of Scene.to_dict."""
+    if isinstance(obj, Circle):
+        return {"name": obj.name, "type": "circle", "center": list(obj.center), "radius": obj.radius}
+    return {"name": obj.name, "type": "plane", "point": list(obj.point), "normal": list(obj.normal)}
+
+
+def test_objects_contact_and_radii_are_read_and_round_trip(tmp_path):
+    data = {
+        "model": {"phalanx_radius": [0.009, 0.006], "contact": {"stiffness": 2.0e5, "exponent": 1.0, "damping": 0.5, "friction": 0.3, "slip_velocity": 0.01}},
+        "objects": [CUP, {**TABLE, "normal": [0.3, -2.0]}],
+    }
+    scene = scene_from_dict(data)
+    assert scene.phalanx_radius == (0.009, 0.006)
+    assert scene.contact == ContactParams(2.0e5, 1.0, 0.5, 0.3, 0.01)
+    assert scene.objects[0] == Circle("cup", (0.065, 0.04), 0.012)
+    plane = scene.objects[1]
+    assert isinstance(plane, Plane) and math.hypot(*plane.normal) == pytest.approx(1.0, abs=1e-15)
+    assert plane.normal[0] / plane.normal[1] == pytest.approx(0.3 / -2.0, rel=1e-15)
+    (contact,) = [e for e in scene.force_elements() if isinstance(e, Contact)]
+    assert (contact.radii, contact.contact, contact.objects) == (scene.phalanx_radius, scene.contact, scene.objects)
+    # the log stores the resolved scene: it reads back equal (the normalized normal bit for bit)
+    assert scene_from_dict(scene.to_dict()) == scene
+    copy = tmp_path / "copy.yaml"
+    copy.write_text(scene.to_yaml())
+    assert load_scene(copy) == scene
+    assert yaml.safe_load(copy.read_text())["objects"][1]["normal"] == list(plane.normal)
+
+
+def test_no_objects_means_no_contact_element_and_the_spec_defaults():
+    for data in ({}, {"objects": []}, {"objects": None}):
+        scene = scene_from_dict(data)
+        assert scene.objects == () and not any(isinstance(e, Contact) for e in scene.force_elements())
+    scene = scene_from_dict({"objects": [CUP]})
+    assert scene.phalanx_radius == (0.008, 0.007)
+    assert scene.contact == ContactParams(stiffness=1.0e5, exponent=1.5, damping=1.5, friction=0.0, slip_velocity=1.0e-3)
+    assert scene.to_dict()["model"]["contact"] == {"stiffness": 1.0e5, "exponent": 1.5, "damping": 1.5, "friction": 0.0, "slip_velocity": 1.0e-3}
+
+
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        ({"objects": [{**CUP, "radius": 0.0}]}, "objects[0].radius: expected a finite radius > 0 (m), got 0.0"),
+        ({"objects": [CUP, {**TABLE, "normal": [0.0, 0.0]}]}, "objects[1].normal: expected a non-zero direction (|n| ≥ 1e-09; it is normalized), got [0.0, 0.0]"),
+        ({"objects": [{**CUP, "type": "box"}]}, "objects[0].type: expected one of ['circle', 'plane'], got 'box'"),
+        ({"objects": [{"name": "t", "type": "plane", "point": [0.0, 0.05]}]}, "objects[0].normal: expected a value (required for a plane), got None"),
+        ({"objects": {"cup": CUP}}, "objects: expected a list of objects ({name, type: circle|plane, ...}), got {'cup': " + repr(CUP) + "}"),
+        ({"objects": [CUP, {**CUP, "center": [0.0, 0.09]}]}, "objects[1].name: expected a name no other object uses, got 'cup'"),
+        ({"objects": [{**CUP, "center": [0.065, 1e300]}]}, "objects[0].center[1]: expected a number with magnitude ≤ 10, got 1e+300"),
+        ({"objects": [{**CUP, "radius": 100.0}]}, "objects[0].radius: expected a number ≤ 10, got 100.0"),
+        ({"objects": [{**CUP, "name": "x" * 65}]}, "objects[0].name: expected a string of at most 64 characters, got '65 characters'"),
+        ({"model": {"contact": {"stiffness": -1.0}}}, "model.contact.stiffness: expected a finite number > 0, got -1.0"),
+        ({"model": {"contact": {"stiffness": 1e300}}}, "model.contact.stiffness: expected a number ≤ 1e+12, got 1e+300"),
+        ({"model": {"contact": {"exponent": 1e300}}}, "model.contact.exponent: expected a number ≤ 4, got 1e+300"),
+        ({"model": {"contact": {"slip_velocity": 1e-300}}}, "model.contact.slip_velocity: expected a number ≥ 1e-09, got 1e-300"),
+        ({"model": {"contact": {"stifness": 1.0}}}, "model.contact: expected only the keys ['damping', 'exponent', 'friction', 'slip_velocity', 'stiffness'], got 'stifness'"),
+        ({"model": {"phalanx_radius": [0.008]}}, "model.phalanx_radius: expected [proximal, distal] capsule radii (m), got [0.008]"),
+        ({"model": {"phalanx_radius": [0.008, -0.007]}}, "model.phalanx_radius[1]: expected a finite radius > 0 (m), got -0.007"),
+    ],
+)
+def test_bad_objects_and_contact_values_are_refused_naming_the_key(data, message):
+    assert refusal(data) == message
+
+
+def test_an_object_overlapping_a_phalanx_at_the_initial_state_is_refused(tmp_path):
+    """The distal capsule's axis ends at the tip (0.0885, 0) at θ1 = 0: a cup 1 mm into it is refused."""
+    tip_x = FingerParams().r1 + FingerParams().L3
+    mug = {"name": "mug", "type": "circle", "center": [tip_x + 0.007 + 0.012 - 0.001, 0.0], "radius": 0.012}
+    msg = refusal({"objects": [CUP, mug]})
+    assert msg.startswith("objects[1]: expected an object clear of the phalanges at the initial state (overlap ≤ 0.0001 m), got ")
+    assert "'mug' overlaps the distal phalanx by 0.001" in msg and "\n" not in msg
+    # the same cup is clear at another initial pose, and within the tolerance it is accepted
+    assert scene_from_dict({"objects": [mug], "initial": {"theta1": 0.3}}).objects[0].name == "mug"
+    mug["center"][0] += 0.001 - 0.5e-4
+    assert scene_from_dict({"objects": [mug]}).objects[0].name == "mug"
+    # through a file, the refusal names the file too
+    path = tmp_path / "overlap.yaml"
+    path.write_text(yaml.safe_dump({"objects": [{**mug, "center": [tip_x + 0.018, 0.0]}]}))
+    with pytest.raises(ConfigError, match=r"^overlap\.yaml: objects\[0\]: expected an object clear of the phalanges"):
+        load_scene(path)

@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING, ClassVar
 from finger_sim.effects.base import Vec3, effect
 from finger_sim.effects.contact_geometry import PHALANX_RADII, Circle, ContactParams, Plane, SceneObject, Vec2
 from finger_sim.errors import ConfigError
+from finger_sim.kernel.layout import CONTACT
 from finger_sim.kinematics import distal_offset
 from finger_sim.model import FingerParams
 
@@ -78,6 +79,7 @@ class Contact:
 
     #: Q depends on q' through δ' δ^e and tanh(v_t / v_s): not affine in q'.
     affine_in_velocity: ClassVar[bool] = False
+    kernel_code: ClassVar[int] = CONTACT
     #: F_n ∝ δ^e is not smooth at onset: onset and release are events (see `gaps`).
     smooth: ClassVar[bool] = False
 
@@ -124,6 +126,21 @@ class Contact:
         self._dist_circles = tuple(dist_circles)
         self._ends = tuple(ends)
         self._tips = tuple(tips)
+
+    def kernel_params(self) -> tuple[float, ...]:
+        """(r1, L3, α, k, e, d, μ, v_s, counts of the four candidate kinds, then the candidates):
+        what `finger_sim.kernel.numerics` reads to compute `force`."""
+        out = [self._r1, self._l3, self.alpha, self._k, self._e, self._d, self._mu, self._vs,
+               len(self._prox_circles), len(self._dist_circles), len(self._ends), len(self._tips)]
+        for _, cx, cy, rad in self._prox_circles:
+            out += [cx, cy, rad]
+        for _, cx, cy, rad, reach2 in self._dist_circles:
+            out += [cx, cy, rad, reach2]
+        for _, _, ox, oy, nx, ny, rho in self._ends:
+            out += [ox, oy, nx, ny, rho]
+        for _, ox, oy, nx, ny, rho, reach in self._tips:
+            out += [ox, oy, nx, ny, rho, reach]
+        return tuple(float(x) for x in out)
 
     # -- geometry ------------------------------------------------------------------------
     def _hits(self, q: Vec3, all_candidates: bool) -> list[_Hit]:

@@ -20,6 +20,8 @@ Vec2 = tuple[float, float]
 PHALANX_RADII: Vec2 = (0.008, 0.007)
 #: A plane normal shorter than this (in the scene's units, m) has no direction.
 MIN_NORMAL_NORM = 1e-9
+#: Most normalization passes of a plane's normal; a fixed point is reached within 3.
+NORMALIZE_PASSES = 8
 
 OBJECT_TYPES = ("circle", "plane")
 _OBJECT_KEYS = {"circle": {"name", "type", "center", "radius"}, "plane": {"name", "type", "point", "normal"}}
@@ -59,7 +61,14 @@ class Plane:
         norm = math.hypot(nx, ny)
         if norm < MIN_NORMAL_NORM:
             raise ConfigError("normal", f"a non-zero direction (|n| ≥ {MIN_NORMAL_NORM:g}; it is normalized)", list(self.normal))
-        object.__setattr__(self, "normal", (nx / norm, ny / norm))
+        # Normalize to a fixed point (2–3 passes): a stored normal then reads back bit for bit,
+        # so a logged scene re-simulates exactly.
+        for _ in range(NORMALIZE_PASSES):
+            unit = (nx / norm, ny / norm)
+            if unit == (nx, ny):
+                break
+            (nx, ny), norm = unit, math.hypot(*unit)
+        object.__setattr__(self, "normal", (nx, ny))
 
 
 SceneObject = Circle | Plane
