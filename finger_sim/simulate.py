@@ -1,16 +1,18 @@
-"""Fixed-rate stepping of a scene: the time grid, torque breakpoints, joint stops, checks.
+"""Fixed-rate stepping of a scene: the time grid, torque breakpoints, events, checks.
 
 `Simulator` advances exactly dt per step (t = n·dt, never accumulated), whatever the
 integrator, so the node and offline runs share one path and the same torques at the
-same steps give bit-identical states. `simulate` runs a whole scene offline.
+same steps give bit-identical states. Events of the non-smooth force elements (a stop
+impact, a contact onset) are located inside the step and the step is split there.
+`simulate` runs a whole scene offline.
 """
 
 from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import NamedTuple
 
@@ -18,22 +20,30 @@ import numpy as np
 from scipy.optimize import brentq
 
 from finger_sim import kinematics
+from finger_sim.auto import choose_method, contact_substeps
+from finger_sim.effects import ForceElement
 from finger_sim.errors import SimulationDiverged, StabilityError
 from finger_sim.inputs import Profile
 from finger_sim.integrators import METHODS, Integrator, TorqueFn
+from finger_sim.kernel import offline_kernel
+from finger_sim.kernel import select as select_kernel
+from finger_sim.kernel.runner import advance, can_run
 from finger_sim.kinematics import Vec3
 from finger_sim.scene import AUTO, Scene
-from finger_sim.auto import choose_method
-from finger_sim.stability import fastest_mode, largest_stable_dt, stable_at
+from finger_sim.stability import fastest_mode, largest_stable_dt, mcp_range, stable_at
 
-#: A joint-stop crossing is located to this tolerance on θ1, rad.
-STOP_TOLERANCE = 1e-12
+#: A gap crossing (a stop) is located to this tolerance on the gap (rad for the MCP stops);
+#: a gap counts as closed below −EVENT_TOLERANCE.
+EVENT_TOLERANCE = 1e-12
 #: Regula-falsi iterations allowed to locate one crossing.
 MAX_LOCATE_ITERATIONS = 60
 #: The release from a stop is located to this fraction of the step.
 RELEASE_TOLERANCE = 1e-12
-#: Impacts allowed within one step before the run is declared chattering.
-MAX_IMPACTS_PER_STEP = 8
+#: Events (impacts, kinks) allowed within one step before the run is declared chattering.
+MAX_EVENTS_PER_STEP = 8
+#: A step is split into substeps (auto on a contact scene) when a contact gap, moving at its
+#: start rate, would close within this many step lengths: margin for the acceleration towards it.
+NEAR_CONTACT = 2.0
 #: A constant torque is split nowhere: a break closer than this (relative to dt) to a
 #: step's end is taken as lying on it.
 BREAK_EPS = 1e-9
@@ -49,31 +59,60 @@ class State(NamedTuple):
     v: Vec3
 
 
+class _Gap(NamedTuple):
+    """One event function of a non-smooth element: gap `index` of `element`, and the restitution
+    of its impact (None: crossing it is a kink only)."""
+
+    element: ForceElement
+    index: int
+    restitution: float | None
+
+
+class _Crossing(NamedTuple):
+    """A located crossing: where the sub-step ends (t, q, q') and the gap that crossed."""
+
+    t: float
+    q: Vec3
+    v: Vec3
+    gap: _Gap
+
+
 class Simulator:
     """Steps one scene at its fixed dt. Torque is the scene's profile, or a held value per step."""
 
-    def __init__(self, scene: Scene) -> None:
+    def __init__(self, scene: Scene, *, kernel: str = "auto") -> None:
+        """kernel: "auto" (compiled where numba and the scene allow), "compiled", "python", or a
+        kernel name recorded by an earlier run; `self.kernel` names the one that runs."""
         self.scene = scene
         self.system = scene.build_system()
         self.dt = scene.dt
         self.method_reason = ""
         method = scene.method
+        #: steps in contact (or closing a contact within the step) are split in this many (auto only)
+        self.substeps = 1
         if method == AUTO:
             method, self.method_reason = choose_method(scene)
+            self.substeps = contact_substeps(scene) if not METHODS[method].implicit else 1
         self._method_cls = METHODS[method]
-        self._check_stability(self._method_cls)
         self.method = method
-        self._limits = scene.mcp_limits
+        self._check_stability(self._method_cls)
+        self._integrator_cls, self.kernel = select_kernel(self._method_cls, self.system, kernel)
+        q0, _ = scene.initial_state()
+        # every gap of every non-smooth element; empty on a smooth scene, which then pays nothing
+        self._gaps = tuple(
+            _Gap(e, i, e.impact(i)) for e in self.system.elements if not e.smooth for i in range(len(e.gaps(q0)))
+        )
+        self._kinks = tuple(gap for gap in self._gaps if gap.restitution is None) if self.substeps > 1 else ()
         self.reset()
 
     def reset(self) -> None:
         """Back to the scene's initial state at t = 0."""
         # A fresh integrator: a warm start kept from the last run (adaptive's step size,
         # rattle's Jacobian) would make the rerun differ in the last bits.
-        self.integrator: Integrator = self._method_cls(self.system)
+        self.integrator: Integrator = self._integrator_cls(self.system)
         self.step_index = 0
         self.q, self.v = self.scene.initial_state()
-        self._contact = 0  # +1 resting on the upper MCP stop, −1 on the lower, 0 free
+        self._resting: _Gap | None = None  # the closed impact gap the finger rests on (a stop)
         #: the motor torque at the end of the last step (N·m): what a JointState effort reports
         self.torque = self.scene.torque(0.0)
         self.impacts = 0
@@ -102,59 +141,138 @@ class Simulator:
         else:
             value = self.torque = float(profile)
             self._advance(t0, t1, lambda s: value)
-        if not all(math.isfinite(c) for c in self.q + self.v):
-            raise SimulationDiverged(f"{self.method}: non-finite state at t = {t1:.6f} s (step {self.step_index + 1})")
+        if not math.isfinite(sum(self.q) + sum(self.v)):  # a NaN or inf anywhere makes the sum non-finite
+            raise SimulationDiverged(f"non-finite state (step {self.step_index + 1})", method=self.method, t=t1, dt=self.dt)
         self.step_index += 1
         return self.state
 
     # -- internals ---------------------------------------------------------------------
     def _check_stability(self, cls: type[Integrator]) -> None:
-        root = fastest_mode(self.system, self.scene.mcp_limits or kinematics.assembly_range(self.scene.params))
-        if not stable_at(cls, root, self.dt):
-            safe = largest_stable_dt(cls, root, self.dt)
-            raise StabilityError(
-                f"integrator.method: {cls.name} is unstable for scene '{self.scene.name}' at dt = {self.dt:g} s "
-                f"(fastest mode |s| = {abs(root):.4g} 1/s, |s|·dt = {abs(root) * self.dt:.3g}); "
-                f"use an implicit method (radau) or auto, or dt ≤ {safe:.3g} s"
-            )
+        root = fastest_mode(self.system, mcp_range(self.scene))
+        if not stable_at(cls, root, self.dt / self.substeps):
+            raise StabilityError(cls.name, self.scene.name, self.dt, root, largest_stable_dt(cls, root, self.dt))
 
     def _advance(self, t0: float, t1: float, torque: TorqueFn) -> None:
-        """Integrate [t0, t1] under a smooth torque, resolving MCP stop impacts on the way."""
+        """Integrate [t0, t1] under a smooth torque, splitting it at every event on the way."""
+        if not self._gaps:
+            self.q, self.v = self.integrator.step(t0, self.q, self.v, t1 - t0, torque)
+            return
         t, q, v = t0, self.q, self.v
-        for _ in range(MAX_IMPACTS_PER_STEP):
-            if self._contact:
-                release = self._release_time(t, t1, q, torque)
+        for _ in range(MAX_EVENTS_PER_STEP):
+            if self._resting is not None:
+                release = self._release_time(self._resting, t, t1, q, torque)
                 if release is None:  # held on the stop for the whole segment
                     self.q, self.v = q, ZERO
                     return
-                t, v, self._contact = release, ZERO, 0
-            q1, v1 = self.integrator.step(t, q, v, t1 - t, torque)
-            side = self._violated(q1[0])
-            if not side:
+                t, v, self._resting = release, ZERO, None
+            q1, v1 = self._step(t, q, v, t1 - t, torque)
+            crossing = self._first_crossing(t, q, v, t1, q1, torque)
+            if crossing is None:
                 self.q, self.v = q1, v1
                 return
-            t, q, v = self._impact(t, q, v, t1, torque, side)
-        raise SimulationDiverged(f"more than {MAX_IMPACTS_PER_STEP} stop impacts in one step at t = {t0:.6f} s")
+            t, q, v = crossing.t, crossing.q, crossing.v
+            if crossing.gap.restitution is not None:
+                v = self._impact(crossing, torque)
+        raise SimulationDiverged(f"more than {MAX_EVENTS_PER_STEP} events (stop impacts, contact changes) in one step",
+                                 method=self.method, t=t0, dt=self.dt)
 
-    def _violated(self, theta1: float) -> int:
-        if self._limits is None:
-            return 0
-        if theta1 > self._limits[1] + STOP_TOLERANCE:
-            return +1
-        if theta1 < self._limits[0] - STOP_TOLERANCE:
-            return -1
-        return 0
+    def _step(self, t: float, q: Vec3, v: Vec3, h: float, torque: TorqueFn) -> tuple[Vec3, Vec3]:
+        """One integrator step of length h, split in `substeps` equal ones when a contact gap is
+        closed at its start or closes within it (gap + NEAR_CONTACT·h·gap' < 0)."""
+        for gap in self._kinks:
+            g = gap.element.gaps(q)[gap.index]
+            n = gap.element.gap_gradient(gap.index, q)
+            if g + NEAR_CONTACT * h * min(0.0, n[0] * v[0] + n[1] * v[1] + n[2] * v[2]) < 0.0:
+                m = self.substeps
+                for k in range(m):
+                    q, v = self.integrator.step(t + h * k / m, q, v, h / m, torque)
+                return q, v
+        return self.integrator.step(t, q, v, h, torque)
 
-    def _release_time(self, t: float, t1: float, q: Vec3, torque: TorqueFn) -> float | None:
-        """When in [t, t1] the finger resting on the stop leaves it; None if it stays throughout.
+    def _first_crossing(self, t: float, q: Vec3, v: Vec3, t1: float, q1: Vec3, torque: TorqueFn) -> _Crossing | None:
+        """The earliest gap crossing in (t, t1] of the step (t, q, q') → (t1, q1), or None.
 
-        At rest on the stop q is fixed and q' = 0, so the free acceleration is a function of
-        time alone: the release is the root of its component into the stop, found by brentq.
+        An impact gap (a stop) crosses when it is closed at the step's end; a kink gap when it
+        is open at one end of the step and closed at the other.
         """
+        first: _Crossing | None = None
+        for gap in self._gaps:
+            crossed = gap.element.gaps(q1)[gap.index] < -EVENT_TOLERANCE
+            if gap.restitution is None:  # a kink: crossed when open and closed differ at the two ends
+                crossed = crossed != (gap.element.gaps(q)[gap.index] < -EVENT_TOLERANCE)
+            if crossed:
+                crossing = self._locate(gap, t, q, v, t1, torque)
+                if first is None or crossing.t < first.t:
+                    first = crossing
+        return first
+
+    def _locate(self, gap: _Gap, t: float, q: Vec3, v: Vec3, t1: float, torque: TorqueFn) -> _Crossing:
+        """Where in (t, t1] the gap crosses zero: Illinois regula falsi on g(s) = gap(q(s)).
+
+        An impact is applied at the located point (|g| ≤ EVENT_TOLERANCE); a kink's step ends
+        on its far side, so that the rest of the step does not see the crossing again.
+        """
+        step, element, index = self._step, gap.element, gap.index
+
+        def at(s: float) -> tuple[float, Vec3, Vec3]:
+            qs, vs = step(t, q, v, s - t, torque)
+            return element.gaps(qs)[index], qs, vs
+
+        # g(t) and g(t1) have opposite signs.
+        a, ga = t, element.gaps(q)[index]
+        b = t1
+        gb, qb, vb = at(b)
+        keep = 0
+        for _ in range(MAX_LOCATE_ITERATIONS):
+            s = b - gb * (b - a) / (gb - ga)
+            # A step that starts on the gap (g(t) = 0) crosses at t itself: stepping a
+            # zero-length interval would divide by zero in rattle and fail in scipy.
+            gs, qs, vs = at(s) if s > t else (element.gaps(q)[index], q, v)
+            if abs(gs) <= EVENT_TOLERANCE or s <= a or s >= b:
+                break
+            if (gs > 0) == (gb > 0):
+                b, gb, qb, vb = s, gs, qs, vs
+                ga = ga / 2 if keep == 1 else ga  # Illinois: halve the stale end's value
+                keep = 1
+            else:
+                a, ga = s, gs
+                gb = gb / 2 if keep == -1 else gb
+                keep = -1
+        if gap.restitution is None and (gs < -EVENT_TOLERANCE) != (element.gaps(qb)[index] < -EVENT_TOLERANCE):
+            return _Crossing(b, qb, vb, gap)  # the kink's far side
+        return _Crossing(s, qs, vs, gap)
+
+    def _impact(self, crossing: _Crossing, torque: TorqueFn) -> Vec3:
+        """q' just after the impact of a located crossing: −e q', or rest (zero) on the closed gap.
+
+        One degree of freedom: q' lies on the null space of Φ_q, so the impulse along the gap
+        scales the whole velocity: v⁺ = −e v⁻. Constraints hold; kinetic energy × e².
+        """
+        s, qs, vs, gap = crossing
+        assert gap.restitution is not None
+        self.impacts += 1
+        e = gap.restitution
+        v_plus = (-e * vs[0], -e * vs[1], -e * vs[2])
+        a_free, _ = self.system.accelerations(s, qs, ZERO, torque(s))
+        n = gap.element.gap_gradient(gap.index, qs)
+        closing = n[0] * a_free[0] + n[1] * a_free[1] + n[2] * a_free[2]  # d²gap/dt² at rest
+        rate = n[0] * v_plus[0] + n[1] * v_plus[1] + n[2] * v_plus[2]
+        if closing < 0.0 and abs(rate) <= abs(closing) * self.dt:  # would be back within a step: rest
+            self._resting = gap
+            return ZERO
+        return v_plus
+
+    def _release_time(self, gap: _Gap, t: float, t1: float, q: Vec3, torque: TorqueFn) -> float | None:
+        """When in [t, t1] the finger resting on a closed gap leaves it; None if it stays throughout.
+
+        At rest q is fixed and q' = 0, so the free acceleration is a function of time alone:
+        the release is the root of its component into the gap, found by brentq.
+        """
+        n = gap.element.gap_gradient(gap.index, q)
 
         def push(s: float) -> float:
             a, _ = self.system.accelerations(s, q, ZERO, torque(s))
-            return a[0] * self._contact
+            return -(n[0] * a[0] + n[1] * a[1] + n[2] * a[2])
 
         if push(t) <= 0.0:
             return t
@@ -162,52 +280,22 @@ class Simulator:
             return None
         return brentq(push, t, t1, xtol=RELEASE_TOLERANCE * (t1 - t), rtol=4 * np.finfo(float).eps)
 
-    def _impact(self, t: float, q: Vec3, v: Vec3, t1: float, torque: TorqueFn, side: int) -> tuple[float, Vec3, Vec3]:
-        """Locate the crossing in (t, t1], apply the impact there; returns (t*, q*, v⁺)."""
-        assert self._limits is not None
-        limit = self._limits[1] if side > 0 else self._limits[0]
-        step = self.integrator.step
 
-        def gap(s: float) -> tuple[float, Vec3, Vec3]:
-            qs, vs = step(t, q, v, s - t, torque)
-            return qs[0] - limit, qs, vs
+def output_names(elements: Sequence[ForceElement], q: Vec3) -> tuple[str, ...]:
+    """The names of every element's `outputs` (e.g. contact's grip_force, N), in element order:
+    the extra columns of a run's CSV. Asked at a pose q; an element reports the same names at every state."""
+    return tuple(name for e in elements for name in e.outputs(0.0, q, ZERO))
 
-        # Illinois regula falsi on g(s) = θ1(s) − limit; g(t) and g(t1) have opposite signs.
-        a, ga = t, q[0] - limit
-        b = t1
-        gb, qb, vb = gap(b)
-        keep = 0
-        for _ in range(MAX_LOCATE_ITERATIONS):
-            s = b - gb * (b - a) / (gb - ga)
-            # A step that starts on the stop (g(t) = 0) crosses at t itself: stepping a
-            # zero-length interval would divide by zero in rattle and fail in scipy.
-            gs, qs, vs = gap(s) if s > t else (q[0] - limit, q, v)
-            if abs(gs) <= STOP_TOLERANCE or s <= a or s >= b:
-                break
-            if (gs > 0) == (gb > 0):
-                b, gb = s, gs
-                ga = ga / 2 if keep == 1 else ga  # Illinois: halve the stale end's value
-                keep = 1
-            else:
-                a, ga = s, gs
-                gb = gb / 2 if keep == -1 else gb
-                keep = -1
-        self.impacts += 1
-        # One degree of freedom: q' lies on the null space of Φ_q, so the impulse on θ1
-        # scales the whole velocity: v⁺ = −e v⁻. Constraints hold; kinetic energy × e².
-        e = self.scene.restitution
-        v_plus = (-e * vs[0], -e * vs[1], -e * vs[2])
-        a_free, _ = self.system.accelerations(s, qs, ZERO, torque(s))
-        pushing = a_free[0] * side > 0.0
-        if pushing and abs(v_plus[0]) <= abs(a_free[0]) * self.dt:  # would be back within a step: rest
-            self._contact = side
-            v_plus = ZERO
-        return s, qs, v_plus
+
+def output_values(elements: Sequence[ForceElement], t: float, q: Vec3, v: Vec3) -> tuple[float, ...]:
+    """Every element's `outputs` at (t, q, q'), in the order of `output_names`."""
+    return tuple(value for e in elements for value in e.outputs(t, q, v).values())
 
 
 @dataclass
 class Trajectory:
-    """A run sampled at every step, t = 0 included. Angles rad, rates rad/s, energy J, |Φ| m."""
+    """A run sampled at every step, t = 0 included. Angles rad, rates rad/s, energy J, |Φ| m;
+    `outputs`: what the force elements report (name → one value per sample, e.g. grip_force, N)."""
 
     t: np.ndarray
     q: np.ndarray  # (N, 3)
@@ -217,12 +305,19 @@ class Trajectory:
     method: str
     method_reason: str
     wall_time: float  # s, stepping only
+    outputs: dict[str, np.ndarray] = field(default_factory=dict)
 
+    #: The columns every run has; the elements' outputs follow them (`csv_header`).
     CSV_HEADER = "t,theta1,theta2,theta3,theta1_dot,theta2_dot,theta3_dot,energy,constraint_residual"
 
+    @staticmethod
+    def csv_header(output_columns: Sequence[str] = ()) -> str:
+        """The CSV header: CSV_HEADER, then the elements' output names."""
+        return ",".join([Trajectory.CSV_HEADER, *output_columns])
+
     def write_csv(self, path: str | Path) -> None:
-        data = np.column_stack([self.t, self.q, self.v, self.energy, self.residual])
-        np.savetxt(path, data, delimiter=",", header=self.CSV_HEADER, comments="", fmt="%.17g")
+        data = np.column_stack([self.t, self.q, self.v, self.energy, self.residual, *self.outputs.values()])
+        np.savetxt(path, data, delimiter=",", header=self.csv_header(list(self.outputs)), comments="", fmt="%.17g")
 
     def summary(self) -> str:
         deg = np.degrees(self.q[-1])
@@ -234,19 +329,26 @@ class Trajectory:
         )
 
 
-def simulate(scene: Scene, *, on_step: Callable[[State], None] | None = None) -> Trajectory:
-    """Run `scene` from t = 0 to its duration (rounded up to whole steps) and record every step."""
-    sim = Simulator(scene)
+def simulate(scene: Scene, *, kernel: str = "auto") -> Trajectory:
+    """Run `scene` from t = 0 to its duration (rounded up to whole steps) and record every step.
+
+    On the compiled kernel a smooth scene's steps run in one kernel loop (`kernel.runner`);
+    "auto" runs a short scene in Python (`kernel.offline_kernel`: loading numba costs more).
+    """
     n = math.ceil(scene.duration / scene.dt - BREAK_EPS)
+    sim = Simulator(scene, kernel=offline_kernel(kernel, n))
     states = [sim.state]
     start = time.perf_counter()
-    for _ in range(n):
-        state = sim.step()
-        states.append(state)
-        if on_step is not None:
-            on_step(state)
+    if can_run(sim):
+        xs = advance(sim, n)
+        states += [State((k + 1) * sim.dt, tuple(x[:3]), tuple(x[3:])) for k, x in enumerate(xs.tolist())]
+    else:
+        for _ in range(n):
+            states.append(sim.step())
     wall = time.perf_counter() - start
     system, p = sim.system, scene.params
+    names = output_names(system.elements, states[0].q)
+    values = np.array([output_values(system.elements, *s) for s in states]).reshape(len(states), len(names))
     return Trajectory(
         t=np.array([s.t for s in states]),
         q=np.array([s.q for s in states]),
@@ -256,4 +358,5 @@ def simulate(scene: Scene, *, on_step: Callable[[State], None] | None = None) ->
         method=sim.method,
         method_reason=sim.method_reason,
         wall_time=wall,
+        outputs={name: values[:, i] for i, name in enumerate(names)},
     )

@@ -1,0 +1,106 @@
+"""Compiled integrators behind the shared `Integrator.step` interface.
+
+`CompiledRungeKutta` runs any fixed-step explicit method of `finger_sim.integrators`
+(euler, rk4, rk6, dop8: their tableaux as data) in the compiled kernel; the Simulator's
+time grid, breakpoints and events are unchanged. The motor torque stays a Python callable:
+an explicit step's stage times are known before it starts, so τ is evaluated there in
+Python and handed to the kernel as an array.
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import numpy as np
+
+from finger_sim.dynamics import FingerSystem
+from finger_sim.errors import SimulationDiverged
+from finger_sim.integrators.base import Integrator, TorqueFn
+from finger_sim.integrators.explicit import ExplicitRungeKutta, PaperEuler
+from finger_sim.kernel import numerics
+from finger_sim.kernel.layout import distinct_nodes, model_array, tableau_array
+from finger_sim.kinematics import Vec3
+
+#: The state of the throw-away step that loads the compiled code at construction.
+WARM_UP_STATE: Vec3 = (0.0, 0.0, 0.0)
+
+
+def check_status(status: int, method: str, t: float, q: Vec3) -> None:
+    """Raise the Python path's SimulationDiverged for a kernel status other than OK."""
+    if status == numerics.NON_FINITE:
+        raise SimulationDiverged(f"state became non-finite: q = {q}", method=method, t=t)
+    if status == numerics.NOT_CONVERGED:
+        raise SimulationDiverged(f"projection did not converge at q = {q}", method=method, t=t)
+    if status == numerics.STEP_TOO_SMALL:
+        raise SimulationDiverged("the adaptive step fell below its floor", method=method, t=t)
+
+
+class CompiledRungeKutta(Integrator):
+    """A fixed-step explicit method (`PaperEuler` or an `ExplicitRungeKutta` tableau), compiled.
+
+    Same numbers as the Python class it mirrors (to round-off), same class constants, so
+    stability checks and `auto` read it unchanged. Build with `CompiledRungeKutta.of(cls, system)`.
+    """
+
+    reference: ClassVar[type[Integrator]]
+
+    def __init__(self, system: FingerSystem, model: np.ndarray | None = None) -> None:
+        super().__init__(system)
+        self.model = model_array(system) if model is None else model
+        if self.model is None:
+            raise ValueError("a force element of this system has no compiled form (kernel_code)")
+        ref = self.reference
+        if issubclass(ref, ExplicitRungeKutta):
+            self.tableau = tableau_array(ref.A, ref.B, ref.C)
+        else:  # the paper's Euler: an empty tableau, one stage at c = 0
+            self.tableau = np.zeros((3, 0))
+        #: the distinct stage nodes c: τ is evaluated at t + c·dt for each
+        self.nodes = distinct_nodes(ref.C) if issubclass(ref, ExplicitRungeKutta) else (0.0,)
+        # Load the compiled step now (from numba's disk cache: ~0.3-1 s the first time in a
+        # process), not inside the first paced step of the node.
+        numerics.rk_step_tuple(self.model, self.tableau, 0.0, WARM_UP_STATE, WARM_UP_STATE, 0.0,
+                               tuple(0.0 for _ in self.nodes))
+
+    @classmethod
+    def of(cls, method: type[Integrator]) -> type[CompiledRungeKutta]:
+        """The compiled twin of a fixed-step explicit method class."""
+        return type(f"Compiled{method.__name__}", (cls,), {
+            "reference": method, "name": method.name, "order": method.order,
+            "keeps_constraints": method.keeps_constraints, "implicit": method.implicit,
+            "__doc__": f"{method.name}, compiled: {(method.__doc__ or '').splitlines()[0]}",
+        })
+
+    def step(self, t: float, q: Vec3, v: Vec3, dt: float, torque: TorqueFn) -> tuple[Vec3, Vec3]:
+        taus = tuple([torque(t + c * dt) for c in self.nodes])
+        status, q1, v1 = numerics.rk_step_tuple(self.model, self.tableau, t, q, v, dt, taus)
+        if status != numerics.OK:
+            check_status(status, self.name, t, q)
+        return q1, v1
+
+    def run(self, t0: np.ndarray, h: np.ndarray, taus: np.ndarray, x0: tuple[float, ...]) -> np.ndarray:
+        """Many steps at once: step n from t0[n] by h[n] under τ at its `nodes`, taus[n] (N·m).
+
+        Returns the (n + 1) × 6 states (q, q'), x0 first; the same numbers as n calls of `step`.
+        """
+        xs = np.empty((len(t0) + 1, 6))
+        xs[0] = x0
+        status, done = numerics.rk_run(self.model, self.tableau, t0, h, taus, xs)
+        if status != numerics.OK:
+            check_status(status, self.name, float(t0[done]), tuple(xs[done, :3]))
+        return xs
+
+    @classmethod
+    def is_stable(cls, z: complex) -> bool:
+        return cls.reference.is_stable(z)
+
+
+_TWINS: dict[type[Integrator], type[CompiledRungeKutta]] = {}
+
+
+def compiled_twin(method: type[Integrator]) -> type[CompiledRungeKutta] | None:
+    """The compiled class of a fixed-step explicit method (euler and every RK tableau), else None."""
+    if not (method is PaperEuler or issubclass(method, ExplicitRungeKutta)):
+        return None
+    if method not in _TWINS:
+        _TWINS[method] = CompiledRungeKutta.of(method)
+    return _TWINS[method]

@@ -1,0 +1,69 @@
+"""The compiled kernel's data: a finger system flattened into one float64 array (no numba here).
+
+The kernel reads the model as pure data, so one compiled function serves every scene:
+
+    [0:10]  m11, m22, m33, c, r1, r2, r3, α, k1 = r4 cos θ4, k2 = r4 sin θ4   (SI, rad)
+    [10]    number of force elements
+    then per element, in the system's summation order: code, n, then its n parameters.
+
+An element's compiled form is `kernel_code` (one of the codes below) and `kernel_params()`
+(floats) on the element itself (see `finger_sim.effects.base.ForceElement`); an element
+without them has no compiled form, and the Simulator then steps the scene in Python.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from finger_sim.dynamics import FingerSystem
+
+#: Codes of the compiled force elements. NO_FORCE: an element whose Q is zero (the stops).
+NO_FORCE = 0
+SPRING = 1
+DAMPING = 2
+GRAVITY = 3
+TIP_FORCE = 4
+CONTACT = 5
+CODES = (NO_FORCE, SPRING, DAMPING, GRAVITY, TIP_FORCE, CONTACT)
+#: Length of the system header before the element count.
+HEADER = 10
+
+
+def model_array(system: "FingerSystem") -> np.ndarray | None:
+    """The flat model of `system` for the kernel, or None when an element has no compiled form."""
+    p = system.params
+    # the same expressions as FingerSystem.__init__, so the compiled solve sees the same bits
+    data = [
+        p.inertia_A + p.m3 * p.r1**2, p.inertia_D, p.inertia_G3 + p.m3 * p.L3**2 / 4.0,
+        p.m3 * p.r1 * p.L3 / 2.0, p.r1, p.r2, p.r3, system.alpha,
+        p.r4 * math.cos(p.theta4), p.r4 * math.sin(p.theta4), float(len(system.elements)),
+    ]
+    for element in system.elements:
+        code = getattr(element, "kernel_code", None)
+        if code not in CODES:
+            return None
+        params = [float(x) for x in element.kernel_params()]
+        data += [float(code), float(len(params)), *params]
+    return np.array(data, dtype=np.float64)
+
+
+def tableau_array(a: tuple[tuple[float, ...], ...], b: tuple[float, ...], c: tuple[float, ...]) -> np.ndarray:
+    """An explicit Runge-Kutta tableau as one (s + 3) × s array: rows A, then B, then C, then
+    for each stage the index of its node among the distinct nodes (`distinct_nodes`): stages
+    that share a time share one torque evaluation."""
+    s = len(b)
+    tab = np.zeros((s + 3, s))
+    for i, row in enumerate(a):
+        tab[i, : len(row)] = row
+    nodes = distinct_nodes(c)
+    tab[s], tab[s + 1], tab[s + 2] = b, c, [nodes.index(x) for x in c]
+    return tab
+
+
+def distinct_nodes(c: tuple[float, ...]) -> tuple[float, ...]:
+    """The distinct stage nodes of a tableau, in order of first use: where τ is evaluated."""
+    return tuple(dict.fromkeys(float(x) for x in c))

@@ -1,0 +1,443 @@
+"""The compiled numerics: the acceleration solve, the force elements, projection, RK stages, DOP853.
+
+Each function is the same arithmetic, in the same order, as its Python reference
+(`FingerSystem.accelerations`, the effects' `force`, `projection.project`,
+`ExplicitRungeKutta.step`), so both paths agree to round-off (the tests ask 1e-13 rad).
+Compiled by numba on first use and cached on disk (`cache=True`; see `finger_sim.kernel`).
+Errors are status codes, raised as exceptions by the Python callers.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from finger_sim.kernel import use_writable_cache
+
+use_writable_cache()  # before numba reads NUMBA_CACHE_DIR
+try:
+    from numba import njit
+except ImportError:  # no numba: the same functions run as plain Python (slow, same numbers)
+
+    def njit(**_options):  # type: ignore[no-untyped-def]
+        return lambda function: function
+
+
+from finger_sim.effects.contact import MIN_DISTANCE
+from finger_sim.kernel.layout import CONTACT, DAMPING, GRAVITY, HEADER, SPRING, TIP_FORCE
+from finger_sim.projection import ACCEPTED_RESIDUAL_FACTOR, MAX_ITERATIONS, POSITION_TOLERANCE
+
+#: Status codes of the kernel's calls.
+OK = 0
+NON_FINITE = 1  # the projection met a non-finite state
+NOT_CONVERGED = 2  # the projection did not reach POSITION_TOLERANCE
+STEP_TOO_SMALL = 3  # DOP853's step fell below its floor
+
+# DOP853's step-size control: scipy's constants (scipy/integrate/_ivp/rk.py).
+SAFETY = 0.9  # the factor on the optimal step after an accepted or rejected step
+MIN_FACTOR = 0.2  # the step shrinks at most 5× after a rejection
+MAX_FACTOR = 10.0  # and grows at most 10× after an acceptance
+ERROR_EXPONENT = -1.0 / 8.0  # −1/(order of the error estimator + 1)
+#: DOP853's step floor, in ulps of t (scipy's rule)
+MIN_STEP_ULPS = 10.0
+
+JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
+
+
+@njit(**JIT)
+def _contact(m, o, q0, q2, v0, v2):
+    """Contact's (Q1, Q3): `finger_sim.effects.contact.Contact.force`, same order of terms."""
+    r1, l3, alpha = m[o], m[o + 1], m[o + 2]
+    k, e, d, mu, vs = m[o + 3], m[o + 4], m[o + 5], m[o + 6], m[o + 7]
+    n_prox, n_dist, n_ends, n_tips = int(m[o + 8]), int(m[o + 9]), int(m[o + 10]), int(m[o + 11])
+    j = o + 12
+    c1, s1 = math.cos(q0), math.sin(q0)
+    bx, by = r1 * c1, r1 * s1
+    out1 = 0.0
+    out3 = 0.0
+    for _ in range(n_prox):
+        cx, cy, rad = m[j], m[j + 1], m[j + 2]
+        j += 3
+        s = (cx * bx + cy * by) / (r1 * r1)
+        s = 0.0 if s < 0.0 else (1.0 if s > 1.0 else s)
+        px, py = s * bx, s * by
+        dx, dy = px - cx, py - cy
+        dist = math.hypot(dx, dy)
+        delta = rad - dist
+        if delta > 0.0:
+            if dist > MIN_DISTANCE:
+                nx, ny = dx / dist, dy / dist
+            else:
+                nx, ny = -s1, c1
+            f1, f3 = _contact_force(delta, nx, ny, -s * by, s * bx, 0.0, 0.0, v0, v2, k, e, d, mu, vs)
+            out1 += f1
+            out3 += f3
+    ux = uy = 0.0
+    have_u = False
+    for _ in range(n_dist):
+        cx, cy, rad, reach2 = m[j], m[j + 1], m[j + 2], m[j + 3]
+        j += 4
+        dx, dy = cx - bx, cy - by
+        if dx * dx + dy * dy > reach2:
+            continue
+        if not have_u:
+            psi = q2 + alpha
+            ux, uy, have_u = math.cos(psi), math.sin(psi), True
+        ell = dx * ux + dy * uy
+        ell = 0.0 if ell < 0.0 else (l3 if ell > l3 else ell)
+        px, py = bx + ell * ux, by + ell * uy
+        dx, dy = px - cx, py - cy
+        dist = math.hypot(dx, dy)
+        delta = rad - dist
+        if delta > 0.0:
+            if dist > MIN_DISTANCE:
+                nx, ny = dx / dist, dy / dist
+            else:
+                nx, ny = -uy, ux
+            f1, f3 = _contact_force(delta, nx, ny, -by, bx, -ell * uy, ell * ux, v0, v2, k, e, d, mu, vs)
+            out1 += f1
+            out3 += f3
+    for _ in range(n_ends):
+        ox, oy, nx, ny, rho = m[j], m[j + 1], m[j + 2], m[j + 3], m[j + 4]
+        j += 5
+        delta = rho - (nx * (bx - ox) + ny * (by - oy))
+        if delta > 0.0:
+            f1, f3 = _contact_force(delta, nx, ny, -by, bx, 0.0, 0.0, v0, v2, k, e, d, mu, vs)
+            out1 += f1
+            out3 += f3
+    for _ in range(n_tips):
+        ox, oy, nx, ny, rho, reach = m[j], m[j + 1], m[j + 2], m[j + 3], m[j + 4], m[j + 5]
+        j += 6
+        height_b = nx * (bx - ox) + ny * (by - oy)
+        if height_b - reach >= 0.0:
+            continue
+        if not have_u:
+            psi = q2 + alpha
+            ux, uy, have_u = math.cos(psi), math.sin(psi), True
+        px, py = bx + l3 * ux, by + l3 * uy
+        delta = rho - (nx * (px - ox) + ny * (py - oy))
+        if delta > 0.0:
+            f1, f3 = _contact_force(delta, nx, ny, -by, bx, -l3 * uy, l3 * ux, v0, v2, k, e, d, mu, vs)
+            out1 += f1
+            out3 += f3
+    return out1, out3
+
+
+@njit(**JIT)
+def _contact_force(delta, nx, ny, j1x, j1y, j3x, j3y, v0, v2, k, e, d, mu, vs):
+    """J_pᵀ F of one candidate in contact: `Contact._forces` then the sum in `Contact.force`."""
+    vx, vy = j1x * v0 + j3x * v2, j1y * v0 + j3y * v2
+    fn = k * delta**e * (1.0 - d * (nx * vx + ny * vy))
+    if fn <= 0.0:
+        fx = fy = 0.0
+    else:
+        fx, fy = fn * nx, fn * ny
+        if mu != 0.0:
+            ft = -mu * fn * math.tanh((nx * vy - ny * vx) / vs)
+            fx -= ft * ny
+            fy += ft * nx
+    return j1x * fx + j1y * fy, j3x * fx + j3y * fy
+
+
+@njit(**JIT)
+def generalized_force(m, t, q0, q1, q2, v0, v1, v2, tau):
+    """Q = (τ, 0, 0) + Σ elements, N·m: `FingerSystem.generalized_force`."""
+    f1, f2, f3 = tau, 0.0, 0.0
+    o = HEADER + 1
+    for _ in range(int(m[HEADER])):
+        code, n = int(m[o]), int(m[o + 1])
+        o += 2
+        e1 = e2 = e3 = 0.0
+        if code == SPRING:
+            kb = m[o] * (q2 + m[o + 1] - q0)
+            e1, e3 = kb, -kb
+        elif code == DAMPING:
+            c = m[o]
+            beta_dot = v2 - v0
+            e1, e2, e3 = -c * v0 + c * beta_dot, -c * v1, -c * beta_dot
+        elif code == GRAVITY:
+            gx, gy, w1, w2, w3, alpha = m[o], m[o + 1], m[o + 2], m[o + 3], m[o + 4], m[o + 5]
+            psi = q2 + alpha
+            e1 = w1 * (-math.sin(q0) * gx + math.cos(q0) * gy)
+            e2 = w2 * (-math.sin(q1) * gx + math.cos(q1) * gy)
+            e3 = w3 * (-math.sin(psi) * gx + math.cos(psi) * gy)
+        elif code == TIP_FORCE:
+            fx, fy, r1, l3, alpha = m[o], m[o + 1], m[o + 2], m[o + 3], m[o + 4]
+            psi = q2 + alpha
+            e1 = r1 * (-math.sin(q0) * fx + math.cos(q0) * fy)
+            e3 = l3 * (-math.sin(psi) * fx + math.cos(psi) * fy)
+        elif code == CONTACT:
+            e1, e3 = _contact(m, o, q0, q2, v0, v2)
+        f1 += e1
+        f2 += e2
+        f3 += e3
+        o += n
+    return f1, f2, f3
+
+
+@njit(**JIT)
+def accelerations(m, t, q0, q1, q2, v0, v1, v2, tau):
+    """q'' (rad/s²) of the index-1 system: `FingerSystem.accelerations`, same Schur complement."""
+    m11, m22, m33, cc, r1, r2, r3, alpha = m[0], m[1], m[2], m[3], m[4], m[5], m[6], m[7]
+    s1, c1 = math.sin(q0), math.cos(q0)
+    s2, c2 = math.sin(q1), math.cos(q1)
+    s3, c3 = math.sin(q2), math.cos(q2)
+    u = q0 - q2 - alpha
+    su, cu = math.sin(u), math.cos(u)
+    f1, f2, f3 = generalized_force(m, t, q0, q1, q2, v0, v1, v2, tau)
+    f1 -= cc * su * v2 * v2
+    f3 += cc * su * v0 * v0
+    b = cc * cu
+    det = m11 * m33 - b * b
+    i11, i13, i33 = m33 / det, -b / det, m11 / det
+    i22 = 1.0 / m22
+    x1, x2, x3 = i11 * f1 + i13 * f3, i22 * f2, i13 * f1 + i33 * f3
+    g11, g12, g13 = -r1 * s1, r2 * s2, r3 * s3
+    g21, g22, g23 = r1 * c1, -r2 * c2, -r3 * c3
+    y11, y12, y13 = i11 * g11 + i13 * g13, i22 * g12, i13 * g11 + i33 * g13
+    y21, y22, y23 = i11 * g21 + i13 * g23, i22 * g22, i13 * g21 + i33 * g23
+    a11 = g11 * y11 + g12 * y12 + g13 * y13
+    a12 = g11 * y21 + g12 * y22 + g13 * y23
+    a22 = g21 * y21 + g22 * y22 + g23 * y23
+    gam1 = r1 * c1 * v0 * v0 - r2 * c2 * v1 * v1 - r3 * c3 * v2 * v2
+    gam2 = r1 * s1 * v0 * v0 - r2 * s2 * v1 * v1 - r3 * s3 * v2 * v2
+    b1 = gam1 - (g11 * x1 + g12 * x2 + g13 * x3)
+    b2 = gam2 - (g21 * x1 + g22 * x2 + g23 * x3)
+    dw = a11 * a22 - a12 * a12
+    lam1 = (a22 * b1 - a12 * b2) / dw
+    lam2 = (a11 * b2 - a12 * b1) / dw
+    return x1 + lam1 * y11 + lam2 * y21, x2 + lam1 * y12 + lam2 * y22, x3 + lam1 * y13 + lam2 * y23
+
+
+@njit(**JIT)
+def project(m, x):
+    """Project x = (q, q') (6 floats, in place) onto Φ = 0, Φ_q q' = 0: `projection.project`. Status."""
+    r1, r2, r3, k1, k2 = m[4], m[5], m[6], m[8], m[9]
+    t1, t2, t3 = x[0], x[1], x[2]
+    converged = False
+    f1 = f2 = g11 = g12 = g13 = g21 = g22 = g23 = 0.0
+    for _ in range(MAX_ITERATIONS):
+        s1, c1, s2, c2, s3, c3 = math.sin(t1), math.cos(t1), math.sin(t2), math.cos(t2), math.sin(t3), math.cos(t3)
+        f1 = r1 * c1 + k1 - r2 * c2 - r3 * c3
+        f2 = r1 * s1 + k2 - r2 * s2 - r3 * s3
+        g11, g12, g13 = -r1 * s1, r2 * s2, r3 * s3
+        g21, g22, g23 = r1 * c1, -r2 * c2, -r3 * c3
+        if abs(f1) + abs(f2) <= POSITION_TOLERANCE:
+            converged = True
+            break
+        a11 = g11 * g11 + g12 * g12 + g13 * g13
+        a12 = g11 * g21 + g12 * g22 + g13 * g23
+        a22 = g21 * g21 + g22 * g22 + g23 * g23
+        det = a11 * a22 - a12 * a12
+        l1 = (a22 * f1 - a12 * f2) / det
+        l2 = (a11 * f2 - a12 * f1) / det
+        t1 -= g11 * l1 + g21 * l2
+        t2 -= g12 * l1 + g22 * l2
+        t3 -= g13 * l1 + g23 * l2
+    if not converged:
+        if not (math.isfinite(t1) and math.isfinite(t2) and math.isfinite(t3)):
+            return NON_FINITE
+        bound = ACCEPTED_RESIDUAL_FACTOR * POSITION_TOLERANCE * (1.0 + max(abs(t1), abs(t2), abs(t3)))
+        if math.hypot(f1, f2) > bound:
+            return NOT_CONVERGED
+    a11 = g11 * g11 + g12 * g12 + g13 * g13
+    a12 = g11 * g21 + g12 * g22 + g13 * g23
+    a22 = g21 * g21 + g22 * g22 + g23 * g23
+    det = a11 * a22 - a12 * a12
+    w1, w2, w3 = x[3], x[4], x[5]
+    e1 = g11 * w1 + g12 * w2 + g13 * w3
+    e2 = g21 * w1 + g22 * w2 + g23 * w3
+    l1 = (a22 * e1 - a12 * e2) / det
+    l2 = (a11 * e2 - a12 * e1) / det
+    x[0], x[1], x[2] = t1, t2, t3
+    x[3], x[4], x[5] = w1 - g11 * l1 - g21 * l2, w2 - g12 * l1 - g22 * l2, w3 - g13 * l1 - g23 * l2
+    return OK
+
+
+@njit(**JIT)
+def euler_step(m, t, x, h, tau):
+    """The paper's Euler step (equations 6-7) on x = (q, q') in place: `PaperEuler.step`."""
+    a0, a1, a2 = accelerations(m, t, x[0], x[1], x[2], x[3], x[4], x[5], tau)
+    h2 = 0.5 * h * h
+    x[0], x[1], x[2] = x[0] + x[3] * h + a0 * h2, x[1] + x[4] * h + a1 * h2, x[2] + x[5] * h + a2 * h2
+    x[3], x[4], x[5] = x[3] + a0 * h, x[4] + a1 * h, x[5] + a2 * h
+    return OK
+
+
+@njit(**JIT)
+def rk_step(m, tab, t, x, h, taus, k):
+    """One projected explicit RK step on x = (q, q') in place: `ExplicitRungeKutta.step`.
+
+    tab: (s + 3) × s tableau (A, B, C rows, then each stage's node index; `layout.tableau_array`);
+    taus: τ at each distinct node time t + c h (N·m); k: s × 6 work array of stage derivatives.
+    Zero tableau entries are skipped, as in Python.
+    """
+    s = tab.shape[1]
+    for i in range(s):
+        x0, x1, x2, w0, w1, w2 = x[0], x[1], x[2], x[3], x[4], x[5]
+        for j in range(i):
+            a = tab[i, j]
+            if a != 0.0:
+                ha = h * a
+                x0 += ha * k[j, 0]
+                x1 += ha * k[j, 1]
+                x2 += ha * k[j, 2]
+                w0 += ha * k[j, 3]
+                w1 += ha * k[j, 4]
+                w2 += ha * k[j, 5]
+        k[i, 0], k[i, 1], k[i, 2] = w0, w1, w2
+        tau = taus[int(tab[s + 2, i])]
+        k[i, 3], k[i, 4], k[i, 5] = accelerations(m, t + tab[s + 1, i] * h, x0, x1, x2, w0, w1, w2, tau)
+    for j in range(s):
+        b = tab[s, j]
+        if b != 0.0:
+            hb = h * b
+            for c in range(6):
+                x[c] += hb * k[j, c]
+    return project(m, x)
+
+
+@njit(**JIT)
+def rk_run(m, tab, t0, h, taus, xs):
+    """Steps n = len(taus) of `rk_step` (or Euler when tab is empty) from xs[0]; fills xs[1:].
+
+    t0, h: each step's start and length (s); taus: n × (distinct nodes) stage torques.
+    Returns (status, steps done).
+    """
+    s = tab.shape[1]
+    k = np.empty((max(s, 1), 6))
+    x = xs[0].copy()
+    for n in range(taus.shape[0]):
+        if s == 0:
+            status = euler_step(m, t0[n], x, h[n], taus[n, 0])
+        else:
+            status = rk_step(m, tab, t0[n], x, h[n], taus[n], k)
+        if status != OK:
+            return status, n
+        xs[n + 1] = x
+    return OK, taus.shape[0]
+
+
+# -- DOP853: Hairer's embedded 8(5,3) pair with its 7th-order dense output ------------------
+@njit(**JIT)
+def _rhs(m, t, y, tau, out):
+    out[0], out[1], out[2] = y[3], y[4], y[5]
+    out[3], out[4], out[5] = accelerations(m, t, y[0], y[1], y[2], y[3], y[4], y[5], tau)
+
+
+@njit(**JIT)
+def dop853_attempt(m, a, b, c, e3, e5, d, t, y, f, h, taus, rtol, atol, kk, y_new, dense):
+    """One DOP853 step attempt from (t, y) with y' = f at t, step h; scipy's `rk_step` and
+    `_estimate_error_norm`, then on acceptance the three extra stages and the dense
+    coefficients (`_dense_output_impl`).
+
+    a (16 × 16), b (12), c (16), e3, e5 (13), d (4 × 16): scipy's dop853_coefficients.
+    taus: τ at t + c_i h for the 12 stages, then at t + h, then at the 3 extra stages.
+    kk: 16 × 6 work array (kk[0] = f on entry); y_new: 6, the result; dense: 7 × 6.
+    Returns the error norm (accepted when < 1).
+    """
+    n_stages = 12
+    kk[0] = f
+    ys = np.empty(6)
+    for s in range(1, n_stages):
+        for i in range(6):
+            acc = 0.0
+            for j in range(s):
+                acc += kk[j, i] * a[s, j]
+            ys[i] = y[i] + acc * h
+        _rhs(m, t + c[s] * h, ys, taus[s], kk[s])
+    for i in range(6):
+        acc = 0.0
+        for j in range(n_stages):
+            acc += kk[j, i] * b[j]
+        y_new[i] = y[i] + h * acc
+    _rhs(m, t + h, y_new, taus[n_stages], kk[n_stages])
+    err5 = 0.0
+    err3 = 0.0
+    for i in range(6):
+        scale = atol + max(abs(y[i]), abs(y_new[i])) * rtol
+        s5 = 0.0
+        s3 = 0.0
+        for j in range(n_stages + 1):
+            s5 += kk[j, i] * e5[j]
+            s3 += kk[j, i] * e3[j]
+        err5 += (s5 / scale) ** 2
+        err3 += (s3 / scale) ** 2
+    if err5 == 0.0 and err3 == 0.0:
+        norm = 0.0
+    else:
+        norm = abs(h) * err5 / math.sqrt((err5 + 0.01 * err3) * 6)
+    if norm < 1.0:
+        for s in range(n_stages + 1, 16):
+            for i in range(6):
+                acc = 0.0
+                for j in range(s):
+                    acc += kk[j, i] * a[s, j]
+                ys[i] = y[i] + acc * h
+            _rhs(m, t + c[s] * h, ys, taus[s], kk[s])
+        for i in range(6):
+            dy = y_new[i] - y[i]
+            dense[0, i] = dy
+            dense[1, i] = h * kk[0, i] - dy
+            dense[2, i] = 2.0 * dy - h * (kk[n_stages, i] + kk[0, i])
+            for r in range(4):
+                acc = 0.0
+                for j in range(16):
+                    acc += d[r, j] * kk[j, i]
+                dense[3 + r, i] = h * acc
+    return norm
+
+
+@njit(**JIT)
+def dop853_dense(t_old, h, y_old, dense, t, out):
+    """The dense output of the last accepted step at t, into out (6): scipy's `Dop853DenseOutput`."""
+    x = (t - t_old) / h
+    for i in range(6):
+        acc = 0.0
+        for r in range(6, -1, -1):
+            acc += dense[r, i]
+            if (6 - r) % 2 == 0:
+                acc *= x
+            else:
+                acc *= 1.0 - x
+        out[i] = acc + y_old[i]
+
+
+@njit(**JIT)
+def rk_step_tuple(m, tab, t, q, v, h, taus):
+    """`rk_step` (or Euler when tab is empty) on tuples: the single step the Simulator calls.
+
+    q, v: 3-tuples (rad, rad/s); taus: τ at the distinct nodes, a tuple. Returns (status, q, v).
+    """
+    s = tab.shape[1]
+    x = np.empty(6)
+    x[0], x[1], x[2], x[3], x[4], x[5] = q[0], q[1], q[2], v[0], v[1], v[2]
+    if s == 0:
+        status = euler_step(m, t, x, h, taus[0])
+    else:
+        k = np.empty((s, 6))
+        tau = np.empty(len(taus))
+        for i in range(len(taus)):
+            tau[i] = taus[i]
+        status = rk_step(m, tab, t, x, h, tau, k)
+    return status, (x[0], x[1], x[2]), (x[3], x[4], x[5])
+
+
+@njit(**JIT)
+def dop853_output(m, t_old, h, y_old, dense, t, out):
+    """The dense output at t projected (`dop853_dense`, then `project`): (status, q, q') as tuples."""
+    dop853_dense(t_old, h, y_old, dense, t, out)
+    status = project(m, out) if np.isfinite(out).all() else NON_FINITE
+    return status, (out[0], out[1], out[2]), (out[3], out[4], out[5])
+
+
+@njit(**JIT)
+def dop853_outputs(m, t_old, h, y_old, dense, targets, out):
+    """`dop853_output` at every time of `targets` into the rows of out (len(targets) × 6). Status."""
+    for n in range(targets.shape[0]):
+        dop853_dense(t_old, h, y_old, dense, targets[n], out[n])
+        status = project(m, out[n]) if np.isfinite(out[n]).all() else NON_FINITE
+        if status != OK:
+            return status
+    return OK
