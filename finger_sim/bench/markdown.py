@@ -164,7 +164,7 @@ def render_scene(scene: Scene, ref: Reference, figure: str, rows: list[Run]) -> 
         f"### {scene.name}",
         "",
         f"{scene.description} — {scene.duration:g} s simulated.",
-        f"Reference: {sol.method} rtol {sol.rtol:g} ({sol.nfev} evaluations, {sol.cpu_time:.2f} s); check: "
+        f"Reference: {sol.method} rtol {sol.rtol:g} ({f'{sol.nfev} evaluations, ' if sol.nfev else ''}{sol.cpu_time:.2f} s); check: "
         f"{chk.method} rtol {chk.rtol:g}; reference floor {ref.check_difference:.1e} rad.",
         "",
         f"![{scene.name}]({figure})",
@@ -282,20 +282,25 @@ def render_hard_cases(tables: Tables) -> list[str]:
         "|---|---|" + "---|" * len(methods),
     ]
     for row in tables.hard:
-        cells = []
-        for m in methods:
-            h = row.results.get(m)
-            if h is None:
-                cells.append("—")
-                continue
-            mark = HARD_MARKS[h.status]
-            detail = "; ".join(
-                f"{label} {text}" + ("" if ok is not False else " ✗") for label, ok, text in h.checks if label != "no NaN"
-            )
-            detail = detail.replace("|", "\\|")
-            cells.append(f"{mark}<br>{detail}" if h.status in ("pass", "fail") else mark)
-        out.append(f"| {row.scene} | {row.auto_pick} | " + " | ".join(cells) + " |")
+        cells = [_hard_cell(row.results.get(m)) for m in methods]
+        pick = row.auto_pick if row.auto_result is None else f"{row.auto_pick}: {_hard_cell(row.auto_result)}"
+        out.append(f"| {row.scene} | {pick} | " + " | ".join(cells) + " |")
+    out += [
+        "",
+        "On the contact scenes (grasp_impact, grasp_rigid) `auto` itself is run: in contact it splits each step into "
+        "substeps (`finger_sim.auto.contact_substeps`), so its verdict is its own run's, shown in its cell.",
+    ]
     return out
+
+
+def _hard_cell(h: an.HardResult | None) -> str:
+    """One method's hard-case verdict for a cell: the mark, then each judged figure."""
+    if h is None:
+        return "—"
+    mark = HARD_MARKS[h.status]
+    detail = "; ".join(f"{label} {text}" + ("" if ok is not False else " ✗") for label, ok, text in h.checks if label != "no NaN")
+    detail = detail.replace("|", "\\|")
+    return f"{mark}<br>{detail}" if h.status in ("pass", "fail") else mark
 
 
 def render_recommendation(tables: Tables, quick: bool) -> list[str]:

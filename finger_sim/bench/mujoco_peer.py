@@ -23,7 +23,18 @@ cannot be combined with a finite z.
 
 The PIP spring is the stiffness of ``pip_joint`` with springref 0 (V = ½ k β², at rest at
 extension); the motor is a ``motor`` actuator on ``mcp_joint`` with gear 1 and unlimited ctrl.
-No gravity, no joint damping or armature, contacts disabled (the spec scene has none).
+No gravity, no joint damping or armature.
+
+Contact (spec §7), only when objects are given: each phalanx gets a collision capsule of the
+spec's radius on its axis (proximal A→B, ρ1; distal B→tip, ρ3), each object a world geom: a
+circle is a ``cylinder`` along z (the model-plane normal, long enough that the capsules at
+z = 0 only meet its side), a plane a ``plane`` geom whose z axis is the outward normal (MuJoCo's
+plane is solid on its −z side, the spec's −n). contype/conaffinity let a phalanx touch an
+object and nothing else (capsules contype 1 conaffinity 0, objects 0 and 1). Frictionless
+contacts (μ = 0, the spec's default) have condim 1; with μ > 0, condim 3 and sliding friction
+μ. MuJoCo's contact law is its own soft constraint (solref/solimp), not Hunt–Crossley: the
+rest pose differs from ours by the difference in penetration, while the force that holds the
+finger at rest is set by the statics. Without objects, contacts stay disabled.
 """
 
 from __future__ import annotations
@@ -36,6 +47,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from finger_sim.effects.contact_geometry import PHALANX_RADII, Circle, Plane, SceneObject
 from finger_sim.errors import ConfigError, SimulationDiverged
 from finger_sim.kinematics import constraint_norm, distal_offset, extended_pose
 from finger_sim.model import FingerParams
@@ -62,6 +74,12 @@ VISUAL_RADIUS = 0.002
 
 #: Joint names in the paper's order: the coordinates θ1, θ2 and (via β) θ3.
 JOINTS = ("mcp_joint", "coupler_joint", "pip_joint")
+
+#: Half-length of a circle's cylinder along z, m: far beyond the capsules' radii, so they meet its side only.
+CYLINDER_HALF_LENGTH = 0.05
+
+#: Names of the phalanges' collision capsules (bodies proximal and distal).
+PHALANX_GEOMS = ("proximal_capsule", "distal_capsule")
 
 #: Sample times must lie on the step grid to this fraction of a step.
 GRID_TOLERANCE = 1e-6
@@ -99,6 +117,23 @@ TIGHT_TIMECONST_STEPS = 2.0
 
 #: A loop open by more than this fraction of r3 is no longer the finger: the run diverged.
 DIVERGED_LOOP_FRACTION = 0.5
+
+
+#: MuJoCo's default contact solver parameters (the same as a connect's when the MJCF says nothing).
+DEFAULT_CONTACT = EqualitySetting("default", DEFAULT_EQUALITY.solref, DEFAULT_EQUALITY.solimp)
+
+
+#: Tight contact timeconst in timesteps. Measured on grasp_cylinder (RK4, the tight loop): at
+#: 1e-4 s a contact at 2 steps chatters at rest (on and off, grip 0–0.37 N over the last 0.2 s);
+#: 3 steps comes to rest at 1e-3 and 1e-4 s, with the grip within 2e-6 N of its end value.
+TIGHT_CONTACT_TIMECONST_STEPS = 3.0
+
+
+def tight_contact(timestep: float) -> EqualitySetting:
+    """The stiffest contact that stays stable (comes to rest) at `timestep` s: critically damped,
+    timeconst TIGHT_CONTACT_TIMECONST_STEPS·timestep, impedance 0.9999: the most rigid contact
+    MuJoCo's soft-constraint model gives at that step."""
+    return EqualitySetting("tight", (TIGHT_CONTACT_TIMECONST_STEPS * timestep, 1.0), TIGHT_SOLIMP)
 
 
 def tight_equality(timestep: float) -> EqualitySetting:
@@ -158,8 +193,16 @@ def mjcf(
     integrator: str,
     equality: EqualitySetting = DEFAULT_EQUALITY,
     spring_stiffness: float = PAPER_SPRING_STIFFNESS,
+    objects: Sequence[SceneObject] = (),
+    radii: tuple[float, float] = PHALANX_RADII,
+    contact: EqualitySetting = DEFAULT_CONTACT,
+    friction: float = 0.0,
 ) -> str:
-    """The MJCF text of the finger (SI units, radians); qpos = 0 is the extended pose."""
+    """The MJCF text of the finger (SI units, radians); qpos = 0 is the extended pose.
+
+    objects: spec §7 circles and planes (none: contacts disabled); radii: the phalanx capsules'
+    (ρ1, ρ3), m; contact: solref/solimp of the phalanx–object contacts; friction: μ (0: condim 1).
+    """
     p = params
     alpha = distal_offset(p)
     theta2_ext = extended_pose(p)[1]
@@ -170,19 +213,32 @@ def mjcf(
     i1 = p.inertia_A - p.m1 * (p.r1 / 2.0) ** 2
     i2 = p.inertia_D - p.m2 * (p.r2 / 2.0) ** 2
     solref, solimp = _xyz(*equality.solref), _xyz(*equality.solimp)
+    flags = "" if objects else '\n  <flag contact="disable"/>\n'
+    surface = (
+        f'condim="{1 if friction == 0.0 else 3}" friction="{_xyz(friction, 0.0, 0.0)}" '
+        f'solref="{_xyz(*contact.solref)}" solimp="{_xyz(*contact.solimp)}"'
+    )
+
+    def capsule(name: str, length: float, radius: float) -> str:
+        if not objects:
+            return ""
+        return (
+            f'<geom name="{name}" type="capsule" fromto="{_xyz(0, 0, 0, length, 0, 0)}" size="{_xyz(radius)}" '
+            f'contype="1" conaffinity="0" {surface}/>\n'
+        )
+
+    world = "".join(_object_geom(obj, surface) for obj in objects)
     return f"""<mujoco model="finger_fourbar">
 <compiler angle="radian" inertiafromgeom="false"/>
-<option timestep="{_xyz(timestep)}" integrator="{integrator}" gravity="0 0 0">
-  <flag contact="disable"/>
-</option>
+<option timestep="{_xyz(timestep)}" integrator="{integrator}" gravity="0 0 0">{flags}</option>
 <worldbody>
-<body name="proximal">
+{world}<body name="proximal">
 <joint name="mcp_joint" type="hinge" axis="0 0 1"/>
 {_link("proximal", p.m1, p.r1 / 2.0, i1, p.r1)}
-<body name="distal" pos="{_xyz(p.r1, 0, 0)}">
+{capsule(PHALANX_GEOMS[0], p.r1, radii[0])}<body name="distal" pos="{_xyz(p.r1, 0, 0)}">
 <joint name="pip_joint" type="hinge" axis="0 0 1" stiffness="{_xyz(spring_stiffness)}" springref="0"/>
 {_link("distal", p.m3, p.L3 / 2.0, p.inertia_G3, p.L3)}
-<site name="C_distal" pos="{_xyz(*c_distal, 0)}"/>
+{capsule(PHALANX_GEOMS[1], p.L3, radii[1])}<site name="C_distal" pos="{_xyz(*c_distal, 0)}"/>
 <site name="tip" pos="{_xyz(p.L3, 0, 0)}"/>
 </body>
 </body>
@@ -202,6 +258,20 @@ def mjcf(
 """
 
 
+def _object_geom(obj: SceneObject, surface: str) -> str:
+    """A world geom of one spec §7 object: a circle as a cylinder along z, a plane with z along its normal."""
+    if isinstance(obj, Circle):
+        return (
+            f'<geom name="{obj.name}" type="cylinder" pos="{_xyz(*obj.center, 0)}" '
+            f'size="{_xyz(obj.radius, CYLINDER_HALF_LENGTH)}" contype="0" conaffinity="1" {surface}/>\n'
+        )
+    assert isinstance(obj, Plane)
+    return (
+        f'<geom name="{obj.name}" type="plane" pos="{_xyz(*obj.point, 0)}" zaxis="{_xyz(*obj.normal, 0)}" '
+        f'size="0 0 1" contype="0" conaffinity="1" {surface}/>\n'
+    )
+
+
 class MujocoFinger:
     """The finger's MJCF compiled to a `mujoco.MjModel`, with the maps to the paper's coordinates.
 
@@ -216,6 +286,10 @@ class MujocoFinger:
         integrator: str,
         equality: EqualitySetting = DEFAULT_EQUALITY,
         spring_stiffness: float = PAPER_SPRING_STIFFNESS,
+        objects: Sequence[SceneObject] = (),
+        radii: tuple[float, float] = PHALANX_RADII,
+        contact: EqualitySetting = DEFAULT_CONTACT,
+        friction: float = 0.0,
     ) -> None:
         if integrator not in INTEGRATORS:
             raise ConfigError("integrator", f"one of {INTEGRATORS}", integrator)
@@ -226,7 +300,8 @@ class MujocoFinger:
         self.params = params
         self.theta_ext = np.array(extended_pose(params))
         self.xml = mjcf(
-            params, timestep=timestep, integrator=integrator, equality=equality, spring_stiffness=spring_stiffness
+            params, timestep=timestep, integrator=integrator, equality=equality, spring_stiffness=spring_stiffness,
+            objects=objects, radii=radii, contact=contact, friction=friction,
         )
         self.model = mujoco.MjModel.from_xml_string(self.xml)
         ids = [self.model.joint(name).id for name in JOINTS]
@@ -235,6 +310,21 @@ class MujocoFinger:
         self.dof_index = np.array([self.model.jnt_dofadr[i] for i in ids])
         self.site_ids = (self.model.site("C_coupler").id, self.model.site("C_distal").id)
         self.motor_id = self.model.actuator("mcp_motor").id
+        #: geom ids of the phalanx capsules and of the objects (empty without objects)
+        self.phalanx_geoms = frozenset(self.model.geom(n).id for n in PHALANX_GEOMS) if objects else frozenset()
+        self.object_geoms = frozenset(self.model.geom(obj.name).id for obj in objects)
+        self._force = np.zeros(6)
+
+    def grip_force(self, data: mujoco.MjData) -> float:
+        """Σ F_n, N: the normal forces (`mj_contactForce`, contact frame) of the phalanx–object contacts."""
+        total = 0.0
+        for i in range(data.ncon):
+            c = data.contact[i]
+            pair = {int(c.geom1), int(c.geom2)}
+            if pair & self.phalanx_geoms and pair & self.object_geoms:
+                mujoco.mj_contactForce(self.model, data, i, self._force)
+                total += float(self._force[0])
+        return total
 
     def to_paper(self, qpos: np.ndarray) -> np.ndarray:
         """(θ1, θ2, θ3), rad, from qpos of shape (..., nq): θ = θ_ext + (q_mcp, q_coupler, q_mcp + q_pip)."""

@@ -2,8 +2,10 @@
 
 The project's integrators over a grid of dt, scipy's solve_ivp over rtol on the same index-1
 equations (and the same scalar right-hand side), MuJoCo's integrators over timestep on the
-MJCF peer; the scene kinds and step rates of the recommendation table; the hard cases.
-`tasks` turns this into the list of measurements, in the order they run.
+MJCF peer; the scene kinds and step rates of the recommendation table; the hard cases; the
+contact scenes (spec §7), where `method: auto` itself is run too (its choice and its substeps
+in contact are not one of the fixed methods). `tasks` turns this into the list of
+measurements, in the order they run.
 """
 
 from __future__ import annotations
@@ -14,14 +16,20 @@ from pathlib import Path
 
 import finger_sim
 from finger_sim.bench.reference import Reference
-from finger_sim.bench.runners import Run, run_method, run_mujoco_peer, run_scipy
+from finger_sim.bench.runners import AUTO, Run, run_method, run_mujoco_peer, run_scipy
 from finger_sim.integrators import METHODS
 from finger_sim.scene import Scene
 
 #: Scenes with a work-precision figure (peers included), then the scenes measured for the
 #: recommendation and hard cases only.
 WP_SCENES = ("paper_flexion", "toggle_passage", "free_swing", "bang_bang", "stiff_spring")
-ALL_SCENES = WP_SCENES + ("paper_to_stop",)
+#: Contact scenes (objects, spec §7) with a work-precision figure and the MuJoCo contact peer
+#: (no scipy rows: a plain solve_ivp script does not locate contact onsets), then the contact
+#: hard cases: the impact onto the cup and the near-rigid cup.
+CONTACT_WP_SCENES = ("grasp_cylinder", "press_table")
+CONTACT_HARD_SCENES = ("grasp_impact", "grasp_rigid")
+CONTACT_SCENES = CONTACT_WP_SCENES + CONTACT_HARD_SCENES
+ALL_SCENES = WP_SCENES + ("paper_to_stop",) + CONTACT_SCENES
 #: Scene kinds of the recommendation table and the scenes measured for each (the same
 #: kinds `finger_sim.auto.scene_kind` recognizes in a scene).
 KINDS: dict[str, tuple[str, ...]] = {
@@ -33,7 +41,7 @@ KINDS: dict[str, tuple[str, ...]] = {
 #: Step rates of the recommendation table, Hz.
 RATES = (100, 1000, 10000)
 #: Scenes judged as hard cases (at `analysis.HARD_DT`).
-HARD_SCENES = ("toggle_passage", "free_swing", "bang_bang", "stiff_spring", "paper_to_stop")
+HARD_SCENES = ("toggle_passage", "free_swing", "bang_bang", "stiff_spring", "paper_to_stop") + CONTACT_HARD_SCENES
 #: Errors are measured on this grid (s), or on a method's own coarser step grid.
 SPACING = 1e-3
 #: Timing repeats (median); runs longer than runners.LONG_RUN_SECONDS are timed once.
@@ -94,8 +102,29 @@ def project_methods() -> list[str]:
 
 
 def dt_grid(method: str, *, quick: bool) -> tuple[float, ...]:
-    """The dt values (s) `method` is run at."""
+    """The dt values (s) `method` is run at (AUTO: at the recommendation's rates)."""
+    if method == AUTO:
+        return QUICK_DT if quick else tuple(1.0 / rate for rate in RATES)
     return QUICK_DT if quick else FULL_DT.get(method, DEFAULT_DT)
+
+
+def scene_methods(name: str) -> list[str]:
+    """The project's methods run on a scene: every one, and AUTO itself on a contact scene."""
+    return project_methods() + ([AUTO] if name in CONTACT_SCENES else [])
+
+
+def mujoco_tasks(name: str, scene: Scene, ref: Reference, *, quick: bool) -> list[Task]:
+    """MuJoCo's integrators × settings × timesteps on one scene."""
+    kw = {"spacing": SPACING, "repeats": REPEATS}
+    return [
+        Task(
+            f"{name} MuJoCo {integrator} {setting} h={ts:g}",
+            lambda s=scene, i=integrator, g=setting, h=ts, r=ref: run_mujoco_peer(s, i, h, g, r, **kw),
+        )
+        for integrator in MUJOCO_INTEGRATORS
+        for setting in MUJOCO_SETTINGS
+        for ts in (QUICK_TIMESTEPS if quick else FULL_TIMESTEPS)
+    ]
 
 
 def tasks(scenes: dict[str, Scene], refs: dict[str, Reference], *, quick: bool) -> list[Task]:
@@ -104,9 +133,11 @@ def tasks(scenes: dict[str, Scene], refs: dict[str, Reference], *, quick: bool) 
     kw = {"spacing": SPACING, "repeats": REPEATS}
     for name, scene in scenes.items():
         ref = refs[name]
-        for method in project_methods():
+        for method in scene_methods(name):
             for dt in dt_grid(method, quick=quick):
                 out.append(Task(f"{name} {method} dt={dt:g}", lambda s=scene, m=method, d=dt, r=ref: run_method(s, m, d, r, **kw)))
+        if name in CONTACT_WP_SCENES:
+            out += mujoco_tasks(name, scene, ref, quick=quick)
         if name not in WP_SCENES:
             continue
         for method in SCIPY_METHODS:
@@ -120,13 +151,5 @@ def tasks(scenes: dict[str, Scene], refs: dict[str, Reference], *, quick: bool) 
                         lambda s=scene, t=rtol, r=ref: run_scipy(s, NUMPY_RHS_METHOD, t, r, rhs="numpy", **kw),
                     )
                 )
-        for integrator in MUJOCO_INTEGRATORS:
-            for setting in MUJOCO_SETTINGS:
-                for ts in QUICK_TIMESTEPS if quick else FULL_TIMESTEPS:
-                    out.append(
-                        Task(
-                            f"{name} MuJoCo {integrator} {setting} h={ts:g}",
-                            lambda s=scene, i=integrator, g=setting, h=ts, r=ref: run_mujoco_peer(s, i, h, g, r, **kw),
-                        )
-                    )
+        out += mujoco_tasks(name, scene, ref, quick=quick)
     return out

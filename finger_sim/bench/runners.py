@@ -6,6 +6,10 @@ the relative energy drift where energy is conserved, and the CPU time of the ste
 alone: `time.process_time`, median of the repeats, with setup (model building, stability
 checks, MJCF compiling) outside it. A run whose first repeat takes longer than
 LONG_RUN_SECONDS is timed once: its relative timing noise is already small.
+
+On a contact scene (objects) a run also reports the grip force Σ F_n at its end and its
+spread over the last GRIP_WINDOW of the run (a run at rest has none; a chattering contact
+shows it), and the final θ1.
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ from scipy.integrate import solve_ivp
 
 from finger_sim import kinematics
 from finger_sim.bench.reference import Reference, sample_times
+from finger_sim.effects.contact import build_contact
 from finger_sim.errors import FingerSimError, SimulationDiverged, StabilityError
 from finger_sim.inputs import Constant
 from finger_sim.scene import Scene
@@ -34,6 +39,10 @@ LONG_RUN_SECONDS = 2.0
 #: (scipy's Radau at rtol 1e-12 on stiff_spring would take ~2e7 evaluations, 10 minutes).
 MAX_SCIPY_EVALUATIONS = 300_000
 FAMILY_PROJECT, FAMILY_SCIPY, FAMILY_MUJOCO = "finger_sim", "scipy", "MuJoCo"
+#: Fraction of a run, at its end, over which the grip force's spread (max − min) is taken.
+GRIP_WINDOW = 0.1
+#: The method label that runs `method: auto` itself (the choice and its contact substeps).
+AUTO = "auto"
 
 OK, REFUSED, DIVERGED, GAVE_UP, SKIPPED = "ok", "refused", "diverged", "gave up", "skipped"
 
@@ -55,6 +64,9 @@ class Run:
     max_phi: float = math.nan
     energy_drift: float = math.nan
     penetration: float = math.nan
+    grip_force: float = math.nan  # N, Σ F_n at the run's end (contact scenes)
+    grip_spread: float = math.nan  # N, max − min of Σ F_n over the last GRIP_WINDOW of the run
+    final_theta1: float = math.nan  # rad
     cpu: float = math.nan  # median CPU s of the stepping
     repeats: int = 0
     steps: int = 0
@@ -80,10 +92,11 @@ class Run:
 
 
 def conserves_energy(scene: Scene) -> bool:
-    """τ ≡ 0, no damping and no stops that could absorb energy: T + V is a constant of motion."""
+    """τ ≡ 0, no damping, and no stops or contacts that could absorb energy: T + V (+ V_c) is a constant of motion."""
     no_torque = isinstance(scene.torque, Constant) and scene.torque.value == 0.0
     elastic = scene.mcp_limits is None or scene.restitution == 1.0
-    return no_torque and scene.damping == 0.0 and elastic
+    lossless_contact = not scene.objects or (scene.contact.damping == 0.0 and scene.contact.friction == 0.0)
+    return no_torque and scene.damping == 0.0 and elastic and lossless_contact
 
 
 def _timed(fn: Callable[[], object], repeats: int) -> tuple[object, float, int]:
@@ -116,25 +129,48 @@ def _fill_accuracy(run: Run, scene: Scene, reference: Reference, times: np.ndarr
     if scene.mcp_limits is not None:
         lo, hi = scene.mcp_limits
         run.penetration = float(max(0.0, np.max(q[:, 0] - hi), np.max(lo - q[:, 0])))
+    run.final_theta1 = float(q[-1, 0])
+
+
+def grip_forces(scene: Scene, times: np.ndarray, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Σ F_n (N) of the scene's contact element at each sampled state (spec §7)."""
+    contact = build_contact(scene)
+    if contact is None:
+        return np.zeros(len(times))
+    return np.array([contact.outputs(t, tuple(a), tuple(b))["grip_force"] for t, a, b in zip(times, q, v)])
+
+
+def fill_grip(run: Run, times: np.ndarray, grip: np.ndarray) -> None:
+    """The run's grip force at its end and its spread over the last GRIP_WINDOW of the run."""
+    tail = grip[times >= times[-1] - GRIP_WINDOW * run.duration - 1e-12]
+    run.grip_force, run.grip_spread = float(grip[-1]), float(np.max(tail) - np.min(tail))
 
 
 # -- the project's integrators ---------------------------------------------------------------
 
 
-def run_method(scene: Scene, method: str, dt: float, reference: Reference, *, spacing: float, repeats: int) -> Run:
-    """`scene` stepped by the project's `method` at `dt` through `Simulator` (the node's path)."""
+def run_method(
+    scene: Scene, method: str, dt: float, reference: Reference, *, spacing: float, repeats: int, kernel: str = "auto"
+) -> Run:
+    """`scene` stepped by the project's `method` at `dt` through `Simulator` (the node's path).
+
+    method AUTO runs `method: auto` (its choice and, in contact, its substeps); the note says what ran.
+    kernel: Simulator's kernel ("auto": compiled where it can, "python": CPython, "compiled").
+    """
     family = FAMILY_PROJECT
     run = Run(scene.name, family, method, "dt", dt, scene.duration)
     n = round(scene.duration / dt)
     try:
         resolved = scene.with_overrides(method=method, dt=dt)
-        Simulator(resolved)  # the stability check, outside the timing
+        probe = Simulator(resolved, kernel=kernel)  # the stability check, outside the timing
+        if method == AUTO:
+            run.note = f"{probe.method}" + (f", {probe.substeps} substeps in contact" if probe.substeps > 1 else "")
     except StabilityError as exc:
         run.status, run.note = REFUSED, str(exc).split(";")[0].split(": ", 1)[-1]
         return run
 
     def timed_once() -> tuple[list, float]:
-        sim = Simulator(resolved)
+        sim = Simulator(resolved, kernel=kernel)
         states = [sim.state]
         step, append = sim.step, states.append
         start = time.process_time()
@@ -168,6 +204,8 @@ def run_method(scene: Scene, method: str, dt: float, reference: Reference, *, sp
         if scene.mcp_limits is not None:
             lo, hi = scene.mcp_limits
             run.penetration = max(0.0, max(max(s.q[0] - hi, lo - s.q[0]) for s in states))
+        if scene.objects:
+            fill_grip(run, times, grip_forces(scene, times, q, v))
     return run
 
 
@@ -324,8 +362,9 @@ def run_mujoco_peer(
 ) -> Run:
     """The MJCF peer (finger_sim.bench.mujoco_peer) with MuJoCo's `integrator` at `timestep`.
 
-    setting "default": MuJoCo's default solref/solimp on the loop-closing connect;
-    "tight": the peer's `tight_equality(timestep)` (the stiffest stable loop).
+    setting "default": MuJoCo's default solref/solimp on the loop-closing connect (and on the
+    contacts of a scene with objects); "tight": the peer's `tight_equality(timestep)` (the
+    stiffest stable loop) and `tight_contact(timestep)`.
     """
     label = f"MuJoCo {integrator} {setting}"
     run = Run(scene.name, FAMILY_MUJOCO, label, "timestep", timestep, scene.duration)
@@ -339,18 +378,19 @@ def run_mujoco_peer(
         run.status, run.note = SKIPPED, "the MJCF peer models neither joint stops, gravity nor tip forces"
         return run
     equality = mp.DEFAULT_EQUALITY if setting == "default" else mp.tight_equality(timestep)
+    contact = mp.DEFAULT_CONTACT if setting == "default" else mp.tight_contact(timestep)
     times = sample_times(scene.duration, max(spacing, timestep))
     q0, v0 = scene.initial_state()
-    plain = scene.theta1 == 0.0 and scene.theta1_dot == 0.0 and scene.damping == 0.0
+    plain = scene.theta1 == 0.0 and scene.theta1_dot == 0.0 and scene.damping == 0.0 and not scene.objects
 
-    def once() -> tuple[np.ndarray, np.ndarray | None, float, int]:
+    def once() -> tuple[np.ndarray, np.ndarray | None, float, int, np.ndarray | None]:
         if plain:  # the peer's own runner
             res = mp.run_mujoco(
                 scene.params, torque=scene.torque, t_end=scene.duration, timestep=timestep, integrator=integrator,
                 equality=equality, spring_stiffness=scene.spring_stiffness, sample_times=times,
             )
-            return res.theta, None, res.cpu_time, res.n_steps
-        return _mujoco_general(mp, scene, integrator, timestep, equality, times, q0, v0)
+            return res.theta, None, res.cpu_time, res.n_steps, None
+        return _mujoco_general(mp, scene, integrator, timestep, equality, contact, times, q0, v0)
 
     warnings: list[str] = []
     try:
@@ -369,22 +409,26 @@ def run_mujoco_peer(
         run.status, run.note = DIVERGED, (str(exc).split(":", 1)[-1].strip() + said)[:200]
         return run
     assert first is not None
-    theta, theta_dot, _, n_steps = first
+    theta, theta_dot, _, n_steps, grip = first
     run.cpu, run.repeats, run.steps = statistics.median(cpus), len(cpus), n_steps
     _fill_accuracy(run, scene, reference, times, theta, theta_dot)
+    if run.ok and grip is not None:
+        fill_grip(run, times, grip)
     return run
 
 
-def _mujoco_general(mp, scene, integrator, timestep, equality, times, q0, v0):  # type: ignore[no-untyped-def]
-    """run_mujoco's loop for what it does not take (an initial rate, joint damping): same timing, same checks.
+def _mujoco_general(mp, scene, integrator, timestep, equality, contact, times, q0, v0):  # type: ignore[no-untyped-def]
+    """run_mujoco's loop for what it does not take (an initial rate, joint damping, objects): same timing, same checks.
 
     Joint damping c on MuJoCo's hinges (mcp, coupler, pip) is the spec's Rayleigh damping
-    R = ½ c (θ1'² + θ2'² + β'²) exactly, since the pip hinge turns by β.
+    R = ½ c (θ1'² + θ2'² + β'²) exactly, since the pip hinge turns by β. With objects, the
+    grip force (`MujocoFinger.grip_force`) is read at each sample, outside the timing; else None.
     """
     import mujoco
 
     finger = mp.MujocoFinger(
-        scene.params, timestep=timestep, integrator=integrator, equality=equality, spring_stiffness=scene.spring_stiffness
+        scene.params, timestep=timestep, integrator=integrator, equality=equality, spring_stiffness=scene.spring_stiffness,
+        objects=scene.objects, radii=scene.phalanx_radius, contact=contact, friction=scene.contact.friction,
     )
     model = finger.model
     model.dof_damping[finger.dof_index] = scene.damping
@@ -397,14 +441,18 @@ def _mujoco_general(mp, scene, integrator, timestep, equality, times, q0, v0):  
     qpos = np.empty((samples.size, model.nq))
     qvel = np.empty((samples.size, model.nv))
     qpos[0], qvel[0] = data.qpos, data.qvel
+    grip = np.zeros(samples.size) if scene.objects else None
     ctrl, motor, step = data.ctrl, finger.motor_id, mujoco.mj_step
-    start = time.process_time()
+    cpu = 0.0
     for j, chunk in enumerate(chunks, start=1):
+        start = time.process_time()
         for tau in chunk:
             ctrl[motor] = tau
             step(model, data)
         qpos[j], qvel[j] = data.qpos, data.qvel
-    cpu = time.process_time() - start
+        cpu += time.process_time() - start
+        if grip is not None:
+            grip[j] = finger.grip_force(data)
     theta = finger.to_paper(qpos)
     w = qvel[:, finger.dof_index]
     theta_dot = np.column_stack([w[:, 0], w[:, 1], w[:, 0] + w[:, 2]])
@@ -414,4 +462,4 @@ def _mujoco_general(mp, scene, integrator, timestep, equality, times, q0, v0):  
         raise SimulationDiverged(
             f"MuJoCo {integrator}: {bad.number} bad-acceleration reset(s), largest loop violation {loop.max():.3g} m"
         )
-    return theta, theta_dot, cpu, n_steps
+    return theta, theta_dot, cpu, n_steps, grip

@@ -39,7 +39,7 @@ class AdaptiveReference(Integrator):
 
     def step(self, t: float, q: Vec3, v: Vec3, dt: float, torque: TorqueFn) -> tuple[Vec3, Vec3]:
         rhs = self.system.rhs
-        first = min(self._h, dt) if self._h else None
+        first = min(self._h, dt) if self._h and dt > 0.0 else None  # dt = 0: an event on the step end
         sol = solve_ivp(lambda s, y: rhs(s, y, torque), (t, t + dt), [*q, *v], method=self.method, rtol=self.rtol, atol=self.atol, first_step=first)
         if not sol.success:
             raise SimulationDiverged(sol.message, method=self.name, t=t)
