@@ -167,3 +167,195 @@ def test_overrides_in_process(capsys):
     y = ref.solve_scene(yaml.safe_load(PAPER.read_text()), t_end=0.1).y(0.1)
     shown = tuple(float(x) for x in re.search(rf"θ = \({NUMBER}°, {NUMBER}°, {NUMBER}°\)", first).groups())
     assert shown == tuple(round(math.degrees(a), 2) for a in y[:3])
+
+
+# -- issue 8: resource bounds, paths, one line per failure, the default method -----------------------------
+
+def one_error_line(err: str, command: str = "simulate") -> str:
+    lines = err.splitlines()
+    assert len(lines) == 1 and "Traceback" not in err, err
+    assert lines[0].startswith(f"finger-sim {command}: error: "), lines[0]
+    return lines[0]
+
+
+@pytest.mark.parametrize(("scene_text", "args", "steps", "memory"), [
+    (None, ("--dt", "1e-9", "--t-end", "100"), "100,000,000,000 steps", "60 TB"),
+    ("integrator: {dt: 1e-5}\nduration: 100\n", (), "10,000,000 steps", "6 GB"),
+], ids=["dt_1e-9", "long_duration"])
+def test_a_run_too_big_for_memory_is_refused_up_front(tmp_path, capsys, scene_text, args, steps, memory):
+    """Refused at once (nothing runs), naming the steps, the memory and both ways to go ahead."""
+    scene = PAPER
+    if scene_text is not None:
+        scene = tmp_path / "long.yaml"
+        scene.write_text(scene_text)
+    assert main(["simulate", str(scene), *args]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    line = one_error_line(captured.err)
+    assert f"a run of {steps} would hold about {memory} in memory, over the limit of 2,000,000 steps" in line
+    count = steps.split()[0].replace(",", "")
+    assert f"--max-steps {count}" in line and "--csv FILE" in line
+
+
+def test_a_scene_asking_for_1e38_seconds_is_refused(tmp_path, capsys):
+    scene = tmp_path / "huge.yaml"
+    scene.write_text("duration: 1e38\n")
+    assert main(["simulate", str(scene)]) == 2
+    line = one_error_line(capsys.readouterr().err)
+    assert "huge.yaml: duration: expected a run of at most 1e+12 steps" in line and "1e+41 steps" in line
+
+
+def test_max_steps_refuses_or_lets_a_run_go_ahead(tmp_path, capsys):
+    """The paper's run is 300 steps: a cap of 299 refuses it (held in memory or streamed), 300 runs it."""
+    assert main(["simulate", str(PAPER), "--max-steps", "299"]) == 2
+    line = one_error_line(capsys.readouterr().err)
+    assert "a run of 300 steps would hold about 181 kB in memory, over the limit of 299 steps" in line
+    assert "--max-steps 300" in line
+    assert main(["simulate", str(PAPER), "--max-steps", "299", "--csv", str(tmp_path / "run.csv")]) == 2
+    line = one_error_line(capsys.readouterr().err)
+    assert line.endswith("--max-steps: expected at least the run's 300 steps (duration 0.3 s at dt = 0.001 s), got 299")
+    assert not (tmp_path / "run.csv").exists()
+    assert main(["simulate", str(PAPER), "--max-steps", "300"]) == 0
+    assert "steps = 300" in capsys.readouterr().out
+
+
+def test_csv_alone_streams_the_same_file_and_summary(tmp_path, capsys):
+    """--csv without --plot writes row by row: byte for byte the in-memory run's CSV, the same summary."""
+    streamed, held = tmp_path / "streamed.csv", tmp_path / "held.csv"
+    assert main(["simulate", str(PAPER), "--csv", str(streamed)]) == 0
+    out = capsys.readouterr().out.splitlines()
+    traj = simulate(load_scene(PAPER))
+    traj.write_csv(held)
+    assert streamed.read_bytes() == held.read_bytes()
+    without_wall = re.compile(r"  wall = \S+ s$")
+    assert without_wall.sub("", out[0]) == without_wall.sub("", traj.summary())
+    assert out[1] == f"method auto → {traj.method}: {traj.method_reason}"
+    assert out[2] == f"wrote {streamed}"
+
+
+def test_a_streamed_run_takes_constant_memory(tmp_path):
+    """tracemalloc peak of stream_csv: four times the steps, the same peak (within 4 KiB), and under a
+    quarter of the same run held in memory."""
+    import tracemalloc
+
+    from finger_sim.streaming import stream_csv
+
+    base = load_scene(ref.CONFIG / "free_swing.yaml").with_overrides(method="rk4")
+    stream_csv(base.with_overrides(duration=0.01), tmp_path / "warm.csv")  # first-call costs out of the way
+
+    def peak(run, steps: int) -> int:
+        tracemalloc.start()
+        try:
+            run(base.with_overrides(duration=steps * base.dt))
+            return tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+
+    short = peak(lambda s: stream_csv(s, tmp_path / "short.csv"), 250)
+    long = peak(lambda s: stream_csv(s, tmp_path / "long.csv"), 1000)
+    held = peak(simulate, 1000)
+    assert long < short + 4096, (short, long)
+    assert long < held / 4, (long, held)
+    assert len((tmp_path / "long.csv").read_text().splitlines()) == 1000 + 2  # header, t = 0, every step
+
+
+PATH_CASES = {
+    "csv_folder": (["--csv", "{tmp}"], "--csv: expected a file path, not a folder, got '{tmp}'"),
+    "csv_missing_folder": (["--csv", "{tmp}/missing/run.csv"],
+                           "--csv: expected a file in an existing folder (no folder {tmp}/missing), got '{tmp}/missing/run.csv'"),
+    "csv_proc": (["--csv", "/proc"], "--csv: expected a file path, not a folder, got '/proc'"),
+    "plot_unknown_extension": (["--plot", "{tmp}/run.xyz"], "--plot: expected an image file ending in one of .avif, .eps, "),
+    "plot_no_extension": (["--plot", "{tmp}/some/dir"], "--plot: expected an image file ending in one of .avif, .eps, "),
+    "plot_folder": (["--plot", "{tmp}/some"], "--plot: expected a file path, not a folder, got '{tmp}/some'"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(PATH_CASES))
+def test_a_bad_output_path_is_refused_before_the_run(tmp_path, capsys, case):
+    """One line naming the argument; nothing run (stdout empty), nothing written (not even dir.png)."""
+    args, message = PATH_CASES[case]
+    (tmp_path / "some").mkdir()
+    before = sorted(tmp_path.rglob("*"))
+    assert main(["simulate", str(PAPER), *(a.format(tmp=tmp_path) for a in args)]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    line = one_error_line(captured.err)
+    assert message.format(tmp=tmp_path) in line
+    if case.startswith("plot_") and "extension" in case:
+        assert all(f".{ext}," in line for ext in ("pdf", "png", "svg", "jpg")) and ".xyz" not in line.split("got")[0]
+        assert line.endswith(f"got '{args[1].format(tmp=tmp_path)}'")
+    assert sorted(tmp_path.rglob("*")) == before
+
+
+def test_a_file_the_system_refuses_is_one_line(capsys):
+    """/proc takes no new files: the write itself fails; main() reports the OSError in one line."""
+    assert main(["simulate", str(PAPER), "--csv", "/proc/run.csv"]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert "/proc/run.csv" in one_error_line(captured.err)
+
+
+def test_plot_writes_the_format_its_extension_names(tmp_path, capsys):
+    """What `wrote` names is the file written, in its format: an SVG for .svg."""
+    svg = tmp_path / "run.svg"
+    assert main(["simulate", str(PAPER), "--plot", str(svg)]) == 0
+    assert capsys.readouterr().out.splitlines()[-1] == f"wrote {svg}"
+    head = svg.read_bytes()[:400]
+    assert head.startswith(b"<?xml") and b"<svg" in head
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run.svg"]
+
+
+@pytest.mark.parametrize(("argv", "command", "message"), [
+    (["kinematics", "--plot", "{tmp}/k.xyz"], "kinematics", "--plot: expected an image file ending in one of"),
+    (["kinematics", "--plot", "{tmp}/k"], "kinematics", "--plot: expected an image file ending in one of"),
+    (["bench", "--out", "{tmp}/file/docs"], "bench", "--out: expected a folder ({tmp}/file is a file), got '{tmp}/file/docs'"),
+], ids=["kinematics_extension", "kinematics_no_extension", "bench_out_under_a_file"])
+def test_other_commands_check_their_paths(tmp_path, capsys, argv, command, message):
+    (tmp_path / "file").write_text("")
+    assert main([a.format(tmp=tmp_path) for a in argv]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert message.format(tmp=tmp_path) in one_error_line(captured.err, command)
+
+
+@pytest.mark.parametrize("argv", [
+    [], ["simulate"], ["frobnicate"], ["simulate", str(PAPER), "--method", "nope"],
+    ["simulate", str(PAPER), "--method", "rk4\nrk6"], ["simulate", str(PAPER), "--max-steps", "0"],
+    ["simulate", str(PAPER), "--dt", "fast"], ["simulate", str(PAPER), "--unknown\nflag"],
+], ids=["nothing", "no_scene", "unknown_command", "unknown_method", "newline_in_value", "max_steps_0", "dt_text",
+        "newline_in_unknown"])
+def test_a_usage_error_is_one_line(capsys, argv):
+    """argparse's refusals too: one line (no usage block), exit status 2."""
+    with pytest.raises(SystemExit) as exit_info:
+        main(argv)
+    assert exit_info.value.code == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    lines = captured.err.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("finger-sim") and ": error: " in lines[0], captured.err
+
+
+@pytest.mark.parametrize(("content", "message"), [
+    (b"name: caf\xe9\n", "bad.yaml: byte 0xe9 at offset 9 is not UTF-8"),
+    (b"[" * 100_000 + b"]" * 100_000, "nesting deeper than"),
+    (b"integrator: {method: [rk4]}\n", "integrator.method"),
+], ids=["not_utf8", "nested_100k_deep", "unhashable_method"])
+def test_scenes_that_gave_tracebacks_are_one_line(tmp_path, content, message):
+    scene = tmp_path / "bad.yaml"
+    scene.write_bytes(content)
+    proc = run("simulate", str(scene), cwd=tmp_path)
+    assert proc.returncode == 2 and proc.stdout == ""
+    assert message in one_error_line(proc.stderr)
+
+
+def test_the_default_method_is_auto(tmp_path, capsys):
+    """A scene that names no method runs with auto, as the help says; --method still overrides it."""
+    scene = tmp_path / "plain.yaml"
+    scene.write_text("duration: 0.01\n")
+    assert main(["simulate", str(scene)]) == 0
+    assert "method auto → " in capsys.readouterr().out
+    assert main(["simulate", str(scene), "--method", "rk4"]) == 0
+    assert "method = rk4" in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        main(["simulate", "--help"])
+    assert "a scene that names none uses auto" in " ".join(capsys.readouterr().out.split())
