@@ -6,6 +6,11 @@ by a about +y, the quaternion (w, x, y, z) = (cos a/2, 0, sin a/2, 0). Joint pos
 zero at extension and positive in flexion (finger_sim.joints); efforts are the applied
 torques: the motor τ at `mcp_joint`, 0 at `coupler_joint`, the PIP spring's −kβ at `pip_joint`.
 
+Contact (spec §7): the force on a phalanx, model (Fx, Fy), is (Fx, 0, −Fy) in `finger_base`,
+and a moment Mz about the model's z axis is a torque about +y: the model's axes are X = x and
+Y = −z, so Z = X × Y = x × (−z) = +y (the axis a model angle turns about). Objects are markers:
+a circle is a cylinder along y, a plane a thin slab on the side of −normal.
+
 Every stamp is sim time in integer nanoseconds, never wall time. Each function returns a new
 message, or with `out=` (like numpy's) refills one it returned before for the same frames and
 returns it: at 20 000 states per second, building three messages costs more than a physics
@@ -21,24 +26,42 @@ from dataclasses import dataclass
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import Point, PoseStamped
+from geometry_msgs.msg import Point, PoseStamped, WrenchStamped
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import ColorRGBA
+from std_msgs.msg import ColorRGBA, Float64
 from visualization_msgs.msg import Marker, MarkerArray
 
 from finger_sim import joints, kinematics
 from finger_sim.dynamics import FingerSystem
-from finger_sim.forces import PipSpring
+from finger_sim.effects import ForceElement
+from finger_sim.effects.contact_geometry import Circle, SceneObject
 from finger_sim.kinematics import Vec3
 from finger_sim.model import FingerParams
 
 BASE_FRAME = "finger_base"
 NS_PER_S = 1_000_000_000
+#: A pure PIP rotation in q = (θ1, θ2, θ3): β = θ3 + α − θ1 changes by 1 rad.
+PIP_ROTATION: Vec3 = (0.0, 0.0, 1.0)
+
+#: The element output that marks a scene with contact (N): its elements' reports become the
+#: grip_force and contact_wrench topics (keys of finger_sim.ros.interfaces.OUTPUTS).
+GRIP_FORCE = "grip_force"
+PHALANGES = ("proximal", "distal")
+WRENCH_KEYS = tuple(f"contact_wrench/{phalanx}" for phalanx in PHALANGES)
 
 #: Line width of the link markers and diameter of the fingertip sphere, m.
 LINK_WIDTH = 0.002
 TIP_DIAMETER = 0.006
+#: Object markers: extent normal to the model plane (a cup's height), a plane's thickness and
+#: its width along the model plane, m; colour (r, g, b, a), translucent so the finger shows.
+OBJECT_DEPTH = 0.04
+PLANE_THICKNESS = 0.002
+PLANE_WIDTH = 0.2
+OBJECT_COLOR = (0.8, 0.8, 0.85, 0.6)
+#: A cylinder marker's axis is its z: a quarter turn about x lays it along finger_base y, the
+#: axis of a circle object (normal to the model plane). Quaternion (w, x, y, z).
+CYLINDER_ALONG_Y = (math.sqrt(0.5), math.sqrt(0.5), 0.0, 0.0)
 #: Marker colours (r, g, b, a): ground grey, proximal blue, coupler orange, distal green, tip red.
 COLORS = {
     "ground": (0.5, 0.5, 0.5, 1.0),
@@ -70,11 +93,17 @@ class FingerFrames:
     alpha: float  # distal offset α, rad
     stiffness: float  # PIP spring k, N·m/rad (0 when the scene has none)
     prefix: str = ""
+    objects: tuple[SceneObject, ...] = ()  # the scene's fixed objects (spec §7), drawn as markers
 
     @classmethod
     def from_system(cls, system: FingerSystem, prefix: str = "") -> FingerFrames:
-        k = sum(e.stiffness for e in system.elements if isinstance(e, PipSpring))
-        return cls(system.params, kinematics.extended_pose(system.params), system.alpha, k, prefix)
+        q_ext = kinematics.extended_pose(system.params)
+        # the PIP spring's k, through the force-element protocol: the stiffness the smooth
+        # elements put on a pure PIP rotation (dθ3 = dβ = 1). Non-smooth ones are left out: a
+        # contact reports a design stiffness there even out of contact, for the stability check.
+        k = sum(e.modal(q_ext, PIP_ROTATION)[0] for e in system.elements if e.smooth)
+        objects = tuple(obj for e in system.elements for obj in getattr(e, "objects", ()))
+        return cls(system.params, q_ext, system.alpha, k, prefix, objects)
 
     @property
     def base_frame(self) -> str:
@@ -150,7 +179,8 @@ def fingertip_pose(frames: FingerFrames, q: Vec3, stamp_ns: int, out: PoseStampe
 
 
 def markers(frames: FingerFrames, q: Vec3, stamp_ns: int) -> MarkerArray:
-    """visualization_msgs/MarkerArray: the four links as line strips and the fingertip as a sphere."""
+    """visualization_msgs/MarkerArray: the four links as line strips, the fingertip as a sphere,
+    then each object (namespace: its name) as a cylinder (circle) or a thin cube (plane)."""
     pts = kinematics.points(frames.params, q, frames.alpha)
     stamp = to_time(stamp_ns)
     out = MarkerArray()
@@ -163,21 +193,104 @@ def markers(frames: FingerFrames, q: Vec3, stamp_ns: int) -> MarkerArray:
     tip.scale.x = tip.scale.y = tip.scale.z = TIP_DIAMETER
     tip.pose.position.x, tip.pose.position.y, tip.pose.position.z = to_base(*pts["tip"])
     out.markers.append(tip)
+    out.markers += [object_marker(frames, stamp, i, obj) for i, obj in enumerate(frames.objects)]
     return out
 
 
-def _marker(frames: FingerFrames, stamp: Time, marker_id: int, link: str, kind: int) -> Marker:
+def object_marker(frames: FingerFrames, stamp: Time, marker_id: int, obj: SceneObject) -> Marker:
+    """A circle as a cylinder along y (diameter 2R, OBJECT_DEPTH long) at its centre; a plane as a
+    PLANE_THICKNESS slab whose face lies on the plane, on the side of −normal: the cube's x along
+    the normal (a rotation by the normal's model angle about +y), y along finger_base y."""
+    if isinstance(obj, Circle):
+        m = _marker(frames, stamp, marker_id, obj.name, Marker.CYLINDER, ns=frames.prefix + obj.name)
+        m.scale.x = m.scale.y = 2.0 * obj.radius
+        m.scale.z = OBJECT_DEPTH
+        center, orientation = obj.center, CYLINDER_ALONG_Y
+    else:
+        m = _marker(frames, stamp, marker_id, obj.name, Marker.CUBE, ns=frames.prefix + obj.name)
+        m.scale.x, m.scale.y, m.scale.z = PLANE_THICKNESS, OBJECT_DEPTH, PLANE_WIDTH
+        (ox, oy), (nx, ny) = obj.point, obj.normal
+        center = (ox - 0.5 * PLANE_THICKNESS * nx, oy - 0.5 * PLANE_THICKNESS * ny)
+        orientation = about_y(math.atan2(ny, nx))
+    p, o = m.pose.position, m.pose.orientation
+    p.x, p.y, p.z = to_base(*center)
+    o.w, o.x, o.y, o.z = orientation
+    return m
+
+
+def _marker(frames: FingerFrames, stamp: Time, marker_id: int, link: str, kind: int, ns: str | None = None) -> Marker:
     m = Marker()
     m.header.stamp = stamp
     m.header.frame_id = frames.base_frame
-    m.ns = frames.prefix + "finger"
+    m.ns = frames.prefix + "finger" if ns is None else ns
     m.id = marker_id
     m.type = kind
     m.action = Marker.ADD
     m.pose.orientation.w = 1.0
-    r, g, b, a = COLORS[link]
+    r, g, b, a = COLORS.get(link, OBJECT_COLOR)
     m.color = ColorRGBA(r=r, g=g, b=b, a=a)
     return m
+
+
+def moment_to_base(mz: float) -> tuple[float, float, float]:
+    """A moment Mz about the model's z axis (N·m) in `finger_base`: (0, Mz, 0), since Z = +y."""
+    return (0.0, mz, 0.0)
+
+
+def contact_wrench(frames: FingerFrames, wrench: Vec3, stamp_ns: int, out: WrenchStamped | None = None) -> WrenchStamped:
+    """geometry_msgs/WrenchStamped in `finger_base` from a model-plane (Fx, Fy, Mz): the contact
+    force on a phalanx (N) and its moment about the frame origin A (N·m)."""
+    if out is None:
+        msg = WrenchStamped()
+        msg.header.frame_id = frames.base_frame
+    else:
+        msg = out
+    to_time(stamp_ns, msg.header.stamp)
+    f, m = msg.wrench.force, msg.wrench.torque
+    f.x, f.y, f.z = to_base(wrench[0], wrench[1])
+    m.x, m.y, m.z = moment_to_base(wrench[2])
+    return msg
+
+
+class ContactReport:
+    """The contact topics' messages of a state, from the elements that report a grip force.
+
+    Summed over those elements: grip_force (Σ F_n, N) from their `outputs`, and each phalanx's
+    (Fx, Fy, Mz about A) from their `wrenches(t, q, q')` (finger_sim.effects.contact). Messages
+    are refilled in place (as `out=` does above).
+    """
+
+    def __init__(self, frames: FingerFrames, elements: Iterable[ForceElement]) -> None:
+        zero = (0.0, 0.0, 0.0)
+        self.frames = frames
+        self.elements = tuple(e for e in elements if GRIP_FORCE in e.outputs(0.0, frames.q_ext, zero))
+        for e in self.elements:
+            if not callable(getattr(e, "wrenches", None)):  # at start, never in the stepping loop
+                raise TypeError(f"{type(e).__name__} reports {GRIP_FORCE} but has no wrenches(t, q, v)")
+        self._grip = Float64()
+        self._wrenches: list[WrenchStamped | None] = [None] * len(PHALANGES)
+
+    @classmethod
+    def of(cls, frames: FingerFrames, elements: Iterable[ForceElement]) -> ContactReport | None:
+        """The report of a scene with contact; None (nothing to publish, no cost) without any."""
+        report = cls(frames, elements)
+        return report if report.elements else None
+
+    def messages(self, t: float, q: Vec3, v: Vec3, stamp_ns: int) -> list[tuple[str, Float64 | WrenchStamped]]:
+        """[(output key, message)]: grip_force, then contact_wrench/proximal and /distal."""
+        grip, sums = 0.0, [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]
+        for e in self.elements:
+            grip += e.outputs(t, q, v)[GRIP_FORCE]
+            for acc, wrench in zip(sums, e.wrenches(t, q, v)):  # type: ignore[attr-defined]
+                acc[0] += wrench[0]
+                acc[1] += wrench[1]
+                acc[2] += wrench[2]
+        self._grip.data = grip
+        out: list[tuple[str, Float64 | WrenchStamped]] = [(GRIP_FORCE, self._grip)]
+        for i, (key, acc) in enumerate(zip(WRENCH_KEYS, sums)):
+            self._wrenches[i] = contact_wrench(self.frames, tuple(acc), stamp_ns, out=self._wrenches[i])  # type: ignore[arg-type]
+            out.append((key, self._wrenches[i]))
+        return out
 
 
 def key_values(values: Mapping[str, object]) -> list[KeyValue]:
