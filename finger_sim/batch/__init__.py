@@ -1,0 +1,326 @@
+"""Many scenes stepped at once: the compiled kernel looped over fingers on every core.
+
+`run_batch(scenes)` runs N scenes to their ends with the numbers of `Simulator` (same method
+per scene, `auto` resolved as the Simulator resolves it; tested to 1e-12 rad). The scenes may
+differ in anything (geometry, spring, damping, torque profile and its parameters, initial state,
+duration, dt): each finger's model is data for the kernel (`kernel.layout.model_array`).
+
+What runs where:
+- compiled (`finger_sim.batch.loop`, numba `prange` over the fingers): every fixed-step
+  explicit method (euler, rk4, rk6, dop8) on a scene whose force elements all have a compiled
+  form, with a constant, ramp, step, square or sine torque. Torque switches are cut inside the
+  loop as `Simulator.step` cuts them. A step in which a stop closes, a contact gap opens or
+  closes, or the kernel fails is handed to that finger's own `Simulator` (compiled kernel), which
+  locates the event, applies the impact and keeps the finger while it rests on a stop; the
+  finger then goes back to the loop.
+- a per-finger `Simulator` loop (`simulate`) for the rest: implicit and adaptive methods
+  (radau, rattle, dop853, adaptive: `auto` picks radau for stiff scenes), contact scenes under
+  `auto` whose steps near contact are split into substeps (`auto.contact_substeps`), an element
+  or profile without a compiled form, no numba, or kernel="python". These fingers run one after
+  another in this process.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import time
+from collections import defaultdict
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from finger_sim import kinematics
+from finger_sim.auto import choose_method, contact_substeps
+from finger_sim.dynamics import FingerSystem
+from finger_sim.errors import ConfigError, StabilityError
+from finger_sim.inputs import PROFILES, Profile
+from finger_sim.integrators import METHODS
+from finger_sim.kernel import KERNELS, PYTHON, use_writable_cache
+from finger_sim.scene import AUTO, Scene
+from finger_sim.simulate import Simulator, simulate
+from finger_sim.stability import fastest_mode, largest_stable_dt, mcp_range, stable_at
+
+#: The output a contact element reports as the grip force (N): a column of contact sweeps.
+GRIP_FORCE = "grip_force"
+#: Torque profile kinds the compiled loop evaluates itself (`loop.PROFILE_*`), and the order
+#: of their parameters there.
+COMPILED_PROFILES = {
+    "constant": ("value",),
+    "ramp": ("offset", "slope"),
+    "step": ("before", "after", "at"),
+    "square": ("amplitude", "frequency", "offset"),
+    "sine": ("amplitude", "frequency", "offset"),
+}
+_PROFILE_CODES = {kind: i for i, kind in enumerate(COMPILED_PROFILES)}  # loop.PROFILE_CONSTANT ... PROFILE_SINE
+
+
+@dataclass(frozen=True)
+class BatchResult:
+    """The end of every run, in the order of the scenes given. Angles rad, rates rad/s, |Φ| m, J, N."""
+
+    q: np.ndarray  # (N, 3) final (θ1, θ2, θ3)
+    v: np.ndarray  # (N, 3) final rates
+    max_residual: np.ndarray  # (N,) max |Φ| over each run, t = 0 included
+    energy_change: np.ndarray  # (N,) E(end) − E(0)
+    grip_force: np.ndarray | None  # (N,) at the end; None when no scene has contact
+    methods: tuple[str, ...]  # the method each run used (auto resolved)
+    compiled: np.ndarray  # (N,) bool: stepped in the compiled loop (else a per-finger Simulator loop)
+    handed_over: np.ndarray  # (N,) steps of compiled runs that their Simulator took (events, rest)
+    trajectories: list[np.ndarray] | None  # per run, (steps + 1) × 3 angles, when recorded
+    wall_time: float  # s, stepping and set-up
+    cpu_time: float  # s of process CPU (every thread), stepping and set-up
+
+
+@dataclass
+class _Plan:
+    """One scene made ready for the loop: its system, method, compiled model and profile."""
+
+    scene: Scene
+    system: FingerSystem
+    method: str
+    model: np.ndarray | None  # None: not compiled
+    profile: tuple[int, tuple[float, ...]] | None
+    stops: bool  # the scene's impact gaps are its MCP stops
+
+
+def compiled_available() -> bool:
+    """Whether numba is installed (the compiled loop can run)."""
+    return importlib.util.find_spec("numba") is not None
+
+
+def run_batch(
+    scenes: Sequence[Scene],
+    *,
+    kernel: str = "auto",
+    record: bool = False,
+    progress: Callable[[int], None] | None = None,
+) -> BatchResult:
+    """Run every scene to its end; see the module docstring for which fingers run compiled.
+
+    kernel: "auto" (compiled where it can run), "compiled" (refused, naming the first scene,
+    where it cannot), or "python" (every finger through `simulate(kernel="python")`: the
+    reference). record: keep every run's angles at every step (`BatchResult.trajectories`).
+    progress: called with a count of runs finished, as they finish.
+    StabilityError names the scene whose method is unstable at its dt.
+    """
+    if kernel not in KERNELS:
+        raise ConfigError("kernel", f"one of {list(KERNELS)}", kernel)
+    wall0, cpu0 = time.perf_counter(), time.process_time()
+    planner = _Planner(compile_=kernel != PYTHON and compiled_available())
+    plans = [planner.plan(i, s) for i, s in enumerate(scenes)]
+    if kernel == "compiled":
+        for i, p in enumerate(plans):
+            if p.model is None:
+                raise ConfigError(f"scenes[{i}] ({p.scene.name})", "a scene the compiled batch can step "
+                                  "(an explicit method, compiled force elements and torque profile)", kernel)
+    n = len(plans)
+    q, v = np.zeros((n, 3)), np.zeros((n, 3))
+    max_res, energy = np.zeros(n), np.zeros(n)
+    handed = np.zeros(n, dtype=np.int64)
+    trajs: list[np.ndarray] | None = [np.empty(0)] * n if record else None
+    groups: dict[str, list[int]] = defaultdict(list)
+    for i, p in enumerate(plans):
+        if p.model is not None:
+            groups[p.method].append(i)
+    for method, members in groups.items():
+        _run_compiled(method, [plans[i] for i in members], members, q, v, max_res, handed, trajs, progress)
+    for i, p in enumerate(plans):
+        if p.model is None:
+            traj = simulate(p.scene, kernel=PYTHON if kernel == PYTHON else "auto")
+            q[i], v[i], max_res[i] = traj.q[-1], traj.v[-1], traj.residual.max()
+            if trajs is not None:
+                trajs[i] = traj.q
+            if progress is not None:
+                progress(1)
+    grip = np.zeros(n)
+    has_grip = False
+    for i, p in enumerate(plans):
+        qi, vi = tuple(q[i].tolist()), tuple(v[i].tolist())
+        energy[i] = p.system.energy(qi, vi) - p.system.energy(*p.scene.initial_state())
+        t_end = p.scene.step_count * p.scene.dt
+        for element in p.system.elements:
+            value = element.outputs(t_end, qi, vi).get(GRIP_FORCE)
+            if value is not None:
+                grip[i] += value
+                has_grip = True
+    return BatchResult(
+        q=q, v=v, max_residual=max_res, energy_change=energy, grip_force=grip if has_grip else None,
+        methods=tuple(p.method for p in plans), compiled=np.array([p.model is not None for p in plans], dtype=bool),
+        handed_over=handed, trajectories=trajs,
+        wall_time=time.perf_counter() - wall0, cpu_time=time.process_time() - cpu0,
+    )
+
+
+class _Planner:
+    """Resolves each scene's method and checks its stability as `Simulator.__init__` does, with the
+    fastest mode (the costly part, ~1 ms) computed once per distinct finger model."""
+
+    def __init__(self, *, compile_: bool) -> None:
+        self.compile = compile_
+        self._roots: dict[tuple, complex] = {}
+        self._auto: dict[tuple, str] = {}
+        self._stable: dict[tuple, bool] = {}
+        if compile_:
+            use_writable_cache()
+            from finger_sim.kernel.integrators import compiled_twin
+            from finger_sim.kernel.layout import model_array
+
+            self._twin, self._model_array = compiled_twin, model_array
+
+    def plan(self, index: int, scene: Scene) -> _Plan:
+        system = scene.build_system()
+        model = self._model_array(system) if self.compile else None
+        key = None if model is None else (scene.params, model.tobytes(), mcp_range(scene))
+        method = scene.method
+        if method == AUTO:
+            # choose_method reads the model, the MCP range, dt, and the torque's switches and kind
+            switches = len(scene.torque.breakpoints(0.0, scene.duration))
+            auto_key = None if key is None else (*key, scene.dt, scene.torque.kind, switches)
+            method = self._auto.get(auto_key) if auto_key is not None else None
+            if method is None:
+                method, _ = choose_method(scene)
+                if auto_key is not None:
+                    self._auto[auto_key] = method
+        cls = METHODS[method]
+        profile = _profile(scene.torque)
+        known, stops = _events(scene, system)
+        # auto splits a contact scene's steps near contact into substeps (Simulator._step): its Simulator runs it
+        substeps = contact_substeps(scene) if scene.method == AUTO and scene.objects and not cls.implicit else 1
+        if model is not None and (profile is None or self._twin(cls) is None or not known or substeps != 1):
+            model = None
+        if model is None:  # a per-finger Simulator runs it, and checks its stability
+            return _Plan(scene, system, method, None, profile, stops)
+        root = self._roots.get(key)
+        if root is None:
+            root = self._roots[key] = fastest_mode(system, mcp_range(scene))
+        stable = self._stable.get((key, method, scene.dt))
+        if stable is None:
+            stable = self._stable[(key, method, scene.dt)] = stable_at(cls, root, scene.dt)
+        if not stable:
+            raise StabilityError(cls.name, scene.name, scene.dt, root, largest_stable_dt(cls, root, scene.dt),
+                                 f"batch run {index}")
+        return _Plan(scene, system, method, model, profile, stops)
+
+
+def _profile(profile: Profile) -> tuple[int, tuple[float, ...]] | None:
+    """(code, parameters) of a profile the compiled loop evaluates, else None."""
+    names = COMPILED_PROFILES.get(profile.kind)
+    if names is None or type(profile) is not PROFILES.get(profile.kind):
+        return None
+    return _PROFILE_CODES[profile.kind], tuple(float(getattr(profile, k)) for k in names)
+
+
+def _events(scene: Scene, system: FingerSystem) -> tuple[bool, bool]:
+    """(known, stops): whether the loop sees every event of the scene, i.e. its impact gaps are
+    exactly the MCP stops (θ1 − lower, upper − θ1) and every other non-smooth element is contact
+    (whose gaps `loop` evaluates); and whether it has the stops."""
+    from finger_sim.kernel.layout import CONTACT
+
+    impact_gaps = 0
+    for element in system.elements:
+        if element.smooth:
+            continue
+        q0, _ = scene.initial_state()
+        gaps = element.gaps(q0)
+        impacts = [i for i in range(len(gaps)) if element.impact(i) is not None]
+        if not impacts:
+            if getattr(element, "kernel_code", None) != CONTACT:
+                return False, False
+            continue
+        if scene.mcp_limits is None or len(gaps) != 2 or len(impacts) != 2:
+            return False, False
+        lower, upper = scene.mcp_limits
+        if gaps != (q0[0] - lower, upper - q0[0]) or element.gap_gradient(0, q0) != (1.0, 0.0, 0.0):
+            return False, False
+        impact_gaps += 2
+    return impact_gaps in (0, 2), impact_gaps == 2
+
+
+def _contact_candidates(model: np.ndarray) -> int:
+    """Number of contact candidates (gaps) in a flat model: 0 without contact."""
+    from finger_sim.kernel.layout import CONTACT, HEADER
+
+    o, count = HEADER + 1, 0
+    for _ in range(int(model[HEADER])):
+        code, n = int(model[o]), int(model[o + 1])
+        if code == CONTACT:
+            count += int(sum(model[o + 2 + 8: o + 2 + 12]))
+        o += 2 + n
+    return count
+
+
+def _run_compiled(method: str, plans: list[_Plan], members: list[int], q: np.ndarray, v: np.ndarray,
+                  max_res: np.ndarray, handed: np.ndarray, trajs: list[np.ndarray] | None,
+                  progress: Callable[[int], None] | None) -> None:
+    """Run the fingers of one method in the compiled loop, handing event steps to Simulators."""
+    from finger_sim.batch import loop
+    from finger_sim.integrators.explicit import ExplicitRungeKutta
+    from finger_sim.kernel.layout import distinct_nodes, tableau_array
+
+    ref = METHODS[method]
+    if issubclass(ref, ExplicitRungeKutta):
+        tab, nodes = tableau_array(ref.A, ref.B, ref.C), np.array(distinct_nodes(ref.C))
+    else:  # the paper's Euler: an empty tableau, one node at 0
+        tab, nodes = np.zeros((3, 0)), np.zeros(1)
+    n = len(plans)
+    width = max(len(p.model) for p in plans)  # type: ignore[arg-type]
+    models = np.zeros((n, width))
+    codes = np.empty(n, dtype=np.int64)
+    params = np.zeros((n, 3))
+    dts, lasts = np.empty(n), np.empty(n, dtype=np.int64)
+    stops, limits = np.zeros(n, dtype=np.bool_), np.zeros((n, 2))
+    gaps = np.empty(n, dtype=np.int64)
+    states = np.empty((n, 6))
+    for j, p in enumerate(plans):
+        models[j, : len(p.model)] = p.model  # type: ignore[arg-type]
+        code, values = p.profile  # type: ignore[misc]
+        codes[j], params[j, : len(values)] = code, values
+        dts[j], lasts[j] = p.scene.dt, p.scene.step_count
+        if p.stops:
+            stops[j], limits[j] = True, p.scene.mcp_limits
+        gaps[j] = _contact_candidates(p.model)  # type: ignore[arg-type]
+        q0, v0 = p.scene.initial_state()
+        states[j] = (*q0, *v0)
+    steps = np.zeros(n, dtype=np.int64)
+    max_res_local = np.array([kinematics.constraint_norm(p.scene.params, tuple(states[j, :3])) for j, p in enumerate(plans)])
+    record = trajs is not None
+    if record:
+        longest = int(lasts.max())
+        paths = np.full((n, longest + 1, 3), np.nan)
+        paths[:, 0] = states[:, :3]
+    else:
+        paths = np.zeros((n, 1, 3))
+    sims: dict[int, Simulator] = {}
+    active = np.arange(n)
+    while len(active):
+        sub_states, sub_steps, sub_res = states[active], steps[active], max_res_local[active]
+        sub_paths = paths[active] if record else paths[np.zeros(len(active), dtype=np.int64)]
+        status = loop.run(models[active], tab, nodes, codes[active], params[active], dts[active], stops[active],
+                          limits[active], gaps[active], sub_states, sub_steps, lasts[active], sub_res, sub_paths, record)
+        states[active], steps[active], max_res_local[active] = sub_states, sub_steps, sub_res
+        if record:
+            paths[active] = sub_paths
+        again = []
+        for j in active[status == loop.EVENT].tolist():
+            sim = sims.get(j) or sims.setdefault(j, Simulator(plans[j].scene, kernel="compiled"))
+            sim.step_index, sim.q, sim.v = int(steps[j]), tuple(states[j, :3].tolist()), tuple(states[j, 3:].tolist())
+            while True:
+                s = sim.step()
+                handed[members[j]] += 1
+                max_res_local[j] = max(max_res_local[j], kinematics.constraint_norm(plans[j].scene.params, s.q))
+                if record:
+                    paths[j, sim.step_index] = s.q
+                # a finger resting on a stop stays with its Simulator, which knows when it leaves
+                if sim.step_index >= lasts[j] or sim._resting is None:  # noqa: SLF001 (see the module docstring)
+                    break
+            steps[j], states[j] = sim.step_index, (*sim.q, *sim.v)
+            if sim.step_index < lasts[j]:
+                again.append(j)
+        if progress is not None:
+            progress(len(active) - len(again))
+        active = np.array(again, dtype=np.int64)
+    for j, i in enumerate(members):
+        q[i], v[i], max_res[i] = states[j, :3], states[j, 3:], max_res_local[j]
+        if trajs is not None:
+            trajs[i] = paths[j, : lasts[j] + 1].copy()
