@@ -19,18 +19,20 @@ from typing import NamedTuple
 import numpy as np
 from scipy.optimize import brentq
 
-from finger_sim import kinematics
 from finger_sim.auto import choose_method, contact_substeps
+from finger_sim.dynamics import FingerSystem
 from finger_sim.effects import ForceElement
 from finger_sim.errors import SimulationDiverged, StabilityError
-from finger_sim.inputs import Profile
+from finger_sim.inputs import HELD_ARRAY, Profile
 from finger_sim.integrators import METHODS, Integrator, TorqueFn
 from finger_sim.kernel import offline_kernel
 from finger_sim.kernel import select as select_kernel
-from finger_sim.kernel.runner import advance, can_run
+from finger_sim.kernel.runner import advance
+from finger_sim.kernel.layout import BREAKPOINT
+from finger_sim.kernel.layout import OK as FAST_OK
 from finger_sim.kinematics import Vec3
 from finger_sim.scene import AUTO, Scene
-from finger_sim.stability import fastest_mode, largest_stable_dt, mcp_range, stable_at
+from finger_sim.stability import CONTACT_RESOLUTION, fastest_mode, has_contact, largest_stable_dt, mcp_range, stable_at
 
 #: A gap crossing (a stop) is located to this tolerance on the gap (rad for the MCP stops);
 #: a gap counts as closed below −EVENT_TOLERANCE.
@@ -44,6 +46,9 @@ MAX_EVENTS_PER_STEP = 8
 #: A step is split into substeps (auto on a contact scene) when a contact gap, moving at its
 #: start rate, would close within this many step lengths: margin for the acceleration towards it.
 NEAR_CONTACT = 2.0
+#: How deep `Simulator._bracket` refines a predicted crossing inside a step that its check
+#: did not confirm (each level probes both halves: at most 2^depth − 1 extra integrator steps).
+BRACKET_DEPTH = 3
 #: A constant torque is split nowhere: a break closer than this (relative to dt) to a
 #: step's end is taken as lying on it.
 BREAK_EPS = 1e-9
@@ -57,6 +62,10 @@ class State(NamedTuple):
     t: float
     q: Vec3
     v: Vec3
+
+
+#: State(t, q, v) without the NamedTuple's Python-level __new__ (0.3 µs of a 2 µs step).
+_new_state = tuple.__new__
 
 
 class _Gap(NamedTuple):
@@ -103,7 +112,16 @@ class Simulator:
             _Gap(e, i, e.impact(i)) for e in self.system.elements if not e.smooth for i in range(len(e.gaps(q0)))
         )
         self._kinks = tuple(gap for gap in self._gaps if gap.restitution is None) if self.substeps > 1 else ()
+        # the gaps grouped by element, in `_gaps` order: each element's gaps are evaluated once per state
+        self._gap_elements = tuple((e, tuple(g.index for g in self._gaps if g.element is e))
+                                   for e in dict.fromkeys(g.element for g in self._gaps))
         self.reset()
+        #: the lean compiled path of `step` (a compiled fixed-step method on a smooth scene), else None
+        self.fast_stepper = None
+        if hasattr(self.integrator, "step_plan") and not self._gaps:
+            from finger_sim.kernel.integrators import FastStepper  # numba is loaded by now
+
+            self.fast_stepper = FastStepper(self.integrator, self.dt, scene.torque)
 
     def reset(self) -> None:
         """Back to the scene's initial state at t = 0."""
@@ -113,6 +131,7 @@ class Simulator:
         self.step_index = 0
         self.q, self.v = self.scene.initial_state()
         self._resting: _Gap | None = None  # the closed impact gap the finger rests on (a stop)
+        self._gap_cache: tuple[Vec3, Vec3, list[tuple[float, float]]] | None = None  # `_gap_states`' last
         #: the motor torque at the end of the last step (N·m): what a JointState effort reports
         self.torque = self.scene.torque(0.0)
         self.impacts = 0
@@ -128,6 +147,18 @@ class Simulator:
 
     def step(self, torque: Profile | float | None = None) -> State:
         """Advance one dt under `torque`: the scene's profile if None, a profile, or a held value (N·m)."""
+        fast = self.fast_stepper
+        if fast is not None and not isinstance(torque, Profile):
+            # one kernel call: the compiled profile (or the held value) and the step, same numbers
+            prof, held = (fast.profile, 0.0) if torque is None else (HELD_ARRAY, float(torque))
+            if prof is not None:
+                k = self.step_index
+                status, q, v, end = fast.call(fast.plan, prof, held, k, self.q, self.v)
+                if status == FAST_OK:
+                    self.q, self.v, self.torque, self.step_index = q, v, end, k + 1
+                    return _new_state(State, ((k + 1) * self.dt, q, v))
+                if status != BREAKPOINT:  # else a switch inside the step: split it below
+                    fast.fail(status, k, self.q)
         profile = self.scene.torque if torque is None else torque
         t0, t1 = self.step_index * self.dt, (self.step_index + 1) * self.dt
         if isinstance(profile, Profile):
@@ -148,9 +179,15 @@ class Simulator:
 
     # -- internals ---------------------------------------------------------------------
     def _check_stability(self, cls: type[Integrator]) -> None:
+        """StabilityError unless `cls` is stable on the scene's fastest mode at its (sub)step; a named
+        method on a scene with contact must also resolve that mode (`stability.stable_at`). auto
+        resolves the contact mode by its substeps (auto.CONTACT_SUBSTEP_MODE_DT)."""
         root = fastest_mode(self.system, mcp_range(self.scene))
-        if not stable_at(cls, root, self.dt / self.substeps):
-            raise StabilityError(cls.name, self.scene.name, self.dt, root, largest_stable_dt(cls, root, self.dt))
+        contact = self.scene.method != AUTO and has_contact(self.system, self.scene.initial_state()[0])
+        if not stable_at(cls, root, self.dt / self.substeps, contact):
+            raise StabilityError(cls.name, self.scene.name, self.dt, root, largest_stable_dt(cls, root, self.dt, contact),
+                                 f"a method with a bounded stability region must resolve the contact mode, |s|·dt ≤ {CONTACT_RESOLUTION:g}"
+                                 if contact and stable_at(cls, root, self.dt) else "")
 
     def _advance(self, t0: float, t1: float, torque: TorqueFn) -> None:
         """Integrate [t0, t1] under a smooth torque, splitting it at every event on the way."""
@@ -166,13 +203,16 @@ class Simulator:
                     return
                 t, v, self._resting = release, ZERO, None
             q1, v1 = self._step(t, q, v, t1 - t, torque)
-            crossing = self._first_crossing(t, q, v, t1, q1, torque)
+            crossing = self._first_crossing(t, q, v, t1, q1, v1, torque)
             if crossing is None:
                 self.q, self.v = q1, v1
                 return
             t, q, v = crossing.t, crossing.q, crossing.v
             if crossing.gap.restitution is not None:
                 v = self._impact(crossing, torque)
+            if t >= t1:  # the crossing ends the segment: a zero-length step would divide by zero (rattle)
+                self.q, self.v = q, v
+                return
         raise SimulationDiverged(f"more than {MAX_EVENTS_PER_STEP} events (stop impacts, contact changes) in one step",
                                  method=self.method, t=t0, dt=self.dt)
 
@@ -189,25 +229,74 @@ class Simulator:
                 return q, v
         return self.integrator.step(t, q, v, h, torque)
 
-    def _first_crossing(self, t: float, q: Vec3, v: Vec3, t1: float, q1: Vec3, torque: TorqueFn) -> _Crossing | None:
-        """The earliest gap crossing in (t, t1] of the step (t, q, q') → (t1, q1), or None.
+    def _first_crossing(self, t: float, q: Vec3, v: Vec3, t1: float, q1: Vec3, v1: Vec3,
+                        torque: TorqueFn) -> _Crossing | None:
+        """The earliest gap crossing in (t, t1] of the step (t, q, q') → (t1, q1, q1'), or None.
 
-        An impact gap (a stop) crosses when it is closed at the step's end; a kink gap when it
-        is open at one end of the step and closed at the other.
+        A gap crosses when it is closed at one end of the step and open at the other (an impact
+        gap, a stop, counts as open at the start: the step starts off it), or when it closes and
+        opens again inside the step, which the ends alone do not show (a contact shorter than
+        a step): `_bracket` looks for that between the ends.
         """
         first: _Crossing | None = None
-        for gap in self._gaps:
-            crossed = gap.element.gaps(q1)[gap.index] < -EVENT_TOLERANCE
-            if gap.restitution is None:  # a kink: crossed when open and closed differ at the two ends
-                crossed = crossed != (gap.element.gaps(q)[gap.index] < -EVENT_TOLERANCE)
-            if crossed:
-                crossing = self._locate(gap, t, q, v, t1, torque)
+        start, end = self._gap_states(q, v), self._gap_states(q1, v1)
+        for gap, (g0, r0), (g1, r1) in zip(self._gaps, start, end):
+            if gap.restitution is not None:
+                g0 = max(g0, 0.0)  # an impact gap: the step starts on the open side
+            found = self._bracket(gap, t, q, v, torque, (t, g0, r0), (t1, g1, r1, q1, v1), BRACKET_DEPTH)
+            if found is not None:
+                crossing = self._locate(gap, t, q, v, (t, g0), found, torque)
                 if first is None or crossing.t < first.t:
                     first = crossing
         return first
 
-    def _locate(self, gap: _Gap, t: float, q: Vec3, v: Vec3, t1: float, torque: TorqueFn) -> _Crossing:
-        """Where in (t, t1] the gap crosses zero: Illinois regula falsi on g(s) = gap(q(s)).
+    def _gap_states(self, q: Vec3, v: Vec3) -> list[tuple[float, float]]:
+        """(gap, gap') of every gap at (q, q') in `_gaps` order: gap' = ∂gap/∂q · q'. The last
+        state asked is kept: a step's end is the next one's start."""
+        cached = self._gap_cache
+        if cached is not None and cached[0] is q and cached[1] is v:
+            return cached[2]
+        out = []
+        for element, indices in self._gap_elements:
+            values = element.gaps(q)
+            for i in indices:
+                n = element.gap_gradient(i, q)
+                out.append((values[i], n[0] * v[0] + n[1] * v[1] + n[2] * v[2]))
+        self._gap_cache = (q, v, out)
+        return out
+
+    def _bracket(self, gap: _Gap, t: float, q: Vec3, v: Vec3, torque: TorqueFn,
+                 lo: tuple[float, float, float], hi: tuple[float, float, float, Vec3, Vec3],
+                 depth: int) -> tuple[float, float, Vec3, Vec3] | None:
+        """(s, gap, q, q') at a time s in (lo, hi] where the gap is on the other side than at lo,
+        or None. lo = (s, gap, gap'), hi = (s, gap, gap', q, q'): states of the step from
+        (t, q, q'), so the state at s is one step from t.
+
+        Either hi is across already, or the gap crosses and comes back inside: predicted by
+        `_predicted_crossing` from the ends' values and rates, then checked by stepping to the
+        predicted time; a check that finds no crossing refines on both halves, `depth` deep.
+        """
+        sa, ga, ra = lo
+        sb, gb, rb, qb, vb = hi
+        closed = ga < -EVENT_TOLERANCE
+        if (gb < -EVENT_TOLERANCE) != closed:
+            return sb, gb, qb, vb
+        x = _predicted_crossing(ga, ra, gb, rb, sb - sa, closed)
+        if x is None or depth == 0:
+            return None
+        s = sa + x * (sb - sa)
+        qs, vs = self._step(t, q, v, s - t, torque)
+        gs, rs = self._gap_states(qs, vs)[self._gaps.index(gap)]
+        mid = (s, gs, rs, qs, vs)
+        if (gs < -EVENT_TOLERANCE) != closed:
+            return s, gs, qs, vs
+        return (self._bracket(gap, t, q, v, torque, lo, mid, depth - 1)
+                or self._bracket(gap, t, q, v, torque, (s, gs, rs), hi, depth - 1))
+
+    def _locate(self, gap: _Gap, t: float, q: Vec3, v: Vec3, lo: tuple[float, float],
+                hi: tuple[float, float, Vec3, Vec3], torque: TorqueFn) -> _Crossing:
+        """Where in (lo, hi] the gap crosses zero: Illinois regula falsi on g(s) = gap(q(s)),
+        q(s) the step from (t, q, q') to s. lo = (s, gap), hi = (s, gap, q, q') (`_bracket`).
 
         An impact is applied at the located point (|g| ≤ EVENT_TOLERANCE); a kink's step ends
         on its far side, so that the rest of the step does not see the crossing again.
@@ -218,10 +307,10 @@ class Simulator:
             qs, vs = step(t, q, v, s - t, torque)
             return element.gaps(qs)[index], qs, vs
 
-        # g(t) and g(t1) have opposite signs.
-        a, ga = t, element.gaps(q)[index]
-        b = t1
-        gb, qb, vb = at(b)
+        # g(a) and g(b) lie on opposite sides.
+        a, ga = lo
+        b, gb, qb, vb = hi
+        s, gs, qs, vs = b, gb, qb, vb
         keep = 0
         for _ in range(MAX_LOCATE_ITERATIONS):
             s = b - gb * (b - a) / (gb - ga)
@@ -281,6 +370,34 @@ class Simulator:
         return brentq(push, t, t1, xtol=RELEASE_TOLERANCE * (t1 - t), rtol=4 * np.finfo(float).eps)
 
 
+def _predicted_crossing(ga: float, ra: float, gb: float, rb: float, h: float, closed: bool) -> float | None:
+    """Where (a fraction x of h, in (0, 1)) a gap that is on the same side at both ends of an
+    interval of length h (s) may cross and come back inside it; None if nothing suggests so.
+
+    ga, gb: the gap at the ends; ra, rb: its rates (gap units/s); closed: the side at both
+    ends (below −EVENT_TOLERANCE). Two predictions, the earlier one counts:
+    - the start's rate: ga + x h ra reaches zero at x < 1 (the start state is the trustworthy
+      one: a step straddling a whole contact bounces in its stages and ends on the open side);
+    - the cubic Hermite interpolant of (gap, rate) at both ends has an extremum across the
+      side's bound at x (the contact, or the release, lies wholly inside the interval).
+    """
+    sign = 1.0 if closed else -1.0  # the direction that crosses
+    best = None
+    if sign * ra > 0.0 and sign * (ga + h * ra) > -sign * EVENT_TOLERANCE:
+        best = min(1.0, max(0.0, -ga / (h * ra)))
+    # H(x) = ((a x + b) x + c) x + ga; H'(x) = 3a x² + 2b x + c
+    a = 2.0 * (ga - gb) + h * (ra + rb)
+    b = 3.0 * (gb - ga) - h * (2.0 * ra + rb)
+    c = h * ra
+    disc = b * b - 3.0 * a * c
+    if disc >= 0.0:
+        root = -(b + math.copysign(math.sqrt(disc), b))  # the stable quadratic formula
+        for x in ((root / (3.0 * a)) if a != 0.0 else 2.0, (c / root) if root != 0.0 else 2.0):
+            if 0.0 < x < 1.0 and ((((a * x + b) * x + c) * x + ga) < -EVENT_TOLERANCE) != closed:
+                best = x if best is None else min(best, x)
+    return best if best is not None and 0.0 < best < 1.0 else None
+
+
 def output_names(elements: Sequence[ForceElement], q: Vec3) -> tuple[str, ...]:
     """The names of every element's `outputs` (e.g. contact's grip_force, N), in element order:
     the extra columns of a run's CSV. Asked at a pose q; an element reports the same names at every state."""
@@ -290,6 +407,35 @@ def output_names(elements: Sequence[ForceElement], q: Vec3) -> tuple[str, ...]:
 def output_values(elements: Sequence[ForceElement], t: float, q: Vec3, v: Vec3) -> tuple[float, ...]:
     """Every element's `outputs` at (t, q, q'), in the order of `output_names`."""
     return tuple(value for e in elements for value in e.outputs(t, q, v).values())
+
+
+def state_columns(system: FingerSystem, t: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A block of states' checks and outputs: energy (J), |Φ| (m), and the elements' outputs
+    (one column per `output_names`), for states x = (q, q') (n × 6) at times t (s).
+
+    The kinetic energy and Φ are evaluated over the block with numpy in the same order of
+    operations as `FingerSystem.kinetic_energy` and `kinematics.constraint` (|Φ| by math.hypot);
+    the elements' potentials and outputs row by row. Used by `simulate` and `stream_csv` alike,
+    so both write the same bytes.
+    """
+    p, alpha = system.params, system.alpha
+    q0, q1, q2, v0, v1, v2 = x.T
+    # FingerSystem's mass-matrix entries, the same expressions
+    m11, m22, m33 = p.inertia_A + p.m3 * p.r1**2, p.inertia_D, p.inertia_G3 + p.m3 * p.L3**2 / 4.0
+    b = p.m3 * p.r1 * p.L3 / 2.0 * np.cos(q0 - q2 - alpha)
+    energy = 0.5 * (m11 * v0**2 + m22 * v1**2 + m33 * v2**2) + b * v0 * v2
+    rows = x.tolist()
+    elements = system.elements
+    if elements:
+        energy = energy + np.array([sum(e.potential((r[0], r[1], r[2])) for e in elements) for r in rows])
+    k1, k2 = p.r4 * math.cos(p.theta4), p.r4 * math.sin(p.theta4)
+    f1 = p.r1 * np.cos(q0) + k1 - p.r2 * np.cos(q1) - p.r3 * np.cos(q2)
+    f2 = p.r1 * np.sin(q0) + k2 - p.r2 * np.sin(q1) - p.r3 * np.sin(q2)
+    residual = np.array(list(map(math.hypot, f1.tolist(), f2.tolist())))
+    names = output_names(elements, (0.0, 0.0, 0.0))
+    outputs = np.array([output_values(elements, s, (r[0], r[1], r[2]), (r[3], r[4], r[5]))
+                        for s, r in zip(t.tolist(), rows)] if names else np.empty((len(rows), 0)))
+    return energy, residual, outputs.reshape(len(rows), len(names))
 
 
 @dataclass
@@ -337,24 +483,20 @@ def simulate(scene: Scene, *, kernel: str = "auto") -> Trajectory:
     """
     n = math.ceil(scene.duration / scene.dt - BREAK_EPS)
     sim = Simulator(scene, kernel=offline_kernel(kernel, n))
-    states = [sim.state]
+    x0 = (*sim.q, *sim.v)
     start = time.perf_counter()
-    if can_run(sim):
-        xs = advance(sim, n)
-        states += [State((k + 1) * sim.dt, tuple(x[:3]), tuple(x[3:])) for k, x in enumerate(xs.tolist())]
-    else:
-        for _ in range(n):
-            states.append(sim.step())
+    xs = advance(sim, n)  # in the kernel where it can, else step by step
     wall = time.perf_counter() - start
-    system, p = sim.system, scene.params
-    names = output_names(system.elements, states[0].q)
-    values = np.array([output_values(system.elements, *s) for s in states]).reshape(len(states), len(names))
+    x = np.vstack([x0, xs])
+    t = np.arange(n + 1) * sim.dt  # k·dt, as Simulator.time
+    energy, residual, values = state_columns(sim.system, t, x)
+    names = output_names(sim.system.elements, sim.q)
     return Trajectory(
-        t=np.array([s.t for s in states]),
-        q=np.array([s.q for s in states]),
-        v=np.array([s.v for s in states]),
-        energy=np.array([system.energy(s.q, s.v) for s in states]),
-        residual=np.array([kinematics.constraint_norm(p, s.q) for s in states]),
+        t=t,
+        q=np.ascontiguousarray(x[:, :3]),
+        v=np.ascontiguousarray(x[:, 3:]),
+        energy=energy,
+        residual=residual,
         method=sim.method,
         method_reason=sim.method_reason,
         wall_time=wall,

@@ -85,6 +85,9 @@ class SoftStop(Smooth):
     def impact(self, index: int) -> float | None:
         return None
 
+    def gap_gradient(self, index: int, q: Vec3) -> Vec3:
+        return (-1.0, 0.0, 0.0)
+
     def outputs(self, t: float, q: Vec3, v: Vec3) -> Mapping[str, float]:
         return {"soft_stop_torque": self.force(t, q, v)[0]}
 

@@ -65,8 +65,9 @@ class ForceElement(Protocol):
         ...
 
     def gap_gradient(self, index: int, q: Vec3) -> Vec3:
-        """∂gap/∂q of gap `index` at q (gap units per rad). Asked only for impact gaps: the finger
-        resting on a closed gap stays while its free acceleration a pushes into it (∇gap·a < 0)."""
+        """∂gap/∂q of gap `index` at q (gap units per rad), for every gap: the gap's rate ∇gap·q'
+        shows a crossing inside a step (Simulator), and the finger resting on a closed impact gap
+        stays while its free acceleration a pushes into it (∇gap·a < 0)."""
         ...
 
     # Optional: the compiled form (finger_sim.kernel). An element without these two members

@@ -38,7 +38,7 @@ class Circle:
     def __post_init__(self) -> None:
         _check_name(self.name)
         object.__setattr__(self, "center", _vec2(self.center, "center"))
-        if not (isinstance(self.radius, (int, float)) and math.isfinite(self.radius) and self.radius > 0.0):
+        if not (_is_number(self.radius) and self.radius > 0.0):
             raise ConfigError("radius", "a finite radius > 0 (m)", self.radius)
         object.__setattr__(self, "radius", float(self.radius))
 
@@ -89,7 +89,7 @@ class ContactParams:
         for f in fields(self):
             value = getattr(self, f.name)
             low, strict = minima[f.name]
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < low or (strict and value == low):
+            if not _is_number(value) or value < low or (strict and value == low):
                 raise ConfigError(f"model.contact.{f.name}", f"a finite number {'>' if strict else '≥'} {low:g}", value)
             object.__setattr__(self, f.name, float(value))
 
@@ -157,9 +157,14 @@ def phalanx_radii_from_value(value: Any, key: str = "model.phalanx_radius") -> V
     if not isinstance(value, (list, tuple)) or len(value) != 2:
         raise ConfigError(key, "[proximal, distal] capsule radii (m)", value)
     for i, r in enumerate(value):
-        if isinstance(r, bool) or not isinstance(r, (int, float)) or not (math.isfinite(r) and r > 0.0):
+        if not (_is_number(r) and r > 0.0):
             raise ConfigError(f"{key}[{i}]", "a finite radius > 0 (m)", r)
     return (float(value[0]), float(value[1]))
+
+
+def _is_number(value: Any) -> bool:
+    """A finite int or float; not a bool (YAML's `true` is an int to Python, not a length)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
 
 
 def _check_name(name: Any) -> None:
@@ -171,6 +176,6 @@ def _vec2(value: Any, key: str) -> Vec2:
     if not isinstance(value, (list, tuple)) or len(value) != 2:
         raise ConfigError(key, "a list of two numbers (m)", value)
     for i, x in enumerate(value):
-        if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
+        if not _is_number(x):
             raise ConfigError(f"{key}[{i}]", "a finite number (m)", x)
     return (float(value[0]), float(value[1]))
