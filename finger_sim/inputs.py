@@ -4,6 +4,10 @@ A profile is evaluated at each integrator stage time. Piecewise-constant profile
 (step, square) also name their switching times, so the simulator can end a sub-step
 exactly there and integrate each smooth piece on its own: a switch inside a step
 would otherwise cost a first-order error.
+
+Each profile also describes itself as data for the compiled kernel (`kernel_code`,
+`kernel_params()`, packed by `profile_array`), as the force elements do: the kernel then
+evaluates τ at the stage times itself, with the same arithmetic as `__call__`.
 """
 
 from __future__ import annotations
@@ -12,6 +16,8 @@ import math
 from collections.abc import Callable
 from dataclasses import MISSING, asdict, dataclass
 from typing import Any, ClassVar
+
+import numpy as np
 
 from finger_sim.errors import ConfigError
 from finger_sim.scene_yaml import magnitude
@@ -27,15 +33,32 @@ MAX_TORQUE = 1e3
 #: Largest ramp slope, N·m/s.
 MAX_SLOPE = 1e6
 
+#: Codes of the compiled profiles (`Profile.kernel_code`; `finger_sim.kernel.numerics.torque_at`).
+#: HELD: a value held over the step (the node's command), passed to the kernel beside the profile.
+HELD = 0
+CONSTANT = 1
+RAMP = 2
+SINE = 3
+STEP = 4
+SQUARE = 5
+#: The codes whose profile is constant between switches: τ on a step is its value at the step's middle.
+PIECEWISE_CONSTANT = (STEP, SQUARE)
+
 
 @dataclass(frozen=True)
 class Profile:
     """Base of the torque profiles: smooth unless a subclass says otherwise."""
 
     kind: ClassVar[str]
+    #: The compiled form's code (see HELD ... SQUARE); None: no compiled form, τ stays in Python.
+    kernel_code: ClassVar[int | None] = None
 
     def __call__(self, t: float) -> float:
         raise NotImplementedError
+
+    def kernel_params(self) -> tuple[float, ...]:
+        """The numbers the compiled form `kernel_code` reads, in its order (SI): the fields."""
+        return tuple(float(x) for x in asdict(self).values())
 
     def breakpoints(self, t0: float, t1: float) -> list[float]:
         """Switching times strictly inside (t0, t1), s."""
@@ -60,6 +83,7 @@ class Constant(Profile):
     """τ = value."""
 
     kind: ClassVar[str] = "constant"
+    kernel_code: ClassVar[int | None] = CONSTANT
     value: float
 
     def __call__(self, t: float) -> float:
@@ -71,6 +95,7 @@ class Ramp(Profile):
     """τ = offset + slope·t (the paper's input (8): offset 0.001 N·m, slope 0.01 N·m/s)."""
 
     kind: ClassVar[str] = "ramp"
+    kernel_code: ClassVar[int | None] = RAMP
     offset: float
     slope: float
 
@@ -83,6 +108,7 @@ class Sine(Profile):
     """τ = offset + amplitude·sin(2π·frequency·t)."""
 
     kind: ClassVar[str] = "sine"
+    kernel_code: ClassVar[int | None] = SINE
     amplitude: float
     frequency: float
     offset: float = 0.0
@@ -108,6 +134,7 @@ class Step(_PiecewiseConstant):
     """τ = before for t < at, after from t = at on."""
 
     kind: ClassVar[str] = "step"
+    kernel_code: ClassVar[int | None] = STEP
     before: float
     after: float
     at: float
@@ -124,6 +151,7 @@ class Square(_PiecewiseConstant):
     """τ = offset + amplitude over the first half of each period, offset − amplitude over the second."""
 
     kind: ClassVar[str] = "square"
+    kernel_code: ClassVar[int | None] = SQUARE
     amplitude: float
     frequency: float
     offset: float = 0.0
@@ -143,6 +171,17 @@ class Square(_PiecewiseConstant):
             out.append(k * half)
             k += 1
         return out
+
+
+def profile_array(profile: Profile) -> np.ndarray | None:
+    """[kernel_code, *kernel_params()] as float64 for the compiled kernel; None without a compiled form."""
+    if profile.kernel_code is None:
+        return None
+    return np.array([float(profile.kernel_code), *profile.kernel_params()], dtype=np.float64)
+
+
+#: The compiled form of a held value (the value itself is passed beside it).
+HELD_ARRAY = np.array([float(HELD)])
 
 
 PROFILES: dict[str, type[Profile]] = {cls.kind: cls for cls in (Constant, Ramp, Step, Square, Sine)}

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import subprocess
 import sys
@@ -177,3 +178,89 @@ def test_without_numba_the_python_path_runs(tmp_path: Path) -> None:
     assert kernel == PYTHON
     reference = simulate(load_scene(CONFIG / "paper_flexion.yaml").with_overrides(duration=0.01, method="dop853"))
     assert abs(float(theta1) - reference.q[-1, 0]) <= 1e-13
+
+
+PROFILES = {
+    "constant": {"type": "constant", "value": 0.004},
+    "ramp": {"type": "ramp", "offset": 0.001, "slope": 0.01},
+    "sine": {"type": "sine", "amplitude": 0.003, "frequency": 7.0, "offset": 0.001},
+    # switches inside a step (0.1234 s, and every 1/(2·9.7) s), and one on a step's end (0.05 s)
+    "step": {"type": "step", "before": 0.0, "after": 0.005, "at": 0.1234},
+    "square": {"type": "square", "amplitude": 0.004, "frequency": 9.7},
+    "step_on_grid": {"type": "step", "before": 0.002, "after": -0.001, "at": 0.05},
+}
+
+
+@pytest.mark.parametrize("method", ("euler", "rk6"))
+@pytest.mark.parametrize("name", sorted(PROFILES))
+def test_compiled_profiles_agree_with_python(name: str, method: str) -> None:
+    """Simulator.step's compiled path (τ evaluated in the kernel) against the Python path."""
+    from finger_sim.inputs import profile_from_dict
+
+    scene = load_scene(CONFIG / "paper_flexion.yaml").with_overrides(method=method, duration=0.2)
+    scene = dataclasses.replace(scene, torque=profile_from_dict(PROFILES[name]))
+    python, compiled = Simulator(scene, kernel="python"), Simulator(scene, kernel="compiled")
+    assert compiled.fast_stepper is not None and compiled.fast_stepper.profile is not None
+    for _ in range(scene.step_count):
+        a, b = python.step(), compiled.step()
+        assert a.t == b.t and python.torque == compiled.torque
+        assert max(abs(x - y) for x, y in zip((*a.q, *a.v), (*b.q, *b.v))) <= AGREEMENT * (1.0 + max(map(abs, a.v)))
+    run = simulate(scene, kernel="compiled")  # the whole-run loop, with its switches split in Python
+    assert np.abs(run.q[-1] - np.array(python.q)).max() <= AGREEMENT
+
+
+def test_held_torque_on_the_compiled_path_agrees_with_python() -> None:
+    """The node's path: a held command per step (changing now and then), both kernels."""
+    scene = load_scene(CONFIG / "paper_flexion.yaml")
+    python, compiled = Simulator(scene, kernel="python"), Simulator(scene, kernel="compiled")
+    for n in range(300):
+        held = 0.002 + 0.001 * (n // 40)
+        a, b = python.step(held), compiled.step(held)
+        assert compiled.torque == held
+        assert max(abs(x - y) for x, y in zip((*a.q, *a.v), (*b.q, *b.v))) <= AGREEMENT * (1.0 + max(map(abs, a.v)))
+
+
+def test_compiled_torque_and_switches_equal_the_profiles() -> None:
+    """numerics.torque_at equals each profile's __call__ bit for bit; switches_inside its breakpoints."""
+    from finger_sim.inputs import profile_array, profile_from_dict
+    from finger_sim.simulate import BREAK_EPS
+
+    times = np.random.default_rng(5).uniform(0.0, 2.0, 2000).tolist()
+    dt = 1e-3
+    for data in PROFILES.values():
+        profile = profile_from_dict(data)
+        prof = profile_array(profile)
+        assert all(numerics.torque_at(prof, 0.0, t) == profile(t) for t in times)
+        for k in range(0, 400):
+            t0, t1 = k * dt, (k + 1) * dt
+            eps = BREAK_EPS * dt
+            want = any(t0 + eps < b < t1 - eps for b in profile.breakpoints(t0, t1))
+            assert numerics.switches_inside(prof, t0, t1, eps) == want
+
+
+def test_a_compiled_kernel_log_resims_bit_for_bit() -> None:
+    """Item 1: the log names its kernel, and resim steps with that one (bit for bit)."""
+    from finger_sim.joints import joint_positions, joint_velocities
+    from finger_sim.run_log import CommandEvent, RecordedRun, RunMetadata, resimulate, run_metadata, stamp_ns
+
+    scene = load_scene(CONFIG / "paper_flexion.yaml")
+    sim = Simulator(scene, kernel="compiled")
+    record = run_metadata(scene, method=sim.method, method_reason="", torque_source="topic", parameters={},
+                          kernel=sim.kernel)
+    meta = RunMetadata.from_dict(record)
+    assert meta.kernel == sim.kernel == compiled_name()
+    q_ext, alpha = kinematics.extended_pose(scene.params), kinematics.distal_offset(scene.params)
+    states, events, held = [], [], 0.0
+    for n in range(scene.step_count + 1):  # what the node records: the state, then the step under the command
+        states.append((stamp_ns(0, n, scene.dt), joint_positions(sim.q, q_ext, alpha) + joint_velocities(sim.v)))
+        if n % 50 == 0:
+            held = 0.001 * (1 + n // 50)
+            events.append(CommandEvent("accepted", step=n, episode=0, stamp_ns=stamp_ns(0, n, scene.dt), torque=held))
+        sim.step(held)
+    result = resimulate(RecordedRun(meta, joint_states=states, events=events))
+    assert result.exact and result.compared == scene.step_count + 1
+    old = {k: v for k, v in record.items() if k != "kernel"}  # a log made before the key existed
+    assert RunMetadata.from_dict(old).kernel == PYTHON
+    with pytest.raises(ConfigError, match="kernel"):
+        foreign = RunMetadata.from_dict({**record, "kernel": "fortran"})
+        resimulate(RecordedRun(foreign, joint_states=states, events=events))

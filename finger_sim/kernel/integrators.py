@@ -2,9 +2,12 @@
 
 `CompiledRungeKutta` runs any fixed-step explicit method of `finger_sim.integrators`
 (euler, rk4, rk6, dop8: their tableaux as data) in the compiled kernel; the Simulator's
-time grid, breakpoints and events are unchanged. The motor torque stays a Python callable:
-an explicit step's stage times are known before it starts, so τ is evaluated there in
-Python and handed to the kernel as an array.
+time grid, breakpoints and events are unchanged. Through `step` the motor torque stays a
+Python callable: an explicit step's stage times are known before it starts, so τ is
+evaluated there in Python and handed to the kernel as an array.
+
+`FastStepper` is the Simulator's lean path for a smooth scene: one kernel call per step
+(or per run) that evaluates a compiled torque profile (`inputs.profile_array`) itself.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ from finger_sim.dynamics import FingerSystem
 from finger_sim.errors import SimulationDiverged
 from finger_sim.integrators.base import Integrator, TorqueFn
 from finger_sim.integrators.explicit import ExplicitRungeKutta, PaperEuler
+from finger_sim.inputs import HELD_ARRAY, Profile, profile_array
 from finger_sim.kernel import numerics
 from finger_sim.kernel.layout import distinct_nodes, model_array, tableau_array
 from finger_sim.kinematics import Vec3
@@ -61,6 +65,12 @@ class CompiledRungeKutta(Integrator):
         numerics.rk_step_tuple(self.model, self.tableau, 0.0, WARM_UP_STATE, WARM_UP_STATE, 0.0,
                                tuple(0.0 for _ in self.nodes))
 
+    def step_plan(self, dt: float) -> np.ndarray:
+        """This method on this system at step dt as one array for `numerics.fast_step` and
+        `fast_run`: [dt, len(model), tableau rows, tableau columns, model..., tableau...]."""
+        rows, cols = self.tableau.shape
+        return np.concatenate(([dt, len(self.model), rows, cols], self.model, self.tableau.ravel()))
+
     @classmethod
     def of(cls, method: type[Integrator]) -> type[CompiledRungeKutta]:
         """The compiled twin of a fixed-step explicit method class."""
@@ -77,18 +87,6 @@ class CompiledRungeKutta(Integrator):
             check_status(status, self.name, t, q)
         return q1, v1
 
-    def run(self, t0: np.ndarray, h: np.ndarray, taus: np.ndarray, x0: tuple[float, ...]) -> np.ndarray:
-        """Many steps at once: step n from t0[n] by h[n] under τ at its `nodes`, taus[n] (N·m).
-
-        Returns the (n + 1) × 6 states (q, q'), x0 first; the same numbers as n calls of `step`.
-        """
-        xs = np.empty((len(t0) + 1, 6))
-        xs[0] = x0
-        status, done = numerics.rk_run(self.model, self.tableau, t0, h, taus, xs)
-        if status != numerics.OK:
-            check_status(status, self.name, float(t0[done]), tuple(xs[done, :3]))
-        return xs
-
     @classmethod
     def is_stable(cls, z: complex) -> bool:
         return cls.reference.is_stable(z)
@@ -104,3 +102,45 @@ def compiled_twin(method: type[Integrator]) -> type[CompiledRungeKutta] | None:
     if method not in _TWINS:
         _TWINS[method] = CompiledRungeKutta.of(method)
     return _TWINS[method]
+
+
+class FastStepper:
+    """One compiled call per `Simulator.step` on a smooth scene (no events): `numerics.fast_step`
+    with the method, the system and dt as one plan array, and the scene's compiled profile.
+
+    `call` is the compiled function's entry point for exactly the argument types the
+    Simulator passes (float64 arrays, a float, an int, two 3-tuples of floats), which skips
+    numba's type dispatch (≈ 1 µs of a ≈ 3 µs step); `numerics.fast_step` itself otherwise.
+    """
+
+    def __init__(self, integrator: CompiledRungeKutta, dt: float, profile: Profile) -> None:
+        self.method, self.dt = integrator.name, dt
+        self.plan = integrator.step_plan(dt)
+        #: the scene profile's compiled form; None: it has none, steps under it go through Python
+        self.profile = profile_array(profile)
+        args = (self.plan, HELD_ARRAY, 0.0, 0, WARM_UP_STATE, WARM_UP_STATE)
+        numerics.fast_step(*args)  # load (or compile) it now, not in the first paced step
+        self.call = _entry_point(numerics.fast_step, args)
+
+    def run(self, k0: int, xs: np.ndarray) -> tuple[int, int, float]:
+        """Steps k0, k0 + 1, … under the scene's profile from xs[0] into xs[1:] (`numerics.fast_run`):
+        (status, steps done, τ at the end of the last step done)."""
+        return numerics.fast_run(self.plan, self.profile, k0, xs)
+
+    def fail(self, status: int, k: int, q: Vec3) -> None:
+        """Raise what the Python path raises for step k failed with `status` from state q."""
+        if status == numerics.STATE_NON_FINITE:
+            raise SimulationDiverged(f"non-finite state (step {k + 1})", method=self.method, t=(k + 1) * self.dt,
+                                     dt=self.dt)
+        check_status(status, self.method, k * self.dt, q)
+
+
+def _entry_point(dispatcher, args: tuple):  # type: ignore[no-untyped-def]
+    """The compiled entry of `dispatcher` for the types of `args` (the dispatcher when absent)."""
+    try:
+        import numba
+    except ImportError:
+        return dispatcher
+    overloads = getattr(dispatcher, "overloads", {})
+    compiled = overloads.get(tuple(numba.typeof(a) for a in args))
+    return dispatcher if compiled is None else compiled.entry_point

@@ -32,6 +32,14 @@ CODES = (NO_FORCE, SPRING, DAMPING, GRAVITY, TIP_FORCE, CONTACT)
 #: Length of the system header before the element count.
 HEADER = 10
 
+#: Status codes of the kernel's calls (`finger_sim.kernel.numerics`).
+OK = 0
+NON_FINITE = 1  # the projection met a non-finite state
+NOT_CONVERGED = 2  # the projection did not reach POSITION_TOLERANCE
+STEP_TOO_SMALL = 3  # DOP853's step fell below its floor
+BREAKPOINT = 4  # a torque switch lies inside the step: the caller splits it (state unchanged)
+STATE_NON_FINITE = 5  # the step ended in a non-finite state (the Simulator's own check)
+
 
 def model_array(system: "FingerSystem") -> np.ndarray | None:
     """The flat model of `system` for the kernel, or None when an element has no compiled form."""

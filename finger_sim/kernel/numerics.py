@@ -25,14 +25,11 @@ except ImportError:  # no numba: the same functions run as plain Python (slow, s
 
 
 from finger_sim.effects.contact import MIN_DISTANCE
-from finger_sim.kernel.layout import CONTACT, DAMPING, GRAVITY, HEADER, SPRING, TIP_FORCE
+from finger_sim.inputs import BREAK_EPS, CONSTANT, HELD, RAMP, SINE, SQUARE, STEP
+from finger_sim.kernel.layout import (BREAKPOINT, CONTACT, DAMPING, GRAVITY, HEADER, NON_FINITE, NOT_CONVERGED, OK,
+                                     SPRING, STATE_NON_FINITE, STEP_TOO_SMALL, TIP_FORCE)
 from finger_sim.projection import ACCEPTED_RESIDUAL_FACTOR, MAX_ITERATIONS, POSITION_TOLERANCE
 
-#: Status codes of the kernel's calls.
-OK = 0
-NON_FINITE = 1  # the projection met a non-finite state
-NOT_CONVERGED = 2  # the projection did not reach POSITION_TOLERANCE
-STEP_TOO_SMALL = 3  # DOP853's step fell below its floor
 
 # DOP853's step-size control: scipy's constants (scipy/integrate/_ivp/rk.py).
 SAFETY = 0.9  # the factor on the optimal step after an accepted or rejected step
@@ -298,27 +295,6 @@ def rk_step(m, tab, t, x, h, taus, k):
     return project(m, x)
 
 
-@njit(**JIT)
-def rk_run(m, tab, t0, h, taus, xs):
-    """Steps n = len(taus) of `rk_step` (or Euler when tab is empty) from xs[0]; fills xs[1:].
-
-    t0, h: each step's start and length (s); taus: n × (distinct nodes) stage torques.
-    Returns (status, steps done).
-    """
-    s = tab.shape[1]
-    k = np.empty((max(s, 1), 6))
-    x = xs[0].copy()
-    for n in range(taus.shape[0]):
-        if s == 0:
-            status = euler_step(m, t0[n], x, h[n], taus[n, 0])
-        else:
-            status = rk_step(m, tab, t0[n], x, h[n], taus[n], k)
-        if status != OK:
-            return status, n
-        xs[n + 1] = x
-    return OK, taus.shape[0]
-
-
 # -- DOP853: Hairer's embedded 8(5,3) pair with its 7th-order dense output ------------------
 @njit(**JIT)
 def _rhs(m, t, y, tau, out):
@@ -441,3 +417,111 @@ def dop853_outputs(m, t_old, h, y_old, dense, targets, out):
         if status != OK:
             return status
     return OK
+
+
+# -- compiled torque profiles and the Simulator's step (`finger_sim.inputs`, `Simulator.step`) --------
+@njit(**JIT)
+def torque_at(prof, held, t):
+    """τ(t), N·m, of a compiled profile [code, params...] (`inputs.profile_array`): the same
+    arithmetic as the profile's `__call__`; HELD returns `held`."""
+    code = int(prof[0])
+    if code == RAMP:
+        return prof[1] + prof[2] * t
+    if code == SINE:
+        return prof[3] + prof[1] * math.sin(2.0 * math.pi * prof[2] * t)
+    if code == STEP:
+        return prof[1] if t < prof[3] else prof[2]
+    if code == SQUARE:
+        phase = (t * prof[2]) % 1.0
+        return prof[3] + (prof[1] if phase < 0.5 else -prof[1])
+    if code == CONSTANT:
+        return prof[1]
+    return held
+
+
+@njit(**JIT)
+def switches_inside(prof, t0, t1, eps):
+    """Whether a switch of a step or square profile lies in (t0 + eps, t1 − eps): the
+    Simulator's breakpoint test on `Profile.breakpoints(t0, t1)`, same arithmetic."""
+    code = int(prof[0])
+    if code == STEP:
+        at = prof[3]
+        return t0 < at < t1 and t0 + eps < at < t1 - eps
+    if code == SQUARE:
+        half = 0.5 / prof[2]
+        k = math.floor(t0 / half) + 1
+        while k * half < t1:
+            if t0 + eps < k * half < t1 - eps:
+                return True
+            k += 1
+    return False
+
+
+@njit(**JIT)
+def plan_parts(plan):
+    """(dt, model, tableau) of a step plan: [dt, len(model), tableau rows, tableau columns,
+    model..., tableau row by row] (`finger_sim.kernel.integrators.step_plan`)."""
+    nm, rows, cols = int(plan[1]), int(plan[2]), int(plan[3])
+    m = plan[4: 4 + nm]
+    tab = plan[4 + nm: 4 + nm + rows * cols].reshape((rows, cols))
+    return plan[0], m, tab
+
+
+@njit(**JIT)
+def _profile_step(m, tab, prof, held, k, dt, x, work, taus):
+    """Step k of a scene (t0 = k·dt to (k + 1)·dt) on x in place under a compiled profile, as
+    `Simulator.step` does it on a step with no switch inside. Returns (status, τ at the step's end)."""
+    t0, t1 = k * dt, (k + 1) * dt
+    code = int(prof[0])
+    piecewise = code == STEP or code == SQUARE
+    value = 0.0
+    if piecewise:
+        if switches_inside(prof, t0, t1, BREAK_EPS * dt):
+            return BREAKPOINT, 0.0
+        value = torque_at(prof, held, 0.5 * (t0 + t1))  # `on_segment`: the value on the segment
+        end = value
+    else:
+        end = torque_at(prof, held, t1)
+    h = t1 - t0
+    s = tab.shape[1]
+    if s == 0:
+        tau = value if piecewise else torque_at(prof, held, t0)
+        status = euler_step(m, t0, x, h, tau)
+    else:
+        for i in range(s):
+            taus[int(tab[s + 2, i])] = value if piecewise else torque_at(prof, held, t0 + tab[s + 1, i] * h)
+        status = rk_step(m, tab, t0, x, h, taus, work)
+    if status == OK and not (math.isfinite(x[0] + x[1] + x[2] + x[3] + x[4] + x[5])):
+        status = STATE_NON_FINITE
+    return status, end
+
+
+@njit(**JIT)
+def fast_step(plan, prof, held, k, q, v):
+    """`Simulator.step` k of a smooth scene under a compiled profile (or a held value), in one
+    call: (status, q, v, τ at the step's end). Status BREAKPOINT: a switch lies inside the
+    step and nothing was done (the Simulator splits the step in Python)."""
+    dt, m, tab = plan_parts(plan)
+    x = np.empty(6)
+    x[0], x[1], x[2], x[3], x[4], x[5] = q[0], q[1], q[2], v[0], v[1], v[2]
+    s = tab.shape[1]
+    status, end = _profile_step(m, tab, prof, held, k, dt, x, np.empty((max(s, 1), 6)), np.empty(max(s, 1)))
+    return status, (x[0], x[1], x[2]), (x[3], x[4], x[5]), end
+
+
+@njit(**JIT)
+def fast_run(plan, prof, k0, xs):
+    """Steps k0, k0 + 1, … of `fast_step` under the scene's profile from xs[0], filling xs[1:],
+    until done or a step with a switch inside. Returns (status, steps done, τ at the last end)."""
+    dt, m, tab = plan_parts(plan)
+    s = tab.shape[1]
+    work, taus = np.empty((max(s, 1), 6)), np.empty(max(s, 1))
+    x = xs[0].copy()
+    end = 0.0
+    for n in range(xs.shape[0] - 1):
+        status, tau = _profile_step(m, tab, prof, 0.0, k0 + n, dt, x, work, taus)
+        if status != OK:
+            return status, n, end
+        end = tau
+        xs[n + 1] = x
+    return OK, xs.shape[0] - 1, end

@@ -1,9 +1,11 @@
 """The whole-run fast path: many Simulator steps inside one kernel call.
 
-Used by offline `simulate()` (and batch callers): where no event can occur (a smooth scene)
-and no torque breakpoint falls inside a step, the steps' stage torques are evaluated in
-Python up front and the compiled kernel loops over the steps. A step with a breakpoint
-inside goes through `Simulator.step`. Same numbers as stepping one by one, bit for bit.
+Used by offline `simulate()`, `streaming.stream_csv` (block by block) and batch callers:
+on a smooth scene (no events) with a compiled torque profile, the compiled kernel loops
+over the steps and evaluates τ itself (`numerics.fast_run`); it stops before a step with a
+torque switch inside, which goes through `Simulator.step` (split there), and goes on.
+Our DOP853 answers a whole smooth stretch of the output grid in one call. Same numbers as
+stepping one by one, bit for bit.
 """
 
 from __future__ import annotations
@@ -12,68 +14,50 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from finger_sim.errors import SimulationDiverged
 from finger_sim.inputs import Profile
+from finger_sim.kernel.layout import BREAKPOINT, OK
 
 if TYPE_CHECKING:
     from finger_sim.simulate import Simulator
 
 
 def can_run(sim: "Simulator") -> bool:
-    """Whether `advance` may loop `sim` in the kernel: a compiled fixed-step method or dop853, a smooth scene."""
-    integrator = sim.integrator
-    return (hasattr(integrator, "run") or hasattr(integrator, "run_grid")) and all(e.smooth for e in sim.system.elements)
+    """Whether `advance` loops `sim` in the kernel: the Simulator's compiled fast path with a
+    compiled profile, or our DOP853; on a smooth scene."""
+    fast = sim.fast_stepper
+    smooth = all(e.smooth for e in sim.system.elements)
+    return smooth and ((fast is not None and fast.profile is not None) or hasattr(sim.integrator, "run_grid"))
 
 
 def advance(sim: "Simulator", n: int) -> np.ndarray:
     """Step `sim` n times under its scene's torque profile; the (n, 6) states (q, q') after each step."""
-    from finger_sim.simulate import BREAK_EPS
-
     if not can_run(sim):
-        return np.array([(*s.q, *s.v) for s in (sim.step() for _ in range(n))]).reshape(n, 6)
-    integrator, profile, dt = sim.integrator, sim.scene.torque, sim.dt
-    if hasattr(integrator, "run_grid"):
+        return _stepped(sim, n)
+    if hasattr(sim.integrator, "run_grid"):
         return _advance_grid(sim, n)
-    nodes = integrator.nodes  # type: ignore[attr-defined]
-    out = np.empty((n, 6))
-    t0s: list[float] = []
-    hs: list[float] = []
-    taus: list[list[float]] = []
-    start = sim.step_index
-    eps = BREAK_EPS * dt
-    checks_breaks = isinstance(profile, Profile)
+    fast = sim.fast_stepper
+    assert fast is not None
+    xs = np.empty((n + 1, 6))
+    xs[0] = (*sim.q, *sim.v)
+    done = 0
+    while done < n:
+        status, count, end = fast.run(sim.step_index, xs[done:])
+        if count:
+            done += count
+            last = xs[done].tolist()
+            sim.q, sim.v, sim.torque = tuple(last[:3]), tuple(last[3:]), end
+            sim.step_index += count
+        if status == BREAKPOINT:  # a switch inside the next step: the Simulator splits it
+            state = sim.step()
+            done += 1
+            xs[done] = (*state.q, *state.v)
+        elif status != OK:
+            fast.fail(status, sim.step_index, sim.q)
+    return xs[1:]
 
-    def flush(upto: int) -> None:
-        """Run the collected steps (those ending at step `upto` of this call) in the kernel."""
-        if not t0s:
-            return
-        count = len(t0s)
-        xs = integrator.run(np.array(t0s), np.array(hs), np.array(taus), (*sim.q, *sim.v))  # type: ignore[attr-defined]
-        finite = np.isfinite(xs).all(axis=1)
-        if not finite.all():
-            bad = upto - count + int(np.argmin(finite))
-            raise SimulationDiverged(f"non-finite state (step {start + bad})", method=sim.method, t=(start + bad) * dt, dt=dt)
-        out[upto - count: upto] = xs[1:]
-        sim.q, sim.v = tuple(xs[-1, :3].tolist()), tuple(xs[-1, 3:].tolist())
-        sim.step_index = start + upto
-        t0s.clear(), hs.clear(), taus.clear()
 
-    for i in range(n):
-        k = start + i
-        t0, t1 = k * dt, (k + 1) * dt
-        if checks_breaks and any(t0 + eps < b < t1 - eps for b in profile.breakpoints(t0, t1)):
-            flush(i)
-            s = sim.step()
-            out[i] = (*s.q, *s.v)
-            continue
-        segment = profile.on_segment(t0, t1)
-        h = t1 - t0
-        t0s.append(t0)
-        hs.append(h)
-        taus.append([segment(t0 + c * h) for c in nodes])
-        sim.torque = segment(t1)
-    flush(n)
-    return out
+def _stepped(sim: "Simulator", n: int) -> np.ndarray:
+    return np.array([(*s.q, *s.v) for s in (sim.step() for _ in range(n))]).reshape(n, 6)
 
 
 def _advance_grid(sim: "Simulator", n: int) -> np.ndarray:
@@ -84,7 +68,7 @@ def _advance_grid(sim: "Simulator", n: int) -> np.ndarray:
     segment = profile.on_segment(t0, t1) if isinstance(profile, Profile) else profile
     if segment is not profile or (isinstance(profile, Profile) and profile.breakpoints(t0, t1)):
         # not one smooth function (a piecewise-constant profile): `step` restarts at every step
-        return np.array([(*s.q, *s.v) for s in (sim.step() for _ in range(n))]).reshape(n, 6)
+        return _stepped(sim, n)
     k = np.arange(start, start + n + 1, dtype=np.float64)
     lows, highs = k[:-1] * dt, k[1:] * dt
     times = np.concatenate(([t0], lows + (highs - lows)))  # t + (t1 − t), as each step's end
