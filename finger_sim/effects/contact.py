@@ -158,7 +158,7 @@ class Contact:
             s = 0.0 if s < 0.0 else (1.0 if s > 1.0 else s)
             px, py = s * bx, s * by
             dx, dy = px - cx, py - cy
-            dist = math.hypot(dx, dy)
+            dist = math.sqrt(dx * dx + dy * dy)  # not hypot: CPython's and libm's differ in the last bit
             d = rad - dist
             if d > 0.0 or all_candidates:
                 nx, ny = (dx / dist, dy / dist) if dist > MIN_DISTANCE else (-s1, c1)
@@ -177,7 +177,7 @@ class Contact:
             ell = 0.0 if ell < 0.0 else (l3 if ell > l3 else ell)
             px, py = bx + ell * ux, by + ell * uy
             dx, dy = px - cx, py - cy
-            dist = math.hypot(dx, dy)
+            dist = math.sqrt(dx * dx + dy * dy)  # not hypot: CPython's and libm's differ in the last bit
             d = rad - dist
             if d > 0.0 or all_candidates:
                 nx, ny = (dx / dist, dy / dist) if dist > MIN_DISTANCE else (-uy, ux)

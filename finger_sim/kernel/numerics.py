@@ -60,7 +60,7 @@ def _contact(m, o, q0, q2, v0, v2):
         s = 0.0 if s < 0.0 else (1.0 if s > 1.0 else s)
         px, py = s * bx, s * by
         dx, dy = px - cx, py - cy
-        dist = math.hypot(dx, dy)
+        dist = math.sqrt(dx * dx + dy * dy)  # not hypot: CPython's and libm's differ in the last bit
         delta = rad - dist
         if delta > 0.0:
             if dist > MIN_DISTANCE:
@@ -85,7 +85,7 @@ def _contact(m, o, q0, q2, v0, v2):
         ell = 0.0 if ell < 0.0 else (l3 if ell > l3 else ell)
         px, py = bx + ell * ux, by + ell * uy
         dx, dy = px - cx, py - cy
-        dist = math.hypot(dx, dy)
+        dist = math.sqrt(dx * dx + dy * dy)  # not hypot: CPython's and libm's differ in the last bit
         delta = rad - dist
         if delta > 0.0:
             if dist > MIN_DISTANCE:
