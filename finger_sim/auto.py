@@ -36,11 +36,12 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import NamedTuple
 
+from finger_sim import kinematics
 from finger_sim.dynamics import FingerSystem
 from finger_sim.effects import EFFECTS
 from finger_sim.integrators import METHODS
 from finger_sim.scene import Scene
-from finger_sim.stability import fastest_mode, mcp_range, stable_at
+from finger_sim.stability import SAMPLES, TOGGLE_MARGIN, fastest_mode, inside_object, mcp_range, modal_roots, stable_at
 
 LOG = logging.getLogger(__name__)
 
@@ -59,6 +60,8 @@ FALLBACK = "radau"
 CONTACT_SUBSTEP_MODE_DT = 0.25
 #: Most substeps per step in contact; a contact stiffer than that at dt gets FALLBACK.
 MAX_CONTACT_SUBSTEPS = 32
+#: FALLBACK in contact: each substep h = dt/m resolves the contact's oscillatory mode, ω_c·h ≤ this.
+IMPLICIT_CONTACT_MODE_DT = 0.5
 #: The measured table, package data written by the bench.
 RECOMMENDATION_FILE = Path(__file__).parent / "data" / "recommendation.json"
 
@@ -168,21 +171,44 @@ def pick(rows: Sequence[Sequence[object]], root: complex, dt: float) -> tuple[st
     return FALLBACK, f"no tabulated method is stable{unstable}: {FALLBACK}, L-stable"
 
 
-def contact_substeps(scene: Scene) -> int:
-    """Substeps m of a step in contact under `method: auto`: 1 without objects; else the fewest
-    with |s|·dt/m ≤ CONTACT_SUBSTEP_MODE_DT on the scene's fastest mode s (its contact mode, at the
-    contact element's design force). 1 when the scene is stiff without its contact too, or needs
-    more than MAX_CONTACT_SUBSTEPS: then the whole run wants an implicit method."""
+def contact_substeps(scene: Scene, implicit: bool = False) -> int:
+    """Substeps m of a step in contact under `method: auto`: 1 without objects.
+
+    Explicit (`implicit` False): the fewest with |s|·dt/m ≤ CONTACT_SUBSTEP_MODE_DT on the scene's
+    fastest mode s (its contact mode, at the contact element's design force); 1 when the scene is
+    stiff without its contact too, or needs more than MAX_CONTACT_SUBSTEPS: then the whole run wants
+    an implicit method. Implicit (FALLBACK): the fewest with ω_c·dt/m ≤ IMPLICIT_CONTACT_MODE_DT on
+    the contact's oscillatory mode ω_c (`contact_frequency`), at most MAX_CONTACT_SUBSTEPS: the
+    friction's damping, however fast, is left to the L-stable method."""
     system = scene.build_system()
     q0, _ = scene.initial_state()
     smooth = [e for e in system.elements if e.smooth or all(e.impact(i) is not None for i in range(len(e.gaps(q0))))]
     if len(smooth) == len(system.elements):
         return 1  # no contact
     theta_range = mcp_range(scene)
+    if implicit:
+        kinks = [e for e in system.elements if e not in smooth]
+        omega = contact_frequency(FingerSystem(scene.params, kinks), theta_range)
+        return min(max(1, math.ceil(omega * scene.dt / IMPLICIT_CONTACT_MODE_DT)), MAX_CONTACT_SUBSTEPS)
     if abs(fastest_mode(FingerSystem(scene.params, smooth), theta_range)) * scene.dt > STIFF_MODE_DT:
         return 1
     m = math.ceil(abs(fastest_mode(system, theta_range)) * scene.dt / CONTACT_SUBSTEP_MODE_DT)
     return m if 1 <= m <= MAX_CONTACT_SUBSTEPS else 1
+
+
+def contact_frequency(contact: FingerSystem, theta1_range: tuple[float, float]) -> float:
+    """The contact's oscillatory mode ω_c = √(K_c/I) (rad/s), largest over the open poses θ1 in
+    theta1_range (rad) of a system holding only the contact elements: |s₁ s₂| = K_c/I of its modal
+    roots, whatever its damping (the Hunt–Crossley and friction terms only move the roots apart)."""
+    lo, hi = kinematics.assembly_range(contact.params)
+    lo, hi = max(theta1_range[0], lo + TOGGLE_MARGIN), min(theta1_range[1], hi - TOGGLE_MARGIN)
+    worst = 0.0
+    for i in range(SAMPLES):
+        q = kinematics.assemble(contact.params, lo + (hi - lo) * i / (SAMPLES - 1))
+        if not inside_object(contact, q):
+            s1, s2 = modal_roots(contact, q)
+            worst = max(worst, math.sqrt(abs(s1 * s2)))
+    return worst
 
 
 def choose_method(scene: Scene) -> tuple[str, str]:

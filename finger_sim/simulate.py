@@ -101,7 +101,7 @@ class Simulator:
         self.substeps = 1
         if method == AUTO:
             method, self.method_reason = choose_method(scene)
-            self.substeps = contact_substeps(scene) if not METHODS[method].implicit else 1
+            self.substeps = contact_substeps(scene, METHODS[method].implicit)
         self._method_cls = METHODS[method]
         self.method = method
         self._check_stability(self._method_cls)

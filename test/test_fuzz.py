@@ -160,8 +160,7 @@ def test_random_scene_structures_are_parsed_or_refused(data: Any) -> None:
 @example({"input": {"torque": {"type": ["ramp"]}}})
 @example({"model": {"geometry": {"r1": 0.03}}})
 @example({"model": {"damping": 1e300}})
-@example({"model": {"contact": {"name": None, 0: None}}}).xfail(
-    raises=TypeError, reason="found by this suite: effects/contact_geometry.py sorts mixed str/int keys (owner: contact)")
+@example({"model": {"contact": {"name": None, 0: None}}})
 def test_a_scene_with_one_bad_value_is_parsed_or_refused(data: Any) -> None:
     parse_or_refuse(data)
 

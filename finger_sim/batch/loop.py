@@ -6,7 +6,8 @@ data here, `PROFILE_*` codes) and every piece is one `finger_sim.kernel.numerics
 (or `euler_step`): the kernel's own jitted step, so the numbers are the Simulator's.
 
 A step in which something happens that the loop does not resolve itself (a stop closes, a
-contact gap opens or closes, the kernel reports a status other than OK) is not taken: the
+contact gap opens or closes, or the Simulator predicts it may inside the step, a contact shorter
+than the step: `simulate._predicted_crossing`; the kernel reports a status other than OK) is not taken: the
 finger stops *before* it with `EVENT` and the Python driver (`finger_sim.batch`) hands that
 step to a `Simulator`, which locates the event exactly as it always does.
 """
@@ -18,6 +19,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from finger_sim import simulate
 from finger_sim.inputs import BREAK_EPS
 from finger_sim.kernel.layout import CONTACT, HEADER
 from finger_sim.kernel.numerics import OK, euler_step, rk_step
@@ -38,7 +40,12 @@ PROFILE_SINE = 4  # amplitude, frequency, offset
 MAX_CUTS = 8
 
 #: `simulate.EVENT_TOLERANCE`: a gap counts as closed below −EVENT_TOLERANCE.
-EVENT_TOLERANCE = 1e-12
+EVENT_TOLERANCE = simulate.EVENT_TOLERANCE
+#: A gap's rate is the forward difference of the gap along q' over this fraction of the step.
+RATE_STEP = 1e-4
+
+#: The Simulator's prediction of a crossing inside a step, compiled (the same function).
+predicted_crossing = njit(cache=True, nogil=True, error_model="numpy")(simulate._predicted_crossing)
 
 PARALLEL = {"cache": True, "nogil": True, "error_model": "numpy", "parallel": True}
 SERIAL = {"cache": True, "nogil": True, "error_model": "numpy"}
@@ -80,9 +87,9 @@ def cuts(code, p, t0, t1, eps, out):
 
 
 @njit(**SERIAL)
-def contact_closed(m, o, q0, q2, closed):
-    """Whether each contact candidate is closed (δ > EVENT_TOLERANCE), into `closed`: the sign of
-    `Contact.gaps` = −δ, in its order and with its arithmetic (`Contact._hits`, every candidate)."""
+def contact_gaps(m, o, q0, q2, gap):
+    """Each contact candidate's gap −δ (m) into `gap`: `Contact.gaps`, in its order and with its
+    arithmetic (`Contact._hits`, every candidate); returns their count."""
     r1, l3, alpha = m[o], m[o + 1], m[o + 2]
     n_prox, n_dist, n_ends, n_tips = int(m[o + 8]), int(m[o + 9]), int(m[o + 10]), int(m[o + 11])
     j = o + 12
@@ -94,7 +101,7 @@ def contact_closed(m, o, q0, q2, closed):
         j += 3
         s = (cx * bx + cy * by) / (r1 * r1)
         s = 0.0 if s < 0.0 else (1.0 if s > 1.0 else s)
-        closed[i] = -(rad - math.hypot(s * bx - cx, s * by - cy)) < -EVENT_TOLERANCE
+        gap[i] = -(rad - math.hypot(s * bx - cx, s * by - cy))
         i += 1
     psi = q2 + alpha
     ux, uy = math.cos(psi), math.sin(psi)
@@ -105,34 +112,48 @@ def contact_closed(m, o, q0, q2, closed):
         ell = dx * ux + dy * uy
         ell = 0.0 if ell < 0.0 else (l3 if ell > l3 else ell)
         px, py = bx + ell * ux, by + ell * uy
-        closed[i] = -(rad - math.hypot(px - cx, py - cy)) < -EVENT_TOLERANCE
+        gap[i] = -(rad - math.hypot(px - cx, py - cy))
         i += 1
     for _ in range(n_ends):
         ox, oy, nx, ny, rho = m[j], m[j + 1], m[j + 2], m[j + 3], m[j + 4]
         j += 5
-        closed[i] = -(rho - (nx * (bx - ox) + ny * (by - oy))) < -EVENT_TOLERANCE
+        gap[i] = -(rho - (nx * (bx - ox) + ny * (by - oy)))
         i += 1
     for _ in range(n_tips):
         ox, oy, nx, ny, rho = m[j], m[j + 1], m[j + 2], m[j + 3], m[j + 4]
         j += 6
         px, py = bx + l3 * ux, by + l3 * uy
-        closed[i] = -(rho - (nx * (px - ox) + ny * (py - oy))) < -EVENT_TOLERANCE
+        gap[i] = -(rho - (nx * (px - ox) + ny * (py - oy)))
         i += 1
     return i
 
 
 @njit(**SERIAL)
-def kink(m, qa0, qa2, qb0, qb2, before, after):
-    """Whether a contact gap of model m is closed at one of two poses and open at the other."""
+def kink(m, xa, xb, h, ga, gb, shifted):
+    """Whether a step of length h (s) from state xa to xb may hold a contact event that the
+    Simulator would split it at: a contact gap of model m is closed at one end and open at the
+    other, or `simulate._predicted_crossing` (the Simulator's own test, from the gaps and their
+    rates at both ends) predicts a crossing inside it. ga, gb, shifted: scratch arrays (one per
+    candidate). The rates are forward differences along q' over RATE_STEP·h."""
     o = HEADER + 1
+    eps = RATE_STEP * h
     for _ in range(int(m[HEADER])):
         code, n = int(m[o]), int(m[o + 1])
         o += 2
         if code == CONTACT:
-            count = contact_closed(m, o, qa0, qa2, before)
-            contact_closed(m, o, qb0, qb2, after)
+            count = contact_gaps(m, o, xa[0], xa[2], ga)
+            contact_gaps(m, o, xb[0], xb[2], gb)
             for c in range(count):
-                if before[c] != after[c]:
+                if (ga[c] < -EVENT_TOLERANCE) != (gb[c] < -EVENT_TOLERANCE):
+                    return True
+            contact_gaps(m, o, xa[0] + eps * xa[3], xa[2] + eps * xa[5], shifted)
+            for c in range(count):
+                shifted[c] = (shifted[c] - ga[c]) / eps  # the start's rate
+            rates_a = shifted.copy()
+            contact_gaps(m, o, xb[0] + eps * xb[3], xb[2] + eps * xb[5], shifted)
+            for c in range(count):
+                rate_b = (shifted[c] - gb[c]) / eps
+                if predicted_crossing(ga[c], rates_a[c], gb[c], rate_b, h, ga[c] < -EVENT_TOLERANCE) is not None:
                     return True
         o += n
     return False
@@ -155,8 +176,10 @@ def _finger(m, tab, nodes, code, p, dt, stop, limits, gaps, x, step, last, max_r
     cut = np.empty(MAX_CUTS)
     edges = np.empty(MAX_CUTS + 2)
     start = np.empty(6)
-    before = np.empty(gaps, dtype=np.bool_)
-    after = np.empty(gaps, dtype=np.bool_)
+    before = np.empty(gaps)
+    after = np.empty(gaps)
+    shifted = np.empty(gaps)
+    xa = np.empty(6)
     eps = BREAK_EPS * dt
     while step < last:
         t0, t1 = step * dt, (step + 1) * dt
@@ -170,7 +193,7 @@ def _finger(m, tab, nodes, code, p, dt, stop, limits, gaps, x, step, last, max_r
         for seg in range(count + 1):
             a, b = edges[seg], edges[seg + 1]
             h = b - a
-            qa0, qa2 = x[0], x[2]
+            xa[:] = x
             piecewise = code == PROFILE_STEP or code == PROFILE_SQUARE
             middle = torque(code, p, 0.5 * (a + b)) if piecewise else 0.0
             for j in range(nodes.shape[0]):
@@ -183,7 +206,7 @@ def _finger(m, tab, nodes, code, p, dt, stop, limits, gaps, x, step, last, max_r
                 event = True
             elif stop and (x[0] - limits[0] < -EVENT_TOLERANCE or limits[1] - x[0] < -EVENT_TOLERANCE):
                 event = True
-            elif gaps > 0 and kink(m, qa0, qa2, x[0], x[2], before, after):
+            elif gaps > 0 and kink(m, xa, x, h, before, after, shifted):
                 event = True
             if event:
                 break

@@ -113,7 +113,7 @@ def objects_from_list(value: Any, key: str = "objects") -> tuple[SceneObject, ..
         if kind not in OBJECT_TYPES:
             raise ConfigError(f"{where}.type", f"one of {list(OBJECT_TYPES)}", kind)
         allowed = _OBJECT_KEYS[kind]
-        unknown = sorted(set(item) - allowed)
+        unknown = sorted(set(item) - allowed, key=str)
         if unknown:
             raise ConfigError(where, f"only the keys {sorted(allowed)} for a {kind}", unknown[0])
         missing = sorted(allowed - set(item))
@@ -141,7 +141,7 @@ def contact_params_from_dict(value: Any, key: str = "model.contact") -> ContactP
     allowed = {f.name for f in fields(ContactParams)}
     if not isinstance(value, dict):
         raise ConfigError(key, f"a mapping with the keys {sorted(allowed)}", value)
-    unknown = sorted(set(value) - allowed)
+    unknown = sorted(set(value) - allowed, key=str)  # YAML keys may be ints, None, ...: sorted as text
     if unknown:
         raise ConfigError(key, f"only the keys {sorted(allowed)}", unknown[0])
     try:

@@ -11,10 +11,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.linalg import lu_solve
 
 from finger_sim.errors import SimulationDiverged
 from finger_sim.integrators.base import Integrator, TorqueFn
-from finger_sim.integrators.newton import factor, forward_jacobian, simplified_newton
+from finger_sim.integrators.newton import LU, factor, forward_jacobian, simplified_newton
 from finger_sim.kinematics import Vec3
 from finger_sim.projection import project
 
@@ -31,6 +32,8 @@ C = np.array([(4 - _S6) / 10, (4 + _S6) / 10, 1.0])
 #: Simplified-Newton stop: scaled stage update below this (the error left is ~ its square).
 NEWTON_TOLERANCE = 1e-12
 MAX_NEWTON_ITERATIONS = 10
+#: Newton iterations with a refreshed Jacobian when the simplified iteration fails.
+MAX_REFRESHES = 20
 #: A step whose Newton iteration fails is retried as two half steps, at most this deep.
 MAX_HALVINGS = 6
 #: Size of (θ, θ') below which the Jacobian's difference steps and Newton's scale stop shrinking (rad, rad/s).
@@ -65,11 +68,15 @@ class RadauIIA(Integrator):
         return project(self.system.params, (t1, t2, t3), (w1, w2, w3))
 
     def _solve_stages(self, t: float, y: list[float], dt: float, torque: TorqueFn) -> list[float] | None:
-        """Last stage increment Z₃ = y₁ − y₀ (stiffly accurate), or None when Newton fails."""
+        """Last stage increment Z₃ = y₁ − y₀ (stiffly accurate), or None when Newton fails.
+
+        Simplified Newton on the Jacobian at y₀; if that fails, Newton with the Jacobian refreshed
+        at the last stage's iterate every iteration (up to MAX_REFRESHES): a force steep in q' (the
+        regularized friction's tanh(v_t/v_s) in the stick phase) has its slope where the stages
+        end, not where the step starts.
+        """
         rhs = self.system.rhs
         f0 = np.array(rhs(t, y, torque))
-        jac = forward_jacobian(lambda yp: rhs(t, yp, torque), y, UNIT_SCALE, f0)
-        lu = factor(np.eye(18) - dt * np.kron(A, jac))
         y0 = np.array(y)
         times = t + C * dt
 
@@ -78,10 +85,27 @@ class RadauIIA(Integrator):
             f = np.array([rhs(ts, (y0 + zi).tolist(), torque) for ts, zi in zip(times, stages)])
             return (stages - dt * (A @ f)).ravel()
 
+        def newton_matrix(at: list[float], f_at: np.ndarray | None) -> LU:
+            jac = forward_jacobian(lambda yp: rhs(t, yp, torque), at, UNIT_SCALE, f_at)
+            return factor(np.eye(18) - dt * np.kron(A, jac))
+
         guess = np.outer(C * dt, f0).ravel()  # explicit guess: Z_i ≈ c_i h f(y₀)
         scale = np.tile(np.maximum(np.abs(y0), 1.0), 3)
-        z = simplified_newton(residual, guess, lu, scale, NEWTON_TOLERANCE, MAX_NEWTON_ITERATIONS, stop_when_growing=True)
-        return None if z is None else z[12:].tolist()
+        z = simplified_newton(residual, guess, newton_matrix(y, f0), scale, NEWTON_TOLERANCE, MAX_NEWTON_ITERATIONS,
+                              stop_when_growing=True)
+        if z is None:  # full Newton: the Jacobian refreshed at the last stage's iterate each iteration
+            z = guess
+            for _ in range(MAX_REFRESHES):
+                dz = lu_solve(newton_matrix((y0 + z[12:]).tolist(), None), -residual(z), check_finite=False)
+                z = z + dz
+                size = float(np.max(np.abs(dz) / scale))
+                if not math.isfinite(size):
+                    return None
+                if size < NEWTON_TOLERANCE:
+                    break
+            else:
+                return None
+        return z[12:].tolist()
 
     @classmethod
     def is_stable(cls, z: complex) -> bool:
