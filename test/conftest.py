@@ -6,7 +6,7 @@ find ROS in sys.modules because this file was collected.
 
 Domain ids: TEST_DOMAINS (60-99), from a per-process counter offset by the pid, so that two
 pytest sessions running at the same time rarely share one, and never with the ids used by
-hand (20-49) or test_replay's share (50-59). Discovery stays on the loopback interface.
+hand (20-49). Discovery stays on the loopback interface.
 """
 
 from __future__ import annotations
@@ -23,8 +23,18 @@ from typing import Any
 
 import pytest
 import yaml
+from hypothesis import HealthCheck, settings
 
 TEST_DOMAINS = range(60, 100)
+
+# Hypothesis budgets (test_fuzz.py): "default" keeps the suite's time (a fixed, repeatable set
+# of examples, nothing stored in the tree); `pytest --hypothesis-profile=long` searches anew
+# each run, with many more examples, and keeps failures in .hypothesis/ to replay them.
+settings.register_profile("default", max_examples=40, deadline=10_000, derandomize=True, database=None,
+                          suppress_health_check=[HealthCheck.too_slow])
+settings.register_profile("long", max_examples=2_000, deadline=30_000,
+                          suppress_health_check=[HealthCheck.too_slow])
+settings.load_profile("default")
 _counter = itertools.count((os.getpid() * 7) % len(TEST_DOMAINS))
 
 #: Wall-clock deadlines, s. Generous: two shared cores, other sessions running.
@@ -73,13 +83,18 @@ def wait_until(condition: Callable[[], Any], timeout: float, what: str, *, spin:
 
 
 class RosProcess:
-    """A child process in its own process group, its output in a file; stop() is safe to repeat."""
+    """A child process in its own process group, its output in a file (stderr in a second one
+    with `stderr_path`, else merged into the first); stop() is safe to repeat."""
 
-    def __init__(self, argv: list[str], env: dict[str, str], log_path: Path, cwd: Path | None = None) -> None:
+    def __init__(self, argv: list[str], env: dict[str, str], log_path: Path, cwd: Path | None = None, *,
+                 stderr_path: Path | None = None) -> None:
         self.argv = argv
         self.log_path = log_path
+        self.stderr_path = stderr_path
         self._log = open(log_path, "wb")
-        self.proc = subprocess.Popen(argv, env=env, cwd=cwd, stdout=self._log, stderr=subprocess.STDOUT,
+        self._err = open(stderr_path, "wb") if stderr_path is not None else None
+        self.proc = subprocess.Popen(argv, env=env, cwd=cwd, stdout=self._log,
+                                     stderr=self._err if self._err is not None else subprocess.STDOUT,
                                      stdin=subprocess.DEVNULL, start_new_session=True)
 
     @property
@@ -90,15 +105,29 @@ class RosProcess:
         return self.proc.poll() is None
 
     def output(self) -> str:
+        """What the process wrote to stdout (and stderr, unless kept apart)."""
         self._log.flush()
         return self.log_path.read_text(errors="replace")
+
+    def errors(self) -> str:
+        """What the process wrote to stderr when kept apart (stderr_path), else ''."""
+        return "" if self.stderr_path is None else self.stderr_path.read_text(errors="replace")
+
+    def finish(self, timeout: float) -> tuple[int, str, str]:
+        """Wait for the exit: (status, stdout, stderr); AssertionError if it does not exit in time."""
+        return self.wait(timeout), self.output(), self.errors()
+
+    def send_signal(self, sig: int) -> None:
+        """A signal to the process itself (stop() signals its whole group)."""
+        self.proc.send_signal(sig)
 
     def wait(self, timeout: float) -> int:
         """Exit status; AssertionError with the output if it does not exit in time."""
         try:
             return self.proc.wait(timeout)
         except subprocess.TimeoutExpired:
-            raise AssertionError(f"{self.argv[:4]} did not exit within {timeout:g} s; output:\n{self.output()}") from None
+            raise AssertionError(f"{self.argv[:4]} did not exit within {timeout:g} s; output:\n"
+                                 f"{self.output()}{self.errors()}") from None
 
     def stop(self) -> int | None:
         """SIGINT to the group, then SIGKILL after STOP_TIMEOUT; returns the exit status."""
@@ -112,6 +141,8 @@ class RosProcess:
         else:  # the leader is gone; make sure nothing it started lingers
             self._signal(signal.SIGKILL)
         self._log.close()
+        if self._err is not None:
+            self._err.close()
         return self.proc.returncode
 
     def _signal(self, sig: int) -> None:
@@ -129,8 +160,10 @@ class Launcher:
         self.tmp = tmp
         self.processes: list[RosProcess] = []
 
-    def start(self, argv: list[str], name: str) -> RosProcess:
-        proc = RosProcess(argv, self.env, self.tmp / f"{name}.log", cwd=self.tmp)
+    def start(self, argv: list[str], name: str, *, separate_stderr: bool = False) -> RosProcess:
+        """Start `argv` in the test's folder; its output in <name>.log (stderr in <name>.err if separate)."""
+        stderr_path = self.tmp / f"{name}.err" if separate_stderr else None
+        proc = RosProcess(argv, self.env, self.tmp / f"{name}.log", cwd=self.tmp, stderr_path=stderr_path)
         self.processes.append(proc)
         return proc
 

@@ -169,6 +169,70 @@ def test_export_reaches_the_papers_angles(node_log: NodeLog, simulated: np.ndarr
     assert simulated[-1, 0] == pytest.approx(0.3, abs=1e-15)
 
 
+ROS_HEADER = ("t,mcp_position,coupler_position,pip_position,mcp_velocity,coupler_velocity,pip_velocity,"
+              "mcp_effort,coupler_effort,pip_effort,torque,tip_x,tip_y,tip_z,tip_qx,tip_qy,tip_qz,tip_qw,tip_pitch")
+ROS_UNITS = "# units: s, rad, rad, rad, rad/s, rad/s, rad/s, N·m, N·m, N·m, N·m, m, m, m, 1, 1, 1, 1, rad"
+
+
+def read_ros_csv(path: Path) -> np.ndarray:
+    comment, header, _ = path.read_text().split("\n", 2)
+    assert (comment, header) == (ROS_UNITS, ROS_HEADER)
+    return np.loadtxt(path, delimiter=",", comments="#", skiprows=2, ndmin=2)
+
+
+def test_export_ros_columns_are_the_logged_messages(node_log: NodeLog, tmp_path: Path) -> None:
+    """--columns ros against what the node published, read by mcap_ros2: joint_states' positions,
+    velocities and efforts as logged, and fingertip_pose's position and orientation."""
+    out = tmp_path / "ros.csv"
+    done = run_cli("export", node_log.path, "--csv", out, "--columns", "ros")
+    assert (done.returncode, done.stderr) == (0, ""), done.stderr  # no progress output off a terminal
+    rows = read_ros_csv(out)
+    efforts, poses = [], []
+    with node_log.path.open("rb") as file:
+        reader = make_reader(file, decoder_factories=[DecoderFactory()])
+        for _, channel, _, msg in reader.iter_decoded_messages(topics=["/joint_states", "/fingertip_pose"],
+                                                               log_time_order=False):
+            if channel.topic == "/joint_states":
+                efforts.append([msg.effort[list(msg.name).index(n)] for n in JOINTS])
+            else:
+                p, o = msg.pose.position, msg.pose.orientation
+                poses.append([p.x, p.y, p.z, o.x, o.y, o.z, o.w])
+    np.testing.assert_array_equal(rows[:, 0], np.array(node_log.stamps) / 1e9)
+    np.testing.assert_allclose(rows[:, 1:4], node_log.positions, rtol=0, atol=TOL)  # through θ and back
+    np.testing.assert_allclose(rows[:, 4:7], node_log.velocities, rtol=0, atol=TOL)
+    np.testing.assert_allclose(rows[:, 7:10], np.array(efforts), rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(rows[:, 10], rows[:, 7])  # torque: the motor's, at mcp_joint
+    np.testing.assert_allclose(rows[:, 11:18], np.array(poses), rtol=0, atol=TOL)
+    np.testing.assert_allclose(2 * np.arctan2(rows[:, 15], rows[:, 17]), rows[:, 18], rtol=0, atol=TOL)
+
+
+def test_every_thins_both_column_sets_and_simulate_agrees(node_log: NodeLog, simulated: np.ndarray,
+                                                          tmp_path: Path) -> None:
+    for columns in ("paper", "ros"):
+        out = tmp_path / f"{columns}.csv"
+        assert run_cli("export", node_log.path, "--csv", out, "--columns", columns, "--every", "7").returncode == 0
+        rows = read_ros_csv(out) if columns == "ros" else read_csv(out)[1]
+        assert len(rows) == math.ceil(301 / 7)
+        np.testing.assert_array_equal(rows[:, 0], np.array(node_log.stamps[::7]) / 1e9)
+    np.testing.assert_allclose(read_csv(tmp_path / "paper.csv")[1], simulated[::7], rtol=0, atol=TOL)
+    # simulate --columns ros (streamed): the same scene offline, spec §6's efforts from its own torque
+    sim_out = tmp_path / "sim_ros.csv"
+    done = run_cli("simulate", PAPER, "--csv", sim_out, "--columns", "ros", "--every", "7")
+    assert (done.returncode, done.stderr) == (0, ""), done.stderr
+    sim_rows, logged = read_ros_csv(sim_out), read_ros_csv(tmp_path / "ros.csv")
+    np.testing.assert_allclose(sim_rows[:, [0, 1, 2, 3, 4, 5, 6, 9, 11, 12, 13, 14, 15, 16, 17, 18]],
+                               logged[:, [0, 1, 2, 3, 4, 5, 6, 9, 11, 12, 13, 14, 15, 16, 17, 18]], rtol=0, atol=TOL)
+    scene = load_scene(PAPER)
+    np.testing.assert_array_equal(sim_rows[:, 7], [scene.torque(t) for t in sim_rows[:, 0]])
+    np.testing.assert_allclose(sim_rows[:, 9], -scene.spring_stiffness * sim_rows[:, 3], rtol=1e-15, atol=0)
+    assert not sim_rows[:, 8].any()
+    # and the same through the in-memory path (with --plot)
+    both = tmp_path / "sim_plot.csv"
+    assert run_cli("simulate", PAPER, "--csv", both, "--columns", "ros", "--every", "7",
+                   "--plot", tmp_path / "p.png").returncode == 0
+    np.testing.assert_array_equal(read_ros_csv(both), sim_rows)
+
+
 def test_resim_reproduces_the_scene_run(node_log: NodeLog) -> None:
     done = run_cli("resim", node_log.path)
     assert (done.returncode, done.stderr) == (0, ""), done.stderr

@@ -5,23 +5,22 @@ at 200 Hz, Float64 at 50 Hz between them, and /clock at 200 Hz. The subscriber c
 field with the recorded value and times arrivals with DDS reception timestamps (`msg_info`),
 so executor latency in this process does not enter the timing checks.
 
-Each DDS test has its own ROS_DOMAIN_ID (50-59) and loopback-only discovery, in this process
-and in the child; children are ended by PID in teardown, also when a test fails.
+Each test has its own ROS_DOMAIN_ID and loopback-only discovery, in this process and in the
+child, and its processes are started and ended (by process group, also when a test fails) by
+conftest.py's launcher.
 """
 
 from __future__ import annotations
 
 import itertools
 import math
-import os
 import signal
 import statistics
-import subprocess
 import sys
 import threading
-import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -37,6 +36,7 @@ from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Float64  # noqa: E402
 
+from conftest import Launcher, RosProcess, wait_until  # noqa: E402
 from finger_sim.log import (  # noqa: E402
     LogArgumentError,
     LogFileError,
@@ -60,8 +60,6 @@ TOPIC_TYPES = {"/joint_states": JointState, "/tip_force": Float64, "/clock": Clo
 REMAPPED_FORCE = "/tip_force_replayed"  # where --ros-args -r sends /tip_force
 
 REPLAY = Path(sys.executable).with_name("finger_replay")  # the console script next to this Python
-QUIET_DOMAIN_ID = 50  # for replays that must fail before they publish anything
-DOMAIN_IDS = iter(range(51, 60))  # one per DDS test (this file's share of ids is 50-59)
 DEADLINE_S = 20.0  # for any one condition; the file runs in ~25 s
 TIMING_TOLERANCE = 0.05  # at --rate 1: recorded vs received span and median period
 FAST_RATE_TOLERANCE = 0.20  # at --rate 10
@@ -141,34 +139,12 @@ def clock_ns(msg: Clock) -> int:
     return msg.clock.sec * 10**9 + msg.clock.nanosec
 
 
-# -- DDS isolation, the listener and the replay process ----------------------------------------
-
-
-def isolate(monkeypatch: pytest.MonkeyPatch, domain: int) -> int:
-    """Domain `domain` and loopback-only discovery for this process and the children."""
-    monkeypatch.setenv("ROS_DOMAIN_ID", str(domain))
-    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    monkeypatch.setenv("ROS_STATIC_PEERS", "")
-    monkeypatch.delenv("ROS_LOCALHOST_ONLY", raising=False)
-    return domain
-
-
-@pytest.fixture
-def domain_id(monkeypatch: pytest.MonkeyPatch) -> int:
-    """A domain id no other test of this run uses (a stale participant cannot interfere)."""
-    domain = next(DOMAIN_IDS, None)
-    assert domain is not None, "more DDS tests than domain ids 51-59: share them out again"
-    return isolate(monkeypatch, domain)
-
-
-@pytest.fixture
-def quiet_domain(monkeypatch: pytest.MonkeyPatch) -> int:
-    """For replays expected to fail before they publish: isolated all the same."""
-    return isolate(monkeypatch, QUIET_DOMAIN_ID)
+# -- the listener and the replay process (isolation and processes: conftest.py) -----------------
 
 
 class Listener:
-    """Subscribes to the test topics in its own context; records (reception ns, message) per topic."""
+    """Subscribes to the test topics in its own context and spins in its own thread, so that
+    every arrival is recorded as it happens: (DDS reception ns, message) per topic."""
 
     def __init__(self, domain: int) -> None:
         self.context = Context()
@@ -223,8 +199,8 @@ class Listener:
 
 
 @pytest.fixture
-def listener(domain_id: int) -> Iterator[Listener]:
-    listening = Listener(domain_id)
+def listener(ros_domain: int) -> Iterator[Listener]:
+    listening = Listener(ros_domain)
     try:
         yield listening
     finally:
@@ -232,63 +208,27 @@ def listener(domain_id: int) -> Iterator[Listener]:
 
 
 @pytest.fixture
-def start_replay(domain_id: int) -> Iterator[Callable[..., subprocess.Popen[str]]]:
-    """Starts finger_replay processes in this test's domain; ends any still running, by PID."""
-    started: list[subprocess.Popen[str]] = []
+def start_replay(launcher: Launcher) -> Callable[..., RosProcess]:
+    """Starts finger_replay in this test's domain, stdout and stderr apart; the launcher ends it."""
 
-    def start(*args: object) -> subprocess.Popen[str]:
+    def start(*args: object) -> RosProcess:
         command = [str(REPLAY)] if REPLAY.exists() else [sys.executable, "-m", "finger_sim.ros.replay"]
-        proc = subprocess.Popen([*command, *map(str, args)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                text=True, env=dict(os.environ))
-        started.append(proc)
-        return proc
+        return launcher.start([*command, *map(str, args)], f"replay{len(launcher.processes)}", separate_stderr=True)
 
-    yield start
-    for proc in started:
-        if proc.poll() is None:
-            proc.terminate()
-            try:
-                proc.wait(5)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait(5)
-        proc.communicate()  # closes the pipes
+    return start
 
 
-def wait_for(condition: Callable[[], bool], what: str, timeout_s: float = DEADLINE_S,
-             proc: subprocess.Popen[str] | None = None) -> None:
-    """Poll `condition` until true; fail after `timeout_s`, with the replay's output if it ended."""
-    deadline = time.monotonic() + timeout_s
-    while not condition():
-        if time.monotonic() > deadline:
-            report = ""
-            if proc is not None and proc.poll() is not None:
-                out, err = proc.communicate()
-                report = f"; finger_replay exited {proc.returncode}: {out.strip()} {err.strip()}"
-            pytest.fail(f"timed out after {timeout_s} s waiting for {what}{report}")
-        time.sleep(0.01)
+@pytest.fixture
+def run_replay(start_replay: Callable[..., RosProcess]) -> Callable[..., tuple[int, str, str]]:
+    """A replay run to its end: (status, stdout, stderr)."""
+    return lambda *args: start_replay(*args).finish(DEADLINE_S)
 
 
-def finish(proc: subprocess.Popen[str], timeout_s: float = DEADLINE_S) -> tuple[int, str, str]:
-    """Wait for the replay to exit; its status, stdout and stderr."""
-    try:
-        out, err = proc.communicate(timeout=timeout_s)
-    except subprocess.TimeoutExpired:
-        pytest.fail(f"finger_replay still running after {timeout_s} s")
-    return proc.returncode, out, err
+def wait_for(condition: Callable[[], Any], what: str) -> None:
+    wait_until(condition, DEADLINE_S, what)
 
 
-def run_replay(*args: object) -> subprocess.CompletedProcess[str]:
-    """A replay expected to fail before touching ROS."""
-    command = [str(REPLAY)] if REPLAY.exists() else [sys.executable, "-m", "finger_sim.ros.replay"]
-    return subprocess.run([*command, *map(str, args)], capture_output=True, text=True, timeout=DEADLINE_S,
-                          env=dict(os.environ))
-
-
-def assert_one_line_error(result: subprocess.CompletedProcess[str] | tuple[int, str, str], status: int,
-                          *fragments: str) -> None:
-    if isinstance(result, subprocess.CompletedProcess):
-        result = result.returncode, result.stdout, result.stderr
+def assert_one_line_error(result: tuple[int, str, str], status: int, *fragments: str) -> None:
     code, _, err = result
     assert code == status, err
     assert "Traceback" not in err
@@ -370,7 +310,6 @@ def test_plan_refuses_a_log_without_messages(tmp_path: Path) -> None:
 # -- command line errors: one line, nonzero, before any ROS call --------------------------------
 
 
-@pytest.mark.usefixtures("quiet_domain")
 @pytest.mark.parametrize(
     ("args", "fragments"),
     [
@@ -384,12 +323,12 @@ def test_plan_refuses_a_log_without_messages(tmp_path: Path) -> None:
         ("--ros-args -r nonsense", ["ROS arguments", "nonsense"]),
     ],
 )
-def test_bad_arguments_exit_2_with_one_line(log_path: Path, args: str, fragments: list[str]) -> None:
+def test_bad_arguments_exit_2_with_one_line(log_path: Path, args: str, fragments: list[str],
+                                            run_replay: Callable[..., tuple[int, str, str]]) -> None:
     assert_one_line_error(run_replay(log_path, *args.split()), replay.EXIT_USAGE, *fragments)
 
 
-@pytest.mark.usefixtures("quiet_domain")
-def test_bad_logs_exit_1_with_one_line(tmp_path: Path) -> None:
+def test_bad_logs_exit_1_with_one_line(tmp_path: Path, run_replay: Callable[..., tuple[int, str, str]]) -> None:
     missing = tmp_path / "missing.mcap"
     assert_one_line_error(run_replay(missing), replay.EXIT_LOG, str(missing), "no such file")
     text = tmp_path / "notes.mcap"
@@ -401,8 +340,7 @@ def test_bad_logs_exit_1_with_one_line(tmp_path: Path) -> None:
     assert_one_line_error(run_replay(tmp_path), replay.EXIT_LOG, "a directory")
 
 
-@pytest.mark.usefixtures("quiet_domain")
-def test_a_type_without_python_class_exits_1_with_one_line(tmp_path: Path) -> None:
+def test_a_type_without_python_class_exits_1_with_one_line(tmp_path: Path, run_replay: Callable[..., tuple[int, str, str]]) -> None:
     path = tmp_path / "foreign.mcap"
     with McapRecorder(path) as rec:
         rec.register_channel("/foreign", "foreign_msgs/msg/Gauge", definition="float64 value\n")
@@ -415,13 +353,12 @@ def test_a_type_without_python_class_exits_1_with_one_line(tmp_path: Path) -> No
 
 
 def test_replays_every_message_with_recorded_values_order_and_timing(
-    log_path: Path, listener: Listener, start_replay: Callable[..., subprocess.Popen[str]]
+    log_path: Path, listener: Listener, start_replay: Callable[..., RosProcess]
 ) -> None:
     proc = start_replay(log_path, "--wait-for-subscribers", 10)
     data_counts = (JOINT_COUNT, FORCE_COUNT)
-    wait_for(lambda: listener.counts("/joint_states", "/tip_force") == data_counts, "every data message",
-             proc=proc)
-    code, out, err = finish(proc)
+    wait_for(lambda: listener.counts("/joint_states", "/tip_force") == data_counts, "every data message")
+    code, out, err = proc.finish(DEADLINE_S)
     assert code == 0, err
     assert f"published {2 * JOINT_COUNT + FORCE_COUNT} messages on 3 topics" in out
 
@@ -455,11 +392,11 @@ def test_replays_every_message_with_recorded_values_order_and_timing(
 
 
 def test_rate_10_plays_in_a_tenth_of_the_time(
-    log_path: Path, listener: Listener, start_replay: Callable[..., subprocess.Popen[str]]
+    log_path: Path, listener: Listener, start_replay: Callable[..., RosProcess]
 ) -> None:
     proc = start_replay(log_path, "--rate", 10, "--wait-for-subscribers", 10)
-    wait_for(lambda: listener.count("/joint_states") == JOINT_COUNT, "every joint state", proc=proc)
-    code, out, err = finish(proc)
+    wait_for(lambda: listener.count("/joint_states") == JOINT_COUNT, "every joint state")
+    code, out, err = proc.finish(DEADLINE_S)
     assert code == 0, err
     received = listener.times_s("/joint_states")
     recorded_span = (joint_time(JOINT_COUNT - 1) - joint_time(0)) / 1e9
@@ -470,13 +407,13 @@ def test_rate_10_plays_in_a_tenth_of_the_time(
 
 
 def test_topics_filter_no_clock_and_ros_args_remap(
-    log_path: Path, listener: Listener, start_replay: Callable[..., subprocess.Popen[str]]
+    log_path: Path, listener: Listener, start_replay: Callable[..., RosProcess]
 ) -> None:
     proc = start_replay(log_path, "--topics", "/tip_force", "--no-clock", "--rate", 5,
                         "--wait-for-subscribers", 10, "--wait-for-all-acked", 10,
                         "--ros-args", "-r", f"/tip_force:={REMAPPED_FORCE}")
-    wait_for(lambda: listener.count(REMAPPED_FORCE) == FORCE_COUNT, "every force message", proc=proc)
-    code, out, err = finish(proc)  # it waited for our acknowledgements: nothing else is on its way
+    wait_for(lambda: listener.count(REMAPPED_FORCE) == FORCE_COUNT, "every force message")
+    code, out, err = proc.finish(DEADLINE_S)  # it waited for our acknowledgements: nothing else is on its way
     assert code == 0, err
     assert err == ""  # no warning about missing subscribers or acknowledgements
     assert f"published {FORCE_COUNT} messages on 1 topics" in out
@@ -486,7 +423,7 @@ def test_topics_filter_no_clock_and_ros_args_remap(
 
 
 def test_start_offset_skips_the_beginning(
-    log_path: Path, listener: Listener, start_replay: Callable[..., subprocess.Popen[str]]
+    log_path: Path, listener: Listener, start_replay: Callable[..., RosProcess]
 ) -> None:
     offset_ns = 500_000_000
     joints = [k for k in range(JOINT_COUNT) if joint_time(k) >= T0_NS + offset_ns]
@@ -495,8 +432,8 @@ def test_start_offset_skips_the_beginning(
                         "--wait-for-subscribers", 10)
     data_counts = (len(joints), len(forces))
     wait_for(lambda: listener.counts("/joint_states", "/tip_force") == data_counts,
-             "the data messages after the offset", proc=proc)
-    code, out, err = finish(proc)
+             "the data messages after the offset")
+    code, out, err = proc.finish(DEADLINE_S)
     assert code == 0, err
     for k, msg in zip(joints, listener.messages("/joint_states"), strict=True):
         assert_joint_state(msg, k)
@@ -506,12 +443,12 @@ def test_start_offset_skips_the_beginning(
 
 
 def test_generated_clock_replaces_the_recorded_one(
-    log_path: Path, listener: Listener, start_replay: Callable[..., subprocess.Popen[str]]
+    log_path: Path, listener: Listener, start_replay: Callable[..., RosProcess]
 ) -> None:
     hz = 30
     proc = start_replay(log_path, "--clock", hz, "--wait-for-subscribers", 10)
-    wait_for(lambda: listener.count("/joint_states") == JOINT_COUNT, "every joint state", proc=proc)
-    code, out, err = finish(proc)
+    wait_for(lambda: listener.count("/joint_states") == JOINT_COUNT, "every joint state")
+    code, out, err = proc.finish(DEADLINE_S)
     assert code == 0, err
     clocks = [clock_ns(m) for m in listener.messages("/clock")]
     end = joint_time(JOINT_COUNT - 1)
@@ -524,7 +461,7 @@ def test_generated_clock_replaces_the_recorded_one(
 
 
 def test_truncated_log_replays_its_intact_part_then_exits_1(
-    log_path: Path, tmp_path: Path, listener: Listener, start_replay: Callable[..., subprocess.Popen[str]]
+    log_path: Path, tmp_path: Path, listener: Listener, start_replay: Callable[..., RosProcess]
 ) -> None:
     data = log_path.read_bytes()
     cut = tmp_path / "cut.mcap"
@@ -532,7 +469,7 @@ def test_truncated_log_replays_its_intact_part_then_exits_1(
     readable = read_log(cut)
     assert readable.truncated and 0 < readable.message_count < 2 * JOINT_COUNT + FORCE_COUNT
     proc = start_replay(cut, "--rate", 10, "--wait-for-subscribers", 10)
-    code, out, err = finish(proc)
+    code, out, err = proc.finish(DEADLINE_S)
     assert code == replay.EXIT_LOG
     assert "Traceback" not in err
     assert err.startswith("finger_replay: warning: ") and "truncated at byte" in err
@@ -544,14 +481,14 @@ def test_truncated_log_replays_its_intact_part_then_exits_1(
 
 
 def test_corrupt_chunk_stops_with_one_line(
-    log_path: Path, tmp_path: Path, start_replay: Callable[..., subprocess.Popen[str]]
+    log_path: Path, tmp_path: Path, start_replay: Callable[..., RosProcess]
 ) -> None:
     data = bytearray(log_path.read_bytes())
     middle = len(data) // 2
     data[middle:middle + 64] = bytes(64)  # inside a compressed chunk: zstd or the CRC fails
     bad = tmp_path / "bad.mcap"
     bad.write_bytes(bytes(data))
-    code, out, err = finish(start_replay(bad, "--rate", 20))
+    code, out, err = start_replay(bad, "--rate", 20).finish(DEADLINE_S)
     assert_one_line_error((code, out, err), replay.EXIT_LOG, str(bad), "corrupt")
 
 
@@ -560,13 +497,13 @@ def test_signal_stops_a_loop_cleanly(
     signum: signal.Signals,
     log_path: Path,
     listener: Listener,
-    start_replay: Callable[..., subprocess.Popen[str]],
+    start_replay: Callable[..., RosProcess],
 ) -> None:
     proc = start_replay(log_path, "--loop", "--rate", 5, "--topics", "/joint_states",
                         "--wait-for-subscribers", 10)
-    wait_for(lambda: listener.count("/joint_states") > 1.5 * JOINT_COUNT, "a second pass", proc=proc)
+    wait_for(lambda: listener.count("/joint_states") > 1.5 * JOINT_COUNT, "a second pass")
     proc.send_signal(signum)
-    code, out, err = finish(proc, timeout_s=5)
+    code, out, err = proc.finish(5.0)
     assert code == 0, err
     assert "Traceback" not in err
     assert f"stopped by {signum.name}" in out and "passes" in out

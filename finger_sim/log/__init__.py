@@ -7,6 +7,7 @@ here: what a finger_node run stores is finger_sim.run_log's business.
 
 from mcap.writer import CompressionType
 
+from .cdr import DiagnosticStatusFields, JointStateDecoder, JointStateFields, decode_diagnostic_status, decode_joint_state
 from .definitions import DEFINITION_SEPARATOR, message_definition, type_name_of
 from .errors import (
     CorruptLogError,
@@ -22,12 +23,17 @@ from .errors import (
     RecorderStateError,
     TruncatedLogError,
 )
+from .qos import OFFERED_QOS_PROFILES, offered_qos_profiles
 from .reader import LogMessage, LogReader, TopicInfo, read_log
 from .recorder import DEFAULT_CHUNK_INTERVAL_S, McapRecorder
 
 __all__ = [
     "DEFAULT_CHUNK_INTERVAL_S",
     "DEFINITION_SEPARATOR",
+    "OFFERED_QOS_PROFILES",
+    "DiagnosticStatusFields",
+    "JointStateDecoder",
+    "JointStateFields",
     "CompressionType",
     "CorruptLogError",
     "LogArgumentError",
@@ -45,7 +51,10 @@ __all__ = [
     "RecorderStateError",
     "TopicInfo",
     "TruncatedLogError",
+    "decode_diagnostic_status",
+    "decode_joint_state",
     "message_definition",
+    "offered_qos_profiles",
     "read_log",
     "type_name_of",
 ]

@@ -7,21 +7,26 @@ scanned record by record up to the first record that runs past its end: that pre
 readable and `LogReader.truncation` holds a TruncatedLogError describing the cut, for a
 tool to warn and exit nonzero. Messages are decoded by mcap_ros2 from the schemas in the
 file, so neither rclpy nor message packages are needed (mcap_ros2 by default, or rosbags).
+Reading a few topics in file order (`raw_messages(..., log_time_order=False)`, `messages`)
+goes through the summary's chunk indexes: chunks without a wanted channel are not read, and
+in the others only the wanted records are parsed.
 """
 
 from __future__ import annotations
 
 import functools
 import os
+import struct
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, BinaryIO, NamedTuple
 
+from mcap.data_stream import ReadDataStream
 from mcap.reader import SeekingReader
-from mcap.records import Channel, Chunk, DataEnd, Header, McapRecord, Message, Metadata, Schema
-from mcap.stream_reader import StreamReader, breakup_chunk
+from mcap.records import Channel, Chunk, ChunkIndex, DataEnd, Header, McapRecord, Message, Metadata, Schema
+from mcap.stream_reader import StreamReader, breakup_chunk, get_chunk_data_stream
 from mcap.writer import MCAP0_MAGIC
 from mcap_ros2.decoder import DecoderFactory
 
@@ -38,6 +43,10 @@ from .errors import (
 )
 
 _RECORD_PREFIX = 1 + 8  # opcode byte and uint64 record length before every record's body
+_RECORD_HEAD = struct.Struct("<BQ")  # a record's opcode and body length
+_MESSAGE_HEAD = struct.Struct("<HIQQ")  # a Message body's channel id, sequence, log time, publish time
+_MESSAGE_OPCODE = 0x05
+_CHUNK_OPCODE = 0x06
 _HEAD_BYTES = 16  # bytes read to tell what a non-MCAP file is
 _UNIX_TIME_NS = 10**18  # later log times are taken as Unix time (after 2001) and also shown as a date
 MCAP_ROS2, ROSBAGS = "mcap_ros2", "rosbags"  # message decoders
@@ -97,6 +106,7 @@ class LogReader:
         self._schemas: dict[int, Schema] = {}
         self._channels: dict[int, Channel] = {}
         self._counts: dict[int, int] = {}
+        self._chunk_indexes: list[ChunkIndex] = []  # in file order; only from a valid summary
         with self._open() as file:
             head = file.read(_HEAD_BYTES)
             if not head.startswith(MCAP0_MAGIC):
@@ -153,28 +163,42 @@ class LogReader:
         return self._messages(wanted, decoder)
 
     def _messages(self, wanted: set[str] | None, kind: str) -> Iterator[LogMessage]:
-        decoders: dict[int, Callable[[bytes], Any]] = {}
-        make = self._decoder if kind == MCAP_ROS2 else _RosbagsDecoders(self).decoder
+        decode = self.decoding(kind)
         for schema, channel, record in self._file_order(None if wanted is None else frozenset(wanted), 0):
-            decoder = decoders.get(channel.id)
-            if decoder is None:
-                decoder = decoders[channel.id] = make(channel, schema)
-            yield LogMessage(channel.topic, record.log_time, self._decode(decoder, channel, record))
+            yield LogMessage(channel.topic, record.log_time, decode(schema, channel, record))
+
+    def decoding(self, decoder: str = MCAP_ROS2) -> Callable[[Schema | None, Channel, Message], Any]:
+        """A function that decodes the raw records of `raw_messages` (decoder: see `messages`);
+        it builds each channel's decoder on first use. LogDecodeError for what does not decode."""
+        if decoder not in DECODERS:
+            raise LogArgumentError("decoder", f"one of {list(DECODERS)}", decoder)
+        decoders: dict[int, Callable[[bytes], Any]] = {}
+        make = self._decoder if decoder == MCAP_ROS2 else _RosbagsDecoders(self).decoder
+
+        def decode(schema: Schema | None, channel: Channel, record: Message) -> Any:
+            function = decoders.get(channel.id)
+            if function is None:
+                function = decoders[channel.id] = make(channel, schema)
+            return self._decode(function, channel, record)
+
+        return decode
 
     def raw_messages(
-        self, topics: Iterable[str] | None = None, *, start_ns: int = 0
+        self, topics: Iterable[str] | None = None, *, start_ns: int = 0, log_time_order: bool = True
     ) -> Iterator[tuple[Schema | None, Channel, Message]]:
         """Undecoded (schema, channel, message) records of `topics` (default all) logged at or
         after `start_ns`; Message.data is the CDR bytes.
 
-        Log-time order for a complete log (mcap's indexed reader); file order, up to the cut,
-        for a truncated one. A record that cannot be read raises CorruptLogError after the
-        records before it.
+        Log-time order for a complete log (mcap's indexed reader) unless `log_time_order` is
+        False; file order, up to the cut, for a truncated one. File order reads only the chunks
+        that hold a wanted topic and parses only the wanted messages (the fast way to read a
+        few topics of a long log). A record that cannot be read raises CorruptLogError after
+        the records before it.
         """
         wanted = None if topics is None else frozenset(topics)
         if wanted is not None:
             self.require_topics(wanted)
-        if self.truncated:
+        if self.truncated or not log_time_order:
             return self._file_order(wanted, start_ns)
         return self._log_time_order(wanted, start_ns)
 
@@ -189,6 +213,43 @@ class LogReader:
                 raise CorruptLogError(self.path, None, f"cannot read a message ({problem})") from exc
 
     def _file_order(self, wanted: frozenset[str] | None, start_ns: int) -> Iterator[tuple[Schema | None, Channel, Message]]:
+        if self._chunk_indexes:
+            return self._indexed_file_order(wanted, start_ns)
+        return self._scanned_file_order(wanted, start_ns)
+
+    def _indexed_file_order(self, wanted: frozenset[str] | None, start_ns: int) -> Iterator[tuple[Schema | None, Channel, Message]]:
+        """File order through the summary's chunk indexes: a chunk whose message indexes name no
+        wanted channel, or whose messages all precede `start_ns`, is not read; in a chunk read,
+        only the wanted messages are parsed. (As mcap's own indexed reader, this assumes that a
+        log with chunk indexes keeps every message in a chunk, as chunked writers do.)"""
+        targets = {cid: (self._schemas.get(ch.schema_id), ch) for cid, ch in self._channels.items()
+                   if wanted is None or ch.topic in wanted}
+        with self._open() as file:
+            for index in self._chunk_indexes:
+                if index.message_end_time < start_ns or targets.keys().isdisjoint(index.message_index_offsets):
+                    continue
+                data = self._chunk_data(file, index)
+                yield from _chunk_messages(data, targets, start_ns, self.path, index.chunk_start_offset)
+
+    def _chunk_data(self, file: BinaryIO, index: ChunkIndex) -> bytes:
+        """The decompressed, CRC-checked records of the chunk that `index` points to."""
+        file.seek(index.chunk_start_offset)
+        head = file.read(_RECORD_PREFIX)
+        expected = (_CHUNK_OPCODE, index.chunk_length - _RECORD_PREFIX)
+        if len(head) < _RECORD_PREFIX or _RECORD_HEAD.unpack(head) != expected:
+            got = _RECORD_HEAD.unpack(head) if len(head) == _RECORD_PREFIX else head
+            raise CorruptLogError(self.path, index.chunk_start_offset,
+                                  f"malformed record (the chunk index expects opcode, length {expected}; got {got})")
+        try:
+            chunk = Chunk.read(ReadDataStream(file))
+            stream, length = get_chunk_data_stream(chunk, validate_crc=True)
+            return stream.read(length)
+        except Exception as exc:  # mcap's parser, decompressors and the CRC check raise assorted types
+            raise CorruptLogError(
+                self.path, index.chunk_start_offset, f"chunk does not decompress or fails its CRC ({exc!r})"
+            ) from exc
+
+    def _scanned_file_order(self, wanted: frozenset[str] | None, start_ns: int) -> Iterator[tuple[Schema | None, Channel, Message]]:
         schemas, channels = dict(self._schemas), dict(self._channels)
         with self._open() as file:
             for record in self._records(file):
@@ -260,6 +321,7 @@ class LogReader:
         self.profile, self.library = header.profile, header.library
         self._schemas, self._channels = dict(summary.schemas), dict(summary.channels)
         self._counts = dict(stats.channel_message_counts)
+        self._chunk_indexes = sorted(summary.chunk_indexes, key=lambda index: index.chunk_start_offset)
         self.message_count, self.chunk_count = stats.message_count, stats.chunk_count
         if stats.message_count:
             self.start_ns, self.end_ns = stats.message_start_time, stats.message_end_time
@@ -378,6 +440,34 @@ class _RosbagsDecoders:
         except Exception as exc:  # rosbags' parser and type store raise assorted types on a bad schema
             raise LogDecodeError(self._reader.path, channel.topic, f"bad schema ({exc!r})") from exc
         return functools.partial(self._store.deserialize_cdr, typename=schema.name)
+
+
+def _chunk_messages(
+    data: bytes, targets: dict[int, tuple[Schema | None, Channel]], start_ns: int, path: Path, offset: int
+) -> Iterator[tuple[Schema | None, Channel, Message]]:
+    """The Message records of one decompressed chunk's `data` on the channels in `targets`,
+    logged at or after `start_ns`; other records are stepped over unparsed (MCAP record
+    layout: opcode u8, body length u64, body; a Message body starts with channel id u16,
+    sequence u32, log time u64 and publish time u64, then the payload)."""
+    unpack_record, unpack_message = _RECORD_HEAD.unpack_from, _MESSAGE_HEAD.unpack_from
+    head = _MESSAGE_HEAD.size
+    pos, end = 0, len(data)
+    try:
+        while pos < end:
+            opcode, length = unpack_record(data, pos)
+            body, pos = pos + _RECORD_PREFIX, pos + _RECORD_PREFIX + length
+            if pos > end:
+                raise ValueError(f"a record of {length} bytes runs past the chunk's end")
+            if opcode != _MESSAGE_OPCODE:
+                continue
+            channel_id, sequence, log_time, publish_time = unpack_message(data, body)
+            target = targets.get(channel_id)
+            if target is not None and log_time >= start_ns:
+                message = Message(channel_id=channel_id, log_time=log_time, data=data[body + head:pos],
+                                  publish_time=publish_time, sequence=sequence)
+                yield target[0], target[1], message
+    except (struct.error, ValueError) as exc:
+        raise CorruptLogError(path, offset, f"chunk holds a malformed record ({exc})") from exc
 
 
 def read_log(path: str | os.PathLike[str], *, expected_topics: Iterable[str] = ()) -> LogReader:

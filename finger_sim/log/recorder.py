@@ -11,9 +11,10 @@ counted from 1 (a message dropped before the queue leaves a gap); compressed chu
 by default) with CRCs and message indexes; close() writes the summary (statistics, chunk and
 metadata indexes).
 
-QoS: channels carry no 'offered_qos_profiles' metadata and the file has no 'rosbag2' metadata
-record. rosbag2 reads a missing key as "no recorded offers" and replays with its default QoS,
-whereas a QoS YAML in the wrong bag-metadata version would be misread.
+QoS: a channel registered with its publisher's QoS carries 'offered_qos_profiles' metadata
+as rosbag2 Jazzy writes it (finger_sim.log.qos); one registered without has no such key, which
+rosbag2 reads as "no recorded offers" (replay with its default QoS). The file has no 'rosbag2'
+metadata record, so rosbag2 parses the QoS text with its current bag-metadata version.
 
 Crash safety: a chunk is closed — written and flushed to the operating system — before a
 message that would stretch its log-time span to `chunk_interval_s`, once its uncompressed
@@ -77,6 +78,7 @@ from mcap_ros2.decoder import DecoderFactory
 
 from .definitions import message_definition, normalize_type_name, type_name_of
 from .errors import LogArgumentError, RecorderStateError
+from .qos import OFFERED_QOS_PROFILES, offered_qos_profiles
 
 DEFAULT_CHUNK_INTERVAL_S = 0.5  # log-time span of one chunk: what a kill -9 may lose
 DEFAULT_CHUNK_SIZE = 1 << 20  # uncompressed bytes; bounds memory if an interval holds many messages
@@ -113,6 +115,7 @@ class _Register:
     topic: str
     type_name: str
     definition: str
+    metadata: dict[str, str]
 
 
 @dataclass(frozen=True, slots=True)
@@ -159,6 +162,8 @@ class McapRecorder:
     queue_size: messages that may wait for the writer thread before new ones are dropped.
     idle_flush_s: wall seconds without messages after which the open chunk is closed.
     handover_s: wall seconds between the writer thread's takes of what the caller buffered.
+    time_offset_ns: added to every message's log and publish time (e.g. a wall-clock start
+        for a caller whose clock starts at 0).
     on_problem: called once per kind of trouble with a one-line description.
     """
 
@@ -173,6 +178,7 @@ class McapRecorder:
         idle_flush_s: float = DEFAULT_IDLE_FLUSH_S,
         handover_s: float = DEFAULT_HANDOVER_S,
         on_problem: Callable[[str], None] | None = None,
+        time_offset_ns: int = 0,
     ) -> None:
         if not (math.isfinite(chunk_interval_s) and chunk_interval_s > 0):
             raise LogArgumentError("chunk_interval_s", "a finite number > 0", chunk_interval_s)
@@ -189,6 +195,8 @@ class McapRecorder:
         self._path = Path(path)
         self._interval_ns = round(chunk_interval_s * 1e9)
         self._chunk_size = chunk_size
+        self._offset_ns = _as_time_ns("time_offset_ns", time_offset_ns)
+        self._time_limit_ns = _MAX_TIME_NS - self._offset_ns  # caller times at or past it overflow uint64
         self._compression = compression
         self._queue_size = queue_size
         self._idle_flush_s = idle_flush_s
@@ -255,17 +263,23 @@ class McapRecorder:
 
     # -- setup --------------------------------------------------------------------------------
 
-    def register_channel(self, topic: str, msg_type: str | type, *, definition: str | None = None) -> None:
+    def register_channel(
+        self, topic: str, msg_type: str | type, *, definition: str | None = None, qos: Any = None
+    ) -> None:
         """Declare a topic and its type (an rclpy message class or 'pkg/msg/Type').
 
         definition: the complete 'ros2msg' text (e.g. a schema copied from another log); by default
         built from the installed .msg files (MessageDefinitionNotFoundError if one is missing).
+        qos: the rclpy QoSProfile of the topic's publisher, stored as the channel's
+        `offered_qos_profiles` (finger_sim.log.qos) so that `ros2 bag play` offers it; without
+        it the channel has no such key and rosbag2 replays with its default QoS.
         Registering a topic again with the same type does nothing; with another type, or a type
         again with a different definition, raises LogArgumentError.
         """
         if not isinstance(topic, str) or not _TOPIC.match(topic):
             raise LogArgumentError("topic", "an absolute ROS 2 name such as '/joint_states'", topic)
         type_name = normalize_type_name(msg_type) if isinstance(msg_type, str) else type_name_of(msg_type)
+        metadata = {} if qos is None else {OFFERED_QOS_PROFILES: offered_qos_profiles(qos)}
         existing = self._channels.get(topic)
         if existing is not None:
             if existing.type_name != type_name:
@@ -282,7 +296,7 @@ class McapRecorder:
             self._require_open("register a channel")
             self._codecs[type_name] = codec
             self._channels[topic] = _Channel(type_name, codec)
-            self._buffer.append(_Register(topic, type_name, codec.definition))
+            self._buffer.append(_Register(topic, type_name, codec.definition, metadata))
 
     def add_metadata(self, name: str, data: Mapping[str, str]) -> None:
         """Queue a metadata record (e.g. scene YAML, parameters, version) of at most
@@ -312,15 +326,23 @@ class McapRecorder:
         that does not fit the topic's type or a bad time, and RecorderStateError before
         open(); after close() the message is dropped and counted.
         """
-        log_ns = _as_time_ns("log_time_ns", log_time_ns)
-        publish_ns = log_ns if publish_time_ns is None else _as_time_ns("publish_time_ns", publish_time_ns)
+        # The hot path (a node's CDR bytes and int times) takes the cheapest checks first.
+        offset = self._offset_ns
+        if type(log_time_ns) is int and 0 <= log_time_ns < self._time_limit_ns:
+            log_ns = log_time_ns + offset
+        else:
+            log_ns = self._time_ns("log_time_ns", log_time_ns)
+        publish_ns = log_ns if publish_time_ns is None else self._time_ns("publish_time_ns", publish_time_ns)
         if self._state is _State.NEW:
             raise RecorderStateError("write", self._state.value)
         channel = self._channels.get(topic)
         if channel is None and self._state is _State.OPEN:
             registered = ", ".join(self._channels) or "none yet"
             raise LogArgumentError("topic", f"a registered topic ({registered})", topic)
-        data = self._serialized(topic, channel, message) if channel is not None else b""
+        if type(message) is bytes:  # immutable: kept as it is, no copy
+            data = message
+        else:
+            data = self._serialized(topic, channel, message) if channel is not None else b""
         with self._lock:
             if self._state is not _State.OPEN or channel is None:  # closed, maybe meanwhile
                 self._dropped += 1
@@ -387,6 +409,13 @@ class McapRecorder:
         except Exception as exc:  # rclpy's and mcap_ros2's encoders raise assorted types on a misfit
             expected = f"the fields of {channel.type_name} for {topic}"
             raise LogArgumentError("message", expected, exc) from exc
+
+    def _time_ns(self, argument: str, value: Any) -> int:
+        """A caller's time plus the offset as an MCAP timestamp, or LogArgumentError."""
+        ns = _as_time_ns(argument, value)
+        if ns >= self._time_limit_ns:
+            raise LogArgumentError(argument, f"0 <= ns < 2**64 - time_offset_ns ({self._offset_ns})", value)
+        return ns + self._offset_ns
 
     def _require_open(self, action: str) -> None:
         if self._state is not _State.OPEN:
@@ -501,7 +530,7 @@ class _ChunkedFile:
                 )
                 self._schema_ids[item.type_name] = schema_id
             self._channel_ids[item.topic] = self._writer.register_channel(
-                topic=item.topic, message_encoding=MessageEncoding.CDR, schema_id=schema_id
+                topic=item.topic, message_encoding=MessageEncoding.CDR, schema_id=schema_id, metadata=item.metadata
             )
             return 0
         if isinstance(item, _Metadata):
