@@ -14,10 +14,14 @@ setup(
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", glob("config/*.yaml")),
+        (f"share/{PACKAGE}/config/ros2_control", glob("config/ros2_control/*")),
+        (f"share/{PACKAGE}/config/hands", glob("config/hands/*.yaml")),
+        (f"share/{PACKAGE}/urdf", glob("urdf/*.urdf")),
+        (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),
     ],
-    package_data={PACKAGE: ["py.typed"]},
+    package_data={PACKAGE: ["py.typed", "data/*.json"]},
     python_requires=">=3.10",
-    install_requires=["numpy", "scipy", "pyyaml", "matplotlib", "tqdm", "mcap>=1.5", "mcap-ros2-support>=0.6"],
+    install_requires=["numpy", "scipy", "pyyaml", "matplotlib", "tqdm", "mcap>=1.5", "mcap-ros2-support>=0.6", "rosbags>=0.10", "numba"],
     extras_require={
         # ROS 2 Jazzy's Python stack from PyPI, for machines without a ROS install.
         "ros": [
@@ -30,7 +34,7 @@ setup(
             "ros-jazzy-diagnostic-msgs",
             "ros-jazzy-visualization-msgs",
         ],
-        "test": ["pytest", "pytest-timeout", "rosbags", "colcon-common-extensions"],
+        "test": ["pytest", "pytest-timeout", "hypothesis", "rosbags", "yourdfpy", "colcon-common-extensions"],
         "bench": ["mujoco"],
     },
     zip_safe=True,
@@ -41,7 +45,9 @@ setup(
         "console_scripts": [
             "finger-sim = finger_sim.cli:main",
             "finger_node = finger_sim.ros.node:main",
+            "finger_hand = finger_sim.ros.hand:main",
             "finger_pd_controller = finger_sim.ros.pd_controller:main",
+            "finger_grip_controller = finger_sim.ros.grip_controller:main",
             "finger_replay = finger_sim.ros.replay:main",
         ],
     },

@@ -24,7 +24,7 @@ BUILD_TIMEOUT = 240.0  # s
 RUN_TIMEOUT = 60.0  # s
 #: What the package is built from: setup.py's inputs, nothing else of the working tree.
 PACKAGE_FILES = ("setup.py", "setup.cfg", "package.xml", "README.md")
-PACKAGE_DIRS = ("resource", "config", "finger_sim")
+PACKAGE_DIRS = ("resource", "config", "finger_sim", "urdf", "launch")
 EXECUTABLES = ("finger_node", "finger_pd_controller", "finger_replay", "finger-sim")
 
 pytestmark = pytest.mark.skipif(COLCON is None, reason="colcon is not installed")
@@ -72,7 +72,9 @@ def test_executables_are_where_ros2_run_looks(workspace, monkeypatch):
         assert shebang.startswith("#!") and "python" in shebang, shebang
     share = Path(get_package_share_directory("finger_sim"))
     assert (share / "package.xml").is_file()
-    assert {"paper_flexion.yaml", "finger_node.yaml"} <= {p.name for p in (share / "config").iterdir()}
+    assert {"paper_flexion.yaml", "finger_default.yaml", "finger_node.yaml"} <= {p.name for p in (share / "config").iterdir()}
+    assert (share / "urdf" / "finger.urdf").read_text() == (ROOT / "urdf" / "finger.urdf").read_text()
+    assert (share / "launch" / "finger.launch.py").read_text() == (ROOT / "launch" / "finger.launch.py").read_text()
 
 
 def test_the_built_node_runs_a_scene_from_its_share_directory(workspace, ros_domain, tmp_path):

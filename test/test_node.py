@@ -488,3 +488,159 @@ def test_a_second_clock_publisher_is_warned_about(launcher, ros_client):
         assert status.level == DiagnosticStatus.WARN and "2 publishers on /clock" in status.message
         ros_client.wait_for(lambda: "2 publishers on /clock" in proc.output(), f"{name}'s warning")
         assert proc.output().count("publishers on /clock") == 1  # once
+
+
+# -- robot_description, joint_command, run-time parameters, the live default (issue 10) ------
+def read_log(folder: Path) -> list[tuple[str, int, object]]:
+    """(topic, log time ns, message) of the one log in `folder`, by rosbags (an independent reader)."""
+    from rosbags.highlevel import AnyReader
+
+    (path,) = folder.glob("*.mcap")
+    with AnyReader([path]) as reader:
+        return [(c.topic, t, reader.deserialize(raw, c.msgtype)) for c, t, raw in reader.messages()]
+
+
+def reset_until_heard(client, node_name: str, *received: list) -> int:
+    """~/reset a paused node until a state of each topic reaches us (the reset publishes the
+    initial state; the first may go before the subscriptions match): the node then waits at
+    step 0 of the returned episode."""
+    episode: list[int] = []
+
+    def heard():
+        if episode and all(received):
+            return True
+        episode[:] = [where(client.call(Trigger, f"{node_name}/reset").message)[2]]
+        return False
+
+    client.wait_for(heard, f"the initial state from {node_name}")
+    return episode[0]
+
+
+def test_robot_description_reaches_a_late_subscriber_and_the_log(launcher, ros_client, tmp_path):
+    """robot_description is transient local: a subscriber that joins after it was published gets
+    it; it is finger_urdf of the scene with frame_prefix on links and joints, and the log holds it."""
+    from std_msgs.msg import String
+    from rclpy.qos import DurabilityPolicy
+
+    from finger_sim.urdf import finger_urdf
+
+    node = launcher.node(NODE, dict(scene=str(PAPER), realtime_factor=0.0, start_paused=True, frame_prefix="index_"))
+    states = ros_client.collect(JointState, "/joint_states")
+    start_when_heard(ros_client, "/finger_node", states)  # the node published its description long ago
+    late = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    descriptions = ros_client.collect(String, "/robot_description", late)
+    ros_client.wait_for(lambda: descriptions, "robot_description for a late subscriber")
+    scene = load_scene(PAPER)
+    expected = finger_urdf(scene.params, prefix="index_", radii=scene.phalanx_radius, mcp_effort=0.05)
+    assert descriptions[0].data == expected
+    assert 'name="index_mcp_joint"' in expected and 'name="index_fingertip"' in expected
+    assert node.stop() == 0
+    logged = [(t, m.data) for topic, t, m in read_log(tmp_path / "bags") if topic == "/robot_description"]
+    assert logged == [(0, expected)]
+
+
+def test_joint_command_effort_drives_it_like_motor_torque(launcher, ros_client):
+    """ros2_control's topic interface: a JointState effort on mcp_joint is the motor torque. One
+    episode takes it on joint_command, the next (after ~/reset) the same torque on motor_torque, each
+    from step 0 (sent while paused): the joint states are bit for bit the same. Other joints and
+    position or velocity fields are refused, and the node runs on."""
+    steps = 300
+    node = launcher.node(NODE, dict(scene=str(PAPER), realtime_factor=0.0, command_timeout=0.0, start_paused=True,
+                                    max_torque=0.004, command_qos="reliable", steps_per_trigger=steps))
+    states = ros_client.collect(JointState, "/joint_states")
+    log = ros_client.collect(DiagnosticStatus, "/finger_node/command_log")
+    diagnostics = ros_client.collect(DiagnosticArray, "/diagnostics")
+    reliable = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+    joint_pub = ros_client.publisher(JointState, "/joint_command", reliable)
+    torque_pub = ros_client.publisher(Float64, "/motor_torque", reliable)
+    ros_client.wait_for(lambda: joint_pub.get_subscription_count() and torque_pub.get_subscription_count(), "the command subscriptions")
+    probe_command_log(ros_client, torque_pub, log)
+    first_episode = reset_until_heard(ros_client, "/finger_node", states)
+
+    def refused_for(msg: JointState, what: str) -> None:
+        v = publish_until(ros_client, joint_pub, msg, log,
+                          lambda v: v["event"] == "refused" and v["source"] == "/joint_command" and what in v["reason"], what)
+        assert v["reason"].endswith("only effort on mcp_joint is actuated (name [mcp_joint], one effort, no position or velocity)")
+
+    refused_for(JointState(name=["pip_joint"], effort=[0.001]), "names ['pip_joint']")
+    refused_for(JointState(name=["mcp_joint", "pip_joint"], effort=[0.001, 0.0]), "names ['mcp_joint', 'pip_joint']")
+    refused_for(JointState(name=["mcp_joint"], position=[0.5]), "1 positions and 0 velocities")
+    refused_for(JointState(name=["mcp_joint"], velocity=[0.5], effort=[0.001]), "0 positions and 1 velocities")
+    assert node.running()
+
+    def received() -> int:
+        return max((int(values(d.status[0])["commands_received"]) for d in diagnostics), default=-1)
+
+    def run_episode(publisher, msg) -> tuple[dict, int]:
+        """Send `msg` while paused at step 0, wait until the node counted it, then ~/step `steps` steps."""
+        count = received()
+        publisher.publish(msg)
+        ros_client.wait_for(lambda: received() > count, "the command counted (diagnostics, about 1 Hz)")
+        clock, step, episode = where(ros_client.call(Trigger, "/finger_node/step").message)
+        assert step == steps
+        offset = clock - steps * DT_NS
+        ros_client.wait_for(lambda: any(stamp(m) == clock for m in states), f"step {steps} of episode {episode}")
+        return state_by_step([m for m in states if offset <= stamp(m) <= clock], offset), episode
+
+    by_joint, episode = run_episode(joint_pub, JointState(name=["mcp_joint"], effort=[0.01]))
+    assert episode == first_episode
+    assert where(ros_client.call(Trigger, "/finger_node/reset").message)[1:] == (0, episode + 1)
+    by_torque, episode = run_episode(torque_pub, Float64(data=0.01))
+    assert episode == first_episode + 1
+    accepted = [values(e) for e in log if values(e)["event"] == "accepted"]
+    assert [(v["episode"], v["step"], v["source"], v["requested"], v["torque"], v["saturated"]) for v in accepted] == [
+        (str(first_episode), "0", "/joint_command", "0.01", "0.004", "True"),
+        (str(first_episode + 1), "0", "/motor_torque", "0.01", "0.004", "True")]
+    assert len(by_joint) >= 200 and sorted(by_joint) == sorted(by_torque)
+    for n, a in by_joint.items():
+        b = by_torque[n]
+        assert (a.position.tolist(), a.velocity.tolist(), a.effort.tolist()) == \
+               (b.position.tolist(), b.velocity.tolist(), b.effort.tolist()), n
+    assert by_joint[steps].position[0] > 0.01 and by_joint[1].effort[0] == 0.004  # saturated, from step 0 on
+    assert node.running() and "Traceback" not in node.output()
+
+
+def test_run_time_parameters_apply_from_the_next_step(launcher, ros_client, tmp_path):
+    """max_torque lowered while a command is held: the state after the next ~/step already shows the
+    new limit; out-of-range and read-only values are refused with a reason; the change is logged."""
+    from rcl_interfaces.msg import Parameter as ParameterMsg, ParameterType, ParameterValue
+    from rcl_interfaces.srv import GetParameters, SetParameters
+
+    def set_param(name: str, value: float):
+        p = ParameterMsg(name=name, value=ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=value))
+        return ros_client.call(SetParameters, "/finger_node/set_parameters", SetParameters.Request(parameters=[p])).results[0]
+
+    node = launcher.node(NODE, dict(scene=str(PAPER), realtime_factor=0.0, command_timeout=0.0, start_paused=True,
+                                    max_torque=0.01))
+    states = ros_client.collect(JointState, "/joint_states")
+    log = ros_client.collect(DiagnosticStatus, "/finger_node/command_log")
+    torque_pub = ros_client.publisher(Float64, "/motor_torque")
+    start_when_heard(ros_client, "/finger_node", states)
+    ros_client.wait_for(lambda: torque_pub.get_subscription_count(), "the command subscription")
+    assert ros_client.call(SetBool, "/finger_node/pause", SetBool.Request(data=False)).success
+    publish_until(ros_client, torque_pub, Float64(data=0.008), log, lambda v: v["event"] == "accepted", "0.008 N·m accepted")
+    _, step_p, _ = where(ros_client.call(SetBool, "/finger_node/pause", SetBool.Request(data=True)).message)
+
+    result = set_param("max_torque", 0.002)
+    assert result.successful, result.reason
+    _, step_s, _ = where(ros_client.call(Trigger, "/finger_node/step").message)
+    assert step_s == step_p + 1
+    got = state_by_step(ros_client.wait_for(lambda: [m for m in states if stamp(m) == step_s * DT_NS], "the stepped state"))
+    before = state_by_step([m for m in states if stamp(m) == step_p * DT_NS])
+    assert (before[step_p].effort[0], got[step_s].effort[0]) == (0.008, 0.002)
+    cut = ros_client.wait_for(lambda: next((values(e) for e in log if values(e)["source"] == "max_torque"), None), "the cut")
+    assert (cut["event"], cut["step"], cut["torque"], cut["saturated"]) == ("accepted", str(step_p), "0.002", "True")
+
+    for name, value, why in [("max_torque", 1000.0, "max_torque"), ("command_timeout", -1.0, "command_timeout"),
+                             ("publish_rate_hz", 5000.0, "publish_rate_hz"), ("physics_rate_hz", 500.0, "read-only")]:
+        refused = set_param(name, value)
+        assert not refused.successful and why in refused.reason and refused.reason, (name, refused.reason)
+    assert set_param("realtime_factor", 2.0).successful
+    answer = ros_client.call(GetParameters, "/finger_node/get_parameters", GetParameters.Request(names=["max_torque", "realtime_factor"]))
+    assert [v.double_value for v in answer.values] == [0.002, 2.0]
+    assert node.running()
+    assert node.stop() == 0
+    events = [(t, m) for topic, t, m in read_log(tmp_path / "bags") if topic == "/parameter_events"]
+    assert [(t, [(p.name, p.value.double_value) for p in m.changed_parameters]) for t, m in events] == [
+        (step_p * DT_NS, [("max_torque", 0.002)]), (step_s * DT_NS, [("realtime_factor", 2.0)])]
+    assert events[0][1].node == "/finger_node"

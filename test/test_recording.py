@@ -69,6 +69,9 @@ TYPES = {
     "/finger_node/command_log": "diagnostic_msgs/msg/DiagnosticStatus",
     "/motor_torque": "std_msgs/msg/Float64",
     "/effort_commands": "std_msgs/msg/Float64MultiArray",
+    "/joint_command": "sensor_msgs/msg/JointState",
+    "/robot_description": "std_msgs/msg/String",
+    "/parameter_events": "rcl_interfaces/msg/ParameterEvent",
 }
 SEPARATOR = "\n" + "=" * 80 + "\n"  # rosbag2's ros2msg separator between definitions
 BEST_EFFORT = QoSProfile(depth=10_000, reliability=ReliabilityPolicy.BEST_EFFORT)
@@ -385,7 +388,9 @@ def test_round_trip_read_by_rosbags_and_mcap(launcher, ros_client, tmp_path):
 
     # -- the run's record: resolved scene, parameters, version, method --------------------------
     meta = view.metadata[FINGER_SIM_METADATA]
-    assert set(meta) == {"version", "scene", "method", "method_reason", "torque_source", "dt", "parameters"}
+    assert set(meta) == {"version", "scene", "method", "method_reason", "kernel", "torque_source", "dt", "parameters",
+                         "record_time", "log_time_offset_ns"}
+    assert (meta["record_time"], meta["log_time_offset_ns"]) == ("sim", "0")  # the default: log time = sim time
     expected_scene = load_scene(PAPER).with_overrides(dt=1.0 / RATE)
     assert scene_from_dict(yaml.safe_load(meta["scene"])) == expected_scene
     defaults = yaml.safe_load(NODE_DEFAULTS.read_text())["/**"]["ros__parameters"]
@@ -420,6 +425,40 @@ def test_sigterm_closes_the_log(launcher, ros_client, tmp_path):
     assert summary.statistics.channel_message_counts[
         next(c.id for c in summary.channels.values() if c.topic == "/joint_states")] >= len(states)
     assert not read_log(path).truncated
+
+
+def test_wall_start_log_time_and_publisher_qos(launcher, tmp_path):
+    """record_time 'wall_start': every log time is the Unix time at the start plus the message's
+    sim-time stamp, recorded in the metadata, and resim reads the log as it reads a sim-time
+    one. Every published topic's channel carries its publisher's QoS as rosbag2 stores it
+    (read back by rosbags): /clock best effort, state topics reliable and volatile."""
+    from rosbags.interfaces import QosDurability, QosReliability
+    from rosbags.rosbag2 import Reader
+
+    bags = tmp_path / "bags"
+    before = time.time_ns()
+    node = launcher.node(NODE, dict(scene=str(PAPER), torque_source="scene", realtime_factor=0.0,
+                                    record_dir=str(bags), record_time="wall_start"))
+    assert node.wait(SUBPROCESS_TIMEOUT_S) == 0, output(node)
+    after = time.time_ns()
+    path = the_log(bags)
+    reader = read_log(path)
+    run = load_run(reader)
+    offset = run.metadata.log_time_offset_ns
+    assert run.metadata.record_time == "wall_start" and before <= offset <= after
+    log_times = [m.log_time for _, _, m in reader.raw_messages(["/joint_states"])]
+    assert log_times == [stamp + offset for stamp, _ in run.joint_states]
+    assert reader.start_ns == offset  # the first state is stamped 0 on /clock
+    assert resimulate(run).exact
+    with Reader(path) as bag:
+        qos = {c.topic: c.ext.offered_qos_profiles for c in bag.connections}
+    assert qos["/clock"][0].reliability == QosReliability.BEST_EFFORT
+    for topic in ("/joint_states", "/fingertip_pose", "/diagnostics", "/finger_node/command_log"):
+        (profile,) = qos[topic]
+        assert (profile.reliability, profile.durability) == (QosReliability.RELIABLE, QosDurability.VOLATILE), topic
+    if "/robot_description" in qos:
+        assert qos["/robot_description"][0].durability == QosDurability.TRANSIENT_LOCAL
+    assert qos["/motor_torque"] == []  # received, not published: no offer to record
 
 
 def test_kill_9_leaves_a_readable_prefix(launcher, ros_client, tmp_path):
@@ -535,7 +574,7 @@ def test_resim_of_a_controller_run_is_bit_for_bit(launcher, ros_client, tmp_path
     result = resimulate(run)
     assert (result.max_deviation, result.first_stamp_ns) == (0.0, None)
     assert result.compared >= n_states >= 1400
-    events = run.events
+    events = [e.to_values() for e in run.events]  # as logged: key → value
     assert [e["event"] for e in events].count("reset") == 1
     accepted = [e for e in events if e["event"] == "accepted"]
     assert {e["episode"] for e in accepted} == {"0", "1"} and len(accepted) > 100  # the PD changes it every step

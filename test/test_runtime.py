@@ -20,7 +20,7 @@ from finger_sim.runtime.commands import REFUSED_NOT_FINITE, REFUSED_SCENE, Inbox
 from finger_sim.runtime.diagnostics import DiagnosticsWindow, Level, LogStatus, Snapshot
 from finger_sim.runtime.log_paths import LogFolder, UnwritableLog, create_log_file, safe_component
 from finger_sim.runtime.pacing import Lateness, Pacer
-from finger_sim.runtime.parameters import NODE_PARAMETERS, CommandQos, NodeSettings, Param, ParameterError, TorqueSource
+from finger_sim.runtime.parameters import NODE_PARAMETERS, RUNTIME_PARAMETERS, CommandQos, NodeSettings, Param, ParameterError, TorqueSource
 from finger_sim.runtime.timeline import Timeline
 
 DT = 1e-3
@@ -157,7 +157,7 @@ def test_inbox_counts_what_arrived():
     for i in range(5):
         box.put("/motor_torque", [float(i)])
     assert box.received == 5 and bool(box)
-    assert [v for _, v in box.drain()] == [(0.0,), (1.0,), (2.0,), (3.0,), (4.0,)]
+    assert [v for _, v, _ in box.drain()] == [(0.0,), (1.0,), (2.0,), (3.0,), (4.0,)]
     assert not box and box.received == 5
 
 
@@ -188,7 +188,7 @@ def test_node_settings_defaults_and_rules():
 def test_parameter_table_is_consistent():
     for p in NODE_PARAMETERS:
         assert p.check(p.default) == p.default  # every default passes its own checks
-        assert p.read_only
+        assert p.read_only == (p.name not in RUNTIME_PARAMETERS)
         if p.range is not None:
             assert p.range[0] <= p.default <= p.range[1]
     assert Param("k", 1.0, "", (0.0, 2.0)).check(2.0) == 2.0  # inclusive

@@ -4,28 +4,40 @@ A thin adapter: messages in → core call → messages out. The ROS-free parts a
 finger_sim.runtime (parameters, pacing, commands, timeline, diagnostics, log paths) and the
 topic tables in finger_sim.ros.interfaces; this module wires them to rclpy. Physics time is
 step_index·dt, never measured wall time; every stamp is sim time (runtime.timeline), and
-/clock carries it.
+/clock carries it. `SteppingNode` is the loop for any number of fingers (finger_sim.ros.finger):
+`FingerNode` steps one, finger_sim.ros.hand's `FingerHand` several in lock-step on one /clock.
 
-Threads. The stepping loop runs in its own thread and owns the simulator: it alone steps,
+Threads. The stepping loop runs in its own thread and owns the simulators: it alone steps,
 resets and publishes. The rclpy executor (the main thread) only hands over what arrives:
-commands go into an Inbox, service calls into a request queue whose jobs the loop runs
-between two steps (the service answers when its job is done). No shared state needs a lock,
-and every message leaves from one thread through `_publish`. Why not an rclpy timer: each
-wake-up of rclpy's executor walks every entity of the node in Python (≈ 100 µs here); at
-1 kHz that doubled the node's CPU (0.49 against 0.21 cores measured on the same machine) and
-its late wake-ups (p99 1.1 ms against 0.25 ms); and at realtime_factor 0 a zero-period timer
-spends more time in the executor than in the physics. With realtime_factor > 0 the loop
-sleeps until runtime.pacing says a step is due; with 0 it steps back to back.
+commands go into each finger's Inbox, parameter changes into a queue taken before the next
+step, service calls into a request queue whose jobs the loop runs between two steps (the
+service answers when its job is done). No shared state needs a lock, and every message leaves
+from one thread through `_publish`. Why not an rclpy timer: each wake-up of rclpy's executor
+walks every entity of the node in Python (≈ 100 µs here); at 1 kHz that doubled the node's CPU
+(0.49 against 0.21 cores measured on the same machine) and its late wake-ups (p99 1.1 ms
+against 0.25 ms); and at realtime_factor 0 a zero-period timer spends more time in the
+executor than in the physics. With realtime_factor > 0 the loop sleeps until runtime.pacing
+says a step is due; with 0 it steps back to back.
 
-Commands (`motor_torque`, `effort_commands`; runtime.commands): a command takes effect at the
-next step and is held, saturated to ±max_torque, dropped to 0 after command_timeout s of sim
-time without one; NaN, Inf and wrong lengths are refused. Every change of the applied torque
-and every refusal is a run_log.CommandEvent on `~/command_log`: re-applying them reproduces
-the run bit for bit.
+Commands (`motor_torque`, `effort_commands`, `joint_command`; runtime.commands): a command takes
+effect at the next step and is held, saturated to ±max_torque, dropped to 0 after
+command_timeout s of sim time without one; NaN, Inf and wrong lengths are refused, and so is a
+JointState that names another joint than `<prefix>mcp_joint` or carries positions or
+velocities. Every change of the applied torque and every refusal is a run_log.CommandEvent on
+`~/command_log`: re-applying them reproduces the run bit for bit.
 
-/diagnostics (about 1 Hz of wall time, also while paused): runtime.diagnostics. A log that
-cannot be written shows ERROR, one that drops messages WARN, with the count lost; another
-/clock publisher (a second finger with publish_clock true) is warned about once and shows WARN.
+Parameters: max_torque, command_timeout, realtime_factor and publish_rate_hz may be set while
+running (`ros2 param set`); the change is checked against the same table, takes effect from the
+next step, and is logged as an rcl_interfaces/ParameterEvent on /parameter_events at the stamp of
+that step. The others are read-only.
+
+robot_description (std_msgs/String, transient local): the URDF of the node's scene
+(finger_sim.urdf), published once at start and logged, so Foxglove shows the finger from a log.
+
+/diagnostics (about 1 Hz of wall time, also while paused): runtime.diagnostics, one status per
+finger. A log that cannot be written shows ERROR, one that drops messages WARN, with the count
+lost; another /clock publisher (a second finger with publish_clock true) is warned about once
+and shows WARN.
 """
 
 from __future__ import annotations
@@ -36,40 +48,44 @@ import sys
 import threading
 import time
 import traceback
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from datetime import datetime, timezone
 from enum import Enum
 from typing import Any
 
 import rclpy
+from rcl_interfaces.msg import ParameterEvent, SetParametersResult
 from rclpy.duration import Duration
 from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.executors import ExternalShutdownException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
-from rclpy.qos import QoSProfile
+from rclpy.parameter import Parameter
+from rclpy.publisher import Publisher
+from rclpy.qos import QoSProfile, qos_profile_parameter_events
 from rclpy.serialization import serialize_message
 from rclpy.task import Future
+from std_msgs.msg import String
 from std_srvs.srv import SetBool, Trigger
 
-from finger_sim import kinematics
 from finger_sim.errors import FingerSimError, SimulationDiverged
 from finger_sim.log import LogError, McapRecorder
 from finger_sim.ros import conversions, parameters
-from finger_sim.ros.interfaces import COMMAND_INPUTS, OUTPUTS, Endpoint, InputSpec, OutputSpec, command_qos
-from finger_sim.run_log import FINGER_SIM_METADATA, CommandEvent, run_metadata
-from finger_sim.runtime.commands import Inbox, TorqueCommands
-from finger_sim.runtime.diagnostics import DiagnosticsWindow, Level, LogStatus, Snapshot
+from finger_sim.ros.finger import Finger
+from finger_sim.ros.interfaces import COMMAND_INPUTS, OUTPUTS, Endpoint, InputSpec, OutputSpec, command_qos, finger_topic
+from finger_sim.run_log import FINGER_SIM_METADATA, CommandEvent, log_time_offset_ns, run_metadata
+from finger_sim.runtime.diagnostics import Level, LogStatus, Snapshot
+from finger_sim.runtime.hand_config import FingerSpec
 from finger_sim.runtime.log_paths import UnwritableLog, create_log_file
 from finger_sim.runtime.pacing import Pacer
-from finger_sim.runtime.parameters import NODE_PARAMETERS, NodeSettings, TorqueSource
-from finger_sim.runtime.simulator import node_simulator
+from finger_sim.runtime.parameters import NODE_PARAMETERS, NodeSettings, Param, ParameterError, RunSettings, TorqueSource
 from finger_sim.runtime.timeline import Timeline
-from finger_sim.scene import Scene, load_scene
 from finger_sim.scene_paths import resolve_scene
-from finger_sim.simulate import State
+from finger_sim.urdf import finger_urdf
 
 NODE_NAME = "finger_node"
+#: The log channel of parameter changes (as `ros2 bag record /parameter_events` would hold them).
+PARAMETER_EVENTS = "/parameter_events"
 
 #: Wall time the loop sleeps at most while paused or finished (commands are still taken,
 #: diagnostics still published).
@@ -99,90 +115,105 @@ class RunState(Enum):
     DIVERGED = "diverged"
 
 
-class FingerNode(Node):
-    """The simulated finger as a ROS 2 node.
+class SteppingNode(Node):
+    """Steps one or more fingers in lock-step at a fixed physics rate, with one /clock and one log.
 
-    Life cycle: FingerNode() (raises ConfigError, StabilityError or ParameterError when a
-    parameter cannot start it) → start() (the stepping thread) → spin → stop() → close() →
-    destroy_node(). `done` completes with the exit status when the run is over.
+    Subclasses say which fingers (`_finger_specs`) and which URDF (`_description`). Life cycle:
+    construction (raises ConfigError, StabilityError or ParameterError when a parameter cannot
+    start it) → start() (the stepping thread) → spin → stop() → close() → destroy_node().
+    `done` completes with the exit status when the run is over.
     """
 
-    def __init__(self, **kwargs: Any) -> None:
-        super().__init__(NODE_NAME, **kwargs)
-        self.settings = s = NodeSettings.from_values(parameters.declare(self, NODE_PARAMETERS))
-        self.scene_path = resolve_scene(s.scene)
-        self.sim = node_simulator(self.scene_path, s.physics_rate_hz)
-        self.scene: Scene = self.sim.scene
-        self._file_dt = load_scene(self.scene_path).dt  # the scene file's own dt, for the record
-        self.frames = conversions.FingerFrames.from_system(self.sim.system, s.frame_prefix)
+    def __init__(self, node_name: str, table: tuple[Param, ...], settings_type: type[RunSettings], **kwargs: Any) -> None:
+        super().__init__(node_name, **kwargs)
+        self.settings = s = settings_type.from_values(parameters.declare(self, table))
+        self.timeline = Timeline(1.0 / s.physics_rate_hz)
+        self.fingers = [Finger(spec, s, self.timeline) for spec in self._finger_specs()]
+        self.sim = self.fingers[0].sim  # the step index and time every finger shares
         self.dt = self.sim.dt
         self.done = Future()
 
         # -- owned by the stepping thread once start() has run --
         self.state = RunState.PAUSED if s.start_paused else RunState.RUNNING
-        self.timeline = Timeline(self.dt)
         self.stamp_ns = 0  # stamp of the current state: sim time on /clock, ns
-        scene_driven = s.torque_source is TorqueSource.SCENE
-        self._scene_steps = self.scene.step_count if scene_driven else None
-        self._publish_ratio = 1.0 if s.publish_rate_hz == 0.0 else s.publish_rate_hz / s.physics_rate_hz
+        ends = [f.scene_steps for f in self.fingers if f.scene_steps is not None]
+        self._scene_steps = min(ends) if ends else None  # a scripted run ends with its shortest scene
         self._marker_ratio = min(s.marker_rate_hz / s.physics_rate_hz, 1.0)
-        self.commands = TorqueCommands(self.timeline, max_torque=s.max_torque, command_timeout=s.command_timeout,
-                                       accepting=not scene_driven)
-        self.applied = self.scene.torque(0.0) if scene_driven else 0.0  # N·m, over the last step
-        self.pacer = Pacer(self.dt, s.realtime_factor) if s.realtime_factor > 0 else None
+        self.pacer: Pacer | None = None
+        self._clock_msg = None  # reused /clock message
+        self._apply_settings(s)
         self._last_published = -1  # stamp of the last published state, ns
         self.steps_total = 0
-        self.max_residual = kinematics.constraint_norm(self.sim.system.params, self.sim.q)
         self._run_wall = 0.0  # wall s spent running before _run_since
         self._run_since: float | None = None  # set by start() and by state changes
-        self._diagnostics = DiagnosticsWindow(time.perf_counter())
         self._clock_warned = False
-        self._msgs: dict[str, Any] = {}  # reused outgoing messages (conversions' out=)
 
         # -- the hand-over from the executor thread --
-        self._inbox = Inbox()
         self._requests: collections.deque[tuple[Callable[[], Any], concurrent.futures.Future]] = collections.deque()
+        self._changes: collections.deque[tuple[RunSettings, list[Parameter]]] = collections.deque()
+        self._requested = s  # the settings with every accepted change (executor thread)
         self._wake = threading.Event()
         self._stopping = threading.Event()
-        self._thread = threading.Thread(target=self._loop, name="finger_node stepping", daemon=True)
+        self._thread = threading.Thread(target=self._loop, name=f"{node_name} stepping", daemon=True)
 
         # -- interfaces, from the tables --
-        self._outputs = o = {key: self._publisher(spec) for key, spec in OUTPUTS.items() if spec.enabled(s)}
+        self._outputs = o = {key: self._publisher(spec, spec.topic) for key, spec in OUTPUTS.items()
+                             if not spec.per_finger and spec.enabled(s)}
+        qos = command_qos(s)
+        fqn = self.get_fully_qualified_name()
+        for f in self.fingers:
+            f.connect(fqn, {key: self._publisher(spec, finger_topic(spec.topic, f.spec.name)) for key, spec in OUTPUTS.items()
+                            if spec.per_finger and spec.wanted(s, f.reported)},
+                      [self._subscribe(f, spec, qos) for spec in COMMAND_INPUTS])
         # bound here, so that a missing table entry fails at start, never inside the stepping loop
-        self._clock_out, self._markers_out = o.get("clock"), o.get("markers")  # optional
-        self._joints_out, self._pose_out = o["joint_states"], o["fingertip_pose"]
-        self._diagnostics_out, self._command_log_out = o["diagnostics"], o["command_log"]
-        self._inputs = [self._subscribe(spec, command_qos(s)) for spec in COMMAND_INPUTS]
+        self._clock_out = o.get("clock")  # optional
+        self._diagnostics_out, self._description_out = o["diagnostics"], o["robot_description"]
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_service(SetBool, "~/pause", self._on_pause)
         self.create_service(Trigger, "~/step", self._on_step)
-        self._diag_name = f"{self.get_fully_qualified_name()}: simulation"
-        self._event_name = f"{self.get_fully_qualified_name()}: command"
-        self._hardware_id = s.frame_prefix + "finger"
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.robot_description = self._description()
         self.recorder = self._open_recorder() if s.record else None
         self._log_start()
 
+    # -- what a subclass provides --------------------------------------------------------------
+    def _finger_specs(self) -> list[FingerSpec]:
+        raise NotImplementedError
+
+    def _description(self) -> str:
+        """The URDF published on robot_description."""
+        raise NotImplementedError
+
+    def _log_name(self) -> str:
+        """The first part of the log's file name (a scene's or the hand's name)."""
+        raise NotImplementedError
+
     # -- interfaces ------------------------------------------------------------------------
-    def _publisher(self, spec: OutputSpec) -> Endpoint:
+    def _publisher(self, spec: OutputSpec, topic: str) -> Endpoint:
         """A publisher without rclpy's default QoS-event handlers: each is one more entity the
         executor walks on every wake-up (a controller's 1 kHz commands). A subscriber with an
         incompatible QoS still gets its own warning."""
-        pub = self.create_publisher(spec.msg_type, spec.topic, spec.qos,
+        pub = self.create_publisher(spec.msg_type, topic, spec.qos,
                                     event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
         return Endpoint(pub, pub.topic_name, spec.msg_type, spec.recorded, spec.acked)
 
-    def _subscribe(self, spec: InputSpec, qos: QoSProfile) -> Endpoint:
+    def _subscribe(self, finger: Finger, spec: InputSpec, qos: QoSProfile) -> Endpoint:
         endpoint: list[Endpoint] = []
+        inbox, read, joint = finger.inbox, spec.read, finger.mcp_joint
 
         def on_command(msg: Any) -> None:  # executor thread: hand over, never touch the simulator
             self._record(endpoint[0], msg)
-            self._inbox.put(endpoint[0].topic, spec.values(msg))
+            values, refusal = read(msg, joint)
+            inbox.put(endpoint[0].topic, values, refusal)
             if self.state is not RunState.RUNNING:  # an idle loop answers refusals without waiting
                 self._wake.set()
 
-        sub = self.create_subscription(spec.msg_type, spec.topic, on_command, qos)
+        sub = self.create_subscription(spec.msg_type, finger_topic(spec.topic, finger.spec.name), on_command, qos)
         endpoint.append(Endpoint(sub, sub.topic_name, spec.msg_type, spec.recorded))
         return endpoint[0]
+
+    def _endpoints(self) -> list[Endpoint]:
+        return [*self._outputs.values(), *(e for f in self.fingers for e in (*f.outputs.values(), *f.inputs))]
 
     def _open_recorder(self) -> McapRecorder | UnwritableLog:
         """The run's MCAP log (runtime.log_paths): every recorded topic a channel, the resolved
@@ -191,18 +222,26 @@ class FingerNode(Node):
         s = self.settings
         namespace = self.get_namespace().strip("/").replace("/", "_")
         try:
-            path = create_log_file(s.record_dir, self.scene.name, namespace, started=datetime.now(timezone.utc))
+            path = create_log_file(s.record_dir, self._log_name(), namespace, started=datetime.now(timezone.utc))
         except OSError as exc:
             log = UnwritableLog(s.record_dir, f"cannot create a log in record_dir '{s.record_dir}': {exc}")
             self.get_logger().error(f"{log.error}; simulating without a log")
             return log
-        rec = McapRecorder(path, chunk_interval_s=s.record_chunk_interval, on_problem=self.get_logger().error).open()
-        for endpoint in [*self._outputs.values(), *self._inputs]:
+        offset = log_time_offset_ns(s.record_time, time.time_ns())  # log time = stamp + offset
+        rec = McapRecorder(path, chunk_interval_s=s.record_chunk_interval, on_problem=self.get_logger().error,
+                           time_offset_ns=offset).open()
+        for endpoint in self._endpoints():
             if endpoint.recorded:
-                rec.register_channel(endpoint.topic, endpoint.msg_type)
-        rec.add_metadata(FINGER_SIM_METADATA, run_metadata(
-            self.scene, method=self.sim.method, method_reason=self.sim.method_reason,
-            torque_source=s.torque_source.value, parameters=s.to_values()))
+                # a publisher's QoS goes into the log, so that `ros2 bag play` offers the same
+                rec.register_channel(endpoint.topic, endpoint.msg_type,
+                                     qos=endpoint.handle.qos_profile if isinstance(endpoint.handle, Publisher) else None)
+        rec.register_channel(PARAMETER_EVENTS, ParameterEvent, qos=qos_profile_parameter_events)
+        for f in self.fingers:
+            name = FINGER_SIM_METADATA + (f"/{f.spec.name}" if f.spec.name else "")
+            rec.add_metadata(name, run_metadata(
+                f.scene, method=f.sim.method, method_reason=f.sim.method_reason,
+                torque_source=s.torque_source.value, parameters=s.to_values(), kernel=f.sim.kernel,
+                record_time=s.record_time, log_time_offset_ns=offset))
         return rec
 
     def close_log(self) -> None:
@@ -214,11 +253,13 @@ class FingerNode(Node):
 
     # -- life cycle (main thread) ----------------------------------------------------------
     def start(self) -> None:
-        """Publish the initial state and start stepping (or wait, with start_paused)."""
-        self._publish_state(self.sim.state, force=True)
+        """Publish the description and the initial state, and start stepping (or wait, with start_paused)."""
+        self._publish(self._description_out, String(data=self.robot_description))
+        self._publish_state(force=True)
         now = time.perf_counter()
         self._run_since = None if self.state is RunState.PAUSED else now
-        self._diagnostics.restart(now)
+        for f in self.fingers:
+            f.diagnostics.restart(now)
         self._thread.start()
 
     def stop(self) -> None:
@@ -233,22 +274,29 @@ class FingerNode(Node):
         if not self.context.ok():
             return
         timeout = Duration(seconds=ACK_TIMEOUT_S)
-        for out in self._outputs.values():
+        for out in self._endpoints():
             if out.acked:
                 out.handle.wait_for_all_acked(timeout)
 
     def _log_start(self) -> None:
-        s, sc = self.settings, self.scene
-        method = self.sim.method + (f" (auto: {self.sim.method_reason})" if self.sim.method_reason else "")
+        s = self.settings
         if s.torque_source is TorqueSource.SCENE:
-            source = f"the scene's profile {sc.torque.to_dict()}"
+            source = "the scenes' profiles"
         else:
-            source = " and ".join(e.topic for e in self._inputs) + f" ({s.command_qos.value} QoS)"
+            topics = [e.topic for e in self.fingers[0].inputs] if len(self.fingers) == 1 else \
+                [f"<finger>/{spec.topic}" for spec in COMMAND_INPUTS]
+            source = " and ".join(topics) + f" ({s.command_qos.value} QoS)"
         end = f"exit at t = {self._scene_steps * self.dt:g} s" if self._scene_steps is not None and s.exit_at_end else "run until stopped"
-        self.get_logger().info(
-            f"scene '{sc.name}' from {self.scene_path}; method {method}; dt = {self.dt!r} s "
-            f"(physics_rate_hz {s.physics_rate_hz:g} replaces the scene's dt {self._file_dt!r} s); "
-            f"realtime_factor {s.realtime_factor:g}; torque from {source}; {end}" + ("; paused" if s.start_paused else ""))
+        for f in self.fingers:
+            sc, sim = f.scene, f.sim
+            method = sim.method + (f" (auto: {sim.method_reason})" if sim.method_reason else "")
+            script = f" (torque {sc.torque.to_dict()})" if f.scene_steps is not None else ""
+            self.get_logger().info(
+                f"{f.spec.name + ': ' if f.spec.name else ''}scene '{sc.name}' from {f.spec.scene_path}{script}; "
+                f"method {method}; dt = {self.dt!r} s (physics_rate_hz {s.physics_rate_hz:g} replaces the scene's dt "
+                f"{f.file_dt!r} s)")
+        self.get_logger().info(f"realtime_factor {s.realtime_factor:g}; torque from {source}; {end}"
+                               + ("; paused" if s.start_paused else ""))
 
     # -- the stepping loop (its own thread) ------------------------------------------------
     def _loop(self) -> None:
@@ -256,14 +304,16 @@ class FingerNode(Node):
             while not self._stopping.is_set():
                 self._serve()
                 if self.state is not RunState.RUNNING:
-                    if self._inbox:  # refusals are answered while paused; a valid command waits for the next step
+                    if self._changes:
+                        self._take_changes()
+                    if any(f.inbox for f in self.fingers):  # refusals are answered while paused; a valid command waits
                         self._take_commands()
                     self._sleep(IDLE_WAIT_S)
                 elif self.pacer is not None:
                     self._paced(self.pacer)
                 else:
                     self._advance()
-                if time.perf_counter() - self._diagnostics.wall >= DIAGNOSTICS_PERIOD_S:
+                if time.perf_counter() - self._diagnostics_wall >= DIAGNOSTICS_PERIOD_S:
                     self._publish_diagnostics()
         except _rclpy.RCLError:
             if self.context.ok():
@@ -276,6 +326,10 @@ class FingerNode(Node):
             # SIGINT only): end main()'s spin, so that it closes the log with its summary.
             self.done.set_result(0)
 
+    @property
+    def _diagnostics_wall(self) -> float:
+        return self.fingers[0].diagnostics.wall
+
     def _crashed(self) -> None:
         self.get_logger().fatal(f"the stepping loop failed:\n{traceback.format_exc()}")
         self.state = RunState.DIVERGED
@@ -283,8 +337,8 @@ class FingerNode(Node):
             self.done.set_result(EXIT_FAILED)
 
     def _sleep(self, timeout: float) -> None:
-        """Sleep up to `timeout` wall s, waking at once for a service request."""
-        if timeout > 0 and not self._requests:
+        """Sleep up to `timeout` wall s, waking at once for a service request or a parameter change."""
+        if timeout > 0 and not self._requests and not self._changes:
             self._wake.wait(timeout)
         self._wake.clear()
 
@@ -305,54 +359,55 @@ class FingerNode(Node):
         if not due:
             self._sleep(pacer.next_due - now)
         for _ in range(due):
-            if not self._advance():
+            if not self._advance() or self.pacer is not pacer:  # a new realtime_factor: a new pacing run
                 return
 
     def _advance(self) -> bool:
-        """One physics step and its messages; False once the run cannot go on."""
-        sim = self.sim
-        n = sim.step_index
-        if self._inbox:
-            self._take_commands()
-        torque, event = self.commands.torque_for_step(n)
-        if event is not None:
-            self._event(event)
-        try:
-            state = sim.step(torque)
-        except SimulationDiverged as exc:
-            self._diverged(exc)
-            return False
-        self.applied = sim.torque
+        """One physics step of every finger, then their messages; False once the run cannot go on."""
+        if self._changes:
+            self._take_changes()
+        n = self.sim.step_index
+        for f in self.fingers:
+            if f.inbox:
+                self._take_commands(f)
+            torque, event = f.commands.torque_for_step(n)
+            if event is not None:
+                self._event(f, event)
+            try:
+                f.step(torque)
+            except SimulationDiverged as exc:
+                self._diverged(f, exc)
+                return False
         self.steps_total += 1
-        residual = kinematics.constraint_norm(sim.system.params, state.q)
-        if residual > self.max_residual:
-            self.max_residual = residual
-        self._publish_state(state)
-        if self._scene_steps is not None and sim.step_index >= self._scene_steps:
+        self._publish_state()
+        if self._scene_steps is not None and n + 1 >= self._scene_steps:
             self._end_of_scene()
             return False
         return True
 
-    def _take_commands(self) -> None:
+    def _take_commands(self, finger: Finger | None = None) -> None:
         """Check the commands received since the last step; the last valid one is held from the next."""
-        for source, values in self._inbox.drain():
-            refusal = self.commands.take(source, values, self.sim.step_index)
-            if refusal is not None:
-                self.get_logger().warning(f"refused command [{refusal.requested}] on {source}: {refusal.reason} "
-                                          f"({self.commands.counts.refused} refused so far)",
-                                          throttle_duration_sec=WARN_THROTTLE_S)
-                self._event(refusal, Level.WARN)
+        for f in self.fingers if finger is None else (finger,):
+            for source, values, refusal in f.inbox.drain():
+                event = f.commands.take(source, values, self.sim.step_index, refusal)
+                if event is not None:
+                    self.get_logger().warning(f"refused command [{event.requested}] on {source}: {event.reason} "
+                                              f"({f.commands.counts.refused} refused so far)",
+                                              throttle_duration_sec=WARN_THROTTLE_S)
+                    self._event(f, event, Level.WARN)
 
     def _end_of_scene(self) -> None:
         self._set_state(RunState.FINISHED)
-        self.get_logger().info(f"scene '{self.scene.name}' ended at t = {self.sim.time:g} s after {self.sim.step_index} steps")
+        names = ", ".join(f"'{f.scene.name}'" for f in self.fingers)
+        self.get_logger().info(f"scene {names} ended at t = {self.sim.time:g} s after {self.sim.step_index} steps")
         self._publish_diagnostics()
         if self.settings.exit_at_end and not self.done.done():
             self.done.set_result(0)
 
-    def _diverged(self, exc: SimulationDiverged) -> None:
+    def _diverged(self, finger: Finger, exc: SimulationDiverged) -> None:
         self._set_state(RunState.DIVERGED)
-        self.get_logger().error(f"simulation diverged: {exc}; call ~/reset to start the scene again")
+        self.get_logger().error(f"simulation{' of ' + finger.spec.name if finger.spec.name else ''} diverged: {exc}; "
+                                "call ~/reset to start the scene again")
         self._publish_diagnostics()
         if self.settings.torque_source is TorqueSource.SCENE and self.settings.exit_at_end and not self.done.done():
             self.done.set_result(EXIT_FAILED)
@@ -366,10 +421,55 @@ class FingerNode(Node):
             self.pacer.restart()
         self.state = state
 
-    def _event(self, event: CommandEvent, level: Level = Level.OK) -> None:
+    def _event(self, finger: Finger, event: CommandEvent, level: Level = Level.OK) -> None:
         """One ~/command_log entry."""
-        msg = conversions.status(self._event_name, self._hardware_id, bytes([level]), event.event, event.to_values())
-        self._publish(self._command_log_out, msg)
+        msg = conversions.status(finger.event_name, finger.hardware_id, bytes([level]), event.event, event.to_values())
+        self._publish(finger.command_log_out, msg)
+
+    # -- run-time parameters -----------------------------------------------------------------
+    def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
+        """Executor thread: check a change against the table and its rules (rclpy has already
+        refused read-only parameters and values out of the descriptors' ranges); the stepping
+        loop applies it before the next step."""
+        settings = self._requested
+        try:
+            for p in params:
+                settings = settings.with_change(p.name, p.value)
+        except ParameterError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        if settings != self._requested:
+            self._requested = settings
+            self._changes.append((settings, list(params)))
+            self._wake.set()
+        return SetParametersResult(successful=True)
+
+    def _apply_settings(self, s: RunSettings) -> None:
+        """The run-time parameters' effect (stepping thread, between two steps)."""
+        self.settings = s
+        self._publish_ratio = 1.0 if s.publish_rate_hz == 0.0 else s.publish_rate_hz / s.physics_rate_hz
+        for f in self.fingers:
+            if f.commands.max_torque != s.max_torque:
+                f.commands.set_max_torque(s.max_torque)
+            f.commands.command_timeout = s.command_timeout
+        if s.realtime_factor == 0.0:
+            self.pacer = None
+        elif self.pacer is None:
+            self.pacer = Pacer(self.dt, s.realtime_factor)
+        elif self.pacer.wall_per_step != self.dt / s.realtime_factor:
+            self.pacer.set_realtime_factor(s.realtime_factor)
+
+    def _take_changes(self) -> None:
+        """Apply the parameter changes accepted since the last step and log them at this step's stamp."""
+        while self._changes:
+            settings, params = self._changes.popleft()
+            self._apply_settings(settings)
+            self.get_logger().info("set " + ", ".join(f"{p.name} = {p.value!r}" for p in params)
+                                   + f" from step {self.sim.step_index} on")
+            if self.recorder is not None:
+                event = ParameterEvent(node=self.get_fully_qualified_name(), changed_parameters=[p.to_parameter_msg() for p in params])
+                event.stamp = conversions.to_time(self.stamp_ns)  # the state the change applies from
+                # encoded by the recorder: rclpy's CDR of this type carries trailing bytes strict readers refuse
+                self.recorder.write(PARAMETER_EVENTS, event, self.stamp_ns)
 
     # -- the executor's side: hand over, never touch the simulator -------------------------
     def _in_loop(self, job: Callable[[], tuple[bool, str]]) -> tuple[bool, str]:
@@ -398,12 +498,10 @@ class FingerNode(Node):
     # -- service jobs (in the stepping loop) -------------------------------------------------
     def _reset(self) -> tuple[bool, str]:
         self.timeline.new_episode(self.stamp_ns)  # /clock goes on from the last stamp
-        self.sim.reset()
-        self._inbox.clear()
-        self._event(self.commands.reset("~/reset"))
-        self.applied = self.scene.torque(0.0) if self.settings.torque_source is TorqueSource.SCENE else 0.0
+        for f in self.fingers:
+            self._event(f, f.reset())
         self._set_state(RunState.PAUSED if self.state is RunState.PAUSED else RunState.RUNNING)
-        self._publish_state(self.sim.state, force=True)
+        self._publish_state(force=True)
         return True, self._where()
 
     def _pause(self, pause: bool) -> tuple[bool, str]:
@@ -422,7 +520,7 @@ class FingerNode(Node):
             if not self._advance():
                 break
         if self._last_published != self.stamp_ns:
-            self._publish_state(self.sim.state, force=True)
+            self._publish_state(force=True)
         return True, self._where()
 
     def _where(self) -> str:
@@ -431,21 +529,18 @@ class FingerNode(Node):
                 f"episode={self.timeline.episode}")
 
     # -- output (stepping loop) --------------------------------------------------------------
-    def _publish_state(self, state: State, *, force: bool = False) -> None:
+    def _publish_state(self, *, force: bool = False) -> None:
         n = self.sim.step_index
         self.stamp_ns = stamp = self.timeline.stamp(n)
-        m = self._msgs
-        if force or _due(n, self._publish_ratio):
+        states = force or _due(n, self._publish_ratio)
+        markers = force or _due(n, self._marker_ratio)
+        if states:
             self._last_published = stamp
             if self._clock_out is not None:
-                m["clock"] = conversions.clock(stamp, out=m.get("clock"))
-                self._publish(self._clock_out, m["clock"])
-            m["joints"] = conversions.joint_state(self.frames, state.q, state.v, self.applied, stamp, out=m.get("joints"))
-            self._publish(self._joints_out, m["joints"])
-            m["pose"] = conversions.fingertip_pose(self.frames, state.q, stamp, out=m.get("pose"))
-            self._publish(self._pose_out, m["pose"])
-        if self._markers_out is not None and (force or _due(n, self._marker_ratio)):
-            self._publish(self._markers_out, conversions.markers(self.frames, state.q, stamp))
+                self._clock_msg = conversions.clock(stamp, out=self._clock_msg)
+                self._publish(self._clock_out, self._clock_msg)
+        for f in self.fingers:
+            f.publish_state(self._publish, stamp, states=states, markers=markers)
 
     def _publish(self, out: Endpoint, msg: Any) -> None:
         """Every outgoing message passes here, from the stepping thread, at sim time self.stamp_ns.
@@ -481,24 +576,48 @@ class FingerNode(Node):
             self._clock_warned = True
             self.get_logger().warning(
                 f"{n} publishers on /clock: another node publishes sim time too, so /clock jumps back and forth; "
-                "run several fingers with publish_clock:=false on all but one")
+                "run several fingers in one finger_hand (one clock), or publish_clock:=false on all but one")
         return n
 
     def _publish_diagnostics(self) -> None:
         s, sim = self.settings, self.sim
         now = time.perf_counter()
         run_wall = self._run_wall + (now - self._run_since if self._run_since is not None else 0.0)
-        snap = Snapshot(
-            state=self.state.value, diverged=self.state is RunState.DIVERGED, scene=self.scene.name,
-            scene_file=str(self.scene_path), method=sim.method, dt=self.dt,
-            dt_source=f"physics_rate_hz {s.physics_rate_hz:g} (scene file: {self._file_dt!r} s)",
-            torque_source=s.torque_source.value, clock_s=self.stamp_ns * 1e-9, time_s=sim.time, step=sim.step_index,
-            episode=self.timeline.episode, realtime_factor_target=s.realtime_factor, steps_total=self.steps_total,
-            run_wall_s=run_wall, max_residual_m=self.max_residual, torque=self.applied,
-            commands_received=self._inbox.received, log=self._log_status(), clock_publishers=self._clock_publishers())
-        level, message, values = self._diagnostics.report(snap, self.commands, self.pacer, now)
-        status = conversions.status(self._diag_name, self._hardware_id, bytes([level]), message, values)
-        self._publish(self._diagnostics_out, conversions.diagnostic_array(self.stamp_ns, [status]))
+        log, clocks = self._log_status(), self._clock_publishers()
+        statuses = []
+        for i, f in enumerate(self.fingers):
+            snap = Snapshot(
+                state=self.state.value, diverged=self.state is RunState.DIVERGED, scene=f.scene.name,
+                scene_file=str(f.spec.scene_path), method=f.sim.method, dt=self.dt,
+                dt_source=f"physics_rate_hz {s.physics_rate_hz:g} (scene file: {f.file_dt!r} s)",
+                torque_source=s.torque_source.value, clock_s=self.stamp_ns * 1e-9, time_s=sim.time, step=sim.step_index,
+                episode=self.timeline.episode, realtime_factor_target=s.realtime_factor, steps_total=self.steps_total,
+                run_wall_s=run_wall, max_residual_m=f.max_residual, torque=f.applied,
+                commands_received=f.inbox.received, log=log, clock_publishers=clocks)
+            last = i == len(self.fingers) - 1
+            level, message, values = f.diagnostics.report(snap, f.commands, self.pacer, now, new_window=last)
+            statuses.append(conversions.status(f.diag_name, f.hardware_id, bytes([level]), message, values))
+        self._publish(self._diagnostics_out, conversions.diagnostic_array(self.stamp_ns, statuses))
+
+
+class FingerNode(SteppingNode):
+    """The simulated finger as a ROS 2 node: one finger, its scene from the `scene` parameter."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(NODE_NAME, NODE_PARAMETERS, NodeSettings, **kwargs)
+
+    def _finger_specs(self) -> list[FingerSpec]:
+        s = self.settings
+        assert isinstance(s, NodeSettings)
+        return [FingerSpec("", resolve_scene(s.scene), s.frame_prefix)]
+
+    def _description(self) -> str:
+        f = self.fingers[0]
+        return finger_urdf(f.scene.params, prefix=f.spec.frame_prefix, radii=f.scene.phalanx_radius,
+                           mcp_effort=self.settings.max_torque)
+
+    def _log_name(self) -> str:
+        return self.fingers[0].scene.name
 
 
 def _due(n: int, ratio: float) -> bool:
@@ -506,12 +625,13 @@ def _due(n: int, ratio: float) -> bool:
     return ratio >= 1.0 or n == 0 or int(n * ratio + RATE_EPS) != int((n - 1) * ratio + RATE_EPS)
 
 
-def main(args: list[str] | None = None) -> int:
+def run(node_type: Callable[[], SteppingNode], name: str, args: Sequence[str] | None = None) -> int:
+    """main() of a stepping node: start it, spin until it is done or interrupted, close its log."""
     rclpy.init(args=args)
     node = None
     status = 0
     try:
-        node = FingerNode()
+        node = node_type()
         node.start()
         rclpy.spin_until_future_complete(node, node.done)
         if node.done.done():
@@ -525,7 +645,7 @@ def main(args: list[str] | None = None) -> int:
             raise
         # SIGINT/SIGTERM shut the context down while a callback was running: a clean stop.
     except (FingerSimError, LogError) as exc:
-        rclpy.logging.get_logger(NODE_NAME).error(f"cannot start: {exc}")
+        rclpy.logging.get_logger(name).error(f"cannot start: {exc}")
         status = EXIT_CONFIG
     finally:
         if node is not None:
@@ -534,6 +654,10 @@ def main(args: list[str] | None = None) -> int:
             node.destroy_node()
         rclpy.try_shutdown()
     return status
+
+
+def main(args: list[str] | None = None) -> int:
+    return run(FingerNode, NODE_NAME, args)
 
 
 if __name__ == "__main__":

@@ -4,7 +4,9 @@ A command received between two steps takes effect at the next step and is held; 
 saturated to ±max_torque; after command_timeout s of sim time without a command the torque falls to
 0. Non-finite values and wrong lengths are refused (counted, and each refusal is an event);
 when the scene's scripted profile drives the finger (`accepting=False`) every command is
-refused. Each change of the applied torque (accepted, timeout) and each refusal is a
+refused. A sensor_msgs/JointState command (`joint_command`, ros2_control's topic-based hardware
+interface and Isaac Sim) is read by `joint_effort`: only the effort of the actuated joint
+(`<prefix>mcp_joint`) is a command; other joints, positions and velocities are refused. Each change of the applied torque (accepted, timeout) and each refusal is a
 run_log.CommandEvent, so re-applying the events reproduces the run bit for bit.
 
 Threads: `Inbox.put` is called by the executor thread, everything else by the stepping loop.
@@ -27,6 +29,23 @@ REFUSED_SCENE = "torque_source is 'scene'"
 REFUSED_NOT_FINITE = "not a finite number"
 
 
+def joint_effort(names: Sequence[str], positions: int, velocities: int, efforts: Sequence[float],
+                 joint: str) -> tuple[tuple[float, ...], str | None]:
+    """A JointState command → (its efforts, None) if it commands only `joint`'s effort, else
+    (its efforts, the refusal reason). positions, velocities: how many of each it carries."""
+    values = tuple(efforts)
+    problems = []
+    if list(names) != [joint]:
+        problems.append(f"names {list(names)}")
+    if positions or velocities:
+        problems.append(f"{positions} positions and {velocities} velocities")
+    if len(values) != 1:
+        problems.append(f"{len(values)} efforts")
+    if not problems:
+        return values, None
+    return values, f"{', '.join(problems)}: only effort on {joint} is actuated (name [{joint}], one effort, no position or velocity)"
+
+
 def timeout_steps(command_timeout: float, dt: float) -> int | None:
     """Steps of silence after which a held command times out: ceil(timeout/dt); None for 0 (never)."""
     return math.ceil(command_timeout / dt - STEP_EPS) if command_timeout > 0 else None
@@ -38,20 +57,24 @@ def same(a: float, b: float) -> bool:
 
 
 class Inbox:
-    """Commands handed from the executor thread to the stepping loop; counts what arrived."""
+    """Commands handed from the executor thread to the stepping loop; counts what arrived.
+
+    Each is (source, values, refusal): refusal is the reason an adapter already refused it for
+    (e.g. `joint_effort`'s), None if the stepping loop is to check it.
+    """
 
     def __init__(self) -> None:
-        self._queue: collections.deque[tuple[str, tuple[float, ...]]] = collections.deque()
+        self._queue: collections.deque[tuple[str, tuple[float, ...], str | None]] = collections.deque()
         self.received = 0
 
-    def put(self, source: str, values: Sequence[float]) -> None:
+    def put(self, source: str, values: Sequence[float], refusal: str | None = None) -> None:
         self.received += 1
-        self._queue.append((source, tuple(values)))
+        self._queue.append((source, tuple(values), refusal))
 
     def __bool__(self) -> bool:
         return bool(self._queue)
 
-    def drain(self) -> Iterator[tuple[str, tuple[float, ...]]]:
+    def drain(self) -> Iterator[tuple[str, tuple[float, ...], str | None]]:
         while self._queue:
             yield self._queue.popleft()
 
@@ -63,8 +86,10 @@ class Inbox:
 class _Pending:
     torque: float  # N·m, after saturation
     requested: float  # N·m, as received
-    source: str  # resolved topic name
+    source: str  # resolved topic name, or the parameter that changed it
     saturated: bool
+    reason: str = ""
+    command: bool = True  # False: a lowered max_torque re-saturates the held torque (no new command)
 
 
 @dataclass
@@ -80,7 +105,8 @@ class TorqueCommands:
 
     max_torque: saturation, N·m; command_timeout: sim s without a command before the torque
     falls to 0 (0: hold forever); accepting: False when the scene's profile drives the finger.
-    Both limits may be changed between steps; they apply from the next command or step.
+    Both limits may be changed between steps (`set_max_torque`, `command_timeout`); they apply
+    from the next step: a lowered max_torque also saturates the torque held or pending.
     """
 
     def __init__(self, timeline: Timeline, *, max_torque: float, command_timeout: float, accepting: bool) -> None:
@@ -102,9 +128,25 @@ class TorqueCommands:
         self._command_timeout = seconds
         self.timeout_steps = timeout_steps(seconds, self.timeline.dt)
 
-    def take(self, source: str, values: Sequence[float], step: int) -> CommandEvent | None:
+    def set_max_torque(self, limit: float) -> None:
+        """A new saturation, N·m, from the next step on: a pending command is saturated anew,
+        and a held torque beyond it is cut to it (an 'accepted' event from source max_torque,
+        which does not restart the command timeout)."""
+        self.max_torque = limit
+        cmd = self._pending
+        if cmd is not None:
+            torque = min(max(cmd.requested, -limit), limit)
+            self._pending = _Pending(torque, cmd.requested, cmd.source, torque != cmd.requested, cmd.reason, cmd.command)
+        elif abs(self.held) > limit:
+            self._pending = _Pending(math.copysign(limit, self.held), self.held, "max_torque", True,
+                                     f"max_torque set to {limit!r} N·m", command=False)
+
+    def take(self, source: str, values: Sequence[float], step: int, refusal: str | None = None) -> CommandEvent | None:
         """Check one received command (between steps; `step` is the next step's index): None
-        if accepted (it takes effect at the next step), else the 'refused' event."""
+        if accepted (it takes effect at the next step), else the 'refused' event. `refusal`:
+        the reason an adapter refused it for already."""
+        if refusal is not None:
+            return self.refuse(source, values, refusal, step)
         if not self.accepting:
             return self.refuse(source, values, REFUSED_SCENE, step)
         if len(values) != 1:
@@ -133,11 +175,12 @@ class TorqueCommands:
         cmd, self._pending = self._pending, None
         event = None
         if cmd is not None:
-            self.command_step = n
+            if cmd.command:
+                self.command_step = n
             if not same(cmd.torque, self.held):
                 self.held = cmd.torque
                 event = self._event("accepted", n, requested=repr(cmd.requested), source=cmd.source,
-                                    saturated=cmd.saturated)
+                                    saturated=cmd.saturated, reason=cmd.reason)
         elif (self.timeout_steps is not None and self.command_step is not None
               and n - self.command_step >= self.timeout_steps and not same(self.held, 0.0)):
             self.held = 0.0

@@ -74,8 +74,9 @@ class DiagnosticsWindow:
         self.wall = now
 
     def report(self, snap: Snapshot, commands: TorqueCommands, pacer: Pacer | None,
-               now: float) -> tuple[Level, str, dict[str, object]]:
-        """The status at wall time `now` (s); starts the next window (and the pacer's)."""
+               now: float, *, new_window: bool = True) -> tuple[Level, str, dict[str, object]]:
+        """The status at wall time `now` (s); starts the next window (and the pacer's, unless
+        new_window is False: a hand reports each finger against one pacer, then starts it)."""
         window = now - self.wall
         counts = commands.counts
         dropped_steps = pacer.dropped_steps if pacer is not None else 0
@@ -141,6 +142,6 @@ class DiagnosticsWindow:
         }
         self.wall, self._steps = now, snap.steps_total
         self._refused, self._dropped_steps = counts.refused, dropped_steps
-        if pacer is not None:
+        if pacer is not None and new_window:
             pacer.new_window()
         return level, message, values

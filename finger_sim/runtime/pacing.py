@@ -57,16 +57,22 @@ class Pacer:
     """
 
     def __init__(self, dt: float, realtime_factor: float, catchup_limit_s: float = CATCHUP_LIMIT_S) -> None:
-        if not realtime_factor > 0:
-            raise ConfigError("realtime_factor", "> 0 for a paced loop", realtime_factor)
-        self.wall_per_step = dt / realtime_factor
-        self.catchup_steps = max(1, int(catchup_limit_s / self.wall_per_step))
+        self.dt, self.catchup_limit_s = dt, catchup_limit_s
+        self.set_realtime_factor(realtime_factor)
         self.overruns = 0
         self.dropped_steps = 0
         self.lateness = Lateness()
         self.window = Lateness()
         self._anchor: float | None = None  # wall time of step 0 of the current pacing run
         self._steps = 0  # steps handed out since the anchor
+
+    def set_realtime_factor(self, realtime_factor: float) -> None:
+        """A new pace (sim s per wall s, > 0), from a new pacing run on; the counters go on."""
+        if not realtime_factor > 0:
+            raise ConfigError("realtime_factor", "> 0 for a paced loop", realtime_factor)
+        self.wall_per_step = self.dt / realtime_factor
+        self.catchup_steps = max(1, int(self.catchup_limit_s / self.wall_per_step))
+        self.restart()
 
     def restart(self) -> None:
         """The next `due()` starts a new pacing run (after a start, resume or reset)."""

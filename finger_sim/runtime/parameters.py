@@ -3,8 +3,12 @@
 The table is the one source of truth: finger_sim.ros.parameters declares it with rclpy
 (descriptors carry the description, range and read-only flag, so `ros2 param describe`
 shows them), and `check()` validates values without ROS (types as ROS types them: a float
-parameter needs a decimal point; ranges inclusive; choices). Cross-parameter rules of the
-node are in `NodeSettings.from_values`.
+parameter needs a decimal point; ranges inclusive; choices). Cross-parameter rules are in
+`RunSettings.from_values` (and its subclasses' `_rules`).
+
+Most parameters are read once at start (read-only). RUNTIME_PARAMETERS (max_torque,
+command_timeout, realtime_factor, publish_rate_hz) may be set while running: `with_change`
+checks a new value against the same table and rules, and the node applies it from the next step.
 """
 
 from __future__ import annotations
@@ -12,7 +16,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from enum import Enum
-from typing import Any
+from typing import Any, ClassVar, Self
 
 from finger_sim.errors import FingerSimError
 
@@ -76,38 +80,68 @@ class CommandQos(Enum):
     RELIABLE = "reliable"  # reliable, keep last command_depth: no command lost to DDS
 
 
-#: finger_node's parameters, their defaults (as in config/finger_node.yaml), meanings and ranges.
-#: All are read once at start (read-only): changing one means restarting the node.
-NODE_PARAMETERS = (
-    Param("scene", "paper_flexion", "scene file path, or the name of an installed scene (share/finger_sim/config/<name>.yaml)"),
+#: The scene of a finger_node whose `scene` parameter is empty, by torque_source: the live
+#: default (MCP stops, damping, no scripted input) for commands, the paper's run for its script.
+DEFAULT_SCENES = {TorqueSource.TOPIC: "finger_default", TorqueSource.SCENE: "paper_flexion"}
+
+#: The parameters every stepping run has (finger_node and finger_hand), their defaults (as in
+#: config/finger_node.yaml), meanings and ranges.
+RUN_PARAMETERS = (
     Param("physics_rate_hz", 1000.0, "physics steps per second of sim time; dt = 1/rate replaces the scene's dt", (1.0, 100000.0)),
-    Param("publish_rate_hz", 0.0, "joint_states, fingertip_pose and /clock per second of sim time; 0 = every step", (0.0, 100000.0)),
+    Param("publish_rate_hz", 0.0, "joint_states, fingertip_pose and /clock per second of sim time; 0 = every step "
+          "(settable while running)", (0.0, 100000.0), read_only=False),
     Param("marker_rate_hz", 30.0, "finger_markers per second of sim time; 0 = none", (0.0, 100000.0)),
-    Param("realtime_factor", 1.0, "sim seconds per wall second; 0 = as fast as possible", (0.0, 1000.0)),
-    Param("torque_source", TorqueSource.TOPIC.value, "'topic' (motor_torque, effort_commands) or 'scene' (the scene's scripted torque)",
+    Param("realtime_factor", 1.0, "sim seconds per wall second; 0 = as fast as possible (settable while running)",
+          (0.0, 1000.0), read_only=False),
+    Param("torque_source", TorqueSource.TOPIC.value,
+          "'topic' (motor_torque, effort_commands, joint_command) or 'scene' (the scene's scripted torque)",
           choices=tuple(t.value for t in TorqueSource)),
     Param("exit_at_end", True, "with torque_source 'scene': exit with status 0 at the scene's duration"),
-    Param("max_torque", 0.05, "commands are saturated to ±max_torque, N·m", (0.0, 100.0)),
-    Param("command_timeout", 0.5, "sim seconds without a command after which the torque falls to 0; 0 = hold forever", (0.0, 3600.0)),
+    Param("max_torque", 0.05, "commands are saturated to ±max_torque, N·m (settable while running)", (0.0, 100.0),
+          read_only=False),
+    Param("command_timeout", 0.5, "sim seconds without a command after which the torque falls to 0; 0 = hold forever "
+          "(settable while running)", (0.0, 3600.0), read_only=False),
     Param("command_qos", CommandQos.SYSTEM_DEFAULT.value,
           "'system_default' (best effort, keep last 1 with Fast DDS, as ros2_control) or 'reliable' (keep last command_depth)",
           choices=tuple(q.value for q in CommandQos)),
     Param("command_depth", 1000, "history depth of the command subscriptions with command_qos 'reliable'", (1, 100_000)),
-    Param("frame_prefix", "", "prefix of the frame id (<prefix>finger_base) and of the joint names"),
     Param("steps_per_trigger", 1, "steps that one ~/step call advances while paused", (1, 1_000_000)),
     Param("start_paused", False, "start paused; ~/pause false or ~/step to advance"),
-    Param("publish_clock", True, "publish /clock; with several fingers let exactly one node do it"),
+    Param("publish_clock", True, "publish /clock; with several fingers use finger_hand (one clock), or let exactly one node do it"),
     Param("record", True, "log every message the node publishes and receives to <record_dir>/<scene>_<UTC start>.mcap"),
     Param("record_dir", "bags", "folder of the MCAP logs (created if missing)"),
     Param("record_chunk_interval", 0.5, "sim seconds after which the log's open chunk is closed: what a kill -9 can lose", (0.01, 60.0)),
+    Param("record_time", "sim", "log time of the MCAP messages: 'sim' (sim time from 0, as /clock) or 'wall_start' "
+          "(Unix time at the node's start + sim time); header stamps are sim time either way", choices=("sim", "wall_start")),
 )
+#: finger_node's parameters: the run's, its scene and frame prefix.
+NODE_PARAMETERS = (
+    Param("scene", "", "scene file path, or the name of an installed scene (share/finger_sim/config/<name>.yaml); "
+          "empty: finger_default with torque_source 'topic', paper_flexion with 'scene'"),
+    *RUN_PARAMETERS,
+    Param("frame_prefix", "", "prefix of the frame id (<prefix>finger_base) and of the joint names"),
+)
+#: finger_hand's parameters: the run's and the hand file.
+HAND_PARAMETERS = (
+    Param("hand", "three_fingers", "hand file path, or the name of an installed one (share/finger_sim/config/hands/<name>.yaml): "
+          "its fingers' names, scenes, base poses and frame prefixes"),
+    *RUN_PARAMETERS,
+)
+#: The parameters that may be set while running (the others are read-only).
+RUNTIME_PARAMETERS = tuple(p.name for p in RUN_PARAMETERS if not p.read_only)
+
+
+def _no_space(name: str, value: str) -> None:
+    if any(c.isspace() for c in value):
+        raise ParameterError.expected(name, "a prefix without white space", value)
 
 
 @dataclass(frozen=True)
-class NodeSettings:
-    """finger_node's parameters, validated, SI."""
+class RunSettings:
+    """The parameters of a stepping run (RUN_PARAMETERS), validated, SI."""
 
-    scene: str
+    TABLE: ClassVar[tuple[Param, ...]] = RUN_PARAMETERS
+
     physics_rate_hz: float
     publish_rate_hz: float
     marker_rate_hz: float
@@ -118,27 +152,62 @@ class NodeSettings:
     command_timeout: float
     command_qos: CommandQos
     command_depth: int
-    frame_prefix: str
     steps_per_trigger: int
     start_paused: bool
     publish_clock: bool
     record: bool
     record_dir: str
     record_chunk_interval: float
+    record_time: str
 
     @classmethod
-    def from_values(cls, values: Mapping[str, Any]) -> NodeSettings:
-        """Check every value against NODE_PARAMETERS and the rules between them; ParameterError if one fails."""
-        v: dict[str, Any] = check_all(NODE_PARAMETERS, values)
+    def from_values(cls, values: Mapping[str, Any]) -> Self:
+        """Check every value against the class's TABLE and the rules between them; ParameterError if one fails."""
+        v: dict[str, Any] = check_all(cls.TABLE, values)
         if v["publish_rate_hz"] > v["physics_rate_hz"]:
             raise ParameterError.expected("publish_rate_hz", f"0 or a rate ≤ physics_rate_hz ({v['physics_rate_hz']:g} Hz)",
                                           v["publish_rate_hz"])
-        if any(c.isspace() for c in v["frame_prefix"]):
-            raise ParameterError.expected("frame_prefix", "a prefix without white space", v["frame_prefix"])
         v["torque_source"] = TorqueSource(v["torque_source"])
         v["command_qos"] = CommandQos(v["command_qos"])
+        cls._rules(v)
         return cls(**v)
+
+    @classmethod
+    def _rules(cls, v: dict[str, Any]) -> None:
+        """A subclass's own checks and resolutions of the values (in place)."""
+
+    def with_change(self, name: str, value: Any) -> Self:
+        """These settings with `name` set to `value` while running; ParameterError if `name` is
+        read-only or the value fails the table or the rules."""
+        if name not in RUNTIME_PARAMETERS:
+            raise ParameterError.expected(name, f"one of {list(RUNTIME_PARAMETERS)} (the others are read-only)", value)
+        return self.from_values({**self.to_values(), name: value})
 
     def to_values(self) -> dict[str, Value]:
         """The parameters as ROS values (enums as their strings), e.g. for the log's metadata."""
         return {f.name: (x.value if isinstance(x := getattr(self, f.name), Enum) else x) for f in fields(self)}
+
+
+@dataclass(frozen=True)
+class NodeSettings(RunSettings):
+    """finger_node's parameters: the run's, its scene (resolved: never empty) and frame prefix."""
+
+    TABLE: ClassVar[tuple[Param, ...]] = NODE_PARAMETERS
+
+    scene: str
+    frame_prefix: str
+
+    @classmethod
+    def _rules(cls, v: dict[str, Any]) -> None:
+        _no_space("frame_prefix", v["frame_prefix"])
+        if not v["scene"]:
+            v["scene"] = DEFAULT_SCENES[v["torque_source"]]
+
+
+@dataclass(frozen=True)
+class HandSettings(RunSettings):
+    """finger_hand's parameters: the run's and the hand file."""
+
+    TABLE: ClassVar[tuple[Param, ...]] = HAND_PARAMETERS
+
+    hand: str

@@ -1,0 +1,95 @@
+"""One simulated finger of a stepping node: its simulator, held torque, topics and diagnostics window.
+
+finger_node steps one Finger, finger_hand several in lock-step (finger_sim.ros.node's
+SteppingNode runs the loop). A Finger is owned by the stepping thread once stepping has
+begun, except `inbox`, which the executor thread fills.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+from finger_sim import joints, kinematics
+from finger_sim.ros import conversions
+from finger_sim.ros.interfaces import Endpoint
+from finger_sim.run_log import CommandEvent
+from finger_sim.runtime.commands import Inbox, TorqueCommands
+from finger_sim.runtime.diagnostics import DiagnosticsWindow
+from finger_sim.runtime.hand_config import FingerSpec
+from finger_sim.runtime.parameters import RunSettings, TorqueSource
+from finger_sim.runtime.simulator import node_simulator
+from finger_sim.runtime.timeline import Timeline
+from finger_sim.scene import Scene, load_scene
+from finger_sim.simulate import State, output_names
+
+
+class Finger:
+    """The simulator of one finger and what the stepping loop keeps about it."""
+
+    def __init__(self, spec: FingerSpec, settings: RunSettings, timeline: Timeline) -> None:
+        self.spec = spec
+        self.sim = node_simulator(spec.scene_path, settings.physics_rate_hz)
+        self.scene: Scene = self.sim.scene
+        self.file_dt = load_scene(spec.scene_path).dt  # the scene file's own dt, for the record
+        self.frames = conversions.FingerFrames.from_system(self.sim.system, spec.frame_prefix)
+        self.reported = output_names(self.sim.system.elements, self.sim.q)  # e.g. grip_force: contact topics
+        self.contact = conversions.ContactReport.of(self.frames, self.sim.system.elements)  # None: no contact
+        self.mcp_joint = spec.frame_prefix + joints.JOINT_NAMES[0]
+        scene_driven = settings.torque_source is TorqueSource.SCENE
+        self.scene_steps = self.scene.step_count if scene_driven else None
+        self.commands = TorqueCommands(timeline, max_torque=settings.max_torque,
+                                       command_timeout=settings.command_timeout, accepting=not scene_driven)
+        self.applied = self.initial_torque()  # N·m, over the last step
+        self.max_residual = kinematics.constraint_norm(self.sim.system.params, self.sim.q)
+        self.inbox = Inbox()
+        self.diagnostics = DiagnosticsWindow(time.perf_counter())
+        self.msgs: dict[str, Any] = {}  # reused outgoing messages (conversions' out=)
+        self.outputs: dict[str, Endpoint] = {}  # this finger's publishers by OUTPUTS key (`connect`)
+        self.inputs: list[Endpoint] = []
+        self.diag_name = self.event_name = self.hardware_id = ""
+
+    def connect(self, node_name: str, outputs: dict[str, Endpoint], inputs: list[Endpoint]) -> None:
+        """Give the finger its publishers and subscriptions, and the names of its statuses; a
+        missing table entry fails here, at start, never inside the stepping loop."""
+        self.outputs, self.inputs = outputs, inputs
+        self.joints_out, self.pose_out = outputs["joint_states"], outputs["fingertip_pose"]
+        self.command_log_out, self.markers_out = outputs["command_log"], outputs.get("markers")
+        who = f"{node_name}: {self.spec.name + ' ' if self.spec.name else ''}"
+        self.diag_name, self.event_name = who + "simulation", who + "command"
+        self.hardware_id = self.spec.frame_prefix + "finger"
+
+    def initial_torque(self) -> float:
+        """The torque shown at step 0 of an episode: the script's at t = 0, or none."""
+        return self.scene.torque(0.0) if self.scene_steps is not None else 0.0
+
+    def step(self, torque: float | None) -> State:
+        """One physics step with `torque` (None: the scene's profile); SimulationDiverged passes."""
+        state = self.sim.step(torque)
+        self.applied = self.sim.torque
+        residual = kinematics.constraint_norm(self.sim.system.params, state.q)
+        if residual > self.max_residual:
+            self.max_residual = residual
+        return state
+
+    def reset(self) -> CommandEvent:
+        """Back to the scene's initial state; the 'reset' event."""
+        self.sim.reset()
+        self.inbox.clear()
+        self.applied = self.initial_torque()
+        return self.commands.reset("~/reset")
+
+    def publish_state(self, publish: Callable[[Endpoint, Any], None], stamp: int, *, states: bool, markers: bool) -> None:
+        """Publish this finger's joint states and fingertip pose (states) and markers, stamped `stamp` ns."""
+        m, q = self.msgs, self.sim.q
+        if states:
+            m["joints"] = conversions.joint_state(self.frames, q, self.sim.v, self.applied, stamp, out=m.get("joints"))
+            publish(self.joints_out, m["joints"])
+            m["pose"] = conversions.fingertip_pose(self.frames, q, stamp, out=m.get("pose"))
+            publish(self.pose_out, m["pose"])
+            if self.contact is not None:
+                for key, msg in self.contact.messages(*self.sim.state, stamp):
+                    publish(self.outputs[key], msg)
+        if markers and self.markers_out is not None:
+            publish(self.markers_out, conversions.markers(self.frames, q, stamp))
