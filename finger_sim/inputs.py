@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import MISSING, asdict, dataclass
+from dataclasses import MISSING, asdict, dataclass, fields
 from typing import Any, ClassVar
 
 import numpy as np
@@ -199,8 +199,9 @@ def profile_from_dict(data: Any, key: str = "input.torque") -> Profile:
     if not isinstance(kind, str) or kind not in PROFILES:
         raise ConfigError(f"{key}.type", f"one of {sorted(PROFILES)}", kind)
     cls = PROFILES[kind]
-    names = [f for f in cls.__dataclass_fields__ if f != "kind"]
-    required = [f for f in names if cls.__dataclass_fields__[f].default is MISSING]
+    fields_ = {f.name: f for f in fields(cls) if f.name != "kind"}  # ClassVars excluded
+    names = list(fields_)
+    required = [f for f in names if fields_[f].default is MISSING]
     unknown = sorted((k for k in data if k not in names and k != "type"), key=str)
     if unknown:
         raise ConfigError(f"{key}.{unknown[0]}", f"only keys {names} for type {kind}", data[unknown[0]])
