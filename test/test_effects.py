@@ -7,7 +7,6 @@ its Newton form on the same (affine) forces.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import ClassVar

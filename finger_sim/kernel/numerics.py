@@ -25,9 +25,9 @@ except ImportError:  # no numba: the same functions run as plain Python (slow, s
 
 
 from finger_sim.effects.contact import MIN_DISTANCE
-from finger_sim.inputs import BREAK_EPS, CONSTANT, HELD, RAMP, SINE, SQUARE, STEP
+from finger_sim.inputs import BREAK_EPS, CONSTANT, RAMP, SINE, SQUARE, STEP
 from finger_sim.kernel.layout import (BREAKPOINT, CONTACT, DAMPING, GRAVITY, HEADER, NON_FINITE, NOT_CONVERGED, OK,
-                                     SPRING, STATE_NON_FINITE, STEP_TOO_SMALL, TIP_FORCE)
+                                     SPRING, STATE_NON_FINITE, TIP_FORCE)
 from finger_sim.projection import ACCEPTED_RESIDUAL_FACTOR, MAX_ITERATIONS, POSITION_TOLERANCE
 
 

@@ -20,17 +20,14 @@ from __future__ import annotations
 
 import sys
 
-import rclpy
-from rclpy.executors import ExternalShutdownException
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64
 
 from finger_sim.ros import parameters
+from finger_sim.ros.controller_main import spin_controller
 from finger_sim.runtime.grip import GRIP_PARAMETERS, GripController, GripSettings
-from finger_sim.runtime.parameters import ParameterError
 
 NODE_NAME = "finger_grip_controller"
 #: Newest sample only: a controller answers the latest grip force, not a backlog.
@@ -39,7 +36,6 @@ COMMAND_QOS = QoSProfile(depth=10)
 #: rclcpp::ClockQoS(), as finger_node publishes /clock.
 CLOCK_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
 NS_PER_S = 1_000_000_000
-EXIT_CONFIG = 2
 #: Minimum wall time between two warnings about refused setpoints, s.
 WARN_THROTTLE_S = 1.0
 
@@ -79,25 +75,7 @@ class GripControllerNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    rclpy.init(args=args)
-    node = None
-    status = 0
-    try:
-        node = GripControllerNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except _rclpy.RCLError:
-        if rclpy.ok():
-            raise
-    except ParameterError as exc:
-        rclpy.logging.get_logger(NODE_NAME).error(f"cannot start: {exc}")
-        status = EXIT_CONFIG
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return status
+    return spin_controller(GripControllerNode, NODE_NAME, args)
 
 
 if __name__ == "__main__":

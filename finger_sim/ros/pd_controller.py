@@ -25,16 +25,14 @@ from __future__ import annotations
 import math
 import sys
 
-import rclpy
-from rclpy.executors import ExternalShutdownException
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
 from finger_sim.ros import parameters
-from finger_sim.runtime.parameters import Param, ParameterError
+from finger_sim.ros.controller_main import spin_controller
+from finger_sim.runtime.parameters import Param
 
 NODE_NAME = "finger_pd_controller"
 #: Defaults: critically damped-ish on the paper's finger (no overshoot, |θ − θ_eq| < 5 mrad
@@ -45,7 +43,6 @@ MAX_TORQUE = 0.05  # N·m, as finger_node's default saturation
 #: Newest state only: a controller should answer the latest state, not work off a backlog.
 STATE_QOS = QoSProfile(depth=1)
 COMMAND_QOS = QoSProfile(depth=10)
-EXIT_CONFIG = 2
 
 
 #: The controller's parameters (read once at start).
@@ -99,25 +96,7 @@ class PdController(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    rclpy.init(args=args)
-    node = None
-    status = 0
-    try:
-        node = PdController()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except _rclpy.RCLError:
-        if rclpy.ok():
-            raise
-    except ParameterError as exc:
-        rclpy.logging.get_logger(NODE_NAME).error(f"cannot start: {exc}")
-        status = EXIT_CONFIG
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return status
+    return spin_controller(PdController, NODE_NAME, args)
 
 
 if __name__ == "__main__":
