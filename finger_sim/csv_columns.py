@@ -28,7 +28,7 @@ import numpy as np
 
 from finger_sim import kinematics
 from finger_sim.dynamics import FingerSystem
-from finger_sim.joints import joint_positions, joint_velocities
+from finger_sim.joints import joint_positions, joint_velocities, pip_stiffness
 from finger_sim.kernel import offline_kernel
 from finger_sim.kinematics import Vec3
 from finger_sim.scene import Scene
@@ -50,16 +50,6 @@ ROS_COLUMNS: tuple[tuple[str, str], ...] = (
 VALUE_FORMAT = "%.17g"
 #: Samples from which a write draws a progress bar (on a terminal).
 PROGRESS_MIN_SAMPLES = 100_000
-_PIP_ROTATION: Vec3 = (0.0, 0.0, 1.0)  # dθ3 = dβ = 1: a pure PIP rotation
-
-
-def pip_stiffness(system: FingerSystem) -> float:
-    """The PIP spring's k, N·m/rad: the stiffness the smooth force elements put on a pure PIP
-    rotation at extension (what the node's joint_states use; contact elements are left out)."""
-    q_ext = kinematics.extended_pose(system.params)
-    return sum(e.modal(q_ext, _PIP_ROTATION)[0] for e in system.elements if e.smooth)
-
-
 class RosRow:
     """Builds `ros` rows of one finger: `row(t, q, v, torque)` from the paper's coordinates."""
 

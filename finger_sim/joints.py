@@ -6,9 +6,17 @@ coupler = θ2 − θ2_ext, pip = β = θ3 + α − θ1. Velocities are their rat
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
+from finger_sim import kinematics
 from finger_sim.kinematics import Vec3
 
+if TYPE_CHECKING:
+    from finger_sim.dynamics import FingerSystem
+
 JOINT_NAMES = ("mcp_joint", "coupler_joint", "pip_joint")
+#: dθ3 = dβ = 1: a pure PIP rotation, the direction along which the PIP spring's k is read.
+PIP_ROTATION: Vec3 = (0.0, 0.0, 1.0)
 
 
 def joint_positions(q: Vec3, q_ext: Vec3, alpha: float) -> Vec3:
@@ -28,3 +36,12 @@ def paper_coordinates(positions: Vec3, velocities: Vec3, q_ext: Vec3, alpha: flo
         (t1, positions[1] + q_ext[1], positions[2] + t1 - alpha),
         (velocities[0], velocities[1], velocities[2] + velocities[0]),
     )
+
+
+def pip_stiffness(system: FingerSystem) -> float:
+    """The PIP spring's k, N·m/rad, through the force-element protocol: the stiffness the smooth
+    elements put on a pure PIP rotation at extension (the pip_joint effort is −kβ). Non-smooth
+    ones are left out: a contact reports a design stiffness even out of contact, for the
+    stability check."""
+    q_ext = kinematics.extended_pose(system.params)
+    return sum(e.modal(q_ext, PIP_ROTATION)[0] for e in system.elements if e.smooth)

@@ -23,7 +23,7 @@ from finger_sim.auto import choose_method, contact_substeps
 from finger_sim.dynamics import FingerSystem
 from finger_sim.effects import ForceElement
 from finger_sim.errors import SimulationDiverged, StabilityError
-from finger_sim.inputs import HELD_ARRAY, Profile
+from finger_sim.inputs import BREAK_EPS, HELD_ARRAY, Profile
 from finger_sim.integrators import METHODS, Integrator, TorqueFn
 from finger_sim.kernel import offline_kernel
 from finger_sim.kernel import select as select_kernel
@@ -49,10 +49,6 @@ NEAR_CONTACT = 2.0
 #: How deep `Simulator._bracket` refines a predicted crossing inside a step that its check
 #: did not confirm (each level probes both halves: at most 2^depth − 1 extra integrator steps).
 BRACKET_DEPTH = 3
-#: A constant torque is split nowhere: a break closer than this (relative to dt) to a
-#: step's end is taken as lying on it.
-BREAK_EPS = 1e-9
-
 ZERO: Vec3 = (0.0, 0.0, 0.0)
 
 
@@ -466,13 +462,20 @@ class Trajectory:
         np.savetxt(path, data, delimiter=",", header=self.csv_header(list(self.outputs)), comments="", fmt="%.17g")
 
     def summary(self) -> str:
-        deg = np.degrees(self.q[-1])
-        return (
-            f"t = {self.t[-1]:.4g} s  θ = ({deg[0]:.2f}°, {deg[1]:.2f}°, {deg[2]:.2f}°)  "
-            f"max|Φ| = {self.residual.max():.2e} m  ΔE = {self.energy[-1] - self.energy[0]:+.3e} J  "
-            f"method = {self.method}  steps = {len(self.t) - 1}"
-            + (f"  wall = {self.wall_time:.3f} s" if math.isfinite(self.wall_time) else "")
-        )
+        return summary_line(self.t[-1], self.q[-1], float(self.residual.max()), self.energy[-1] - self.energy[0],
+                            self.method, len(self.t) - 1, self.wall_time)
+
+
+def summary_line(t_end: float, q_end: Sequence[float], max_residual: float, energy_change: float, method: str,
+                 steps: int, wall_time: float) -> str:
+    """The one-line run summary `finger-sim simulate` prints (s, rad, m, J; wall s, NaN for none)."""
+    deg = np.degrees(q_end)
+    return (
+        f"t = {t_end:.4g} s  θ = ({deg[0]:.2f}°, {deg[1]:.2f}°, {deg[2]:.2f}°)  "
+        f"max|Φ| = {max_residual:.2e} m  ΔE = {energy_change:+.3e} J  "
+        f"method = {method}  steps = {steps}"
+        + (f"  wall = {wall_time:.3f} s" if math.isfinite(wall_time) else "")
+    )
 
 
 def simulate(scene: Scene, *, kernel: str = "auto") -> Trajectory:
@@ -481,7 +484,7 @@ def simulate(scene: Scene, *, kernel: str = "auto") -> Trajectory:
     On the compiled kernel a smooth scene's steps run in one kernel loop (`kernel.runner`);
     "auto" runs a short scene in Python (`kernel.offline_kernel`: loading numba costs more).
     """
-    n = math.ceil(scene.duration / scene.dt - BREAK_EPS)
+    n = scene.step_count
     sim = Simulator(scene, kernel=offline_kernel(kernel, n))
     x0 = (*sim.q, *sim.v)
     start = time.perf_counter()

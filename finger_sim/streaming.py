@@ -10,7 +10,6 @@ run, byte for byte.
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,7 +21,7 @@ from finger_sim.kernel import offline_kernel
 from finger_sim.kernel.runner import advance
 from finger_sim.kinematics import Vec3
 from finger_sim.scene import Scene
-from finger_sim.simulate import Simulator, Trajectory, output_names, state_columns
+from finger_sim.simulate import Simulator, Trajectory, output_names, state_columns, summary_line
 
 #: One CSV value, as `Trajectory.write_csv` (np.savetxt, fmt "%.17g") writes it: %.17g round-trips float64.
 VALUE_FORMAT = "%.17g"
@@ -46,13 +45,8 @@ class StreamedRun:
 
     def summary(self) -> str:
         """The line `Trajectory.summary` prints for the same run."""
-        deg = np.degrees(self.q_end)
-        return (
-            f"t = {self.t_end:.4g} s  θ = ({deg[0]:.2f}°, {deg[1]:.2f}°, {deg[2]:.2f}°)  "
-            f"max|Φ| = {self.max_residual:.2e} m  ΔE = {self.energy_change:+.3e} J  "
-            f"method = {self.method}  steps = {self.steps}"
-            + (f"  wall = {self.wall_time:.3f} s" if math.isfinite(self.wall_time) else "")
-        )
+        return summary_line(self.t_end, self.q_end, self.max_residual, self.energy_change, self.method, self.steps,
+                            self.wall_time)
 
 
 def stream_csv(scene: Scene, path: str | Path, *, kernel: str = "auto") -> StreamedRun:

@@ -42,7 +42,6 @@ from finger_sim.model import FingerParams
 BASE_FRAME = "finger_base"
 NS_PER_S = 1_000_000_000
 #: A pure PIP rotation in q = (θ1, θ2, θ3): β = θ3 + α − θ1 changes by 1 rad.
-PIP_ROTATION: Vec3 = (0.0, 0.0, 1.0)
 
 #: The element output that marks a scene with contact (N): its elements' reports become the
 #: grip_force and contact_wrench topics (keys of finger_sim.ros.interfaces.OUTPUTS).
@@ -98,10 +97,7 @@ class FingerFrames:
     @classmethod
     def from_system(cls, system: FingerSystem, prefix: str = "") -> FingerFrames:
         q_ext = kinematics.extended_pose(system.params)
-        # the PIP spring's k, through the force-element protocol: the stiffness the smooth
-        # elements put on a pure PIP rotation (dθ3 = dβ = 1). Non-smooth ones are left out: a
-        # contact reports a design stiffness there even out of contact, for the stability check.
-        k = sum(e.modal(q_ext, PIP_ROTATION)[0] for e in system.elements if e.smooth)
+        k = joints.pip_stiffness(system)
         objects = tuple(obj for e in system.elements for obj in getattr(e, "objects", ()))
         return cls(system.params, q_ext, system.alpha, k, prefix, objects)
 
