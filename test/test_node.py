@@ -203,7 +203,9 @@ def test_scene_run_matches_the_offline_run(launcher, ros_client):
 def test_commands_take_effect_at_the_logged_steps(launcher, ros_client):
     """A constant torque on motor_torque, then another on effort_commands: the node's states are a
     Simulator's fed those torques from the steps ~/command_log names."""
-    launcher.node(NODE, dict(scene=str(PAPER), realtime_factor=0.0, command_timeout=0.0, start_paused=True))
+    # Paced (2× real time), not as fast as possible: with the compiled kernel an unpaced node
+    # outruns the client's keep-last queue, and the check needs states between the two commands.
+    launcher.node(NODE, dict(scene=str(PAPER), realtime_factor=2.0, command_timeout=0.0, start_paused=True))
     states = ros_client.collect(JointState, "/joint_states")
     log = ros_client.collect(DiagnosticStatus, "/finger_node/command_log")
     torque_pub = ros_client.publisher(Float64, "/motor_torque")
@@ -214,6 +216,8 @@ def test_commands_take_effect_at_the_logged_steps(launcher, ros_client):
     assert ros_client.call(SetBool, "/finger_node/pause", SetBool.Request(data=False)).success
 
     first = publish_until(ros_client, torque_pub, Float64(data=0.003), log, lambda v: v["event"] == "accepted", "0.003 N·m accepted")
+    later = (int(first["step"]) + 50) * DT_NS  # let the first torque act for a while
+    ros_client.wait_for(lambda: any(stamp(m) >= later for m in states), "50 steps under the first torque")
     second = publish_until(ros_client, effort_pub, Float64MultiArray(data=[-0.002]), log,
                            lambda v: v["event"] == "accepted" and v["source"] == "/effort_commands", "-0.002 N·m accepted")
     s1, s2 = int(first["step"]), int(second["step"])
