@@ -4,9 +4,9 @@ child processes that always stop, and waiting on conditions with deadlines (neve
 rclpy is imported lazily, inside the fixtures: the core's tests (test_core_isolation) must not
 find ROS in sys.modules because this file was collected.
 
-Domain ids: TEST_DOMAINS (60-99), from a per-process counter offset by the pid, so that two
-pytest sessions running at the same time rarely share one, and never with the ids used by
-hand (20-49). Discovery stays on the loopback interface.
+Domain ids: TEST_DOMAINS (60-99, or the inclusive range in FINGER_SIM_TEST_DOMAINS), from a
+per-process counter offset by the pid, so that two pytest sessions running at the same time
+rarely share one, and never with the ids used by hand (20-49). Discovery stays on the loopback interface.
 """
 
 from __future__ import annotations
@@ -25,7 +25,16 @@ import pytest
 import yaml
 from hypothesis import HealthCheck, settings
 
-TEST_DOMAINS = range(60, 100)
+def _test_domains() -> range:
+    """60-99, or FINGER_SIM_TEST_DOMAINS="lo-hi" (inclusive) to keep parallel checkouts apart."""
+    spec = os.environ.get("FINGER_SIM_TEST_DOMAINS", "")
+    if not spec:
+        return range(60, 100)
+    low, high = (int(part) for part in spec.split("-"))
+    return range(low, high + 1)
+
+
+TEST_DOMAINS = _test_domains()
 
 # Hypothesis budgets (test_fuzz.py): "default" keeps the suite's time (a fixed, repeatable set
 # of examples, nothing stored in the tree); `pytest --hypothesis-profile=long` searches anew
