@@ -278,6 +278,25 @@ def test_idle_writer_closes_the_open_chunk(tmp_path: Path) -> None:
     assert not LogReader(path).truncated
 
 
+def test_a_chunk_closes_on_wall_time_while_log_time_stands_still(tmp_path: Path) -> None:
+    """A paused node: log time stands still, yet messages keep coming (diagnostics, commands), so
+    neither the log-time span nor the idle timer closes the chunk; the wall-time bound does."""
+    path, wall_s = tmp_path / "paused.mcap", 0.2
+    with McapRecorder(path, chunk_interval_s=60.0, idle_flush_s=60.0, chunk_wall_s=wall_s) as recorder:
+        recorder.register_channel("/motor_torque", Float64)
+        deadline = time.monotonic() + DEADLINE_S
+        i = 0
+        while recorder.written == 0 and time.monotonic() < deadline:
+            recorder.write("/motor_torque", Float64(data=float(i)), 5_000_000)  # one log time
+            i += 1
+            time.sleep(0.01)
+        assert recorder.written > 0
+        log = LogReader(path)  # while recording: the closed chunk is on disk
+        assert log.truncated
+        on_disk = [m.msg.data for m in log.messages()]
+    assert on_disk == [float(k) for k in range(len(on_disk))] and 0 < len(on_disk) <= i
+
+
 CHILD = textwrap.dedent("""
     import sys, time
     from std_msgs.msg import Float64

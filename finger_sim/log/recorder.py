@@ -18,8 +18,9 @@ metadata record, so rosbag2 parses the QoS text with its current bag-metadata ve
 
 Crash safety: a chunk is closed — written and flushed to the operating system — before a
 message that would stretch its log-time span to `chunk_interval_s`, once its uncompressed
-payload reaches `chunk_size`, and after `idle_flush_s` wall seconds without messages (a paused
-sim). Closing uses `mcap.writer.Writer.flush()` (mcap >= 1.5); the Writer's own size trigger
+payload reaches `chunk_size`, after `idle_flush_s` wall seconds without messages, and once it
+has been open for `chunk_wall_s` wall seconds whatever arrives: a paused sim whose log time stands
+still while diagnostics and commands keep coming loses at most that much wall time to a kill -9. Closing uses `mcap.writer.Writer.flush()` (mcap >= 1.5); the Writer's own size trigger
 is set out of reach so that every chunk boundary goes through it. A `kill -9` loses the open
 chunk and the summary; the prefix stays readable by linear readers (mcap's StreamReader,
 finger_sim.log.reader).
@@ -84,6 +85,7 @@ DEFAULT_CHUNK_INTERVAL_S = 0.5  # log-time span of one chunk: what a kill -9 may
 DEFAULT_CHUNK_SIZE = 1 << 20  # uncompressed bytes; bounds memory if an interval holds many messages
 DEFAULT_QUEUE_SIZE = 10_000  # pending messages (~1 s of a 1 kHz node's six topics) before dropping
 DEFAULT_IDLE_FLUSH_S = 1.0  # wall seconds without messages after which the open chunk is closed
+DEFAULT_CHUNK_WALL_S = 1.0  # wall seconds after which an open chunk is closed, whatever its log-time span
 DEFAULT_HANDOVER_S = 0.05  # wall seconds between the writer thread's takes of the buffer
 MAX_METADATA_BYTES = 1 << 16  # UTF-8 bytes of one metadata record's keys and values
 _NO_SIZE_TRIGGER = 1 << 62  # chunk_size given to mcap's Writer so only this module closes chunks
@@ -161,6 +163,7 @@ class McapRecorder:
     compression: chunk compression (mcap.writer.CompressionType).
     queue_size: messages that may wait for the writer thread before new ones are dropped.
     idle_flush_s: wall seconds without messages after which the open chunk is closed.
+    chunk_wall_s: wall seconds after its first message after which a chunk is closed.
     handover_s: wall seconds between the writer thread's takes of what the caller buffered.
     time_offset_ns: added to every message's log and publish time (e.g. a wall-clock start
         for a caller whose clock starts at 0).
@@ -176,6 +179,7 @@ class McapRecorder:
         compression: CompressionType = CompressionType.ZSTD,
         queue_size: int = DEFAULT_QUEUE_SIZE,
         idle_flush_s: float = DEFAULT_IDLE_FLUSH_S,
+        chunk_wall_s: float = DEFAULT_CHUNK_WALL_S,
         handover_s: float = DEFAULT_HANDOVER_S,
         on_problem: Callable[[str], None] | None = None,
         time_offset_ns: int = 0,
@@ -188,6 +192,8 @@ class McapRecorder:
             raise LogArgumentError("queue_size", "an int >= 1", queue_size)
         if not (math.isfinite(idle_flush_s) and idle_flush_s > 0):
             raise LogArgumentError("idle_flush_s", "a finite number > 0", idle_flush_s)
+        if not (math.isfinite(chunk_wall_s) and chunk_wall_s > 0):
+            raise LogArgumentError("chunk_wall_s", "a finite number > 0", chunk_wall_s)
         if not (math.isfinite(handover_s) and handover_s > 0):
             raise LogArgumentError("handover_s", "a finite number > 0", handover_s)
         if not isinstance(compression, CompressionType):
@@ -200,6 +206,7 @@ class McapRecorder:
         self._compression = compression
         self._queue_size = queue_size
         self._idle_flush_s = idle_flush_s
+        self._chunk_wall_s = chunk_wall_s
         self._on_problem = on_problem if on_problem is not None else _logger.warning
         self._handover_s = handover_s
         # Items for the writer thread; deque.append and popleft are atomic, so neither side locks.
@@ -457,6 +464,8 @@ class McapRecorder:
                 last_message = now
             elif file is not None and file.pending and now - last_message >= self._idle_flush_s:
                 file = self._apply(file, None, handed)  # idle (a paused sim): close the open chunk
+            if file is not None and file.pending and now - file.opened_at >= self._chunk_wall_s:
+                file = self._apply(file, None, handed)  # open too long in wall time (sim time stands still)
 
     def _apply(self, file: _ChunkedFile, item: object, handed: int) -> _ChunkedFile | None:
         """Hand one item (None: idle, _CLOSE: finish) to the file; None after an I/O failure."""
@@ -515,6 +524,7 @@ class _ChunkedFile:
         self._schema_ids: dict[str, int] = {}
         self._channel_ids: dict[str, int] = {}
         self.pending = 0  # messages in the open chunk
+        self.opened_at = 0.0  # time.monotonic() at the open chunk's first message
         self._pending_bytes = 0
         self._first_ns = self._last_ns = 0  # log-time range of the open chunk
 
@@ -552,6 +562,7 @@ class _ChunkedFile:
         )
         if self.pending == 0:
             self._first_ns = self._last_ns = t
+            self.opened_at = time.monotonic()
         else:
             self._first_ns, self._last_ns = min(self._first_ns, t), max(self._last_ns, t)
         self.pending += 1

@@ -44,6 +44,8 @@ from __future__ import annotations
 
 import collections
 import concurrent.futures
+import contextlib
+import gc
 import sys
 import threading
 import time
@@ -57,7 +59,8 @@ import rclpy
 from rcl_interfaces.msg import ParameterEvent, SetParametersResult
 from rclpy.duration import Duration
 from rclpy.event_handler import PublisherEventCallbacks
-from rclpy.executors import ExternalShutdownException
+from rclpy.exceptions import InvalidHandle
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -625,6 +628,31 @@ def _due(n: int, ratio: float) -> bool:
     return ratio >= 1.0 or n == 0 or int(n * ratio + RATE_EPS) != int((n - 1) * ratio + RATE_EPS)
 
 
+def spin_until_done(node: Node, done: Future) -> None:
+    """Run `node`'s callbacks until `done` completes or the context shuts down.
+
+    rclpy's spin_until_future_complete adds a done-callback closure to the future on every
+    executor wake-up (Jazzy's spin_once_until_future_complete): a future that stays pending for
+    a whole run (1 kHz of commands) grows without bound, and so does every full garbage
+    collection. Here one guard condition, triggered once when `done` completes, ends the
+    executor's plain spin_once loop, which keeps nothing from one wake-up to the next.
+    """
+    executor = SingleThreadedExecutor(context=node.context)
+    finished = node.create_guard_condition(lambda: None)  # destroyed with the node
+
+    def wake(_: Future) -> None:  # once, in the thread that completes `done` (a Future without executor)
+        with contextlib.suppress(InvalidHandle):  # the node is already destroyed: nobody waits
+            finished.trigger()
+
+    done.add_done_callback(wake)
+    executor.add_node(node)
+    try:
+        while node.context.ok() and not done.done():
+            executor.spin_once()
+    finally:
+        executor.shutdown(timeout_sec=0)
+
+
 def run(node_type: Callable[[], SteppingNode], name: str, args: Sequence[str] | None = None) -> int:
     """main() of a stepping node: start it, spin until it is done or interrupted, close its log."""
     rclpy.init(args=args)
@@ -633,7 +661,8 @@ def run(node_type: Callable[[], SteppingNode], name: str, args: Sequence[str] | 
     try:
         node = node_type()
         node.start()
-        rclpy.spin_until_future_complete(node, node.done)
+        gc.freeze()  # what start-up built lives for the run: no full collection walks it again
+        spin_until_done(node, node.done)
         if node.done.done():
             status = node.done.result()
             node.stop()
