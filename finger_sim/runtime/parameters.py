@@ -110,7 +110,8 @@ RUN_PARAMETERS = (
     Param("publish_clock", True, "publish /clock; with several fingers use finger_hand (one clock), or let exactly one node do it"),
     Param("record", True, "log every message the node publishes and receives to <record_dir>/<scene>_<UTC start>.mcap"),
     Param("record_dir", "bags", "folder of the MCAP logs (created if missing)"),
-    Param("record_chunk_interval", 0.5, "sim seconds after which the log's open chunk is closed: what a kill -9 can lose", (0.01, 60.0)),
+    Param("record_chunk_interval", 0.5, "sim seconds after which the log's open chunk is closed (and after 1 s of wall time, "
+          "also while paused): what a kill -9 can lose", (0.01, 60.0)),
     Param("record_time", "sim", "log time of the MCAP messages: 'sim' (sim time from 0, as /clock) or 'wall_start' "
           "(Unix time at the node's start + sim time); header stamps are sim time either way", choices=("sim", "wall_start")),
 )
