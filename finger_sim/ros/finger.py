@@ -44,6 +44,7 @@ class Finger:
         self.applied = self.initial_torque()  # N·m, over the last step
         self.max_residual = kinematics.constraint_norm(self.sim.system.params, self.sim.q)
         self.inbox = Inbox()
+        self.lockstep_timeouts = 0  # states whose command did not come within lockstep_timeout
         self.diagnostics = DiagnosticsWindow(time.perf_counter())
         self.msgs: dict[str, Any] = {}  # reused outgoing messages (conversions' out=)
         self.outputs: dict[str, Endpoint] = {}  # this finger's publishers by OUTPUTS key (`connect`)
@@ -59,6 +60,10 @@ class Finger:
         who = f"{node_name}: {self.spec.name + ' ' if self.spec.name else ''}"
         self.diag_name, self.event_name = who + "simulation", who + "command"
         self.hardware_id = self.spec.frame_prefix + "finger"
+
+    def has_controller(self) -> bool:
+        """Lockstep: some node publishes on one of this finger's command topics."""
+        return any(e.handle.get_publisher_count() > 0 for e in self.inputs)
 
     def initial_torque(self) -> float:
         """The torque shown at step 0 of an episode: the script's at t = 0, or none."""

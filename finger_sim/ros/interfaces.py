@@ -96,6 +96,7 @@ class InputSpec:
     msg_type: type
     read: Callable[[Any, str], tuple[tuple[float, ...], str | None]]
     recorded: bool = True
+    stamped: bool = False  # it has a header whose stamp names the state it answers (lockstep)
 
 
 #: Every topic the node publishes, by the key the node publishes it under.
@@ -121,7 +122,8 @@ COMMAND_INPUTS = (
     InputSpec("motor_torque", Float64, lambda msg, joint: ((msg.data,), None)),
     InputSpec("effort_commands", Float64MultiArray, lambda msg, joint: (tuple(msg.data), None)),
     InputSpec("joint_command", JointState,
-              lambda msg, joint: joint_effort(msg.name, len(msg.position), len(msg.velocity), msg.effort, joint)),
+              lambda msg, joint: joint_effort(msg.name, len(msg.position), len(msg.velocity), msg.effort, joint),
+              stamped=True),
 )
 
 

@@ -103,6 +103,11 @@ REQUEST_TIMEOUT_S = 10.0
 ACK_TIMEOUT_S = 1.0
 #: Wall time stop() waits for the stepping loop to end.
 JOIN_TIMEOUT_S = 5.0
+#: Lockstep: wall time between a controller's first command publisher showing up and the first
+#: state, so that discovery completes both ways and neither the state nor its answer is lost.
+LOCKSTEP_SETTLE_S = 0.5
+#: Lockstep: how often the loop looks for a controller before the first state, wall s.
+LOCKSTEP_POLL_S = 0.01
 #: Slack of the float comparisons on the time grid (publish instants), in steps.
 RATE_EPS = 1e-9
 #: Exit status for a configuration that cannot start (a bad parameter, scene or method).
@@ -150,6 +155,10 @@ class SteppingNode(Node):
         self._run_wall = 0.0  # wall s spent running before _run_since
         self._run_since: float | None = None  # set by start() and by state changes
         self._clock_warned = False
+        self._lockstep = s.lockstep
+        self._awaited_since = 0.0  # lockstep: wall time (perf_counter) the last state went out
+        self._controller_seen: float | None = None  # lockstep: wall time a controller of every finger showed up
+        self._lockstep_started = False  # lockstep: the first state has gone out
 
         # -- the hand-over from the executor thread --
         self._requests: collections.deque[tuple[Callable[[], Any], concurrent.futures.Future]] = collections.deque()
@@ -202,13 +211,14 @@ class SteppingNode(Node):
 
     def _subscribe(self, finger: Finger, spec: InputSpec, qos: QoSProfile) -> Endpoint:
         endpoint: list[Endpoint] = []
-        inbox, read, joint = finger.inbox, spec.read, finger.mcp_joint
+        inbox, read, joint, stamped = finger.inbox, spec.read, finger.mcp_joint, spec.stamped
 
         def on_command(msg: Any) -> None:  # executor thread: hand over, never touch the simulator
             self._record(endpoint[0], msg)
             values, refusal = read(msg, joint)
-            inbox.put(endpoint[0].topic, values, refusal)
-            if self.state is not RunState.RUNNING:  # an idle loop answers refusals without waiting
+            answers = inbox.put(endpoint[0].topic, values, refusal,
+                                conversions.from_time(msg.header.stamp) if stamped else None)
+            if answers or self.state is not RunState.RUNNING:  # an idle loop answers refusals without waiting
                 self._wake.set()
 
         sub = self.create_subscription(spec.msg_type, finger_topic(spec.topic, finger.spec.name), on_command, qos)
@@ -258,7 +268,8 @@ class SteppingNode(Node):
     def start(self) -> None:
         """Publish the description and the initial state, and start stepping (or wait, with start_paused)."""
         self._publish(self._description_out, String(data=self.robot_description))
-        self._publish_state(force=True)
+        if not self._lockstep:  # lockstep: the first state waits for a controller (_lockstep_turn)
+            self._publish_state(force=True)
         now = time.perf_counter()
         self._run_since = None if self.state is RunState.PAUSED else now
         for f in self.fingers:
@@ -312,6 +323,8 @@ class SteppingNode(Node):
                     if any(f.inbox for f in self.fingers):  # refusals are answered while paused; a valid command waits
                         self._take_commands()
                     self._sleep(IDLE_WAIT_S)
+                elif self._lockstep:
+                    self._lockstep_turn()
                 elif self.pacer is not None:
                     self._paced(self.pacer)
                 else:
@@ -364,6 +377,35 @@ class SteppingNode(Node):
         for _ in range(due):
             if not self._advance() or self.pacer is not pacer:  # a new realtime_factor: a new pacing run
                 return
+
+    def _lockstep_turn(self) -> None:
+        """Lockstep: step once every finger's command answering the published state has arrived,
+        or lockstep_timeout wall s after it went out (then count it and hold the last command).
+        The first state goes out once a controller publishes on a command topic of every finger."""
+        if not self._lockstep_started:
+            now = time.perf_counter()
+            if self._controller_seen is None and all(f.has_controller() for f in self.fingers):
+                self._controller_seen = now
+            if self._controller_seen is None or now - self._controller_seen < LOCKSTEP_SETTLE_S:
+                self._sleep(LOCKSTEP_POLL_S)
+                return
+            self._lockstep_started = True
+            self.get_logger().info("lockstep: a controller is connected; publishing the first state")
+            self._publish_state(force=True)
+            return
+        waiting = [f for f in self.fingers if f.inbox.waiting]
+        if waiting:
+            left = self._awaited_since + self.settings.lockstep_timeout - time.perf_counter()
+            if left > 0:
+                self._sleep(left)  # a command, a service request or a parameter change wakes it
+                return
+            for f in waiting:
+                f.lockstep_timeouts += 1
+            self.get_logger().warning(
+                f"lockstep: no command for the state at {self.stamp_ns * 1e-9!r} s within lockstep_timeout "
+                f"{self.settings.lockstep_timeout:g} s from {', '.join(f.spec.name or 'the finger' for f in waiting)}; "
+                "holding the last command", throttle_duration_sec=WARN_THROTTLE_S)
+        self._advance()
 
     def _advance(self) -> bool:
         """One physics step of every finger, then their messages; False once the run cannot go on."""
@@ -420,6 +462,7 @@ class SteppingNode(Node):
         if self._run_since is not None:
             self._run_wall += now - self._run_since
         self._run_since = now if state is RunState.RUNNING else None
+        self._awaited_since = now  # lockstep: a resumed run waits lockstep_timeout anew
         if self.pacer is not None:
             self.pacer.restart()
         self.state = state
@@ -539,6 +582,10 @@ class SteppingNode(Node):
         markers = force or _due(n, self._marker_ratio)
         if states:
             self._last_published = stamp
+            if self._lockstep:  # before anything goes out: the answer may come back at once
+                self._awaited_since = time.perf_counter()
+                for f in self.fingers:
+                    f.inbox.expect(stamp)
             if self._clock_out is not None:
                 self._clock_msg = conversions.clock(stamp, out=self._clock_msg)
                 self._publish(self._clock_out, self._clock_msg)
@@ -596,7 +643,8 @@ class SteppingNode(Node):
                 torque_source=s.torque_source.value, clock_s=self.stamp_ns * 1e-9, time_s=sim.time, step=sim.step_index,
                 episode=self.timeline.episode, realtime_factor_target=s.realtime_factor, steps_total=self.steps_total,
                 run_wall_s=run_wall, max_residual_m=f.max_residual, torque=f.applied,
-                commands_received=f.inbox.received, log=log, clock_publishers=clocks)
+                commands_received=f.inbox.received, log=log, clock_publishers=clocks,
+                lockstep_timeouts=f.lockstep_timeouts if self._lockstep else None)
             last = i == len(self.fingers) - 1
             level, message, values = f.diagnostics.report(snap, f.commands, self.pacer, now, new_window=last)
             statuses.append(conversions.status(f.diag_name, f.hardware_id, bytes([level]), message, values))

@@ -61,15 +61,43 @@ class Inbox:
 
     Each is (source, values, refusal): refusal is the reason an adapter already refused it for
     (e.g. `joint_effort`'s), None if the stepping loop is to check it.
+
+    Lockstep: the stepping loop calls `expect(stamp)` just before it publishes a state; the
+    command that answers it is the first one put after that with no stamp (motor_torque,
+    effort_commands) or with that stamp (joint_command's header.stamp). A stamped command for
+    another state is refused as stale. `waiting` is True until the answer has arrived. Without
+    lock (one writer each side, attribute writes atomic): `put` records which stamp it answered,
+    so an answer to an older state can never release a newer one.
     """
 
     def __init__(self) -> None:
         self._queue: collections.deque[tuple[str, tuple[float, ...], str | None]] = collections.deque()
         self.received = 0
+        self._expected: int | None = None  # stamp (ns) of the state awaiting its answer; None: not in lockstep
+        self._answered: int | None = None  # stamp the last answer was for
 
-    def put(self, source: str, values: Sequence[float], refusal: str | None = None) -> None:
+    def put(self, source: str, values: Sequence[float], refusal: str | None = None,
+            stamp_ns: int | None = None) -> bool:
+        """Hand over one command (stamp_ns: its header stamp, None if it has none); True if it
+        answers the state the stepping loop waits for."""
         self.received += 1
+        expected = self._expected
+        answers = expected is not None and (stamp_ns is None or stamp_ns == expected)
+        if expected is not None and stamp_ns is not None and stamp_ns != expected and refusal is None:
+            refusal = f"lockstep: stamp {stamp_ns} ns answers no state awaited (waiting for {expected} ns)"
         self._queue.append((source, tuple(values), refusal))
+        if answers:
+            self._answered = expected
+        return answers
+
+    def expect(self, stamp_ns: int) -> None:
+        """Lockstep: the state stamped `stamp_ns` is about to be published; wait for its answer."""
+        self._expected = stamp_ns
+
+    @property
+    def waiting(self) -> bool:
+        """Lockstep: the state last expected has no answer yet."""
+        return self._expected is not None and self._answered != self._expected
 
     def __bool__(self) -> bool:
         return bool(self._queue)

@@ -60,6 +60,7 @@ class Snapshot:
     commands_received: int
     log: LogStatus
     clock_publishers: int | None = None  # publishers of /clock seen, when this node publishes it
+    lockstep_timeouts: int | None = None  # states whose command did not come within lockstep_timeout; None: no lockstep
 
 
 class DiagnosticsWindow:
@@ -68,6 +69,7 @@ class DiagnosticsWindow:
     def __init__(self, now: float) -> None:
         self.wall = now  # wall s at the start of the current window
         self._steps, self._refused, self._dropped_steps = 0, 0, 0
+        self._lockstep_timeouts = 0
 
     def restart(self, now: float) -> None:
         """Start the first window at `now` (when stepping begins)."""
@@ -100,6 +102,11 @@ class DiagnosticsWindow:
         if refused_new or dropped_new:
             level = max(level, Level.WARN)
             problems.append(f"{refused_new} commands refused, {dropped_new} steps dropped in the last {window:.1f} s")
+        lockstep_new = (snap.lockstep_timeouts or 0) - self._lockstep_timeouts
+        if lockstep_new:
+            level = max(level, Level.WARN)
+            problems.append(f"lockstep: {lockstep_new} states without a command within lockstep_timeout "
+                            f"in the last {window:.1f} s (the held command went on)")
         message = "; ".join([snap.state, *problems])
         late_w = pacer.window if pacer is not None else Lateness()  # at realtime_factor 0: no wake-ups
         late = pacer.lateness if pacer is not None else late_w
@@ -139,7 +146,9 @@ class DiagnosticsWindow:
             "log_messages_dropped": log.dropped,
             "log_error": log.error if log.error is not None else "none",
             "clock_publishers": snap.clock_publishers if snap.clock_publishers is not None else "not publishing",
+            "lockstep_timeouts": snap.lockstep_timeouts if snap.lockstep_timeouts is not None else "no lockstep",
         }
+        self._lockstep_timeouts = snap.lockstep_timeouts or 0
         self.wall, self._steps = now, snap.steps_total
         self._refused, self._dropped_steps = counts.refused, dropped_steps
         if pacer is not None and new_window:

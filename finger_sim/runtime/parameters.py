@@ -112,6 +112,11 @@ RUN_PARAMETERS = (
     Param("record_dir", "bags", "folder of the MCAP logs (created if missing)"),
     Param("record_chunk_interval", 0.5, "sim seconds after which the log's open chunk is closed (and after 1 s of wall time, "
           "also while paused): what a kill -9 can lose", (0.01, 60.0)),
+    Param("lockstep", False, "wait for the controller: step k+1 only when the command answering the state of step k "
+          "has arrived (joint_command: header.stamp = that state's stamp; motor_torque, effort_commands: the first "
+          "command after it), or after lockstep_timeout"),
+    Param("lockstep_timeout", 1.0, "with lockstep: wall seconds to wait for a command before stepping on with the held "
+          "one (counted in /diagnostics)", (0.001, 3600.0)),
     Param("record_time", "sim", "log time of the MCAP messages: 'sim' (sim time from 0, as /clock) or 'wall_start' "
           "(Unix time at the node's start + sim time); header stamps are sim time either way", choices=("sim", "wall_start")),
 )
@@ -159,6 +164,8 @@ class RunSettings:
     record: bool
     record_dir: str
     record_chunk_interval: float
+    lockstep: bool
+    lockstep_timeout: float
     record_time: str
 
     @classmethod
@@ -169,6 +176,8 @@ class RunSettings:
             raise ParameterError.expected("publish_rate_hz", f"0 or a rate ≤ physics_rate_hz ({v['physics_rate_hz']:g} Hz)",
                                           v["publish_rate_hz"])
         v["torque_source"] = TorqueSource(v["torque_source"])
+        if v["lockstep"] and v["torque_source"] is TorqueSource.SCENE:
+            raise ParameterError.expected("lockstep", "false with torque_source 'scene' (no controller to wait for)", True)
         v["command_qos"] = CommandQos(v["command_qos"])
         cls._rules(v)
         return cls(**v)

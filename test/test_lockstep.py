@@ -1,0 +1,125 @@
+"""Lockstep (`lockstep:=true`): the node steps k+1 only when the command answering state k has come.
+
+References: the PD law (finger_sim.ros.pd_controller.pd_torque) evaluated in the test on each
+logged state, which must be the torque applied over the next step, bit for bit; a second run of
+the same closed loop, whose logged states must equal the first's bit for bit although the
+machine is loaded by a busy process; the commands this test sends itself and the events and
+diagnostics the node reports about them. Logs are read by rosbags (an independent reader).
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+rclpy = pytest.importorskip("rclpy")
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
+from rclpy.qos import QoSProfile  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+
+from finger_sim.ros import conversions  # noqa: E402
+from finger_sim.ros.pd_controller import KD, KP, MAX_TORQUE, pd_torque  # noqa: E402
+
+NODE = "finger_sim.ros.node"
+PD = "finger_sim.ros.pd_controller"
+DT_NS = 1_000_000
+SETPOINT = 0.8  # rad: a step from rest, so the loop moves the finger
+STEPS = 600  # states compared between the two runs
+#: Generous: a loaded machine must never make the controller miss it (the runs would differ).
+LOCKSTEP_TIMEOUT_S = 30.0
+#: A busy process that competes for the cores during the runs.
+BURN = "import time\nend = time.monotonic() + 300\nwhile time.monotonic() < end: pass\n"
+RELIABLE = QoSProfile(depth=1000)
+
+
+def read_log(folder: Path) -> list[tuple[str, object]]:
+    """(topic, message) of the one log in `folder`, by rosbags."""
+    from rosbags.highlevel import AnyReader
+
+    (path,) = folder.glob("*.mcap")
+    with AnyReader([path]) as reader:
+        return [(c.topic, reader.deserialize(raw, c.msgtype)) for c, _, raw in reader.messages()]
+
+
+def stamp_ns(msg) -> int:
+    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+
+
+def states_of(log: list[tuple[str, object]]) -> list[tuple[int, tuple, tuple, tuple]]:
+    return [(stamp_ns(m), tuple(m.position), tuple(m.velocity), tuple(m.effort)) for t, m in log if t == "/joint_states"]
+
+
+def last_values(log: list[tuple[str, object]]) -> dict[str, str]:
+    (status,) = [m for t, m in log if t == "/diagnostics"][-1].status
+    return {kv.key: kv.value for kv in status.values}
+
+
+def closed_loop_run(launcher, ros_client, tag: str) -> list[tuple[str, object]]:
+    """The PD controller and a lockstep node until STEPS states went out; the node's log."""
+    launcher.node(PD, dict(setpoint=SETPOINT), name=f"pd_{tag}")
+    node = launcher.node(NODE, dict(lockstep=True, lockstep_timeout=LOCKSTEP_TIMEOUT_S, realtime_factor=0.0,
+                                    command_qos="reliable", record_dir=f"bags_{tag}", marker_rate_hz=0.0),
+                         name=f"node_{tag}")
+    states = ros_client.collect(JointState, "/joint_states", RELIABLE)
+    ros_client.wait_for(lambda: states and stamp_ns(states[-1]) >= STEPS * DT_NS, f"{STEPS} lockstep states", 120.0)
+    assert node.stop() == 0, node.output()
+    return read_log(launcher.tmp / f"bags_{tag}")
+
+
+def test_two_lockstep_runs_of_the_pd_controller_are_identical_under_load(launcher, ros_client):
+    launcher.start([sys.executable, "-c", BURN], "burn")
+    first = closed_loop_run(launcher, ros_client, "a")
+    for proc in launcher.processes:  # the first run's controller must not answer the second's states
+        if "pd_a" in str(proc.log_path):
+            proc.stop()
+    second = closed_loop_run(launcher, ros_client, "b")
+
+    a, b = states_of(first), states_of(second)
+    assert len(a) > STEPS and len(b) > STEPS
+    assert [s[0] for s in a[:STEPS]] == [n * DT_NS for n in range(STEPS)]  # every step, each state once
+    assert a[:STEPS] == b[:STEPS]  # bit for bit
+    # each command answered state k and acted over step k → k+1: the applied mcp effort of state
+    # k+1 is the PD law of state k
+    for (_, pos, vel, _), (_, _, _, effort) in zip(a[:STEPS], a[1:STEPS]):
+        assert effort[0] == pd_torque(SETPOINT, pos[0], vel[0], KP, KD, MAX_TORQUE)
+    assert len([m for t, m in first if t == "/motor_torque"]) >= STEPS
+    assert last_values(first)["lockstep_timeouts"] == "0"
+
+
+def test_joint_command_stamps_and_a_silent_controller(launcher, ros_client):
+    """joint_command answers the state whose stamp it carries; a stale stamp is refused; once the
+    controller stops answering, each state waits lockstep_timeout, then the held command goes on,
+    and /diagnostics counts it and turns WARN."""
+    answers = {0: 0.01, 1: 0.02, 2: 0.03}  # state index → the effort answered
+    pub = ros_client.publisher(JointState, "/joint_command", RELIABLE)
+    states: list[JointState] = []
+
+    def answer(msg: JointState) -> None:
+        states.append(msg)
+        k = stamp_ns(msg) // DT_NS
+        if k in answers:
+            pub.publish(JointState(header=msg.header, name=["mcp_joint"], effort=[answers[k]]))
+        if k == 3:  # an answer to state 0 arrives late: stale, refused
+            pub.publish(JointState(header=states[0].header, name=["mcp_joint"], effort=[0.04]))
+
+    ros_client.node.create_subscription(JointState, "/joint_states", answer, RELIABLE)
+    events = ros_client.collect(DiagnosticStatus, "/finger_node/command_log", RELIABLE)
+    diagnostics = ros_client.collect(DiagnosticArray, "/diagnostics", RELIABLE)
+    launcher.node(NODE, dict(lockstep=True, lockstep_timeout=0.1, realtime_factor=0.0, command_qos="reliable",
+                             command_timeout=0.0))
+
+    def timeouts() -> int:
+        for d in reversed(diagnostics):
+            v = conversions.parse_values(d.status[0])
+            return int(v["lockstep_timeouts"]) if d.status[0].level == DiagnosticStatus.WARN else 0
+        return 0
+
+    ros_client.wait_for(lambda: timeouts() >= 3, "lockstep timeouts in /diagnostics", 60.0)
+    by_step = {stamp_ns(m) // DT_NS: m for m in states}
+    assert [by_step[k].effort[0] for k in range(1, 5)] == [0.01, 0.02, 0.03, 0.03]  # state k+1 shows answer k
+    assert all(by_step[k].effort[0] == 0.03 for k in by_step if k >= 4)  # held through the timeouts
+    refused = [conversions.parse_values(e) for e in events if conversions.parse_values(e)["event"] == "refused"]
+    assert len(refused) == 1 and "lockstep" in refused[0]["reason"] and refused[0]["requested"] == "0.04"
