@@ -123,3 +123,24 @@ def test_joint_command_stamps_and_a_silent_controller(launcher, ros_client):
     assert all(by_step[k].effort[0] == 0.03 for k in by_step if k >= 4)  # held through the timeouts
     refused = [conversions.parse_values(e) for e in events if conversions.parse_values(e)["event"] == "refused"]
     assert len(refused) == 1 and "lockstep" in refused[0]["reason"] and refused[0]["requested"] == "0.04"
+
+
+def test_a_lockstep_hand_waits_for_every_fingers_controller(launcher, ros_client):
+    """finger_hand in lockstep with one PD controller per finger (its namespace, its setpoint):
+    every finger's state k+1 shows the torque its own controller computed from its state k."""
+    fingers = {"index": 0.4, "middle": 0.8, "ring": 1.2}  # name → setpoint, rad
+    for name, setpoint in fingers.items():
+        launcher.node(PD, dict(setpoint=setpoint, joint=f"{name}_mcp_joint"), name=f"pd_{name}",
+                      ros_args=["-r", f"__ns:=/{name}"])
+    states = {name: ros_client.collect(JointState, f"/{name}/joint_states", RELIABLE) for name in fingers}
+    node = launcher.node("finger_sim.ros.hand", dict(lockstep=True, lockstep_timeout=LOCKSTEP_TIMEOUT_S,
+                                                     realtime_factor=0.0, command_qos="reliable", marker_rate_hz=0.0))
+    steps = 200
+    ros_client.wait_for(lambda: all(s and stamp_ns(s[-1]) >= steps * DT_NS for s in states.values()),
+                        f"{steps} lockstep states of every finger", 120.0)
+    assert node.stop() == 0, node.output()
+    for name, setpoint in fingers.items():
+        by_step = {stamp_ns(m) // DT_NS: m for m in states[name]}
+        for k in range(steps):
+            s, nxt = by_step[k], by_step[k + 1]
+            assert nxt.effort[0] == pd_torque(setpoint, s.position[0], s.velocity[0], KP, KD, MAX_TORQUE), (name, k)

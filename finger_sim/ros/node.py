@@ -31,6 +31,12 @@ running (`ros2 param set`); the change is checked against the same table, takes 
 next step, and is logged as an rcl_interfaces/ParameterEvent on /parameter_events at the stamp of
 that step. The others are read-only.
 
+Lockstep (`lockstep`): the state of step k is published and step k+1 waits until every finger's
+Inbox holds the command that answers it (runtime.commands.Inbox: joint_command by its
+header.stamp, motor_torque and effort_commands the first after the publish), or until
+lockstep_timeout wall s have passed (counted, in /diagnostics). The first state waits for a
+command publisher on every finger. realtime_factor is not used.
+
 robot_description (std_msgs/String, transient local): the URDF of the node's scene
 (finger_sim.urdf), published once at start and logged, so Foxglove shows the finger from a log.
 
