@@ -26,6 +26,8 @@ EXIT_ERROR = 2
 EXIT_TRUNCATED = 3
 #: Exit status of `resim` when the re-simulation deviates from the log.
 EXIT_DEVIATION = 4
+#: Exit status of export or resim on a log whose recorder dropped messages (without --accept-incomplete).
+EXIT_INCOMPLETE = 5
 
 #: MCP range of a real finger (the paper's Table I): the range `kinematics` sweeps, rad.
 MCP_RANGE = (0.0, math.pi / 2)
@@ -129,6 +131,16 @@ def _open_log(path: Path):  # type: ignore[no-untyped-def]
     return reader
 
 
+def _incomplete(reader, args: argparse.Namespace) -> bool:  # type: ignore[no-untyped-def]
+    """Warn about messages the recorder dropped; True if the command must stop (no --accept-incomplete)."""
+    if not reader.dropped:
+        return False
+    stop = not args.accept_incomplete
+    print(f"finger-sim: {'error' if stop else 'warning'}: {args.log}: incomplete log, {reader.dropped} messages were "
+          f"dropped while recording" + ("; --accept-incomplete uses what is there" if stop else ""), file=sys.stderr)
+    return stop
+
+
 @_log_command
 def _info(args: argparse.Namespace) -> int:
     from finger_sim.run_log import FINGER_SIM_METADATA
@@ -145,6 +157,8 @@ def _export(args: argparse.Namespace) -> int:
     csv = check_output_file(args.csv, argument="--csv") if args.csv else None
     plot = check_plot_file(args.plot, argument="--plot") if args.plot else None
     reader = _open_log(args.log)
+    if _incomplete(reader, args):
+        return EXIT_INCOMPLETE
     run = load_run(reader, events=False)
     traj = trajectory_from_log(run)
     print(f"{args.log}: {len(traj.t)} joint states of scene '{run.scene.name}' ({run.torque_source} torque)")
@@ -173,6 +187,8 @@ def _resim(args: argparse.Namespace) -> int:
     from finger_sim.run_log import load_run, resimulate
 
     reader = _open_log(args.log)
+    if _incomplete(reader, args):
+        return EXIT_INCOMPLETE
     result = resimulate(load_run(reader), kernel=args.kernel)
     print(result.summary())
     if reader.truncated:
@@ -284,12 +300,16 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument("--csv", type=Path, help="write the logged joint states (columns: see --columns)")
     _csv_options(export)
     export.add_argument("--plot", type=Path, help="write a PNG of θ1, θ2, θ3 against time")
+    export.add_argument("--accept-incomplete", action="store_true",
+                        help="export a log whose recorder dropped messages (else exit 5)")
     export.set_defaults(func=_export)
 
     resim = sub.add_parser("resim", help="re-simulate a node's MCAP log and report the deviation from it")
     resim.add_argument("log", type=Path)
     resim.add_argument("--kernel", choices=KERNELS,
                        help="step with this kernel instead of the one the log records (its metadata 'kernel')")
+    resim.add_argument("--accept-incomplete", action="store_true",
+                       help="re-simulate a log whose recorder dropped messages (else exit 5)")
     resim.set_defaults(func=_resim)
 
     repair = sub.add_parser("repair", help="rewrite the readable part of a cut log (kill -9, full disk) as a "

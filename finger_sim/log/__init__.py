@@ -25,12 +25,13 @@ from .errors import (
 )
 from .qos import OFFERED_QOS_PROFILES, offered_qos_profiles
 from .reader import LogMessage, LogReader, TopicInfo, read_log
-from .recorder import DEFAULT_CHUNK_INTERVAL_S, McapRecorder
+from .recorder import DEFAULT_CHUNK_INTERVAL_S, RECORDING_STATUS, McapRecorder
 
 __all__ = [
     "DEFAULT_CHUNK_INTERVAL_S",
     "DEFINITION_SEPARATOR",
     "OFFERED_QOS_PROFILES",
+    "RECORDING_STATUS",
     "DiagnosticStatusFields",
     "JointStateDecoder",
     "JointStateFields",

@@ -30,6 +30,8 @@ from mcap.stream_reader import StreamReader, breakup_chunk, get_chunk_data_strea
 from mcap.writer import MCAP0_MAGIC
 from mcap_ros2.decoder import DecoderFactory
 
+from .recorder import DROPPED_BY_TOPIC, MESSAGES_DROPPED, RECORDING_STATUS
+
 from .errors import (
     CorruptLogError,
     LogArgumentError,
@@ -124,6 +126,11 @@ class LogReader:
     def truncated(self) -> bool:
         """True if the file ends inside a record (only its intact prefix is readable)."""
         return self.truncation is not None
+
+    @property
+    def dropped(self) -> int:
+        """Messages the recorder dropped while recording (its status record, RECORDING_STATUS; 0 without one)."""
+        return int(self.metadata.get(RECORDING_STATUS, {}).get(MESSAGES_DROPPED, "0"))
 
     @property
     def duration_s(self) -> float:
@@ -282,6 +289,8 @@ class LogReader:
             ("File", str(self.path)),
             ("Size", _format_bytes(self.size)),
             ("Status", "complete" if self.truncation is None else f"TRUNCATED, {self.truncation.problem}"),
+            *([("Lost", f"INCOMPLETE: {self.dropped} messages dropped while recording "
+                        f"({self.metadata[RECORDING_STATUS].get(DROPPED_BY_TOPIC, '')})")] if self.dropped else []),
             ("Profile", f"{self.profile or '(none)'} (written by {self.library or 'unknown'})"),
             ("Duration", f"{self.duration_s:.9f} s"),
             ("Start", _format_time(self.start_ns)),

@@ -47,6 +47,15 @@ the caller: each kind of trouble is reported once through `on_problem` (default:
 writes nothing more. After close(), written + dropped == the number of write() calls that
 did not raise.
 
+Back-pressure: with `back_pressure` True (settable while open; a node running as fast as
+possible sets it) a full queue blocks write() until the writer thread has taken the buffer,
+instead of dropping: when there is no deadline to meet, losing data is never the right trade.
+
+Loss in the file: with `status_record` set, close() adds a metadata record of that name (before
+the summary) with the messages handed to the writer and those dropped, in total and by topic
+(`RECORDING_METADATA` keys), so a reader can tell a complete log from one with gaps without
+the process that wrote it.
+
 Creation: the file is created under a temporary name in the same folder, its header written
 and flushed, and only then renamed to `path`, so a kill at any moment leaves either no file
 or one that starts with a whole header (finger_sim.log.repair turns it into a valid log).
@@ -91,6 +100,12 @@ MAX_METADATA_BYTES = 1 << 16  # UTF-8 bytes of one metadata record's keys and va
 _NO_SIZE_TRIGGER = 1 << 62  # chunk_size given to mcap's Writer so only this module closes chunks
 _MAX_TIME_NS = 1 << 64  # MCAP timestamps are uint64
 _SEQUENCE_MODULUS = 1 << 32  # MCAP sequence numbers are uint32: they wrap
+#: The usual name of the status record (finger_sim's nodes write it; LogReader.dropped reads it).
+RECORDING_STATUS = "recording"
+#: The keys of the status record written at close (see `status_record`).
+MESSAGES_RECORDED, MESSAGES_DROPPED, DROPPED_BY_TOPIC = "messages_recorded", "messages_dropped", "dropped_by_topic"
+#: Longest a blocked write() waits before it checks the recorder's state again, wall s.
+_BACK_PRESSURE_POLL_S = 0.1
 _TOPIC = re.compile(r"^(/[A-Za-z_][A-Za-z0-9_]*)+$")  # absolute, fully expanded ROS 2 topic name
 LIBRARY = f"finger_sim.log; {LIBRARY_IDENTIFIER}"
 
@@ -168,6 +183,9 @@ class McapRecorder:
     time_offset_ns: added to every message's log and publish time (e.g. a wall-clock start
         for a caller whose clock starts at 0).
     on_problem: called once per kind of trouble with a one-line description.
+    back_pressure: a full queue blocks write() until there is room, instead of dropping.
+    status_record: name of the metadata record close() writes with the counts of messages
+        recorded and dropped (None: none).
     """
 
     def __init__(
@@ -183,6 +201,8 @@ class McapRecorder:
         handover_s: float = DEFAULT_HANDOVER_S,
         on_problem: Callable[[str], None] | None = None,
         time_offset_ns: int = 0,
+        back_pressure: bool = False,
+        status_record: str | None = None,
     ) -> None:
         if not (math.isfinite(chunk_interval_s) and chunk_interval_s > 0):
             raise LogArgumentError("chunk_interval_s", "a finite number > 0", chunk_interval_s)
@@ -212,6 +232,10 @@ class McapRecorder:
         # Items for the writer thread; deque.append and popleft are atomic, so neither side locks.
         self._buffer: deque[object] = deque()
         self._wake = threading.Event()  # set at close or when half of queue_size waits
+        self._room = threading.Event()  # set by the writer thread after each take of the buffer
+        self.back_pressure = back_pressure
+        self._status_record = status_record
+        self._dropped_by_topic: dict[str, int] = {}  # caller side, under _lock
         self._queued = 0  # messages appended to the buffer (caller side, under _lock)
         self._taken = 0  # messages taken from it (writer thread only)
         # Guards state, sequences, dropped. Reentrant: a signal handler that calls close()
@@ -253,6 +277,8 @@ class McapRecorder:
                 return
             was_open, self._state = self._state is _State.OPEN, _State.CLOSED
             if was_open:
+                if self._status_record is not None:
+                    self._buffer.append(_Metadata(self._status_record, self._status()))
                 self._buffer.append(_CLOSE)
                 self._wake.set()
         if was_open and self._thread is not None:
@@ -350,12 +376,15 @@ class McapRecorder:
             data = message
         else:
             data = self._serialized(topic, channel, message) if channel is not None else b""
+        if self.back_pressure:
+            self._wait_for_room()
         with self._lock:
             if self._state is not _State.OPEN or channel is None:  # closed, maybe meanwhile
                 self._dropped += 1
                 problem, text = _Problem.CLOSED, f"MCAP recorder {self._path} is closed; dropping messages"
             elif (waiting := self._queued - self._taken) >= self._queue_size:
                 self._dropped += 1
+                self._dropped_by_topic[topic] = self._dropped_by_topic.get(topic, 0) + 1
                 # The number is spent: the gap tells a reader where the drop was.
                 channel.last_sequence = (channel.last_sequence + 1) % _SEQUENCE_MODULUS
                 problem, text = _Problem.QUEUE_FULL, (
@@ -396,6 +425,18 @@ class McapRecorder:
         return self._error
 
     # -- internals ----------------------------------------------------------------------------
+
+    def _wait_for_room(self) -> None:
+        """Back-pressure: block while the queue is full and the writer can still take it."""
+        while self._queued - self._taken >= self._queue_size and self._state is _State.OPEN and self._error is None:
+            self._wake.set()
+            self._room.wait(_BACK_PRESSURE_POLL_S)
+            self._room.clear()
+
+    def _status(self) -> dict[str, str]:
+        """The status record: messages handed to the writer and dropped (in total and by topic)."""
+        by_topic = ", ".join(f"{topic}={n}" for topic, n in sorted(self._dropped_by_topic.items()))
+        return {MESSAGES_RECORDED: str(self._queued), MESSAGES_DROPPED: str(self._dropped), DROPPED_BY_TOPIC: by_topic}
 
     def _serialized(self, topic: str, channel: _Channel, message: Any) -> bytes:
         if isinstance(message, (bytes, bytearray, memoryview)):
@@ -459,6 +500,7 @@ class McapRecorder:
                     return
                 if file is not None:
                     file = self._apply(file, item, handed)
+            self._room.set()
             now = time.monotonic()
             if got_messages:
                 last_message = now

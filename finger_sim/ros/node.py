@@ -78,7 +78,7 @@ from std_msgs.msg import String
 from std_srvs.srv import SetBool, Trigger
 
 from finger_sim.errors import FingerSimError, SimulationDiverged
-from finger_sim.log import LogError, McapRecorder
+from finger_sim.log import RECORDING_STATUS, LogError, McapRecorder
 from finger_sim.ros import conversions, parameters
 from finger_sim.ros.finger import Finger
 from finger_sim.ros.interfaces import COMMAND_INPUTS, OUTPUTS, Endpoint, InputSpec, OutputSpec, command_qos, finger_topic
@@ -155,6 +155,7 @@ class SteppingNode(Node):
         self._marker_ratio = min(s.marker_rate_hz / s.physics_rate_hz, 1.0)
         self.pacer: Pacer | None = None
         self._clock_msg = None  # reused /clock message
+        self.recorder: McapRecorder | UnwritableLog | None = None  # opened at the end of __init__
         self._apply_settings(s)
         self._last_published = -1  # stamp of the last published state, ns
         self.steps_total = 0
@@ -248,6 +249,8 @@ class SteppingNode(Node):
             return log
         offset = log_time_offset_ns(s.record_time, time.time_ns())  # log time = stamp + offset
         rec = McapRecorder(path, chunk_interval_s=s.record_chunk_interval, on_problem=self.get_logger().error,
+                           queue_size=s.record_queue_size, back_pressure=s.realtime_factor == 0.0,
+                           status_record=RECORDING_STATUS,
                            time_offset_ns=offset).open()
         for endpoint in self._endpoints():
             if endpoint.recorded:
@@ -503,6 +506,8 @@ class SteppingNode(Node):
             if f.commands.max_torque != s.max_torque:
                 f.commands.set_max_torque(s.max_torque)
             f.commands.command_timeout = s.command_timeout
+        if self.recorder is not None:  # as fast as possible: no deadline, so wait for the log rather than drop
+            self.recorder.back_pressure = s.realtime_factor == 0.0
         if s.realtime_factor == 0.0:
             self.pacer = None
         elif self.pacer is None:

@@ -112,6 +112,7 @@ class UnwritableLog:
         self.error = error
         self.written = 0
         self.dropped = 0
+        self.back_pressure = False  # nothing to wait for
 
     def write(self, topic: str, message: object, log_time_ns: int) -> bool:
         self.dropped += 1

@@ -112,6 +112,8 @@ RUN_PARAMETERS = (
     Param("record_dir", "bags", "folder of the MCAP logs (created if missing)"),
     Param("record_chunk_interval", 0.5, "sim seconds after which the log's open chunk is closed (and after 1 s of wall time, "
           "also while paused): what a kill -9 can lose", (0.01, 60.0)),
+    Param("record_queue_size", 10_000, "messages that may wait for the log's writer; beyond it a real-time run drops "
+          "(counted in the log and /diagnostics) and a run as fast as possible waits", (1, 10_000_000)),
     Param("lockstep", False, "wait for the controller: step k+1 only when the command answering the state of step k "
           "has arrived (joint_command: header.stamp = that state's stamp; motor_torque, effort_commands: the first "
           "command after it), or after lockstep_timeout"),
@@ -164,6 +166,7 @@ class RunSettings:
     record: bool
     record_dir: str
     record_chunk_interval: float
+    record_queue_size: int
     lockstep: bool
     lockstep_timeout: float
     record_time: str
