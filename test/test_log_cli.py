@@ -137,7 +137,7 @@ def test_info_lists_what_mcap_reads(node_log: NodeLog) -> None:
     topic_lines = [line.removeprefix("Topics:").strip() for line in lines if " | " in line]
     assert topic_lines == [f"{topic} | {node_log.types[topic]} | {node_log.counts[topic]} msgs | cdr"
                            for topic in sorted(node_log.counts)]
-    assert "Metadata: finger_sim" in lines and "            torque_source: scene" in lines
+    assert "Metadata: finger_sim, recording" in lines and "            torque_source: scene" in lines
 
 
 def test_export_is_the_logged_states_in_paper_coordinates(node_log: NodeLog, simulated: np.ndarray,

@@ -138,13 +138,19 @@ def clock(stamp_ns: int, out: Clock | None = None) -> Clock:
     return msg
 
 
-def joint_state(frames: FingerFrames, q: Vec3, v: Vec3, torque: float, stamp_ns: int,
-                out: JointState | None = None) -> JointState:
-    """sensor_msgs/JointState: positions (rad), velocities (rad/s) and efforts (N·m) of spec §6.
+def joint_values(frames: FingerFrames, q: Vec3, v: Vec3, torque: float) -> tuple[Vec3, Vec3, Vec3]:
+    """The positions (rad), velocities (rad/s) and efforts (N·m) of the three joints (spec §6).
 
     torque: the motor torque applied over the step that ended in this state, N·m.
     """
     pos = joints.joint_positions(q, frames.q_ext, frames.alpha)
+    return pos, joints.joint_velocities(v), (float(torque), 0.0, -frames.stiffness * pos[2])
+
+
+def joint_state(frames: FingerFrames, q: Vec3, v: Vec3, torque: float, stamp_ns: int,
+                out: JointState | None = None) -> JointState:
+    """sensor_msgs/JointState: positions (rad), velocities (rad/s) and efforts (N·m) of spec §6
+    (`joint_values`)."""
     if out is None:
         msg = JointState()
         msg.header.frame_id = frames.base_frame
@@ -152,25 +158,31 @@ def joint_state(frames: FingerFrames, q: Vec3, v: Vec3, torque: float, stamp_ns:
     else:
         msg = out
     to_time(stamp_ns, msg.header.stamp)
-    msg.position = pos
-    msg.velocity = joints.joint_velocities(v)
-    msg.effort = (float(torque), 0.0, -frames.stiffness * pos[2])
+    msg.position, msg.velocity, msg.effort = joint_values(frames, q, v, torque)
     return msg
+
+
+def fingertip_values(frames: FingerFrames, q: Vec3) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
+    """The fingertip's position in `finger_base` (m) and the distal phalanx's orientation as the
+    quaternion (x, y, z, w)."""
+    tip = kinematics.fingertip(frames.params, q, frames.alpha)
+    w, x, y, z = about_y(tip.psi)
+    return to_base(tip.x, tip.y), (x, y, z, w)
 
 
 def fingertip_pose(frames: FingerFrames, q: Vec3, stamp_ns: int, out: PoseStamped | None = None) -> PoseStamped:
     """geometry_msgs/PoseStamped of the fingertip in `finger_base`, oriented with the distal phalanx."""
-    tip = kinematics.fingertip(frames.params, q, frames.alpha)
     if out is None:
         msg = PoseStamped()
         msg.header.frame_id = frames.base_frame
     else:
         msg = out
     to_time(stamp_ns, msg.header.stamp)
+    position, orientation = fingertip_values(frames, q)
     p = msg.pose.position
-    p.x, p.y, p.z = to_base(tip.x, tip.y)
+    p.x, p.y, p.z = position
     o = msg.pose.orientation
-    o.w, o.x, o.y, o.z = about_y(tip.psi)
+    o.x, o.y, o.z, o.w = orientation
     return msg
 
 

@@ -12,6 +12,7 @@ from collections.abc import Callable
 from typing import Any
 
 from finger_sim import joints, kinematics
+from finger_sim.log.cdr_writer import JointStateCdr, PoseStampedCdr
 from finger_sim.ros import conversions
 from finger_sim.ros.interfaces import Endpoint
 from finger_sim.run_log import CommandEvent
@@ -46,7 +47,9 @@ class Finger:
         self.inbox = Inbox()
         self.lockstep_timeouts = 0  # states whose command did not come within lockstep_timeout
         self.diagnostics = DiagnosticsWindow(time.perf_counter())
-        self.msgs: dict[str, Any] = {}  # reused outgoing messages (conversions' out=)
+        # the hot messages as CDR bytes, laid out once (finger_sim.log.cdr_writer)
+        self._joints_cdr = JointStateCdr(self.frames.base_frame, self.frames.joint_names)
+        self._pose_cdr = PoseStampedCdr(self.frames.base_frame)
         self.outputs: dict[str, Endpoint] = {}  # this finger's publishers by OUTPUTS key (`connect`)
         self.inputs: list[Endpoint] = []
         self.diag_name = self.event_name = self.hardware_id = ""
@@ -87,12 +90,10 @@ class Finger:
 
     def publish_state(self, publish: Callable[[Endpoint, Any], None], stamp: int, *, states: bool, markers: bool) -> None:
         """Publish this finger's joint states and fingertip pose (states) and markers, stamped `stamp` ns."""
-        m, q = self.msgs, self.sim.q
-        if states:
-            m["joints"] = conversions.joint_state(self.frames, q, self.sim.v, self.applied, stamp, out=m.get("joints"))
-            publish(self.joints_out, m["joints"])
-            m["pose"] = conversions.fingertip_pose(self.frames, q, stamp, out=m.get("pose"))
-            publish(self.pose_out, m["pose"])
+        q = self.sim.q
+        if states:  # CDR bytes: no message objects, no rclpy serialization
+            publish(self.joints_out, self._joints_cdr(stamp, *conversions.joint_values(self.frames, q, self.sim.v, self.applied)))
+            publish(self.pose_out, self._pose_cdr(stamp, *conversions.fingertip_values(self.frames, q)))
             if self.contact is not None:
                 for key, msg in self.contact.messages(*self.sim.state, stamp):
                     publish(self.outputs[key], msg)

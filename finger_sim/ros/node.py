@@ -79,6 +79,7 @@ from std_srvs.srv import SetBool, Trigger
 
 from finger_sim.errors import FingerSimError, SimulationDiverged
 from finger_sim.log import RECORDING_STATUS, LogError, McapRecorder
+from finger_sim.log.cdr_writer import clock_cdr
 from finger_sim.ros import conversions, parameters
 from finger_sim.ros.finger import Finger
 from finger_sim.ros.interfaces import COMMAND_INPUTS, OUTPUTS, Endpoint, InputSpec, OutputSpec, command_qos, finger_topic
@@ -154,7 +155,6 @@ class SteppingNode(Node):
         self._scene_steps = min(ends) if ends else None  # a scripted run ends with its shortest scene
         self._marker_ratio = min(s.marker_rate_hz / s.physics_rate_hz, 1.0)
         self.pacer: Pacer | None = None
-        self._clock_msg = None  # reused /clock message
         self.recorder: McapRecorder | UnwritableLog | None = None  # opened at the end of __init__
         self._apply_settings(s)
         self._last_published = -1  # stamp of the last published state, ns
@@ -598,8 +598,7 @@ class SteppingNode(Node):
                 for f in self.fingers:
                     f.inbox.expect(stamp)
             if self._clock_out is not None:
-                self._clock_msg = conversions.clock(stamp, out=self._clock_msg)
-                self._publish(self._clock_out, self._clock_msg)
+                self._publish(self._clock_out, clock_cdr(stamp))
         for f in self.fingers:
             f.publish_state(self._publish, stamp, states=states, markers=markers)
 
@@ -613,7 +612,7 @@ class SteppingNode(Node):
         if self.recorder is None or not out.recorded:
             out.handle.publish(msg)
             return
-        data = serialize_message(msg)
+        data = msg if type(msg) is bytes else serialize_message(msg)  # the hot topics come as CDR bytes
         out.handle.publish(data)
         self.recorder.write(out.topic, data, self.stamp_ns)
 
