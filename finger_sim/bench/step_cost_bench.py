@@ -1,0 +1,182 @@
+"""The stepping thread's message cost per step, old path against new, side by side in one process.
+
+    python -m finger_sim.bench.step_cost_bench [--steps 5000] [--rounds 7] [--out docs/node_performance.md]
+
+Per step a node publishes joint_states, fingertip_pose and /clock and, when recording, logs the
+same three. The old path (before issue 15) refilled three rclpy messages (finger_sim.ros.conversions),
+serialized each with rclpy, published and logged the bytes. The new path packs the three as CDR
+bytes with finger_sim.log.cdr_writer (no message objects), then publishes and logs those bytes.
+Both run here against the same publishers (nobody subscribed) and the same kind of recorder (an
+McapRecorder to a temporary file, zstd chunks, its writer thread running), rounds alternating
+old and new; the figures are medians over the rounds. Also the garbage collector's generation-0
+collections per 10 000 steps of each path (the allocations that feed it), and the physics step
+for scale.
+
+The report replaces the section between the STEP_COST markers of --out (added at the end if
+absent), so that node_bench's own figures in that file stay as they were.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import os
+import statistics
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from datetime import datetime, timezone
+from pathlib import Path
+
+from finger_sim.bench.processes import ROOT, isolate_dds, machine
+
+DEFAULT_DOMAIN_ID = 32
+BEGIN = "<!-- STEP_COST begin: written by finger_sim/bench/step_cost_bench.py -->"
+END = "<!-- STEP_COST end -->"
+
+
+def _paths(domain_id: int, folder: Path, steps: int, rounds: int) -> dict[str, object]:
+    import rclpy
+    from geometry_msgs.msg import PoseStamped
+    from rclpy.serialization import serialize_message
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import JointState
+
+    from finger_sim.log import McapRecorder
+    from finger_sim.log.cdr_writer import JointStateCdr, PoseStampedCdr, clock_cdr
+    from finger_sim.ros import conversions
+    from finger_sim.scene import load_scene
+    from finger_sim.scene_paths import resolve_scene
+    from finger_sim.simulate import Simulator
+
+    sim = Simulator(load_scene(resolve_scene("paper_flexion")).with_overrides(dt=1e-3))
+    frames = conversions.FingerFrames.from_system(sim.system)
+    q, v = sim.q, sim.v
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain_id)
+    node = rclpy.create_node("step_cost_bench", context=context)
+    js_pub = node.create_publisher(JointState, "/joint_states", 10)
+    pose_pub = node.create_publisher(PoseStamped, "/fingertip_pose", 10)
+    clock_pub = node.create_publisher(Clock, "/clock", 10)
+    joints_cdr, pose_cdr = JointStateCdr(frames.base_frame, frames.joint_names), PoseStampedCdr(frames.base_frame)
+    msgs: dict[str, object] = {}
+
+    def old(i: int, rec: McapRecorder | None) -> None:
+        msgs["js"] = conversions.joint_state(frames, q, v, 0.001, i, out=msgs.get("js"))
+        msgs["pose"] = conversions.fingertip_pose(frames, q, i, out=msgs.get("pose"))
+        msgs["clock"] = conversions.clock(i, out=msgs.get("clock"))
+        for pub, topic, key in ((clock_pub, "/clock", "clock"), (js_pub, "/joint_states", "js"),
+                                (pose_pub, "/fingertip_pose", "pose")):
+            if rec is None:
+                pub.publish(msgs[key])
+            else:
+                data = serialize_message(msgs[key])
+                pub.publish(data)
+                rec.write(topic, data, i)
+
+    def new(i: int, rec: McapRecorder | None) -> None:
+        for pub, topic, data in ((clock_pub, "/clock", clock_cdr(i)),
+                                 (js_pub, "/joint_states", joints_cdr(i, *conversions.joint_values(frames, q, v, 0.001))),
+                                 (pose_pub, "/fingertip_pose", pose_cdr(i, *conversions.fingertip_values(frames, q)))):
+            pub.publish(data)
+            if rec is not None:
+                rec.write(topic, data, i)
+
+    def timed(path: Callable[[int, McapRecorder | None], None], recording: bool, tag: str) -> tuple[float, int]:
+        """µs per step and gen-0 collections over `steps` steps."""
+        rec = None
+        if recording:
+            rec = McapRecorder(folder / f"{tag}.mcap", queue_size=10 * steps).open()
+            for topic, kind in (("/clock", Clock), ("/joint_states", JointState), ("/fingertip_pose", PoseStamped)):
+                rec.register_channel(topic, kind)
+        collections = gc.get_stats()[0]["collections"]
+        t = time.perf_counter()
+        for i in range(steps):
+            path(i * 1_000_000, rec)
+        us = (time.perf_counter() - t) / steps * 1e6
+        collected = gc.get_stats()[0]["collections"] - collections
+        if rec is not None:
+            rec.close()
+            assert rec.dropped == 0
+        return us, collected
+
+    try:
+        t = time.perf_counter()
+        for _ in range(steps):
+            sim.step(1e-4)
+        physics = (time.perf_counter() - t) / steps * 1e6
+        results: dict[tuple[str, bool], list[tuple[float, int]]] = {}
+        for r in range(rounds):
+            for recording in (False, True):
+                for name, path in (("old", old), ("new", new)):
+                    results.setdefault((name, recording), []).append(timed(path, recording, f"{name}{r}"))
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+    return {"physics": physics, "method": sim.method, "results": results}
+
+
+def report(measured: dict, command: str, steps: int, rounds: int) -> str:
+    results = measured["results"]
+
+    def us(name: str, recording: bool) -> float:
+        return statistics.median(r[0] for r in results[(name, recording)])
+
+    def gc0(name: str, recording: bool) -> float:
+        return statistics.median(r[1] for r in results[(name, recording)]) * 10_000 / steps
+
+    rows = []
+    for recording, label in ((False, "publish only"), (True, "publish and record")):
+        o, n = us("old", recording), us("new", recording)
+        rows.append(f"| {label} | {o:.1f} | {n:.1f} | {o / n:.2f}× | {gc0('old', recording):.0f} | {gc0('new', recording):.0f} |")
+    return "\n".join([
+        BEGIN,
+        "## The message path per step, old and new (issue 15)",
+        "",
+        f"Command: `{command}` ({datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC, {machine().get('cpu', '?')}, "
+        f"{os.cpu_count()} cores shared with other work). {rounds} rounds of {steps} steps, old and new alternating; "
+        "medians. Per step: joint_states, fingertip_pose and /clock published (nobody subscribed) and, when "
+        "recording, written to an McapRecorder (zstd chunks, writer thread running). Old: refill three rclpy "
+        "messages, rclpy's serialize_message, publish and log the bytes. New: finger_sim.log.cdr_writer packs the "
+        "CDR bytes from the state (no message objects), published and logged as they are.",
+        "",
+        "| per step | old µs | new µs | old/new | old gen-0 gc per 10k steps | new gen-0 gc per 10k steps |",
+        "|---|---|---|---|---|---|",
+        *rows,
+        "",
+        f"For scale: one physics step of paper_flexion ({measured['method']}) takes {measured['physics']:.1f} µs here.",
+        END,
+    ])
+
+
+def write_section(path: Path, section: str) -> None:
+    """Replace the STEP_COST section of `path` (or append it)."""
+    text = path.read_text() if path.exists() else ""
+    if BEGIN in text and END in text:
+        head, rest = text.split(BEGIN, 1)
+        text = head + section + rest.split(END, 1)[1]
+    else:
+        text = text.rstrip("\n") + "\n\n" + section + "\n"
+    path.write_text(text)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="step_cost_bench", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--steps", type=int, default=5000)
+    parser.add_argument("--rounds", type=int, default=7)
+    parser.add_argument("--domain-id", type=int, default=DEFAULT_DOMAIN_ID)
+    parser.add_argument("--out", type=Path, default=ROOT / "docs" / "node_performance.md")
+    args = parser.parse_args(argv)
+    isolate_dds(args.domain_id)
+    command = "python -m finger_sim.bench.step_cost_bench " + " ".join(argv if argv is not None else sys.argv[1:])
+    with tempfile.TemporaryDirectory(prefix="step_cost_") as tmp:
+        measured = _paths(args.domain_id, Path(tmp), args.steps, args.rounds)
+    section = report(measured, command.strip(), args.steps, args.rounds)
+    write_section(args.out, section)
+    print(section)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
