@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import NoReturn
 
 from finger_sim import __version__, kinematics
+from finger_sim.atomic_write import atomic_path, check_distinct
 from finger_sim.budget import DEFAULT_MAX_STEPS, check_budget
 from finger_sim.errors import ConfigError, FingerSimError
 from finger_sim.integrators import METHODS
@@ -26,6 +27,11 @@ EXIT_ERROR = 2
 EXIT_TRUNCATED = 3
 #: Exit status of `resim` when the re-simulation deviates from the log.
 EXIT_DEVIATION = 4
+#: Exit status of `resim`/`export` refusing a log's states: none, non-finite, duplicated or out of order.
+EXIT_INVALID_LOG = 5
+#: Exit status of a command that lost data of a damaged log: `repair` or `--salvage` skipped damaged
+#: chunks, or `info` found chunks that fail their CRC.
+EXIT_DATA_LOST = 6
 
 #: MCP range of a real finger (the paper's Table I): the range `kinematics` sweeps, rad.
 MCP_RANGE = (0.0, math.pi / 2)
@@ -39,6 +45,7 @@ def _simulate(args: argparse.Namespace) -> int:
     scene = load_scene(args.scene).with_overrides(method=args.method, dt=args.dt, duration=args.t_end)
     csv = check_output_file(args.csv, argument="--csv") if args.csv else None
     plot = check_plot_file(args.plot, argument="--plot") if args.plot else None
+    check_distinct({"SCENE": args.scene}, {"--csv": csv, "--plot": plot})
     streaming = csv is not None and plot is None
     check_budget(scene, max_steps=args.max_steps or DEFAULT_MAX_STEPS, streaming=streaming)
     if args.max_steps and scene.step_count > args.max_steps:  # a streamed run holds nothing: only a cap asked for
@@ -47,12 +54,14 @@ def _simulate(args: argparse.Namespace) -> int:
     if streaming and (args.columns != "paper" or args.every > 1):  # finger_sim.csv_columns
         from finger_sim.csv_columns import write_simulated
 
-        sim = write_simulated(csv, scene, columns=args.columns, every=args.every, kernel=args.kernel)
+        with atomic_path(csv) as part:
+            sim = write_simulated(part, scene, columns=args.columns, every=args.every, kernel=args.kernel)
         print(f"t = {sim.time:.4g} s  method = {sim.method}  steps = {sim.step_index}")
         print(f"wrote {csv} ({args.columns} columns, every {args.every} steps)")
         return 0
     if streaming:
-        run = stream_csv(scene, csv, kernel=args.kernel)
+        with atomic_path(csv) as part:
+            run = stream_csv(scene, part, kernel=args.kernel)
         print(run.summary())
         if run.method_reason:
             print(f"method auto → {run.method}: {run.method_reason}")
@@ -65,19 +74,22 @@ def _simulate(args: argparse.Namespace) -> int:
     if csv and (args.columns != "paper" or args.every > 1):
         from finger_sim.csv_columns import write_paper, write_ros
 
-        if args.columns == "ros":
-            samples = ((t, tuple(q), tuple(v), scene.torque(t)) for t, q, v in zip(traj.t, traj.q, traj.v))
-            write_ros(csv, scene.build_system(), samples, every=args.every, total=len(traj.t))
-        else:
-            write_paper(csv, traj, every=args.every)
+        with atomic_path(csv) as part:
+            if args.columns == "ros":
+                samples = ((t, tuple(q), tuple(v), scene.torque(t)) for t, q, v in zip(traj.t, traj.q, traj.v))
+                write_ros(part, scene.build_system(), samples, every=args.every, total=len(traj.t))
+            else:
+                write_paper(part, traj, every=args.every)
         print(f"wrote {csv}")
     elif csv:
-        traj.write_csv(csv)
+        with atomic_path(csv) as part:
+            traj.write_csv(part)
         print(f"wrote {csv}")
     if plot:
         from finger_sim.plots import plot_angles
 
-        plot_angles(traj.t, traj.q, plot, f"{scene.name}: {traj.method}, dt = {scene.dt:g} s", traj.outputs)
+        with atomic_path(plot) as part:
+            plot_angles(traj.t, traj.q, part, f"{scene.name}: {traj.method}, dt = {scene.dt:g} s", traj.outputs)
         print(f"wrote {plot}")
     return 0
 
@@ -98,7 +110,8 @@ def _kinematics(args: argparse.Namespace) -> int:
     if plot:
         from finger_sim.plots import plot_kinematics
 
-        plot_kinematics(p, MCP_RANGE, plot)
+        with atomic_path(plot) as part:
+            plot_kinematics(p, MCP_RANGE, part)
         print(f"wrote {plot}")
     return 0
 
@@ -109,11 +122,15 @@ def _log_command(command: Callable[[argparse.Namespace], int]) -> Callable[[argp
     @functools.wraps(command)
     def run(args: argparse.Namespace) -> int:
         from finger_sim.log import LogError
+        from finger_sim.run_log_checks import InvalidRunError
 
         try:
             return command(args)
         except LogError as exc:
             raise FingerSimError(str(exc)) from None
+        except InvalidRunError as exc:
+            print(f"finger-sim {args.command}: error: {_one_line(str(exc))}", file=sys.stderr)
+            return EXIT_INVALID_LOG
 
     return run
 
@@ -141,11 +158,14 @@ def _info(args: argparse.Namespace) -> int:
 @_log_command
 def _export(args: argparse.Namespace) -> int:
     from finger_sim.run_log import load_run, trajectory_from_log
+    from finger_sim.run_log_checks import check_states
 
     csv = check_output_file(args.csv, argument="--csv") if args.csv else None
     plot = check_plot_file(args.plot, argument="--plot") if args.plot else None
+    check_distinct({"LOG": args.log}, {"--csv": csv, "--plot": plot})
     reader = _open_log(args.log)
-    run = load_run(reader, events=False)
+    run = load_run(reader)  # with its events: a reset may repeat a stamp (run_log_checks)
+    check_states(run, args.log)
     traj = trajectory_from_log(run)
     print(f"{args.log}: {len(traj.t)} joint states of scene '{run.scene.name}' ({run.torque_source} torque)")
     if len(traj.t):
@@ -154,16 +174,18 @@ def _export(args: argparse.Namespace) -> int:
         from finger_sim.csv_columns import write_paper, write_ros
         from finger_sim.run_log import logged_samples
 
-        if args.columns == "ros":
-            rows = write_ros(csv, run.scene.build_system(), logged_samples(run), every=args.every,
-                             total=len(run.joint_states), desc="export")
-        else:
-            rows = write_paper(csv, traj, every=args.every, desc="export")
+        with atomic_path(csv) as part:
+            if args.columns == "ros":
+                rows = write_ros(part, run.scene.build_system(), logged_samples(run), every=args.every,
+                                 total=len(run.joint_states), desc="export")
+            else:
+                rows = write_paper(part, traj, every=args.every, desc="export")
         print(f"wrote {csv} ({rows} rows, {args.columns} columns)")
     if plot and len(traj.t):
         from finger_sim.plots import plot_angles
 
-        plot_angles(traj.t, traj.q, plot, f"{run.scene.name}: logged by finger_node ({traj.method})")
+        with atomic_path(plot) as part:
+            plot_angles(traj.t, traj.q, part, f"{run.scene.name}: logged by finger_node ({traj.method})")
         print(f"wrote {plot}")
     return EXIT_TRUNCATED if reader.truncated else 0
 
@@ -171,9 +193,12 @@ def _export(args: argparse.Namespace) -> int:
 @_log_command
 def _resim(args: argparse.Namespace) -> int:
     from finger_sim.run_log import load_run, resimulate
+    from finger_sim.run_log_checks import check_states
 
     reader = _open_log(args.log)
-    result = resimulate(load_run(reader), kernel=args.kernel)
+    run = load_run(reader)
+    check_states(run, args.log)
+    result = resimulate(run, kernel=args.kernel)
     print(result.summary())
     if reader.truncated:
         return EXIT_TRUNCATED
@@ -185,6 +210,7 @@ def _repair(args: argparse.Namespace) -> int:
     from finger_sim.log.repair import default_repair_path, repair_log
 
     out = check_output_file(args.out or default_repair_path(args.log), argument="-o/--out")
+    check_distinct({"LOG": args.log}, {"-o/--out": out})
     report = repair_log(args.log, out)
     print(report.summary())
     return 0
@@ -196,11 +222,13 @@ def _urdf(args: argparse.Namespace) -> int:
 
     scene = load_scene(args.scene)
     out = check_output_file(args.out, argument="-o/--out") if args.out else None
+    check_distinct({"SCENE": args.scene}, {"-o/--out": out})
     text = finger_urdf(scene.params, prefix=args.prefix)
     if out is None:
         sys.stdout.write(text)
     else:
-        out.write_text(text, encoding="utf-8")
+        with atomic_path(out) as part:
+            part.write_text(text, encoding="utf-8")
         print(f"wrote {out}")
     return 0
 
@@ -211,6 +239,7 @@ def _sweep(args: argparse.Namespace) -> int:
 
     out = check_output_file(args.out, argument="--out")
     plot = check_plot_file(args.plot, argument="--plot") if args.plot else None
+    check_distinct({"SCENE": args.scene}, {"--out": out, "--plot": plot})
     print(sweep(args.scene, args.vary, out, plot=plot, chunk=args.chunk, max_steps=args.max_steps or DEFAULT_MAX_SWEEP_STEPS))
     return 0
 

@@ -465,6 +465,8 @@ def resimulate(run: RecordedRun, *, kernel: str | None = None) -> ResimResult:
                 mine = joint_positions(sim.q, q_ext, alpha) + joint_velocities(sim.v)
                 if mine != theirs:  # the deviation only where there is one (resim is read-bound)
                     dev = max(abs(a - b) for a, b in zip(mine, theirs))
+                    if math.isnan(dev):  # a NaN on either side is a deviation, not "no larger than the max"
+                        dev = math.inf
                     worst = max(worst, dev)
                     if dev > 0.0 and first is None:
                         first = stamp_ns(offsets[episode], n, run.dt)

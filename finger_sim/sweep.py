@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from finger_sim.atomic_write import atomic_path
 from finger_sim.batch import BatchResult, run_batch
 from finger_sim.errors import ConfigError
 from finger_sim.scene import Scene, load_scene, scene_from_dict
@@ -235,8 +236,8 @@ def _check_distinct(varies: Sequence[Vary]) -> None:
 
 
 def write_rows(path: Path, header: Sequence[str], rows: Sequence[dict[str, Any]]) -> None:
-    """The rows as CSV (floats with 17 significant digits, as `simulate`'s CSV)."""
-    with path.open("w", newline="", encoding="utf-8") as f:
+    """The rows as CSV (floats with 17 significant digits, as `simulate`'s CSV), written atomically."""
+    with atomic_path(path) as part, part.open("w", newline="", encoding="utf-8") as f:
         writer = csv.writer(f)
         writer.writerow(header)
         for row in rows:
@@ -272,7 +273,8 @@ def plot_tips(scenes: Sequence[Scene], paths: Sequence, labels: Sequence[str], p
         ax.legend(loc="lower left", fontsize=7, title=f"first: {labels[0]}\nlast: {labels[-1]}", title_fontsize=7)
     fig.colorbar(collection, ax=ax, label="run (combination order)")
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    with atomic_path(path) as part:
+        fig.savefig(part, dpi=120)
     plt.close(fig)
 
 
