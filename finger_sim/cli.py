@@ -33,6 +33,9 @@ EXIT_INVALID_LOG = 5
 #: chunks, or `info` found chunks that fail their CRC.
 EXIT_DATA_LOST = 6
 
+#: Damaged parts a salvaging read names one by one before it only counts the rest.
+MAX_DAMAGE_LINES = 5
+
 #: MCP range of a real finger (the paper's Table I): the range `kinematics` sweeps, rad.
 MCP_RANGE = (0.0, math.pi / 2)
 
@@ -135,23 +138,44 @@ def _log_command(command: Callable[[argparse.Namespace], int]) -> Callable[[argp
     return run
 
 
-def _open_log(path: Path):  # type: ignore[no-untyped-def]
-    """A log reader; a truncated log is read up to its intact part, with a warning."""
+def _open_log(path: Path, *, salvage: bool = False):  # type: ignore[no-untyped-def]
+    """A log reader; a truncated log is read up to its intact part, with a warning.
+    salvage: damaged chunks are skipped (see `_salvaged`) instead of refused."""
     from finger_sim.log import read_log
 
-    reader = read_log(path)
+    reader = read_log(path, salvage=salvage)
     if reader.truncated:
         print(f"finger-sim: warning: {reader.truncation}; reading the intact part "
               f"(`finger-sim repair {path}` makes a complete copy)", file=sys.stderr)
     return reader
 
 
+def _salvaged(reader, command: str) -> bool:  # type: ignore[no-untyped-def]
+    """Warn (one line each, at most a few) of the damaged parts a salvaging read skipped; whether any were."""
+    for damage in reader.damage[:MAX_DAMAGE_LINES]:
+        print(f"finger-sim {command}: warning: skipped {_one_line(str(damage.error))} "
+              f"({damage.messages} messages by its index)", file=sys.stderr)
+    if len(reader.damage) > MAX_DAMAGE_LINES:
+        print(f"finger-sim {command}: warning: skipped {len(reader.damage) - MAX_DAMAGE_LINES} more damaged parts",
+              file=sys.stderr)
+    return bool(reader.damage)
+
+
 @_log_command
 def _info(args: argparse.Namespace) -> int:
     from finger_sim.run_log import FINGER_SIM_METADATA
 
-    reader = _open_log(args.log)
+    reader = _open_log(args.log, salvage=True)
     print(reader.info(FINGER_SIM_METADATA))
+    if args.no_verify:
+        print("Chunks:   not verified (--no-verify)")
+    else:
+        damage = reader.verify()
+        lost = sum(d.messages for d in damage)
+        print(f"Chunks:   {reader.chunk_count - len(damage)} of {reader.chunk_count} pass their CRC"
+              + (f"; {len(damage)} DAMAGED, holding {lost} messages (`finger-sim repair` keeps the rest)" if damage else ""))
+        if _salvaged(reader, "info"):
+            return EXIT_DATA_LOST
     return EXIT_TRUNCATED if reader.truncated else 0
 
 
@@ -163,7 +187,7 @@ def _export(args: argparse.Namespace) -> int:
     csv = check_output_file(args.csv, argument="--csv") if args.csv else None
     plot = check_plot_file(args.plot, argument="--plot") if args.plot else None
     check_distinct({"LOG": args.log}, {"--csv": csv, "--plot": plot})
-    reader = _open_log(args.log)
+    reader = _open_log(args.log, salvage=args.salvage)
     run = load_run(reader)  # with its events: a reset may repeat a stamp (run_log_checks)
     check_states(run, args.log)
     traj = trajectory_from_log(run)
@@ -187,6 +211,8 @@ def _export(args: argparse.Namespace) -> int:
         with atomic_path(plot) as part:
             plot_angles(traj.t, traj.q, part, f"{run.scene.name}: logged by finger_node ({traj.method})")
         print(f"wrote {plot}")
+    if _salvaged(reader, "export"):
+        return EXIT_DATA_LOST
     return EXIT_TRUNCATED if reader.truncated else 0
 
 
@@ -195,14 +221,16 @@ def _resim(args: argparse.Namespace) -> int:
     from finger_sim.run_log import load_run, resimulate
     from finger_sim.run_log_checks import check_states
 
-    reader = _open_log(args.log)
+    reader = _open_log(args.log, salvage=args.salvage)
     run = load_run(reader)
     check_states(run, args.log)
     result = resimulate(run, kernel=args.kernel)
     print(result.summary())
-    if reader.truncated:
-        return EXIT_TRUNCATED
-    return 0 if result.exact else EXIT_DEVIATION
+    if not result.exact:
+        return EXIT_DEVIATION
+    if _salvaged(reader, "resim"):
+        return EXIT_DATA_LOST
+    return EXIT_TRUNCATED if reader.truncated else 0
 
 
 @_log_command
@@ -213,7 +241,7 @@ def _repair(args: argparse.Namespace) -> int:
     check_distinct({"LOG": args.log}, {"-o/--out": out})
     report = repair_log(args.log, out)
     print(report.summary())
-    return 0
+    return EXIT_DATA_LOST if report.lost else 0
 
 
 def _urdf(args: argparse.Namespace) -> int:
@@ -306,6 +334,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     info = sub.add_parser("info", help="topics, counts, duration and scene of a node's MCAP log (like ros2 bag info)")
     info.add_argument("log", type=Path)
+    info.add_argument("--no-verify", action="store_true",
+                      help="skip reading every chunk to check its CRC (the summary alone is shown)")
     info.set_defaults(func=_info)
 
     export = sub.add_parser("export", help="a node's MCAP log as the simulate CSV and plot")
@@ -313,12 +343,16 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument("--csv", type=Path, help="write the logged joint states (columns: see --columns)")
     _csv_options(export)
     export.add_argument("--plot", type=Path, help="write a PNG of θ1, θ2, θ3 against time")
+    export.add_argument("--salvage", action="store_true",
+                        help="read past damaged chunks (each named on stderr; exit status 6)")
     export.set_defaults(func=_export)
 
     resim = sub.add_parser("resim", help="re-simulate a node's MCAP log and report the deviation from it")
     resim.add_argument("log", type=Path)
     resim.add_argument("--kernel", choices=KERNELS,
                        help="step with this kernel instead of the one the log records (its metadata 'kernel')")
+    resim.add_argument("--salvage", action="store_true",
+                       help="read past damaged chunks (each named on stderr; exit status 6)")
     resim.set_defaults(func=_resim)
 
     repair = sub.add_parser("repair", help="rewrite the readable part of a cut log (kill -9, full disk) as a "
