@@ -224,7 +224,7 @@ def _resim(args: argparse.Namespace) -> int:
     reader = _open_log(args.log, salvage=args.salvage)
     run = load_run(reader)
     check_states(run, args.log)
-    result = resimulate(run, kernel=args.kernel)
+    result = resimulate(run, kernel=args.kernel, max_steps=args.max_steps)
     print(result.summary())
     if not result.exact:
         return EXIT_DEVIATION
@@ -351,6 +351,8 @@ def build_parser() -> argparse.ArgumentParser:
     resim.add_argument("log", type=Path)
     resim.add_argument("--kernel", choices=KERNELS,
                        help="step with this kernel instead of the one the log records (its metadata 'kernel')")
+    resim.add_argument("--max-steps", type=_positive_int, metavar="N",
+                       help=f"refuse a re-simulation of more than N steps in all (default: {DEFAULT_MAX_STEPS:,})")
     resim.add_argument("--salvage", action="store_true",
                        help="read past damaged chunks (each named on stderr; exit status 6)")
     resim.set_defaults(func=_resim)
