@@ -332,3 +332,33 @@ def test_an_unknown_torque_key_is_named(tmp_path: Path) -> None:
     with pytest.raises(ConfigError) as info:
         load_scene(path)
     assert "unknown key" in str(info.value) and "got 'foo'" in str(info.value)
+
+
+# -- (10) sweep: counted before anything is built -------------------------------------------------
+def test_a_huge_sweep_is_refused_from_its_counts(capsys, tmp_path: Path) -> None:
+    """10⁸ combinations (eight keys of ten values): refused at once, in little memory, with the exact count."""
+    import tracemalloc
+
+    values = ",".join(f"{0.001 * (1 + k / 10):.4f}" for k in range(10))
+    vary = [f"model.damping={values}", f"input.torque.slope={values}", f"model.spring_stiffness={values}",
+            f"initial.theta1_dot={values}", f"name={','.join(f'run{k}' for k in range(10))}",
+            f"initial.theta1={','.join(f'{k * 0.01:.2f}' for k in range(10))}", f"input.torque.offset={values}",
+            f"duration={','.join(f'{0.1 + k * 0.01:.2f}' for k in range(10))}"]
+    tracemalloc.start()
+    try:
+        code, _, err = run(capsys, "sweep", PAPER, *[a for v in vary for a in ("--vary", v)], "--out", tmp_path / "s.csv")
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    dt = load_scene(PAPER).dt
+    steps = 10**7 * sum(math.ceil((0.1 + k * 0.01) / dt - 1e-9) for k in range(10))
+    assert code == EXIT_ERROR and f"100,000,000 runs, {steps:,} steps" in error_line(err)
+    assert peak < 50 << 20 and not (tmp_path / "s.csv").exists()
+
+
+def test_sweep_progress_is_a_few_lines_off_a_terminal(capsys, tmp_path: Path) -> None:
+    code, _, err = run(capsys, "sweep", PAPER, "--vary", "model.damping=0.001,0.002,0.003,0.004,0.005,0.006,0.007,0.008",
+                       "--vary", "duration=0.01", "--out", tmp_path / "s.csv")
+    assert code == 0
+    assert err.splitlines() == ["sweep: 8 of 8 runs (25 %)", "sweep: 8 of 8 runs (50 %)", "sweep: 8 of 8 runs (75 %)",
+                                "sweep: 8 of 8 runs (100 %)"]
