@@ -362,3 +362,27 @@ def test_sweep_progress_is_a_few_lines_off_a_terminal(capsys, tmp_path: Path) ->
     assert code == 0
     assert err.splitlines() == ["sweep: 8 of 8 runs (25 %)", "sweep: 8 of 8 runs (50 %)", "sweep: 8 of 8 runs (75 %)",
                                 "sweep: 8 of 8 runs (100 %)"]
+
+
+# -- the node: a FIFO scene, a namespace rmw refuses ---------------------------------------------
+NODE_TIMEOUT_S = 60.0
+
+
+@pytest.mark.parametrize("case", ["fifo", "namespace"])
+def test_the_node_refuses_in_one_line(launcher, tmp_path: Path, case: str) -> None:
+    pytest.importorskip("rclpy")
+    params = {"record": False}
+    ros_args: list[str] = []
+    if case == "fifo":
+        fifo = tmp_path / "scene.yaml"
+        os.mkfifo(fifo)
+        params["scene"] = str(fifo)
+    else:
+        ros_args = ["-r", "__ns:=/" + "a" * 250]
+    node = launcher.node("finger_sim.ros.node", params, ros_args=ros_args)
+    assert node.wait(NODE_TIMEOUT_S) == EXIT_ERROR, node.output()
+    out = node.output()
+    assert "Traceback" not in out
+    errors = [line for line in out.splitlines() if "[ERROR]" in line]
+    assert len(errors) == 1 and "cannot start: " in errors[0], out
+    assert ("regular file" if case == "fifo" else "invalid node namespace") in errors[0]
