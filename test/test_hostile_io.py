@@ -386,3 +386,24 @@ def test_the_node_refuses_in_one_line(launcher, tmp_path: Path, case: str) -> No
     errors = [line for line in out.splitlines() if "[ERROR]" in line]
     assert len(errors) == 1 and "cannot start: " in errors[0], out
     assert ("regular file" if case == "fifo" else "invalid node namespace") in errors[0]
+
+
+def test_replay_names_a_topic_of_a_foreign_type(launcher, tmp_path: Path) -> None:
+    """/joint_states recorded as std_msgs/msg/Float64: republished as recorded, with a warning naming both types."""
+    pytest.importorskip("rclpy")
+    import sys
+
+    from finger_sim.log import McapRecorder
+
+    path = tmp_path / "foreign_type.mcap"
+    with McapRecorder(path) as rec:
+        rec.register_channel("/joint_states", "std_msgs/msg/Float64", definition=message_definition("std_msgs/msg/Float64"))
+        rec.write("/joint_states", {"data": 1.5}, 1_000_000)
+    done = launcher.start([sys.executable, "-m", "finger_sim.ros.replay", str(path), "--no-clock"], "replay",
+                          separate_stderr=True).finish(NODE_TIMEOUT_S)
+    code, _, err = done
+    assert code == 0, err
+    warnings = [line for line in err.splitlines() if "warning" in line]
+    assert warnings == ["finger_replay: warning: /joint_states: recorded as std_msgs/msg/Float64, not "
+                        "sensor_msgs/msg/JointState as finger_node's topic of that name; republished as "
+                        "std_msgs/msg/Float64, so subscribers expecting sensor_msgs/msg/JointState will not receive it"]
