@@ -359,7 +359,7 @@ class LogReader:
         """Index from the summary section; False if there is none or it is damaged."""
         file.seek(0)
         try:
-            reader = SeekingReader(file)
+            reader = SeekingReader(file, record_size_limit=self.size)  # no record longer than the file is read
             header = reader.get_header()
             summary = reader.get_summary()
             if summary is None or summary.statistics is None:
