@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import NoReturn
 
 from finger_sim import __version__, kinematics
+from finger_sim.atomic_write import atomic_path, check_distinct
 from finger_sim.budget import DEFAULT_MAX_STEPS, check_budget
 from finger_sim.errors import ConfigError, FingerSimError
 from finger_sim.integrators import METHODS
@@ -26,8 +27,16 @@ EXIT_ERROR = 2
 EXIT_TRUNCATED = 3
 #: Exit status of `resim` when the re-simulation deviates from the log.
 EXIT_DEVIATION = 4
+#: Exit status of `resim`/`export` refusing a log's states: none, non-finite, duplicated or out of order.
+EXIT_INVALID_LOG = 5
+#: Exit status of a command that lost data of a damaged log: `repair` or `--salvage` skipped damaged
+#: chunks, or `info` found chunks that fail their CRC.
+EXIT_DATA_LOST = 6
 #: Exit status of export or resim on a log whose recorder dropped messages (without --accept-incomplete).
-EXIT_INCOMPLETE = 5
+EXIT_INCOMPLETE = 7
+
+#: Damaged parts a salvaging read names one by one before it only counts the rest.
+MAX_DAMAGE_LINES = 5
 
 #: MCP range of a real finger (the paper's Table I): the range `kinematics` sweeps, rad.
 MCP_RANGE = (0.0, math.pi / 2)
@@ -41,6 +50,7 @@ def _simulate(args: argparse.Namespace) -> int:
     scene = load_scene(args.scene).with_overrides(method=args.method, dt=args.dt, duration=args.t_end)
     csv = check_output_file(args.csv, argument="--csv") if args.csv else None
     plot = check_plot_file(args.plot, argument="--plot") if args.plot else None
+    check_distinct({"SCENE": args.scene}, {"--csv": csv, "--plot": plot})
     streaming = csv is not None and plot is None
     check_budget(scene, max_steps=args.max_steps or DEFAULT_MAX_STEPS, streaming=streaming)
     if args.max_steps and scene.step_count > args.max_steps:  # a streamed run holds nothing: only a cap asked for
@@ -49,12 +59,14 @@ def _simulate(args: argparse.Namespace) -> int:
     if streaming and (args.columns != "paper" or args.every > 1):  # finger_sim.csv_columns
         from finger_sim.csv_columns import write_simulated
 
-        sim = write_simulated(csv, scene, columns=args.columns, every=args.every, kernel=args.kernel)
+        with atomic_path(csv) as part:
+            sim = write_simulated(part, scene, columns=args.columns, every=args.every, kernel=args.kernel)
         print(f"t = {sim.time:.4g} s  method = {sim.method}  steps = {sim.step_index}")
         print(f"wrote {csv} ({args.columns} columns, every {args.every} steps)")
         return 0
     if streaming:
-        run = stream_csv(scene, csv, kernel=args.kernel)
+        with atomic_path(csv) as part:
+            run = stream_csv(scene, part, kernel=args.kernel)
         print(run.summary())
         if run.method_reason:
             print(f"method auto → {run.method}: {run.method_reason}")
@@ -67,19 +79,22 @@ def _simulate(args: argparse.Namespace) -> int:
     if csv and (args.columns != "paper" or args.every > 1):
         from finger_sim.csv_columns import write_paper, write_ros
 
-        if args.columns == "ros":
-            samples = ((t, tuple(q), tuple(v), scene.torque(t)) for t, q, v in zip(traj.t, traj.q, traj.v))
-            write_ros(csv, scene.build_system(), samples, every=args.every, total=len(traj.t))
-        else:
-            write_paper(csv, traj, every=args.every)
+        with atomic_path(csv) as part:
+            if args.columns == "ros":
+                samples = ((t, tuple(q), tuple(v), scene.torque(t)) for t, q, v in zip(traj.t, traj.q, traj.v))
+                write_ros(part, scene.build_system(), samples, every=args.every, total=len(traj.t))
+            else:
+                write_paper(part, traj, every=args.every)
         print(f"wrote {csv}")
     elif csv:
-        traj.write_csv(csv)
+        with atomic_path(csv) as part:
+            traj.write_csv(part)
         print(f"wrote {csv}")
     if plot:
         from finger_sim.plots import plot_angles
 
-        plot_angles(traj.t, traj.q, plot, f"{scene.name}: {traj.method}, dt = {scene.dt:g} s", traj.outputs)
+        with atomic_path(plot) as part:
+            plot_angles(traj.t, traj.q, part, f"{scene.name}: {traj.method}, dt = {scene.dt:g} s", traj.outputs)
         print(f"wrote {plot}")
     return 0
 
@@ -100,7 +115,8 @@ def _kinematics(args: argparse.Namespace) -> int:
     if plot:
         from finger_sim.plots import plot_kinematics
 
-        plot_kinematics(p, MCP_RANGE, plot)
+        with atomic_path(plot) as part:
+            plot_kinematics(p, MCP_RANGE, part)
         print(f"wrote {plot}")
     return 0
 
@@ -111,20 +127,25 @@ def _log_command(command: Callable[[argparse.Namespace], int]) -> Callable[[argp
     @functools.wraps(command)
     def run(args: argparse.Namespace) -> int:
         from finger_sim.log import LogError
+        from finger_sim.run_log_checks import InvalidRunError
 
         try:
             return command(args)
         except LogError as exc:
             raise FingerSimError(str(exc)) from None
+        except InvalidRunError as exc:
+            print(f"finger-sim {args.command}: error: {_one_line(str(exc))}", file=sys.stderr)
+            return EXIT_INVALID_LOG
 
     return run
 
 
-def _open_log(path: Path):  # type: ignore[no-untyped-def]
-    """A log reader; a truncated log is read up to its intact part, with a warning."""
+def _open_log(path: Path, *, salvage: bool = False):  # type: ignore[no-untyped-def]
+    """A log reader; a truncated log is read up to its intact part, with a warning.
+    salvage: damaged chunks are skipped (see `_salvaged`) instead of refused."""
     from finger_sim.log import read_log
 
-    reader = read_log(path)
+    reader = read_log(path, salvage=salvage)
     if reader.truncated:
         print(f"finger-sim: warning: {reader.truncation}; reading the intact part "
               f"(`finger-sim repair {path}` makes a complete copy)", file=sys.stderr)
@@ -141,25 +162,48 @@ def _incomplete(reader, args: argparse.Namespace) -> bool:  # type: ignore[no-un
     return stop
 
 
+def _salvaged(reader, command: str) -> bool:  # type: ignore[no-untyped-def]
+    """Warn (one line each, at most a few) of the damaged parts a salvaging read skipped; whether any were."""
+    for damage in reader.damage[:MAX_DAMAGE_LINES]:
+        print(f"finger-sim {command}: warning: skipped {_one_line(str(damage.error))} "
+              f"({damage.messages} messages by its index)", file=sys.stderr)
+    if len(reader.damage) > MAX_DAMAGE_LINES:
+        print(f"finger-sim {command}: warning: skipped {len(reader.damage) - MAX_DAMAGE_LINES} more damaged parts",
+              file=sys.stderr)
+    return bool(reader.damage)
+
+
 @_log_command
 def _info(args: argparse.Namespace) -> int:
     from finger_sim.run_log import FINGER_SIM_METADATA
 
-    reader = _open_log(args.log)
+    reader = _open_log(args.log, salvage=True)
     print(reader.info(FINGER_SIM_METADATA))
+    if args.no_verify:
+        print("Chunks:   not verified (--no-verify)")
+    else:
+        damage = reader.verify()
+        lost = sum(d.messages for d in damage)
+        print(f"Chunks:   {reader.chunk_count - len(damage)} of {reader.chunk_count} pass their CRC"
+              + (f"; {len(damage)} DAMAGED, holding {lost} messages (`finger-sim repair` keeps the rest)" if damage else ""))
+        if _salvaged(reader, "info"):
+            return EXIT_DATA_LOST
     return EXIT_TRUNCATED if reader.truncated else 0
 
 
 @_log_command
 def _export(args: argparse.Namespace) -> int:
     from finger_sim.run_log import load_run, trajectory_from_log
+    from finger_sim.run_log_checks import check_states
 
     csv = check_output_file(args.csv, argument="--csv") if args.csv else None
     plot = check_plot_file(args.plot, argument="--plot") if args.plot else None
-    reader = _open_log(args.log)
+    check_distinct({"LOG": args.log}, {"--csv": csv, "--plot": plot})
+    reader = _open_log(args.log, salvage=args.salvage)
     if _incomplete(reader, args):
         return EXIT_INCOMPLETE
-    run = load_run(reader, events=False)
+    run = load_run(reader)  # with its events: a reset may repeat a stamp (run_log_checks)
+    check_states(run, args.log)
     traj = trajectory_from_log(run)
     print(f"{args.log}: {len(traj.t)} joint states of scene '{run.scene.name}' ({run.torque_source} torque)")
     if len(traj.t):
@@ -168,32 +212,41 @@ def _export(args: argparse.Namespace) -> int:
         from finger_sim.csv_columns import write_paper, write_ros
         from finger_sim.run_log import logged_samples
 
-        if args.columns == "ros":
-            rows = write_ros(csv, run.scene.build_system(), logged_samples(run), every=args.every,
-                             total=len(run.joint_states), desc="export")
-        else:
-            rows = write_paper(csv, traj, every=args.every, desc="export")
+        with atomic_path(csv) as part:
+            if args.columns == "ros":
+                rows = write_ros(part, run.scene.build_system(), logged_samples(run), every=args.every,
+                                 total=len(run.joint_states), desc="export")
+            else:
+                rows = write_paper(part, traj, every=args.every, desc="export")
         print(f"wrote {csv} ({rows} rows, {args.columns} columns)")
     if plot and len(traj.t):
         from finger_sim.plots import plot_angles
 
-        plot_angles(traj.t, traj.q, plot, f"{run.scene.name}: logged by finger_node ({traj.method})")
+        with atomic_path(plot) as part:
+            plot_angles(traj.t, traj.q, part, f"{run.scene.name}: logged by finger_node ({traj.method})")
         print(f"wrote {plot}")
+    if _salvaged(reader, "export"):
+        return EXIT_DATA_LOST
     return EXIT_TRUNCATED if reader.truncated else 0
 
 
 @_log_command
 def _resim(args: argparse.Namespace) -> int:
     from finger_sim.run_log import load_run, resimulate
+    from finger_sim.run_log_checks import check_states
 
-    reader = _open_log(args.log)
+    reader = _open_log(args.log, salvage=args.salvage)
     if _incomplete(reader, args):
         return EXIT_INCOMPLETE
-    result = resimulate(load_run(reader), kernel=args.kernel)
+    run = load_run(reader)
+    check_states(run, args.log)
+    result = resimulate(run, kernel=args.kernel, max_steps=args.max_steps)
     print(result.summary())
-    if reader.truncated:
-        return EXIT_TRUNCATED
-    return 0 if result.exact else EXIT_DEVIATION
+    if not result.exact:
+        return EXIT_DEVIATION
+    if _salvaged(reader, "resim"):
+        return EXIT_DATA_LOST
+    return EXIT_TRUNCATED if reader.truncated else 0
 
 
 @_log_command
@@ -201,9 +254,10 @@ def _repair(args: argparse.Namespace) -> int:
     from finger_sim.log.repair import default_repair_path, repair_log
 
     out = check_output_file(args.out or default_repair_path(args.log), argument="-o/--out")
+    check_distinct({"LOG": args.log}, {"-o/--out": out})
     report = repair_log(args.log, out)
     print(report.summary())
-    return 0
+    return EXIT_DATA_LOST if report.lost else 0
 
 
 def _urdf(args: argparse.Namespace) -> int:
@@ -212,11 +266,13 @@ def _urdf(args: argparse.Namespace) -> int:
 
     scene = load_scene(args.scene)
     out = check_output_file(args.out, argument="-o/--out") if args.out else None
+    check_distinct({"SCENE": args.scene}, {"-o/--out": out})
     text = finger_urdf(scene.params, prefix=args.prefix)
     if out is None:
         sys.stdout.write(text)
     else:
-        out.write_text(text, encoding="utf-8")
+        with atomic_path(out) as part:
+            part.write_text(text, encoding="utf-8")
         print(f"wrote {out}")
     return 0
 
@@ -227,6 +283,7 @@ def _sweep(args: argparse.Namespace) -> int:
 
     out = check_output_file(args.out, argument="--out")
     plot = check_plot_file(args.plot, argument="--plot") if args.plot else None
+    check_distinct({"SCENE": args.scene}, {"--out": out, "--plot": plot})
     print(sweep(args.scene, args.vary, out, plot=plot, chunk=args.chunk, max_steps=args.max_steps or DEFAULT_MAX_SWEEP_STEPS))
     return 0
 
@@ -293,6 +350,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     info = sub.add_parser("info", help="topics, counts, duration and scene of a node's MCAP log (like ros2 bag info)")
     info.add_argument("log", type=Path)
+    info.add_argument("--no-verify", action="store_true",
+                      help="skip reading every chunk to check its CRC (the summary alone is shown)")
     info.set_defaults(func=_info)
 
     export = sub.add_parser("export", help="a node's MCAP log as the simulate CSV and plot")
@@ -301,7 +360,9 @@ def build_parser() -> argparse.ArgumentParser:
     _csv_options(export)
     export.add_argument("--plot", type=Path, help="write a PNG of θ1, θ2, θ3 against time")
     export.add_argument("--accept-incomplete", action="store_true",
-                        help="export a log whose recorder dropped messages (else exit 5)")
+                        help="export a log whose recorder dropped messages (else exit 7)")
+    export.add_argument("--salvage", action="store_true",
+                        help="read past damaged chunks (each named on stderr; exit status 6)")
     export.set_defaults(func=_export)
 
     resim = sub.add_parser("resim", help="re-simulate a node's MCAP log and report the deviation from it")
@@ -309,7 +370,11 @@ def build_parser() -> argparse.ArgumentParser:
     resim.add_argument("--kernel", choices=KERNELS,
                        help="step with this kernel instead of the one the log records (its metadata 'kernel')")
     resim.add_argument("--accept-incomplete", action="store_true",
-                       help="re-simulate a log whose recorder dropped messages (else exit 5)")
+                       help="re-simulate a log whose recorder dropped messages (else exit 7)")
+    resim.add_argument("--max-steps", type=_positive_int, metavar="N",
+                       help=f"refuse a re-simulation of more than N steps in all (default: {DEFAULT_MAX_STEPS:,})")
+    resim.add_argument("--salvage", action="store_true",
+                       help="read past damaged chunks (each named on stderr; exit status 6)")
     resim.set_defaults(func=_resim)
 
     repair = sub.add_parser("repair", help="rewrite the readable part of a cut log (kill -9, full disk) as a "

@@ -2,7 +2,37 @@
 
 from __future__ import annotations
 
+import reprlib
 from typing import Any
+
+#: Characters of a value shown in an error message: a refused value may be megabytes long.
+MAX_SHOWN_CHARS = 300
+
+
+class _ShortRepr(reprlib.Repr):
+    """reprlib's bounded repr, mappings in their own order (as repr() shows them), not sorted."""
+
+    def repr_dict(self, x: dict[Any, Any], level: int) -> str:
+        if not x:
+            return "{}"
+        if level <= 0:
+            return "{...}"
+        items = [f"{self.repr1(k, level - 1)}: {self.repr1(v, level - 1)}" for k, v in list(x.items())[:self.maxdict]]
+        return "{" + ", ".join(items) + (", ..." if len(x) > self.maxdict else "") + "}"
+
+
+_SHORT = _ShortRepr()
+_SHORT.maxstring = _SHORT.maxother = _SHORT.maxlong = MAX_SHOWN_CHARS
+_SHORT.maxlist = _SHORT.maxtuple = _SHORT.maxdict = _SHORT.maxset = 8
+
+
+def shown(value: Any) -> str:
+    """repr() of `value` for a message, bounded before it is built (a string cut at its end;
+    lists and mappings by reprlib, with '...'), so a huge value costs nothing to refuse."""
+    if isinstance(value, str):
+        return repr(value) if len(value) <= MAX_SHOWN_CHARS else repr(value[:MAX_SHOWN_CHARS]) + "…"
+    text = _SHORT.repr(value)
+    return text if len(text) <= MAX_SHOWN_CHARS else text[:MAX_SHOWN_CHARS] + "…"
 
 
 class FingerSimError(Exception):
@@ -14,7 +44,7 @@ class ConfigError(FingerSimError, ValueError):
 
     def __init__(self, key: str, allowed: str, got: Any, *, problem: str = "") -> None:
         self.key, self.allowed, self.got, self.problem = key, allowed, got, problem
-        super().__init__(f"{key}: " + (f"{problem}; " if problem else "") + f"expected {allowed}, got {got!r}")
+        super().__init__(f"{key}: " + (f"{problem}; " if problem else "") + f"expected {allowed}, got {shown(got)}")
 
     def within(self, prefix: str) -> ConfigError:
         """The same error with its key prefixed, e.g. by the scene file's name."""

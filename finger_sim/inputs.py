@@ -204,7 +204,7 @@ def profile_from_dict(data: Any, key: str = "input.torque") -> Profile:
     required = [f for f in names if fields_[f].default is MISSING]
     unknown = sorted((k for k in data if k not in names and k != "type"), key=str)
     if unknown:
-        raise ConfigError(f"{key}.{unknown[0]}", f"only keys {names} for type {kind}", data[unknown[0]])
+        raise ConfigError(key, f"only keys {names} (and 'type') for type {kind}", unknown[0], problem="unknown key")
     values = {}
     for name in names:
         if name not in data:

@@ -25,7 +25,7 @@ import numpy as np
 import yaml
 
 from finger_sim import __version__, kinematics
-from finger_sim.errors import FingerSimError
+from finger_sim.errors import FingerSimError, shown
 from finger_sim.joints import JOINT_NAMES, joint_positions, joint_velocities, paper_coordinates
 from finger_sim.kinematics import Vec3
 from finger_sim.log.cdr import JointStateDecoder, decode_diagnostic_status
@@ -33,6 +33,7 @@ from finger_sim.log.definitions import DEFINITION_SEPARATOR
 from finger_sim.log.errors import LogArgumentError
 from finger_sim.log.reader import LogReader, TopicInfo
 from finger_sim.scene import Scene, scene_from_dict
+from finger_sim.scene_yaml import parse_scene_text
 from finger_sim.simulate import Simulator, Trajectory
 
 #: Name of the metadata record the node writes.
@@ -129,6 +130,10 @@ class RunMetadata:
     def from_dict(cls, data: Mapping[str, str], path: str | PathLike[str] = "log") -> RunMetadata:
         """Parse and validate a stored record; RunLogError names the key that does not parse."""
         where = f"metadata record {FINGER_SIM_METADATA!r}"
+        size = metadata_size(data)
+        if size > MAX_METADATA_BYTES:  # what a node writes is bounded so: more is no node's record
+            raise RunLogError(path, f"the {where} takes {size} bytes, more than the {MAX_METADATA_BYTES} "
+                                    "bytes a node writes")
         missing = [k for k in cls.REQUIRED if k not in data]
         if missing:
             raise RunLogError(path, f"the {where} lacks {', '.join(missing)}: not a finger_node log?")
@@ -138,9 +143,9 @@ class RunMetadata:
                                     f"got {_short(data['torque_source'])}")
         parameters: Any = {}
         if data.get("parameters"):
-            try:
-                parameters = yaml.safe_load(data["parameters"])
-            except (yaml.YAMLError, RecursionError) as exc:
+            try:  # the scene files' hardened loader: no aliases (a "billion laughs"), bounded depth
+                parameters = parse_scene_text(data["parameters"], f"{where}, key 'parameters'")
+            except (FingerSimError, RecursionError) as exc:
                 raise RunLogError(path, f"{where}, key 'parameters' is not YAML: {_first_line(exc)}") from None
             if not isinstance(parameters, dict):
                 raise RunLogError(path, f"{where}, key 'parameters': expected a mapping, got {_short(parameters)}")
@@ -195,8 +200,8 @@ def metadata_size(record: Mapping[str, str]) -> int:
 
 
 def _parse_scene(text: str, path: str | PathLike[str], where: str) -> Scene:
-    try:
-        data = yaml.safe_load(text)
+    try:  # read as a scene file is: the hardened loader (no aliases, bounded size and depth)
+        data = parse_scene_text(text, f"{where}, key 'scene'")
         return scene_from_dict(data)
     except (yaml.YAMLError, FingerSimError, RecursionError, ValueError, TypeError) as exc:
         raise RunLogError(path, f"{where}, key 'scene' does not parse as a scene: {_first_line(exc)}") from None
@@ -208,8 +213,7 @@ def _first_line(exc: BaseException) -> str:
 
 
 def _short(value: Any) -> str:
-    text = repr(value)
-    return text[:80] + ("…" if len(text) > 80 else "")
+    return shown(value)
 
 
 # -- the command log -------------------------------------------------------------------------------
@@ -251,7 +255,7 @@ class CommandEvent:
         """Parse one entry's key-values; RunLogError names the key and the value."""
         def get(key: str, convert: Any, expected: str) -> Any:
             if key not in values:
-                raise RunLogError(path, f"command log entry {dict(values)!r:.120}: lacks {key!r}")
+                raise RunLogError(path, f"command log entry {shown(dict(values))}: lacks {shown(key)}")
             try:
                 return convert(values[key])
             except (ValueError, OverflowError):
@@ -430,7 +434,7 @@ class ResimResult:
         )
 
 
-def resimulate(run: RecordedRun, *, kernel: str | None = None) -> ResimResult:
+def resimulate(run: RecordedRun, *, kernel: str | None = None, max_steps: int | None = None) -> ResimResult:
     """Re-run the log's scene, re-applying its torques at the steps they were applied, and
     compare every recorded joint state with the re-simulated one (exact comparison).
 
@@ -439,6 +443,8 @@ def resimulate(run: RecordedRun, *, kernel: str | None = None) -> ResimResult:
     step n is that of the last accepted/timeout/reset event of the episode with step ≤ n (0
     before any); in scene mode the scene's profile drives every step, as in the node.
     kernel: the Simulator's kernel; None (the default) takes the one the log was made with.
+    max_steps: refuse (ResourceError, before the first step) a re-simulation of more steps in all;
+    None: `simulate`'s default budget (finger_sim.budget.DEFAULT_MAX_STEPS).
     """
     sim = Simulator(run.scene, kernel=run.metadata.kernel if kernel is None else kernel)
     dt_ns = run.dt * NS_PER_S
@@ -452,6 +458,7 @@ def resimulate(run: RecordedRun, *, kernel: str | None = None) -> ResimResult:
     for stamp, state in run.joint_states:
         episode = max(i for i, off in enumerate(offsets) if off <= stamp)
         wanted.setdefault(episode, {})[round((stamp - offsets[episode]) / dt_ns)] = state
+    _check_resim_budget(run, sum(max(recorded) + 1 for recorded in wanted.values()), max_steps)
     compared, worst, first = 0, 0.0, None
     for episode in sorted(wanted):
         sim.reset()
@@ -465,6 +472,8 @@ def resimulate(run: RecordedRun, *, kernel: str | None = None) -> ResimResult:
                 mine = joint_positions(sim.q, q_ext, alpha) + joint_velocities(sim.v)
                 if mine != theirs:  # the deviation only where there is one (resim is read-bound)
                     dev = max(abs(a - b) for a, b in zip(mine, theirs))
+                    if math.isnan(dev):  # a NaN on either side is a deviation, not "no larger than the max"
+                        dev = math.inf
                     worst = max(worst, dev)
                     if dev > 0.0 and first is None:
                         first = stamp_ns(offsets[episode], n, run.dt)
@@ -473,3 +482,14 @@ def resimulate(run: RecordedRun, *, kernel: str | None = None) -> ResimResult:
                 k += 1
             sim.step(None if run.torque_source == "scene" else held)
     return ResimResult(compared, worst, first)
+
+
+def _check_resim_budget(run: RecordedRun, steps: int, max_steps: int | None) -> None:
+    """Refuse a re-simulation of more than `max_steps` steps (a log's scene of dt = 1e-12 s would run for hours)."""
+    from finger_sim.budget import DEFAULT_MAX_STEPS
+
+    limit = DEFAULT_MAX_STEPS if max_steps is None else max_steps
+    if steps > limit:
+        raise FingerSimError(f"re-simulating the log takes {steps:,} steps (its states span that many steps of its "
+                             f"scene's dt = {run.dt:g} s), over the limit of {limit:,} steps; to go ahead on purpose "
+                             f"pass --max-steps {steps}")

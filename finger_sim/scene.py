@@ -178,6 +178,8 @@ def load_scene(path: str | Path) -> Scene:
     """Read and validate a scene file; ConfigError names the file, key, allowed values and value."""
     path = Path(path)
     data = read_scene_file(path)
+    if data is not None and not isinstance(data, dict):  # e.g. /etc/passwd: name the file, show none of it
+        raise ConfigError("scene", "a YAML mapping of scene keys", f"{path}: a {type(data).__name__}, not a mapping")
     try:
         return scene_from_dict({} if data is None else data, default_name=safe_name(path.stem))
     except ConfigError as exc:

@@ -16,7 +16,9 @@ the schema's types, refusing anything else with a `ConfigError` naming the key.
 from __future__ import annotations
 
 import math
+import os
 import re
+import stat
 from pathlib import Path
 from typing import Any
 
@@ -145,8 +147,10 @@ def parse_scene_text(text: str, source: str = "scene") -> Any:
 
 def read_scene_file(path: Path) -> Any:
     """The data of a scene file: at most MAX_BYTES of UTF-8 YAML (see `parse_scene_text`)."""
-    try:
-        with path.open("rb") as f:
+    try:  # non-blocking open: a FIFO without a writer would block here forever
+        with os.fdopen(os.open(path, os.O_RDONLY | os.O_NONBLOCK), "rb") as f:
+            if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
+                raise ConfigError("scene", "a regular file", f"{path} (a FIFO, socket, device or folder)")
             raw = f.read(MAX_BYTES + 1)
     except OSError as exc:
         raise ConfigError("scene", "a readable scene file", f"{path} ({exc.strerror})") from None

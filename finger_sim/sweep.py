@@ -20,7 +20,6 @@ from __future__ import annotations
 import csv
 import itertools
 import math
-import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,11 +27,13 @@ from typing import Any
 
 import numpy as np
 
+from finger_sim.atomic_write import atomic_path
 from finger_sim.batch import BatchResult, run_batch
 from finger_sim.errors import ConfigError
 from finger_sim.scene import Scene, load_scene, scene_from_dict
 from finger_sim.scene_yaml import parse_scene_text
 from finger_sim.simulate import Trajectory
+from finger_sim.sweep_plan import Progress, check_values, combination, scene_block, sweep_steps
 
 #: The final-state columns, named as in `finger-sim simulate`'s CSV.
 STATE_COLUMNS = tuple(Trajectory.CSV_HEADER.split(",")[1:7])
@@ -158,10 +159,14 @@ def parse_chunk(text: str) -> tuple[int, int]:
 def check_sweep_budget(scenes: Sequence[Scene], *, max_steps: int, plot: bool) -> int:
     """Refuse (ConfigError) a sweep of more than max_steps finger-steps, or a plotted one that
     would hold more than MAX_PLOT_STEPS; the finger-step count otherwise."""
-    steps = sum(s.step_count for s in scenes)
+    return check_step_count(sum(s.step_count for s in scenes), len(scenes), max_steps=max_steps, plot=plot)
+
+
+def check_step_count(steps: int, runs: int, *, max_steps: int, plot: bool) -> int:
+    """check_sweep_budget from the counts alone (finger_sim.sweep_plan.sweep_steps): no scene built."""
     if steps > max_steps:
         raise ConfigError("sweep", f"at most {max_steps:,} finger-steps in all (pass --max-steps {steps} to go ahead "
-                          "on purpose, or split the sweep with --chunk i/n)", f"{len(scenes):,} runs, {steps:,} steps")
+                          "on purpose, or split the sweep with --chunk i/n)", f"{runs:,} runs, {steps:,} steps")
     if plot and steps > MAX_PLOT_STEPS:
         raise ConfigError("--plot", f"a sweep of at most {MAX_PLOT_STEPS:,} finger-steps: it holds every run's angles "
                           f"(drop --plot or split the sweep with --chunk i/n)",
@@ -171,10 +176,10 @@ def check_sweep_budget(scenes: Sequence[Scene], *, max_steps: int, plot: bool) -
 
 def rows_of(vary: Sequence[Vary], start: int, result: BatchResult, grip: bool) -> list[dict[str, Any]]:
     """One row per run: the varied keys (their values as written), then the results."""
-    texts = list(itertools.product(*(v.texts for v in vary)))
     rows = []
     for j in range(len(result.methods)):
-        row: dict[str, Any] = {v.key: text for v, text in zip(vary, texts[start + j])}
+        texts = combination([Vary(v.key, v.texts, v.texts) for v in vary], start + j)
+        row: dict[str, Any] = {v.key: text for v, text in zip(vary, texts)}
         row.update(zip(STATE_COLUMNS, [*result.q[j].tolist(), *result.v[j].tolist()]))
         row["max_constraint_residual"] = float(result.max_residual[j])
         row["energy_change"] = float(result.energy_change[j])
@@ -213,18 +218,21 @@ def run_chunk(scene: str | Path | Scene, vary: Sequence[str | Vary], index: int 
     varies = [v if isinstance(v, Vary) else parse_vary(v) for v in vary]
     _check_distinct(varies)
     start, stop = chunk_range(combination_count(varies), index, count)
-    scenes = sweep_scenes(base, varies, start, stop)
-    check_sweep_budget(scenes, max_steps=max_steps, plot=record)
+    check_values(base, varies)  # each value once, then the counts: nothing of the product is built yet
+    check_step_count(sweep_steps(base, varies, start, stop), stop - start, max_steps=max_steps, plot=record)
     grip = bool(base.objects)
     rows: list[dict[str, Any]] = []
     paths: list[np.ndarray] = []
-    for lo in range(0, len(scenes), BLOCK):
-        result = run_batch(scenes[lo: lo + BLOCK], record=record)
-        rows += rows_of(varies, start + lo, result, grip)
+    kept: list[Scene] = []
+    for lo in range(start, stop, BLOCK):
+        scenes = scene_block(base, varies, lo, min(lo + BLOCK, stop))  # built as the batch needs them
+        result = run_batch(scenes, record=record)
+        rows += rows_of(varies, lo, result, grip)
         paths += result.trajectories or []
+        kept += scenes if record else []
         if progress is not None:
             progress(len(result.methods))
-    return Chunk(columns(varies, base), rows, scenes if record else [], paths)
+    return Chunk(columns(varies, base), rows, kept, paths)
 
 
 def _check_distinct(varies: Sequence[Vary]) -> None:
@@ -235,8 +243,8 @@ def _check_distinct(varies: Sequence[Vary]) -> None:
 
 
 def write_rows(path: Path, header: Sequence[str], rows: Sequence[dict[str, Any]]) -> None:
-    """The rows as CSV (floats with 17 significant digits, as `simulate`'s CSV)."""
-    with path.open("w", newline="", encoding="utf-8") as f:
+    """The rows as CSV (floats with 17 significant digits, as `simulate`'s CSV), written atomically."""
+    with atomic_path(path) as part, part.open("w", newline="", encoding="utf-8") as f:
         writer = csv.writer(f)
         writer.writerow(header)
         for row in rows:
@@ -272,7 +280,8 @@ def plot_tips(scenes: Sequence[Scene], paths: Sequence, labels: Sequence[str], p
         ax.legend(loc="lower left", fontsize=7, title=f"first: {labels[0]}\nlast: {labels[-1]}", title_fontsize=7)
     fig.colorbar(collection, ax=ax, label="run (combination order)")
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    with atomic_path(path) as part:
+        fig.savefig(part, dpi=120)
     plt.close(fig)
 
 
@@ -283,17 +292,12 @@ def sweep(scene: Path, vary: Sequence[str], out: Path, *, plot: Path | None = No
     index, count = parse_chunk(chunk)
     varies = [parse_vary(v) for v in vary]
     start, stop = chunk_range(combination_count(varies), index, count)
-    bar = None
-    if sys.stderr.isatty():
-        from tqdm import tqdm
-
-        bar = tqdm(total=stop - start, unit="run", desc="sweep", file=sys.stderr)
+    bar = Progress(stop - start)  # a bar on a terminal, a line per quarter otherwise
     try:
         result = run_chunk(scene, varies, index, count, max_steps=max_steps, record=plot is not None,
-                           progress=bar.update if bar is not None else None)
+                           progress=bar.update)
     finally:
-        if bar is not None:
-            bar.close()
+        bar.close()
     write_rows(out, result.header, result.rows)
     if plot is not None:
         labels = [", ".join(f"{v.key}={r[v.key]}" for v in varies) for r in result.rows]

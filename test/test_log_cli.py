@@ -483,5 +483,5 @@ def test_repair_refuses_to_overwrite_its_input(node_log: NodeLog, tmp_path: Path
     before = path.read_bytes()
     done = run_cli("repair", path, "-o", tmp_path / "." / "log.mcap")
     assert done.returncode == EXIT_ERROR
-    assert "out: expected a path other than the log being repaired" in single_error_line(done)
+    assert "-o/--out: expected a file other than LOG" in single_error_line(done)
     assert path.read_bytes() == before

@@ -208,7 +208,7 @@ def test_truncated_log_keeps_its_intact_prefix(complete_log: Path, tmp_path: Pat
     assert (log.truncation.offset, log.truncation.size, log.truncation.readable) == (offset, cut, len(readable))
     assert str(log.truncation) == (
         f"{path}: truncated at byte {offset} of {cut}: no summary, the last record is cut off or missing "
-        f"(was the recorder killed?); the {len(readable)} messages before byte {offset} are readable"
+        f"(the recorder was killed, or its disk was full); the {len(readable)} messages before byte {offset} are readable"
     )
     assert [(m.topic, m.log_time_ns, fields(m.msg)) for m in log.messages()] == readable
     assert log.message_count == len(readable)

@@ -36,7 +36,7 @@ PAUSED_WAIT_S = 2.5
 #: sits idle long enough for its idle flush.
 COMMAND_PERIOD_S = 0.1
 FINGER_SIM = Path(sys.executable).with_name("finger-sim")  # the venv's console script
-EXIT_INCOMPLETE = 5
+from finger_sim.cli import EXIT_INCOMPLETE  # noqa: E402
 #: A queue of 50 messages between the stepping thread and the log's writer (which takes the
 #: queue every 50 ms): far less than one handover of a 1 kHz run's 4 messages a step.
 SMALL_QUEUE = 50
@@ -119,7 +119,7 @@ def test_as_fast_as_possible_the_log_keeps_every_message(launcher, tmp_path):
 def test_a_real_time_run_that_drops_says_so_in_its_log(launcher, tmp_path):
     """realtime_factor 1 with the same small queue: messages are dropped, and the log says how
     many (its 'recording' record, written at close); `info` shows it; `export` and `resim` refuse
-    the log (exit 5) unless --accept-incomplete."""
+    the log (exit 7) unless --accept-incomplete."""
     steps = 1000
     node = launcher.node(NODE, dict(scene=str(scene_file(tmp_path, steps / 1000)), torque_source="scene",
                                     realtime_factor=1.0, record_queue_size=SMALL_QUEUE))

@@ -144,6 +144,8 @@ def _aligned(pos: int, size: int) -> int:
 def _count(data: bytes, pos: int) -> tuple[int, int]:
     pos = _aligned(pos, 4)
     (n,) = _U32.unpack_from(data, pos)
+    if n > len(data) - pos - 4:  # every element takes at least a byte: bound it before anything is built
+        raise ValueError(f"an array of {n} elements in a message of {len(data)} bytes")
     return n, pos + 4
 
 

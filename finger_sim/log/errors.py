@@ -82,7 +82,7 @@ class TruncatedLogError(LogFileError):
         super().__init__(
             path,
             f"truncated at byte {offset} of {size}: no summary, the last record is cut off or missing "
-            f"(was the recorder killed?); the {readable} messages before byte {offset} are readable",
+            f"(the recorder was killed, or its disk was full); the {readable} messages before byte {offset} are readable",
         )
 
 

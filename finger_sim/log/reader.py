@@ -18,14 +18,14 @@ import functools
 import os
 import struct
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, BinaryIO, NamedTuple
 
 from mcap.data_stream import ReadDataStream
 from mcap.reader import SeekingReader
-from mcap.records import Channel, Chunk, ChunkIndex, DataEnd, Header, McapRecord, Message, Metadata, Schema
+from mcap.records import Channel, Chunk, ChunkIndex, DataEnd, Header, McapRecord, Message, MessageIndex, Metadata, Schema
 from mcap.stream_reader import StreamReader, breakup_chunk, get_chunk_data_stream
 from mcap.writer import MCAP0_MAGIC
 from mcap_ros2.decoder import DecoderFactory
@@ -49,11 +49,19 @@ _RECORD_HEAD = struct.Struct("<BQ")  # a record's opcode and body length
 _MESSAGE_HEAD = struct.Struct("<HIQQ")  # a Message body's channel id, sequence, log time, publish time
 _MESSAGE_OPCODE = 0x05
 _CHUNK_OPCODE = 0x06
+_MESSAGE_INDEX_OPCODE = 0x07
+_MESSAGE_INDEX_HEAD = 2 + 4  # a MessageIndex body's channel id u16 and entries length u32
+_MESSAGE_INDEX_ENTRY = 8 + 8  # each entry: log time u64, offset u64
 _HEAD_BYTES = 16  # bytes read to tell what a non-MCAP file is
 _UNIX_TIME_NS = 10**18  # later log times are taken as Unix time (after 2001) and also shown as a date
 MCAP_ROS2, ROSBAGS = "mcap_ros2", "rosbags"  # message decoders
 DECODERS = (MCAP_ROS2, ROSBAGS)
 _INFO_VALUE_CHARS = 60  # metadata values longer than this (or multi-line) are summarised in info()
+#: Largest uncompressed chunk read, bytes: checked before anything is decompressed, so a small
+#: chunk that claims gigabytes (a "zstd bomb") is refused instead of allocated. 64 times the
+#: recorder's chunk size (finger_sim.log.recorder.DEFAULT_CHUNK_SIZE); mcap's writers default to 1 MiB.
+MAX_CHUNK_BYTES = 64 << 20
+_CHUNK_SIZE_AT = _RECORD_PREFIX + 16  # a chunk's uncompressed_size u64 follows its two u64 times
 
 
 @dataclass(frozen=True)
@@ -83,6 +91,16 @@ class _Truncated:
     offset: int
 
 
+@dataclass
+class Damage:
+    """A damaged stretch a salvaging read skipped: the error and the messages lost there
+    (counted from the message indexes that follow a dropped chunk; 0 if none say)."""
+
+    error: CorruptLogError
+    messages: int = 0
+    chunks: int = field(default=1)
+
+
 class LogReader:
     """The index of one MCAP log plus decoding access to its messages.
 
@@ -92,12 +110,17 @@ class LogReader:
     truncation (TruncatedLogError or None).
     """
 
-    def __init__(self, path: str | os.PathLike[str]) -> None:
+    def __init__(self, path: str | os.PathLike[str], *, salvage: bool = False) -> None:
         self.path = Path(path)
         if not self.path.exists():
             raise LogNotFoundError(self.path)
         if self.path.is_dir():
             raise NotMcapError(self.path, "a directory; for a rosbag2 bag pass the .mcap file inside it")
+        if not self.path.is_file():  # a FIFO or device would block or never end
+            raise NotMcapError(self.path, "not a regular file (a FIFO, socket or device)")
+        #: Skip damaged chunks (recording each in `damage`) instead of raising CorruptLogError.
+        self.salvage = salvage
+        self.damage: list[Damage] = []
         self.size = self.path.stat().st_size
         self.profile = self.library = ""
         self.chunk_count = self.message_count = 0
@@ -121,6 +144,21 @@ class LogReader:
         self.topics = self._topics()
 
     # -- queries --------------------------------------------------------------------------------
+
+    @property
+    def indexed(self) -> bool:
+        """True if the log was indexed from a valid summary (its counts are the recorder's)."""
+        return bool(self._chunk_indexes)
+
+    @property
+    def schemas(self) -> dict[int, Schema]:
+        """The log's schemas by id (from the summary, or as scanned)."""
+        return dict(self._schemas)
+
+    @property
+    def channels(self) -> dict[int, Channel]:
+        """The log's channels by id (from the summary, or as scanned)."""
+        return dict(self._channels)
 
     @property
     def truncated(self) -> bool:
@@ -235,8 +273,15 @@ class LogReader:
             for index in self._chunk_indexes:
                 if index.message_end_time < start_ns or targets.keys().isdisjoint(index.message_index_offsets):
                     continue
-                data = self._chunk_data(file, index)
-                yield from _chunk_messages(data, targets, start_ns, self.path, index.chunk_start_offset)
+                try:
+                    data = self._chunk_data(file, index)
+                    messages = list(_chunk_messages(data, targets, start_ns, self.path, index.chunk_start_offset))
+                except CorruptLogError as exc:
+                    if not self.salvage:
+                        raise
+                    self.damage.append(Damage(exc, self._indexed_count(file, index)))
+                    continue
+                yield from messages
 
     def _chunk_data(self, file: BinaryIO, index: ChunkIndex) -> bytes:
         """The decompressed, CRC-checked records of the chunk that `index` points to."""
@@ -249,8 +294,11 @@ class LogReader:
                                   f"malformed record (the chunk index expects opcode, length {expected}; got {got})")
         try:
             chunk = Chunk.read(ReadDataStream(file))
+            self._check_chunk_size(index.chunk_start_offset, chunk.uncompressed_size)
             stream, length = get_chunk_data_stream(chunk, validate_crc=True)
             return stream.read(length)
+        except CorruptLogError:
+            raise
         except Exception as exc:  # mcap's parser, decompressors and the CRC check raise assorted types
             raise CorruptLogError(
                 self.path, index.chunk_start_offset, f"chunk does not decompress or fails its CRC ({exc!r})"
@@ -266,6 +314,8 @@ class LogReader:
                     channels[record.id] = record
                 elif isinstance(record, Message):
                     channel = channels.get(record.channel_id)
+                    if channel is None and self.salvage:  # declared in a dropped chunk
+                        continue
                     if channel is None:
                         problem = f"a message names undeclared channel {record.channel_id}"
                         raise CorruptLogError(self.path, None, problem)
@@ -280,7 +330,7 @@ class LogReader:
         """
         with self._open() as file:
             for record in self._records(file):
-                if not isinstance(record, (Chunk, _Truncated)):
+                if not isinstance(record, (Chunk, _Truncated, Damage)):
                     yield record
 
     def info(self, detail: str | None = None) -> str:
@@ -318,7 +368,7 @@ class LogReader:
         """Index from the summary section; False if there is none or it is damaged."""
         file.seek(0)
         try:
-            reader = SeekingReader(file)
+            reader = SeekingReader(file, record_size_limit=self.size)  # no record longer than the file is read
             header = reader.get_header()
             summary = reader.get_summary()
             if summary is None or summary.statistics is None:
@@ -326,7 +376,14 @@ class LogReader:
             metadata = list(reader.iter_metadata())
         except Exception:  # any damage at the end: the record-by-record scan will say exactly what
             return False
+        file.seek(0)
         stats = summary.statistics
+        for index in summary.chunk_indexes if not self.salvage else ():  # the chunks' claims, before any is read
+            self._check_chunk_size(index.chunk_start_offset, index.uncompressed_size)
+            file.seek(index.chunk_start_offset + _CHUNK_SIZE_AT)
+            claim = file.read(8)
+            if len(claim) == 8:
+                self._check_chunk_size(index.chunk_start_offset, int.from_bytes(claim, "little"))
         self.profile, self.library = header.profile, header.library
         self._schemas, self._channels = dict(summary.schemas), dict(summary.channels)
         self._counts = dict(stats.channel_message_counts)
@@ -360,41 +417,103 @@ class LogReader:
             elif isinstance(record, _Truncated):
                 self.truncation = TruncatedLogError(self.path, record.offset, self.size, self.message_count)
 
-    def _records(self, file: BinaryIO) -> Iterator[McapRecord | _Truncated]:
+    def _records(self, file: BinaryIO) -> Iterator[McapRecord | _Truncated | Damage]:
         """Data-section records in file order, chunks followed by their contents.
 
         A parse failure in a file without a valid footer, at a record that runs past the end
-        of the file, ends the scan with _Truncated; any other failure is CorruptLogError.
+        of the file, ends the scan with _Truncated; any other failure is CorruptLogError, or
+        with `salvage` a Damage (also appended to `damage`) after which the scan goes on: past
+        a chunk that fails to decompress or its CRC, or at the next chunk the summary indexes
+        after a malformed record (without chunk indexes the scan ends there).
         """
-        file.seek(len(MCAP0_MAGIC))
-        # A record longer than the file is damage: refuse it before reading it.
-        records = StreamReader(file, skip_magic=True, emit_chunks=True, record_size_limit=self.size).records
-        while True:
-            offset = file.tell()
-            try:
-                record = next(records)
-            except StopIteration:  # the file ends between two records
-                if not self._complete:
-                    yield _Truncated(offset)
-                return
-            except Exception as exc:  # mcap's parsers raise assorted types at a cut or on garbage
-                if not self._complete and _runs_past_end(file, offset, self.size):
-                    yield _Truncated(offset)
-                    return
-                raise CorruptLogError(self.path, offset, f"malformed record ({exc!r})") from exc
-            if isinstance(record, DataEnd):
-                if not self._complete:  # the data is whole, the summary or the closing magic is cut
-                    yield _Truncated(file.tell())
-                return
-            yield record
-            if isinstance(record, Chunk):
+        start = len(MCAP0_MAGIC)
+        while start is not None:
+            file.seek(start)
+            start = None
+            # A record longer than the file is damage: refuse it before reading it.
+            records = StreamReader(file, skip_magic=True, emit_chunks=True, record_size_limit=self.size).records
+            lost: Damage | None = None  # the dropped chunk whose message indexes follow
+            while True:
+                offset = file.tell()
                 try:
-                    contents = breakup_chunk(record, validate_crc=True)
-                except Exception as exc:  # decompressors and the CRC check raise assorted types
-                    raise CorruptLogError(
-                        self.path, offset, f"chunk does not decompress or fails its CRC ({exc!r})"
-                    ) from exc
-                yield from contents
+                    record = next(records)
+                except StopIteration:  # the file ends between two records
+                    if not self._complete:
+                        yield _Truncated(offset)
+                    return
+                except Exception as exc:  # mcap's parsers raise assorted types at a cut or on garbage
+                    if not self._complete and _runs_past_end(file, offset, self.size):
+                        yield _Truncated(offset)
+                        return
+                    damage = self._damaged(CorruptLogError(self.path, offset, f"malformed record ({exc!r})"), exc)
+                    yield damage
+                    start = next((i.chunk_start_offset for i in self._chunk_indexes if i.chunk_start_offset > offset), None)
+                    break
+                if isinstance(record, DataEnd):
+                    if not self._complete:  # the data is whole, the summary or the closing magic is cut
+                        yield _Truncated(file.tell())
+                    return
+                if isinstance(record, MessageIndex):
+                    if lost is not None:
+                        lost.messages += len(record.records)
+                    continue
+                lost = None
+                yield record
+                if isinstance(record, Chunk):
+                    try:
+                        self._check_chunk_size(offset, record.uncompressed_size)
+                        contents = breakup_chunk(record, validate_crc=True)
+                    except Exception as exc:  # decompressors and the CRC check raise assorted types
+                        error = exc if isinstance(exc, CorruptLogError) else CorruptLogError(
+                            self.path, offset, f"chunk does not decompress or fails its CRC ({exc!r})")
+                        lost = self._damaged(error, exc)
+                        yield lost
+                        continue
+                    yield from contents
+
+    def _damaged(self, error: CorruptLogError, cause: BaseException) -> Damage:
+        """`error` raised, or with `salvage` recorded in `damage` and returned."""
+        if not self.salvage:
+            raise error from cause
+        for seen in self.damage:  # a second pass over the file (indexing, then reading) meets it again
+            if seen.error.offset == error.offset:
+                seen.messages = 0
+                return seen
+        damage = Damage(error)
+        self.damage.append(damage)
+        return damage
+
+    def _check_chunk_size(self, offset: int, uncompressed: int) -> None:
+        if uncompressed > MAX_CHUNK_BYTES:
+            raise CorruptLogError(self.path, offset, f"chunk claims {uncompressed} bytes uncompressed, more than the "
+                                                     f"{MAX_CHUNK_BYTES} bytes a chunk may hold (not decompressed)")
+
+    def _indexed_count(self, file: BinaryIO, index: ChunkIndex) -> int:
+        """Messages in the chunk of `index` by its message indexes (0 if they do not read)."""
+        count = 0
+        for offset in index.message_index_offsets.values():
+            file.seek(offset)
+            head = file.read(_RECORD_PREFIX)
+            if len(head) == _RECORD_PREFIX:  # a damaged index only makes the count a lower bound
+                opcode, length = _RECORD_HEAD.unpack(head)
+                if opcode == _MESSAGE_INDEX_OPCODE and length <= self.size:
+                    count += (length - _MESSAGE_INDEX_HEAD) // _MESSAGE_INDEX_ENTRY
+        return count
+
+    def verify(self) -> list[Damage]:
+        """Read every chunk and check its CRC; the damaged ones (also kept in `damage`).
+
+        A log indexed from its summary is checked chunk by chunk through the chunk indexes; a
+        scanned one (truncated) was checked as it was scanned.
+        """
+        if self._chunk_indexes:
+            with self._open() as file:
+                for index in self._chunk_indexes:
+                    try:
+                        self._chunk_data(file, index)
+                    except CorruptLogError as exc:
+                        self.damage.append(Damage(exc, self._indexed_count(file, index)))
+        return self.damage
 
     def _topics(self) -> dict[str, TopicInfo]:
         topics: dict[str, TopicInfo] = {}
@@ -479,9 +598,10 @@ def _chunk_messages(
         raise CorruptLogError(path, offset, f"chunk holds a malformed record ({exc})") from exc
 
 
-def read_log(path: str | os.PathLike[str], *, expected_topics: Iterable[str] = ()) -> LogReader:
-    """Index the log at `path`; raise MissingTopicsError if any of `expected_topics` is absent."""
-    reader = LogReader(path)
+def read_log(path: str | os.PathLike[str], *, expected_topics: Iterable[str] = (), salvage: bool = False) -> LogReader:
+    """Index the log at `path`; raise MissingTopicsError if any of `expected_topics` is absent.
+    salvage: skip damaged chunks (see LogReader.damage) instead of raising CorruptLogError."""
+    reader = LogReader(path, salvage=salvage)
     reader.require_topics(expected_topics)
     return reader
 

@@ -93,6 +93,7 @@ from .qos import OFFERED_QOS_PROFILES, offered_qos_profiles
 DEFAULT_CHUNK_INTERVAL_S = 0.5  # log-time span of one chunk: what a kill -9 may lose
 DEFAULT_CHUNK_SIZE = 1 << 20  # uncompressed bytes; bounds memory if an interval holds many messages
 DEFAULT_QUEUE_SIZE = 10_000  # pending messages (~1 s of a 1 kHz node's six topics) before dropping
+MAX_QUEUED_BYTES = 64 << 20  # pending payload bytes before dropping: a few huge messages cannot fill memory
 DEFAULT_IDLE_FLUSH_S = 1.0  # wall seconds without messages after which the open chunk is closed
 DEFAULT_CHUNK_WALL_S = 1.0  # wall seconds after which an open chunk is closed, whatever its log-time span
 DEFAULT_HANDOVER_S = 0.05  # wall seconds between the writer thread's takes of the buffer
@@ -238,6 +239,7 @@ class McapRecorder:
         self._dropped_by_topic: dict[str, int] = {}  # caller side, under _lock
         self._queued = 0  # messages appended to the buffer (caller side, under _lock)
         self._taken = 0  # messages taken from it (writer thread only)
+        self._queued_bytes = self._taken_bytes = 0  # their payload bytes, counted on the same sides
         # Guards state, sequences, dropped. Reentrant: a signal handler that calls close()
         # while the interrupted main thread is inside write() must not deadlock. The writer
         # thread never takes it.
@@ -382,19 +384,22 @@ class McapRecorder:
             if self._state is not _State.OPEN or channel is None:  # closed, maybe meanwhile
                 self._dropped += 1
                 problem, text = _Problem.CLOSED, f"MCAP recorder {self._path} is closed; dropping messages"
-            elif (waiting := self._queued - self._taken) >= self._queue_size:
+            elif ((waiting := self._queued - self._taken) >= self._queue_size
+                  or (waiting and self._queued_bytes - self._taken_bytes + len(data) > MAX_QUEUED_BYTES)):
                 self._dropped += 1
                 self._dropped_by_topic[topic] = self._dropped_by_topic.get(topic, 0) + 1
                 # The number is spent: the gap tells a reader where the drop was.
                 channel.last_sequence = (channel.last_sequence + 1) % _SEQUENCE_MODULUS
                 problem, text = _Problem.QUEUE_FULL, (
-                    f"MCAP recorder {self._path}: {self._queue_size} messages wait for the writer; "
+                    f"MCAP recorder {self._path}: {waiting} messages wait for the writer "
+                    f"({self._queued_bytes - self._taken_bytes} bytes; limits {self._queue_size} and {MAX_QUEUED_BYTES}); "
                     "dropping messages (see the dropped count)"
                 )
             else:
                 channel.last_sequence = (channel.last_sequence + 1) % _SEQUENCE_MODULUS
                 self._buffer.append(_Message(topic, data, log_ns, publish_ns, channel.last_sequence))
                 self._queued += 1
+                self._queued_bytes += len(data)
                 if waiting == self._queue_size // 2:
                     self._wake.set()  # a burst: take it before the bound is reached
                 return True
@@ -489,6 +494,7 @@ class McapRecorder:
                 item = self._buffer.popleft()
                 if isinstance(item, _Message):
                     self._taken += 1
+                    self._taken_bytes += len(item.data)
                     got_messages = True
                     if file is None:
                         self._lost += 1

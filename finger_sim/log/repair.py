@@ -3,7 +3,8 @@
 A recorder killed (kill -9, power loss) or stopped by a full disk leaves a file without its
 summary and closing magic; readers that start from the footer (rosbags, `mcap` tools that
 seek) refuse it. `repair_log` reads the file record by record, as finger_sim.log.reader does,
-up to the cut (everything up to the last intact chunk) or the first damaged record, and
+up to the cut (everything up to the last intact chunk), skipping a damaged chunk (as `mcap
+recover` does; after a malformed record it goes on at the next chunk the summary indexes), and
 writes the header's profile, every schema, channel, message (with its log and publish
 times and sequence number), metadata record and attachment into a new file with chunks,
 message indexes and a summary: what `mcap recover` or `ros2 bag reindex` produce (a file cut
@@ -25,7 +26,7 @@ from mcap.well_known import Profile
 from mcap.writer import LIBRARY_IDENTIFIER, MCAP0_MAGIC, CompressionType, Writer
 
 from .errors import CorruptLogError, LogArgumentError, NotMcapError, TruncatedLogError
-from .reader import LogReader
+from .reader import Damage, LogReader
 
 REPAIR_SUFFIX = ".repaired.mcap"
 LIBRARY = f"finger_sim.log repair; {LIBRARY_IDENTIFIER}"
@@ -42,11 +43,20 @@ class RepairReport:
     metadata: int
     attachments: int
     truncation: TruncatedLogError | None  # the source's cut, None if it was complete
-    damage: CorruptLogError | None  # the damaged record the copy stopped at, None if none
+    damage: CorruptLogError | None  # the first damaged record skipped, None if none
+    dropped: tuple[Damage, ...] = ()  # every damaged stretch skipped
+    lost_messages: int = 0  # messages in the dropped chunks (by the source's indexes; a lower bound)
+
+    @property
+    def lost(self) -> bool:
+        """Whether damaged data was dropped (the copy lacks something the source once held)."""
+        return bool(self.dropped)
 
     def summary(self) -> str:
-        if self.damage is not None:
-            why = f"stopped at damage: {self.damage.problem}"
+        if self.dropped:
+            first = self.dropped[0].error
+            why = (f"DROPPED {len(self.dropped)} damaged part(s) holding at least {self.lost_messages} messages; "
+                   f"first at byte {first.offset}: {first.reason}")
         elif self.truncation is not None:
             why = f"the source is {self.truncation.problem}"
         else:
@@ -86,13 +96,18 @@ def repair_log(log: str | os.PathLike[str], out: str | os.PathLike[str] | None =
             os.unlink(temp.name)
         raise
     truncation = source.truncation if source is not None else TruncatedLogError(log, 0, Path(log).stat().st_size, 0)
-    return RepairReport(Path(log), target, *counts, truncation=truncation, damage=damage)
+    dropped = tuple(source.damage) if source is not None else ()
+    lost = sum(d.messages for d in dropped)
+    if source is not None and source.indexed and dropped:  # the summary's count is the exact total
+        lost = max(lost, source.message_count - counts[0])
+    return RepairReport(Path(log), target, *counts, truncation=truncation, damage=damage, dropped=dropped,
+                        lost_messages=lost)
 
 
 def _source(log: Path) -> LogReader | None:
     """The log's reader; None for a file cut before its magic was whole (a kill as it was created)."""
     try:
-        return LogReader(log)
+        return LogReader(log, salvage=True)
     except NotMcapError:
         with contextlib.suppress(OSError):
             if log.is_file() and MCAP0_MAGIC.startswith(log.read_bytes()[:len(MCAP0_MAGIC) + 1]):
@@ -129,8 +144,9 @@ def _copy(source: LogReader, writer: Writer) -> tuple[tuple[int, int, int, int],
                 channel_ids[record.id] = writer.register_channel(
                     record.topic, record.message_encoding, schema_ids[record.schema_id], dict(record.metadata))
             elif isinstance(record, Message):
-                if record.channel_id not in channel_ids:
-                    raise CorruptLogError(source.path, None, f"a message names undeclared channel {record.channel_id}")
+                if record.channel_id not in channel_ids and not _declare(source, writer, record.channel_id,
+                                                                         schema_ids, channel_ids):
+                    continue  # declared in a dropped chunk and not in a summary: counted as lost
                 writer.add_message(channel_ids[record.channel_id], record.log_time, record.data,
                                    record.publish_time, record.sequence)
                 messages += 1
@@ -142,7 +158,25 @@ def _copy(source: LogReader, writer: Writer) -> tuple[tuple[int, int, int, int],
                 attachments += 1
     except CorruptLogError as exc:
         damage = exc
+    if damage is None and source.damage:
+        damage = source.damage[0].error
     if not started:  # the file was cut inside its header: assume what McapRecorder writes
         writer.start(profile=Profile.ROS2, library=LIBRARY)
     writer.finish()
     return (messages, len(channel_ids), metadata, attachments), damage
+
+
+def _declare(source: LogReader, writer: Writer, channel_id: int, schema_ids: dict[int, int],
+             channel_ids: dict[int, int]) -> bool:
+    """Register a channel declared only in a dropped chunk from the source's summary; False if it has none."""
+    channel = source.channels.get(channel_id)
+    if channel is None:
+        return False
+    if channel.schema_id not in schema_ids:
+        schema = source.schemas.get(channel.schema_id)
+        if schema is None:
+            return False
+        schema_ids[schema.id] = writer.register_schema(schema.name, schema.encoding, schema.data)
+    channel_ids[channel.id] = writer.register_channel(channel.topic, channel.message_encoding,
+                                                      schema_ids[channel.schema_id], dict(channel.metadata))
+    return True

@@ -65,7 +65,7 @@ import rclpy
 from rcl_interfaces.msg import ParameterEvent, SetParametersResult
 from rclpy.duration import Duration
 from rclpy.event_handler import PublisherEventCallbacks
-from rclpy.exceptions import InvalidHandle
+from rclpy.exceptions import InvalidHandle, NameValidationException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
@@ -102,6 +102,8 @@ PARAMETER_EVENTS = "/parameter_events"
 IDLE_WAIT_S = 0.1
 #: Period of /diagnostics (and of the check for other /clock publishers), wall s.
 DIAGNOSTICS_PERIOD_S = 1.0
+#: Characters of an rmw/rclpy error shown when the node cannot be created (it may echo the name).
+MAX_START_ERROR = 400
 #: Minimum wall time between two warnings about refused commands.
 WARN_THROTTLE_S = 1.0
 #: Wall time a service call waits for the stepping loop to run its job.
@@ -727,8 +729,11 @@ def run(node_type: Callable[[], SteppingNode], name: str, args: Sequence[str] | 
             node.close()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except _rclpy.RCLError:
-        if rclpy.ok():
+    except (_rclpy.RCLError, NameValidationException) as exc:
+        if node is None and rclpy.ok():  # the node itself cannot be made: a name or namespace rmw refuses
+            rclpy.logging.get_logger(name).error(f"cannot start: {' '.join(str(exc).split())[:MAX_START_ERROR]}")
+            status = EXIT_CONFIG
+        elif rclpy.ok():
             raise
         # SIGINT/SIGTERM shut the context down while a callback was running: a clean stop.
     except (FingerSimError, LogError) as exc:

@@ -53,6 +53,7 @@ arguments. Errors are one line on stderr; the summary line goes to stdout.
 from __future__ import annotations
 
 import argparse
+import functools
 import importlib
 import math
 import queue
@@ -211,6 +212,15 @@ def raw_messages(
     """The recorded (schema, channel, message) records of `topics` logged at or after `start_ns`:
     `LogReader.raw_messages` (log-time order; file order up to the cut of a truncated log)."""
     return reader.raw_messages(topics, start_ns=start_ns)
+
+
+@functools.cache
+def node_topic_types() -> dict[str, str]:
+    """finger_node's topics by their relative name (`joint_states`, `contact_wrench/distal`) → type ('pkg/msg/Type')."""
+    from finger_sim.ros.interfaces import COMMAND_INPUTS, OUTPUTS
+
+    specs = [(spec.topic, spec.msg_type) for spec in OUTPUTS.values()] + [(i.topic, i.msg_type) for i in COMMAND_INPUTS]
+    return {topic.removeprefix("~").lstrip("/"): f"{cls.__module__.split('.')[0]}/msg/{cls.__name__}" for topic, cls in specs}
 
 
 def message_class(topic: str, type_name: str) -> type:
@@ -484,6 +494,12 @@ class Player:
         """The publisher of a channel met for the first time; warns if its definition differs."""
         publisher = self._publishers[channel.topic]
         self._by_channel[channel.id] = publisher
+        expected = next((t for name, t in node_topic_types().items() if f"/{channel.topic.lstrip('/')}".endswith(f"/{name}")),
+                        None)
+        recorded = schema.name if schema is not None else "(no schema)"
+        if expected is not None and recorded != expected:  # republished as recorded, but not silently
+            self._warn(f"{channel.topic}: recorded as {recorded}, not {expected} as finger_node's topic of that name; "
+                       f"republished as {recorded}, so subscribers expecting {expected} will not receive it")
         if schema is not None and schema.encoding == "ros2msg":
             try:
                 installed = message_definition(schema.name)

@@ -25,6 +25,8 @@ from finger_sim.runtime.timeline import Timeline
 #: Slack of the float comparison on the step grid, in steps.
 STEP_EPS = 1e-9
 #: Refusal reasons (the `reason` of a 'refused' event).
+#: Elements of a refused command written into its event (and so the node's warning and the log).
+MAX_REQUESTED_SHOWN = 8
 REFUSED_SCENE = "torque_source is 'scene'"
 REFUSED_NOT_FINITE = "not a finite number"
 
@@ -193,8 +195,10 @@ class TorqueCommands:
     def refuse(self, source: str, values: Sequence[float], reason: str, step: int) -> CommandEvent:
         """Count and describe a refused command (also for refusals an adapter decides itself)."""
         self.counts.refused += 1
-        requested = ", ".join(repr(float(v)) for v in values)
-        return self._event("refused", step, requested=requested, source=source, reason=reason)
+        shown = ", ".join(repr(float(v)) for v in values[:MAX_REQUESTED_SHOWN])
+        if len(values) > MAX_REQUESTED_SHOWN:  # a bounded summary: the log and the node's output stay small
+            shown += f", … ({len(values)} elements)"
+        return self._event("refused", step, requested=shown, source=source, reason=reason)
 
     def torque_for_step(self, n: int) -> tuple[float | None, CommandEvent | None]:
         """The torque of step n (None: the scene's profile), N·m, and the event if it changed."""
