@@ -21,6 +21,7 @@ from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Float64  # noqa: E402
 from std_srvs.srv import SetBool  # noqa: E402
 
+from finger_sim.cli import EXIT_INCOMPLETE  # noqa: E402
 from finger_sim.log import RECORDING_STATUS  # noqa: E402
 from finger_sim.log.reader import LogReader  # noqa: E402
 from finger_sim.ros import conversions  # noqa: E402
@@ -36,7 +37,6 @@ PAUSED_WAIT_S = 2.5
 #: sits idle long enough for its idle flush.
 COMMAND_PERIOD_S = 0.1
 FINGER_SIM = Path(sys.executable).with_name("finger-sim")  # the venv's console script
-from finger_sim.cli import EXIT_INCOMPLETE  # noqa: E402
 #: A queue of 50 messages between the stepping thread and the log's writer (which takes the
 #: queue every 50 ms): far less than one handover of a 1 kHz run's 4 messages a step.
 SMALL_QUEUE = 50
