@@ -19,7 +19,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy.optimize import brentq
 
-from finger_sim.auto import choose_method, contact_substeps
+from finger_sim.auto import ERROR_CONTROLLED, choose_method, contact_substeps, integrator_options
 from finger_sim.dynamics import FingerSystem
 from finger_sim.effects import ForceElement
 from finger_sim.errors import SimulationDiverged, StabilityError
@@ -95,9 +95,13 @@ class Simulator:
         method = scene.method
         #: steps in contact (or closing a contact within the step) are split in this many (auto only)
         self.substeps = 1
+        #: keyword options of the integrator (auto's error-controlled method: its tolerances)
+        self._options: dict[str, float] = {}
         if method == AUTO:
             method, self.method_reason = choose_method(scene)
-            self.substeps = contact_substeps(scene, METHODS[method].implicit)
+            self._options = integrator_options(scene, method)
+            if method != ERROR_CONTROLLED:  # its error control resolves the contact mode itself
+                self.substeps = contact_substeps(scene, METHODS[method].implicit)
         self._method_cls = METHODS[method]
         self.method = method
         self._check_stability(self._method_cls)
@@ -123,7 +127,7 @@ class Simulator:
         """Back to the scene's initial state at t = 0."""
         # A fresh integrator: a warm start kept from the last run (adaptive's step size,
         # rattle's Jacobian) would make the rerun differ in the last bits.
-        self.integrator: Integrator = self._integrator_cls(self.system)
+        self.integrator: Integrator = self._integrator_cls(self.system, **self._options)
         self.step_index = 0
         self.q, self.v = self.scene.initial_state()
         self._resting: _Gap | None = None  # the closed impact gap the finger rests on (a stop)

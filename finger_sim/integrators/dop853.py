@@ -31,6 +31,12 @@ DEFAULT_RTOL = 1e-10
 DEFAULT_ATOL = 1e-12
 #: Attempts allowed for one internal step before the run is declared diverged.
 MAX_ATTEMPTS = 60
+#: The error norm bounds the RMS over the 6 state components of error/scale; one component's
+#: error is at most √6 times the norm times its scale.
+COMPONENT_BOUND = math.sqrt(6.0)
+#: `error_estimate` remembers this many recent outputs (the states event location tried within
+#: a step); older ones are dropped down to KEEP_OUTPUTS.
+MAX_OUTPUTS, KEEP_OUTPUTS = 4096, 256
 
 _N_STAGES = coefficients.N_STAGES
 #: Stage nodes of one attempt: the 12 stages, t + h, then the 3 extra dense-output stages.
@@ -79,6 +85,17 @@ class DormandPrince853(Integrator):
         self._out = np.empty(6)
         #: accepted and rejected internal steps so far (for benchmarks)
         self.accepted = self.rejected = 0
+        self._err = 0.0  # Σ local θ error estimates of the internal solution since its start, rad
+        self._err_old = 0.0  # `_err` at the start of the last accepted step
+        self._estimates: dict[Vec3, float] = {}  # output q → estimated θ error there
+
+    def error_estimate(self, q: Vec3) -> float:
+        """The estimated θ error (rad) of an output q of this integrator (0 for a state it did not
+        produce): the sum of the local error estimates of the accepted internal steps on the path that
+        led to it, each bounded as √6·norm·(atol + rtol·|θ|), carried through restarts from an
+        earlier output (an impact keeps q). Linear accumulation: error growth or decay along the
+        flow is not modelled."""
+        return self._estimates.get(q, 0.0)
 
     def step(self, t: float, q: Vec3, v: Vec3, dt: float, torque: TorqueFn) -> tuple[Vec3, Vec3]:
         target = t + dt
@@ -93,7 +110,16 @@ class DormandPrince853(Integrator):
         if status != self._numerics.OK:
             raise SimulationDiverged("non-finite or unprojectable state", method=self.name, t=target, dt=dt)
         self._last = (target, q1, v1)
+        self._remember(q1, target)
         return q1, v1
+
+    def _remember(self, q: Vec3, target: float) -> None:
+        """Record the estimate at an output q at time `target` (s), interpolated linearly over the
+        internal step that covers it."""
+        if len(self._estimates) >= MAX_OUTPUTS:
+            self._estimates = dict(list(self._estimates.items())[-KEEP_OUTPUTS:])
+        x = (target - self._t_old) / self._h_old if self._h_old > 0.0 else 1.0
+        self._estimates[q] = self._err_old + min(1.0, max(0.0, x)) * (self._err - self._err_old)
 
     def run_grid(self, times: np.ndarray, q: Vec3, v: Vec3, torque: TorqueFn) -> np.ndarray:
         """Outputs at times[1:] from (q, q') at times[0], all under one smooth `torque`: the (n, 6)
@@ -113,10 +139,12 @@ class DormandPrince853(Integrator):
                 done = end
         a, b, c, d, e, f = out[-1].tolist()
         self._last = (float(times[-1]), (a, b, c), (d, e, f))
+        self._remember((a, b, c), float(times[-1]))
         return out
 
     def _restart(self, t: float, q: Vec3, v: Vec3, dt: float, torque: TorqueFn) -> None:
         self._torque = torque
+        self._err = self._err_old = self._estimates.get(q, 0.0)
         self._t = self._t_old = t
         self._y[:3], self._y[3:] = q, v
         self._numerics._rhs(self._model, t, self._y, torque(t), self._f)
@@ -136,6 +164,9 @@ class DormandPrince853(Integrator):
             norm = num.dop853_attempt(self._model, _A, _B, _C, _E3, _E5, _D, t, self._y, self._f, h, taus,
                                       self.rtol, self.atol, self._kk, y_new, self._dense)
             if norm < 1.0:
+                theta = max(abs(self._y[0]), abs(self._y[1]), abs(self._y[2]), abs(y_new[0]), abs(y_new[1]), abs(y_new[2]))
+                self._err_old = self._err
+                self._err += COMPONENT_BOUND * norm * (self.atol + self.rtol * theta)
                 factor = num.MAX_FACTOR if norm == 0.0 else min(num.MAX_FACTOR, num.SAFETY * norm**num.ERROR_EXPONENT)
                 self._t_old, self._h_old = t, h
                 self._y_old[:] = self._y
@@ -145,9 +176,9 @@ class DormandPrince853(Integrator):
                 self._h = h * (min(1.0, factor) if rejected else factor)
                 self.accepted += 1
                 return
-            if not math.isfinite(norm):
-                break
-            h *= max(num.MIN_FACTOR, num.SAFETY * norm**num.ERROR_EXPONENT)
+            # a non-finite trial (e.g. a contact state far outside its law) is rejected like a large
+            # error, as scipy does: the step shrinks by MIN_FACTOR
+            h *= max(num.MIN_FACTOR, num.SAFETY * norm**num.ERROR_EXPONENT) if math.isfinite(norm) else num.MIN_FACTOR
             rejected = True
             self.rejected += 1
         raise SimulationDiverged(f"internal step fell to {h:.3g} s (rtol {self.rtol:g})", method=self.name, t=t)
