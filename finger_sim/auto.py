@@ -265,3 +265,35 @@ def integrator_options(scene: Scene, method: str) -> dict[str, float]:
         return {}
     rtol, atol = error_control(scene.tolerance)
     return {"rtol": rtol, "atol": atol}
+
+
+def radau_amplification(z: complex) -> float:
+    """|R(z)| of the 3-stage Radau IIA method (order 5; Hairer & Wanner, *Solving ODEs II*, IV.3):
+    the factor by which one step scales a mode y' = λy, z = λ·dt."""
+    return abs((1 + 2 * z / 5 + z**2 / 20) / (1 - 3 * z / 5 + 3 * z**2 / 20 - z**3 / 60))
+
+
+def warn_unresolved_contact(scene: Scene, method: type) -> str:
+    """Warn (and return the warning, "" if none) when a hand-chosen implicit `method` does not resolve the
+    scene's contact mode ω_c at dt (ω_c·dt > IMPLICIT_CONTACT_MODE_DT): its stable step damps the
+    unresolved oscillation instead, an energy loss the physics does not have (issue 22: radau at 1 ms on
+    an elastic impact loses 1.3 % of the energy and ends 0.19 rad off)."""
+    system = scene.build_system()
+    q0, _ = scene.initial_state()
+    kinks = [e for e in system.elements if not e.smooth and not all(e.impact(i) is not None for i in range(len(e.gaps(q0))))]
+    if not kinks:
+        return ""
+    omega = contact_frequency(FingerSystem(scene.params, kinks), mcp_range(scene))
+    z = omega * scene.dt
+    if z <= IMPLICIT_CONTACT_MODE_DT:
+        return ""
+    loss = ""
+    if method.name == FALLBACK:
+        # a contact lasts about half a period of its mode, π/(ω_c·dt) steps; energy ∝ amplitude²
+        kept = radau_amplification(1j * z) ** (2.0 * math.pi / z)
+        loss = f", which takes {100.0 * (1.0 - kept):.2g} % of the energy out of every contact (|R(iω_c·dt)| = {radau_amplification(1j * z):.4f} per step)"
+    text = (f"integrator.method {method.name} at dt = {scene.dt:g} s does not resolve the contact mode "
+            f"(ω_c = {omega:.3g} rad/s, ω_c·dt = {z:.2g} > {IMPLICIT_CONTACT_MODE_DT:g}){loss}; "
+            f"dt ≤ {IMPLICIT_CONTACT_MODE_DT / omega:.2g} s or method auto resolves it")
+    LOG.warning(text)
+    return text

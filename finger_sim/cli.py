@@ -36,7 +36,8 @@ def _simulate(args: argparse.Namespace) -> int:
     from finger_sim.simulate import simulate
     from finger_sim.streaming import stream_csv
 
-    scene = load_scene(args.scene).with_overrides(method=args.method, dt=args.dt, duration=args.t_end)
+    scene = load_scene(args.scene).with_overrides(method=args.method, dt=args.dt, duration=args.t_end,
+                                                  tolerance=getattr(args, "tolerance", None))
     csv = check_output_file(args.csv, argument="--csv") if args.csv else None
     plot = check_plot_file(args.plot, argument="--plot") if args.plot else None
     streaming = csv is not None and plot is None
@@ -258,6 +259,8 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--method", choices=sorted(METHODS) + [AUTO],
                      help=f"override the scene's integrator (a scene that names none uses {Scene.method})")
     sim.add_argument("--dt", type=float, help="override the step, s")
+    sim.add_argument("--tolerance", type=float, metavar="RAD",
+                     help="override integrator.tolerance: the global error on θ that method auto delivers (default 1e-6 rad)")
     sim.add_argument("--t-end", type=float, help="override the duration, s")
     sim.add_argument("--max-steps", type=_positive_int, metavar="N",
                      help=f"refuse a run longer than N steps (default: {DEFAULT_MAX_STEPS:,} for a run held in "

@@ -19,7 +19,8 @@ from typing import NamedTuple
 import numpy as np
 from scipy.optimize import brentq
 
-from finger_sim.auto import ERROR_CONTROLLED, choose_method, contact_substeps, integrator_options
+from finger_sim.auto import ERROR_CONTROLLED, choose_method, contact_substeps, integrator_options, warn_unresolved_contact
+from finger_sim.depth_guard import DepthGuard
 from finger_sim.dynamics import FingerSystem
 from finger_sim.effects import ForceElement
 from finger_sim.errors import SimulationDiverged, StabilityError
@@ -105,6 +106,10 @@ class Simulator:
         self._method_cls = METHODS[method]
         self.method = method
         self._check_stability(self._method_cls)
+        #: stops the run when a phalanx's axis enters an object (issue 22); empty without objects
+        self._depth_guard = DepthGuard(self.system.elements, scene.phalanx_radius)
+        if self._depth_guard and scene.method != AUTO and self._method_cls.implicit:
+            warn_unresolved_contact(scene, self._method_cls)
         self._integrator_cls, self.kernel = select_kernel(self._method_cls, self.system, kernel)
         q0, _ = scene.initial_state()
         # every gap of every non-smooth element; empty on a smooth scene, which then pays nothing
@@ -145,6 +150,14 @@ class Simulator:
     def state(self) -> State:
         return State(self.time, self.q, self.v)
 
+    @property
+    def error_estimate(self) -> float:
+        """The integrator's estimate of the global θ error at the current state (rad): an
+        error-controlled method's sum of local error estimates (`DormandPrince853.error_estimate`);
+        NaN for a fixed-step method, which does not estimate its error."""
+        estimate = getattr(self.integrator, "error_estimate", None)
+        return math.nan if estimate is None else estimate(self.q)
+
     def step(self, torque: Profile | float | None = None) -> State:
         """Advance one dt under `torque`: the scene's profile if None, a profile, or a held value (N·m)."""
         fast = self.fast_stepper
@@ -174,6 +187,8 @@ class Simulator:
             self._advance(t0, t1, lambda s: value)
         if not math.isfinite(sum(self.q) + sum(self.v)):  # a NaN or inf anywhere makes the sum non-finite
             raise SimulationDiverged(f"non-finite state (step {self.step_index + 1})", method=self.method, t=t1, dt=self.dt)
+        if self._depth_guard:
+            self._depth_guard.check(t1, self.q, self.method)
         self.step_index += 1
         return self.state
 
@@ -452,6 +467,8 @@ class Trajectory:
     method_reason: str
     wall_time: float  # s, stepping only
     outputs: dict[str, np.ndarray] = field(default_factory=dict)
+    #: the integrator's estimate of the θ error at the end (rad; NaN: a fixed-step method, none)
+    error_estimate: float = math.nan
 
     #: The columns every run has; the elements' outputs follow them (`csv_header`).
     CSV_HEADER = "t,theta1,theta2,theta3,theta1_dot,theta2_dot,theta3_dot,energy,constraint_residual"
@@ -467,17 +484,19 @@ class Trajectory:
 
     def summary(self) -> str:
         return summary_line(self.t[-1], self.q[-1], float(self.residual.max()), self.energy[-1] - self.energy[0],
-                            self.method, len(self.t) - 1, self.wall_time)
+                            self.method, len(self.t) - 1, self.wall_time, self.error_estimate)
 
 
 def summary_line(t_end: float, q_end: Sequence[float], max_residual: float, energy_change: float, method: str,
-                 steps: int, wall_time: float) -> str:
-    """The one-line run summary `finger-sim simulate` prints (s, rad, m, J; wall s, NaN for none)."""
+                 steps: int, wall_time: float, error_estimate: float = math.nan) -> str:
+    """The one-line run summary `finger-sim simulate` prints (s, rad, m, J; wall s, NaN for none;
+    error_estimate: the integrator's estimated θ error, rad, NaN for none)."""
     deg = np.degrees(q_end)
     return (
         f"t = {t_end:.4g} s  θ = ({deg[0]:.2f}°, {deg[1]:.2f}°, {deg[2]:.2f}°)  "
         f"max|Φ| = {max_residual:.2e} m  ΔE = {energy_change:+.3e} J  "
         f"method = {method}  steps = {steps}"
+        + (f"  est. error = {error_estimate:.1e} rad" if math.isfinite(error_estimate) else "")
         + (f"  wall = {wall_time:.3f} s" if math.isfinite(wall_time) else "")
     )
 
@@ -508,4 +527,5 @@ def simulate(scene: Scene, *, kernel: str = "auto") -> Trajectory:
         method_reason=sim.method_reason,
         wall_time=wall,
         outputs={name: values[:, i] for i, name in enumerate(names)},
+        error_estimate=sim.error_estimate,
     )
