@@ -48,7 +48,7 @@ from finger_sim import kinematics
 from finger_sim.dynamics import FingerSystem
 from finger_sim.effects import EFFECTS
 from finger_sim.integrators import METHODS
-from finger_sim.scene import Scene
+from finger_sim.scene import AUTO, Scene
 from finger_sim.stability import SAMPLES, TOGGLE_MARGIN, fastest_mode, inside_object, mcp_range, modal_roots, stable_at
 
 LOG = logging.getLogger(__name__)
@@ -297,3 +297,11 @@ def warn_unresolved_contact(scene: Scene, method: type) -> str:
             f"dt ≤ {IMPLICIT_CONTACT_MODE_DT / omega:.2g} s or method auto resolves it")
     LOG.warning(text)
     return text
+
+
+def promise_note(scene: Scene, method: str, error_estimate: float) -> str:
+    """A warning line when a run of `method: auto` estimates more error than scene.tolerance (rad), else ""."""
+    if scene.method != AUTO or not math.isfinite(error_estimate) or error_estimate <= scene.tolerance:
+        return ""
+    return (f"warning: {method} estimates {error_estimate:.1e} rad of error on θ, more than integrator.tolerance "
+            f"{scene.tolerance:g} rad; a smaller --tolerance tightens its error control")

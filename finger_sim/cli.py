@@ -33,6 +33,7 @@ MCP_RANGE = (0.0, math.pi / 2)
 
 def _simulate(args: argparse.Namespace) -> int:
     """Paths and the run's size are checked before it starts; `--csv` without `--plot` streams to the file."""
+    from finger_sim.auto import promise_note
     from finger_sim.simulate import simulate
     from finger_sim.streaming import stream_csv
 
@@ -57,12 +58,16 @@ def _simulate(args: argparse.Namespace) -> int:
         print(run.summary())
         if run.method_reason:
             print(f"method auto → {run.method}: {run.method_reason}")
+        if note := promise_note(scene, run.method, run.error_estimate):
+            print(note)
         print(f"wrote {csv}")
         return 0
     traj = simulate(scene, kernel=args.kernel)
     print(traj.summary())
     if traj.method_reason:
         print(f"method auto → {traj.method}: {traj.method_reason}")
+    if note := promise_note(scene, traj.method, traj.error_estimate):
+        print(note)
     if csv and (args.columns != "paper" or args.every > 1):
         from finger_sim.csv_columns import write_paper, write_ros
 

@@ -31,9 +31,8 @@ DEFAULT_RTOL = 1e-10
 DEFAULT_ATOL = 1e-12
 #: Attempts allowed for one internal step before the run is declared diverged.
 MAX_ATTEMPTS = 60
-#: The error norm bounds the RMS over the 6 state components of error/scale; one component's
-#: error is at most √6 times the norm times its scale.
-COMPONENT_BOUND = math.sqrt(6.0)
+#: Weight of the 3rd-order estimate in DOP853's error combination |e5|²/√(|e5|² + w|e3|²) (scipy's).
+E3_WEIGHT = 0.01
 #: `error_estimate` remembers this many recent outputs (the states event location tried within
 #: a step); older ones are dropped down to KEEP_OUTPUTS.
 MAX_OUTPUTS, KEEP_OUTPUTS = 4096, 256
@@ -164,9 +163,8 @@ class DormandPrince853(Integrator):
             norm = num.dop853_attempt(self._model, _A, _B, _C, _E3, _E5, _D, t, self._y, self._f, h, taus,
                                       self.rtol, self.atol, self._kk, y_new, self._dense)
             if norm < 1.0:
-                theta = max(abs(self._y[0]), abs(self._y[1]), abs(self._y[2]), abs(y_new[0]), abs(y_new[1]), abs(y_new[2]))
                 self._err_old = self._err
-                self._err += COMPONENT_BOUND * norm * (self.atol + self.rtol * theta)
+                self._err += _theta_error(self._kk, h)
                 factor = num.MAX_FACTOR if norm == 0.0 else min(num.MAX_FACTOR, num.SAFETY * norm**num.ERROR_EXPONENT)
                 self._t_old, self._h_old = t, h
                 self._y_old[:] = self._y
@@ -186,6 +184,17 @@ class DormandPrince853(Integrator):
     @classmethod
     def is_stable(cls, z: complex) -> bool:
         return True  # error control shrinks the internal step as needed
+
+
+def _theta_error(kk: np.ndarray, h: float) -> float:
+    """The local error estimate of an accepted step on θ (rad): scipy's DOP853 combination of its
+    5th- and 3rd-order estimates, h·e5²/√(e5² + 0.01·e3²), for each angle, the largest of the three.
+    kk: the step's stages (rows, as `dop853_attempt` leaves them); h: its length, s."""
+    stages = kk[: _N_STAGES + 1, :3]
+    e5, e3 = _E5 @ stages, _E3 @ stages
+    denominator = np.sqrt(e5 * e5 + E3_WEIGHT * e3 * e3)
+    ratios = np.divide(e5 * e5, denominator, out=np.zeros(3), where=denominator > 0.0)
+    return abs(h) * float(ratios.max())
 
 
 def _initial_step(y: np.ndarray, f: np.ndarray, rtol: float, atol: float, dt: float) -> float:
