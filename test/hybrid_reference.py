@@ -103,7 +103,8 @@ class HybridReference:
 def solve(data: dict, *, rest_dt: float = 1e-3) -> HybridReference:
     """The reference of a scene mapping as written in config/ (the keys its hard scenes use)."""
     model = data.get("model", {})
-    fx = ref.Effects(k=model.get("spring_stiffness", ref.K_PAPER), c=model.get("damping", 0.0))
+    fx = ref.Effects(k=model.get("spring_stiffness", ref.K_PAPER), c=model.get("damping", 0.0),
+                     g=tuple(model.get("gravity", (0.0, 0.0))), f=tuple(model.get("tip_force", (0.0, 0.0))))
     c = model.get("contact", {})
     law = ContactLaw(c.get("stiffness", 1e5), c.get("exponent", 1.5), c.get("damping", 1.5), c.get("friction", 0.0),
                      c.get("slip_velocity", 1e-3), tuple(model.get("phalanx_radius", (0.008, 0.007))))
