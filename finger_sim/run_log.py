@@ -430,6 +430,18 @@ class ResimResult:
         )
 
 
+def _recorded_method(scene: Scene, method: str) -> Scene:
+    """The scene to resimulate: under `method: auto`, a log made when auto chose another method (before
+    issue 22 moved scenes with events to dop853) is re-run with the method that made it."""
+    from finger_sim.auto import choose_method
+    from finger_sim.integrators import METHODS
+    from finger_sim.scene import AUTO
+
+    if scene.method != AUTO or method not in METHODS or method == choose_method(scene)[0]:
+        return scene
+    return scene.with_overrides(method=method)
+
+
 def resimulate(run: RecordedRun, *, kernel: str | None = None) -> ResimResult:
     """Re-run the log's scene, re-applying its torques at the steps they were applied, and
     compare every recorded joint state with the re-simulated one (exact comparison).
@@ -440,7 +452,7 @@ def resimulate(run: RecordedRun, *, kernel: str | None = None) -> ResimResult:
     before any); in scene mode the scene's profile drives every step, as in the node.
     kernel: the Simulator's kernel; None (the default) takes the one the log was made with.
     """
-    sim = Simulator(run.scene, kernel=run.metadata.kernel if kernel is None else kernel)
+    sim = Simulator(_recorded_method(run.scene, run.metadata.method), kernel=run.metadata.kernel if kernel is None else kernel)
     dt_ns = run.dt * NS_PER_S
     q_ext, alpha = kinematics.extended_pose(run.scene.params), kinematics.distal_offset(run.scene.params)
     offsets = [0] + [e.stamp_ns for e in run.events if e.event == "reset"]

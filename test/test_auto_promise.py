@@ -147,3 +147,13 @@ def test_the_tolerance_key_is_checked(value):
 
     with pytest.raises(ConfigError, match="integrator.tolerance"):
         scene_from_dict(d)
+
+
+def test_a_log_made_before_auto_changed_its_choice_resimulates_with_the_method_that_made_it():
+    from finger_sim.run_log import _recorded_method
+
+    scene = load_scene(HARD.parent / "paper_to_stop.yaml")  # auto chose rk4 here before issue 22
+    old = simulate(scene.with_overrides(method="rk4"))
+    again = simulate(_recorded_method(scene, "rk4"))
+    assert again.method == "rk4" and np.array_equal(again.q, old.q)  # bit for bit, as resim compares
+    assert _recorded_method(scene, "dop853") is scene  # a log of today's choice: the scene as it is
