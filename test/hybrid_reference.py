@@ -134,8 +134,8 @@ def solve(data: dict, *, rest_dt: float = 1e-3) -> HybridReference:
         while t < b - 1e-15:
             if resting:
                 q, side = y[:3], stop_side
-                if push(t, q, side) > 0.0:
-                    if push(b, q, side) > 0.0:
+                if push(t, q, side) >= 0.0:
+                    if push(b, q, side) >= 0.0:
                         out.pieces.append((t, b, y.copy()))
                         t = b
                         continue
@@ -171,8 +171,9 @@ def solve(data: dict, *, rest_dt: float = 1e-3) -> HybridReference:
                 y[:3] = np.concatenate([[y[0]], ref._close(y[0], y[1:3])])
                 out.impacts += 1
                 v_plus = -e_stop * y[3:]
-                closing = -push(t, y[:3], stop_side)  # θ1'' of the free finger at rest, towards the stop < 0
-                if closing < 0.0 and abs(v_plus[0]) <= abs(closing) * rest_dt:
+                closing = -push(t, y[:3], stop_side)  # θ1'' of the free finger at rest, away from the stop > 0
+                if (closing < 0.0 and abs(v_plus[0]) <= abs(closing) * rest_dt) or (closing == 0.0 and v_plus[0] == 0.0):
+                    # at rest: pushed into the stop, or on it with nothing pushing (then held until a push leaves)
                     y[3:] = 0.0
                     resting = True
                 else:
