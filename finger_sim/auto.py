@@ -78,6 +78,15 @@ ERROR_CONTROLLED = "dop853"
 #: on the hard scenes of issue 22 (config/hard/, docs/auto_accuracy.md) at 1e-3·1e-6 rad: 3e-10 to 1.7e-7
 #: rad against a tight reference, so 1e-3 keeps 5× margin on the worst (elastic stops at 50 rad/s).
 ERROR_CONTROL_PER_TOLERANCE = 1e-3
+#: |s|·h at which DOP853's error control settles on a mode s it cannot follow (its stability boundary on the
+#: negative real axis, ≈ 6): the internal steps per output step are about |s|·dt / this. Measured on
+#: stiff_spring (|s|·dt = 10.8): 1.8 attempts per 1 ms step.
+DOP853_STABILITY = 6.0
+#: CPU per internal DOP853 attempt through `Simulator.step`, µs (docs/auto_accuracy.md: stiff_spring,
+#: 25 µs per step at 1.8 attempts, on the shared machine), and the event bookkeeping of a contact step.
+ATTEMPT_US, EVENT_STEP_US = 14.0, 20.0
+#: Share of a real-time period the stepping may take (the rest: messages, the log).
+REALTIME_SHARE = 0.5
 #: The table's fixed-step method is trusted on a scene it did not measure only when its worst error
 #: over the kind's bench scenes is this many times inside the tolerance.
 TABLE_MARGIN = 10.0
@@ -247,9 +256,26 @@ def choose_method(scene: Scene) -> tuple[str, str]:
             return method, reason
     rtol, _ = error_control(scene.tolerance)
     reason = (f"{kind} scene ({why}); error-controlled {ERROR_CONTROLLED} at rtol = atol = {rtol:.0e} for "
-              f"{scene.tolerance:g} rad on θ, events located inside the step; the run reports its estimated error")
+              f"{scene.tolerance:g} rad on θ, events located inside the step; the run reports its estimated error"
+              + realtime_note(scene, root))
     LOG.info("method auto → %s: %s", ERROR_CONTROLLED, reason)
     return ERROR_CONTROLLED, reason
+
+
+def realtime_note(scene: Scene, root: complex) -> str:
+    """"" when ERROR_CONTROLLED is predicted to step `scene` in real time at 1/dt, else "; " and what it
+    cannot do and what would: the internal steps per output step that its fastest mode `root` (1/s) forces
+    (|s|·dt / DOP853_STABILITY, whatever the tolerance), their predicted CPU against REALTIME_SHARE of the period."""
+    attempts = max(1.0, abs(root) * scene.dt / DOP853_STABILITY)
+    cost = ATTEMPT_US * attempts + (EVENT_STEP_US if scene.objects or scene.mcp_limits is not None else 0.0)
+    budget = REALTIME_SHARE * scene.dt * 1e6
+    if cost <= budget:
+        return ""
+    note = (f"; cannot hold {scene.tolerance:g} rad in real time at {1.0 / scene.dt:g} Hz: its fastest mode forces "
+            f"about {attempts:.0f} internal steps per step, about {cost:.0f} µs of CPU against {budget:.0f} µs "
+            f"(a looser tolerance does not help); a realtime_factor ≤ {budget / cost:.2g} holds it")
+    LOG.warning("method auto → %s%s", ERROR_CONTROLLED, note)
+    return note
 
 
 def error_control(tolerance: float) -> tuple[float, float]:

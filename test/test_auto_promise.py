@@ -157,3 +157,17 @@ def test_a_log_made_before_auto_changed_its_choice_resimulates_with_the_method_t
     again = simulate(_recorded_method(scene, "rk4"))
     assert again.method == "rk4" and np.array_equal(again.q, old.q)  # bit for bit, as resim compares
     assert _recorded_method(scene, "dop853") is scene  # a log of today's choice: the scene as it is
+
+
+def test_a_scene_auto_cannot_step_in_real_time_is_named_at_start_up(caplog):
+    # a mode of 1e6 rad/s at 1 ms: DOP853 settles at |s|·h ≈ 6, about 167 internal steps per step
+    scene = load_scene(HARD / "rigid_fast.yaml")
+    with caplog.at_level(logging.WARNING, logger="finger_sim.auto"):
+        note = auto.realtime_note(scene, complex(-1e6, 0.0))
+    attempts = 1e6 * 1e-3 / auto.DOP853_STABILITY
+    cost = auto.ATTEMPT_US * attempts + auto.EVENT_STEP_US
+    assert f"about {attempts:.0f} internal steps per step, about {cost:.0f} µs of CPU against 500 µs" in note
+    assert f"a realtime_factor ≤ {500 / cost:.2g} holds it" in note and note in caplog.text
+    # every shipped scene with objects or stops is predicted to hold real time at 1 kHz (docs/auto_accuracy.md)
+    for name in ("grasp_rigid", "grasp_impact", "stiff_spring", "finger_default"):
+        assert "cannot hold" not in auto.choose_method(load_scene(HARD.parent / f"{name}.yaml"))[1]
