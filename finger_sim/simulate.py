@@ -140,6 +140,7 @@ class Simulator:
         #: the motor torque at the end of the last step (N·m): what a JointState effort reports
         self.torque = self.scene.torque(0.0)
         self.impacts = 0
+        self._held: tuple[float, TorqueFn] | None = None  # the held torque (N·m) and its function
 
     @property
     def time(self) -> float:
@@ -184,7 +185,11 @@ class Simulator:
             self.torque = segment(t1)
         else:
             value = self.torque = float(profile)
-            self._advance(t0, t1, lambda s: value)
+            if self._held is None or self._held[0] != value:
+                # one function object per held value: an error-controlled method continues its internal
+                # solution from step to step while the value is held (it restarts for a new function)
+                self._held = (value, lambda s: value)
+            self._advance(t0, t1, self._held[1])
         if not math.isfinite(sum(self.q) + sum(self.v)):  # a NaN or inf anywhere makes the sum non-finite
             raise SimulationDiverged(f"non-finite state (step {self.step_index + 1})", method=self.method, t=t1, dt=self.dt)
         if self._depth_guard:
