@@ -44,10 +44,12 @@ MCP_RANGE = (0.0, math.pi / 2)
 
 def _simulate(args: argparse.Namespace) -> int:
     """Paths and the run's size are checked before it starts; `--csv` without `--plot` streams to the file."""
+    from finger_sim.auto import promise_note
     from finger_sim.simulate import simulate
     from finger_sim.streaming import stream_csv
 
-    scene = load_scene(args.scene).with_overrides(method=args.method, dt=args.dt, duration=args.t_end)
+    scene = load_scene(args.scene).with_overrides(method=args.method, dt=args.dt, duration=args.t_end,
+                                                  tolerance=getattr(args, "tolerance", None))
     csv = check_output_file(args.csv, argument="--csv") if args.csv else None
     plot = check_plot_file(args.plot, argument="--plot") if args.plot else None
     check_distinct({"SCENE": args.scene}, {"--csv": csv, "--plot": plot})
@@ -70,12 +72,16 @@ def _simulate(args: argparse.Namespace) -> int:
         print(run.summary())
         if run.method_reason:
             print(f"method auto → {run.method}: {run.method_reason}")
+        if note := promise_note(scene, run.method, run.error_estimate):
+            print(note)
         print(f"wrote {csv}")
         return 0
     traj = simulate(scene, kernel=args.kernel)
     print(traj.summary())
     if traj.method_reason:
         print(f"method auto → {traj.method}: {traj.method_reason}")
+    if note := promise_note(scene, traj.method, traj.error_estimate):
+        print(note)
     if csv and (args.columns != "paper" or args.every > 1):
         from finger_sim.csv_columns import write_paper, write_ros
 
@@ -331,6 +337,8 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--method", choices=sorted(METHODS) + [AUTO],
                      help=f"override the scene's integrator (a scene that names none uses {Scene.method})")
     sim.add_argument("--dt", type=float, help="override the step, s")
+    sim.add_argument("--tolerance", type=float, metavar="RAD",
+                     help="override integrator.tolerance: the global error on θ that method auto delivers (default 1e-6 rad)")
     sim.add_argument("--t-end", type=float, help="override the duration, s")
     sim.add_argument("--max-steps", type=_positive_int, metavar="N",
                      help=f"refuse a run longer than N steps (default: {DEFAULT_MAX_STEPS:,} for a run held in "

@@ -434,6 +434,18 @@ class ResimResult:
         )
 
 
+def _recorded_method(scene: Scene, method: str) -> Scene:
+    """The scene to resimulate: under `method: auto`, a log made when auto chose another method (before
+    issue 22 moved scenes with events to dop853) is re-run with the method that made it."""
+    from finger_sim.auto import choose_method
+    from finger_sim.integrators import METHODS
+    from finger_sim.scene import AUTO
+
+    if scene.method != AUTO or method not in METHODS or method == choose_method(scene)[0]:
+        return scene
+    return scene.with_overrides(method=method)
+
+
 def resimulate(run: RecordedRun, *, kernel: str | None = None, max_steps: int | None = None) -> ResimResult:
     """Re-run the log's scene, re-applying its torques at the steps they were applied, and
     compare every recorded joint state with the re-simulated one (exact comparison).
@@ -446,7 +458,7 @@ def resimulate(run: RecordedRun, *, kernel: str | None = None, max_steps: int | 
     max_steps: refuse (ResourceError, before the first step) a re-simulation of more steps in all;
     None: `simulate`'s default budget (finger_sim.budget.DEFAULT_MAX_STEPS).
     """
-    sim = Simulator(run.scene, kernel=run.metadata.kernel if kernel is None else kernel)
+    sim = Simulator(_recorded_method(run.scene, run.metadata.method), kernel=run.metadata.kernel if kernel is None else kernel)
     dt_ns = run.dt * NS_PER_S
     q_ext, alpha = kinematics.extended_pose(run.scene.params), kinematics.distal_offset(run.scene.params)
     offsets = [0] + [e.stamp_ns for e in run.events if e.event == "reset"]

@@ -60,6 +60,9 @@ from finger_sim.model import FingerParams
 from finger_sim.scene_yaml import dump_scene, magnitude, mapping, number, pair, parse_scene_text, read_scene_file, text
 
 AUTO = "auto"
+#: `integrator.tolerance`: the global error on θ (rad) that `method: auto` delivers; its range
+#: (below 1e-10 the error-controlled path meets round-off and the bench's reference floor).
+DEFAULT_TOLERANCE, MIN_TOLERANCE, MAX_TOLERANCE = 1e-6, 1e-10, 1e-2
 #: A scene name is one safe file-name component (it names log files): these characters,
 #: not starting with a dot, at most NAME_LENGTH of them.
 NAME_PATTERN = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*")
@@ -114,6 +117,8 @@ class Scene:
     duration: float = 0.3
     method: str = AUTO
     dt: float = 0.001
+    #: the global accuracy `method: auto` promises on θ, rad (finger_sim.auto)
+    tolerance: float = DEFAULT_TOLERANCE
 
     @property
     def step_count(self) -> int:
@@ -154,7 +159,7 @@ class Scene:
             "input": {"torque": self.torque.to_dict()},
             "initial": {"theta1": self.theta1, "theta1_dot": self.theta1_dot},
             "duration": self.duration,
-            "integrator": {"method": self.method, "dt": self.dt},
+            "integrator": {"method": self.method, "dt": self.dt, "tolerance": self.tolerance},
             "objects": [_object_dict(obj) for obj in self.objects],
         }
 
@@ -162,9 +167,12 @@ class Scene:
         """The resolved scene as YAML 1.2 that `load_scene` and `scene_from_yaml` read back."""
         return dump_scene(self.to_dict())
 
-    def with_overrides(self, *, method: str | None = None, dt: float | None = None, duration: float | None = None) -> Scene:
+    def with_overrides(self, *, method: str | None = None, dt: float | None = None, duration: float | None = None,
+                       tolerance: float | None = None) -> Scene:
         """A copy with command-line overrides, validated like the file's values."""
         data = self.to_dict()
+        if tolerance is not None:
+            data["integrator"]["tolerance"] = tolerance
         if method is not None:
             data["integrator"]["method"] = method
         if dt is not None:
@@ -207,7 +215,7 @@ def scene_from_dict(data: Any, *, default_name: str = "scene") -> Scene:
     params = FingerParams(**{k: number(v, f"model.geometry.{k}") for k, v in geometry.items()})
     inp = mapping(data.get("input", {}), "input", {"torque"})
     initial = mapping(data.get("initial", {}), "initial", {"theta1", "theta1_dot"})
-    integ = mapping(data.get("integrator", {}), "integrator", {"method", "dt"})
+    integ = mapping(data.get("integrator", {}), "integrator", {"method", "dt", "tolerance"})
     method = integ.get("method", Scene.method)
     if not isinstance(method, str) or (method not in METHODS and method != AUTO):
         raise ConfigError("integrator.method", f"one of {sorted(METHODS) + [AUTO]}", method)
@@ -245,6 +253,8 @@ def scene_from_dict(data: Any, *, default_name: str = "scene") -> Scene:
         duration=duration,
         method=method,
         dt=dt,
+        tolerance=number(integ.get("tolerance", Scene.tolerance), "integrator.tolerance", minimum=MIN_TOLERANCE,
+                         maximum=MAX_TOLERANCE),
     )
     q0, _ = scene.initial_state()  # refuses a θ1 outside the assemblable range, or at a toggle
     contact = build_contact(scene)

@@ -19,7 +19,8 @@ from typing import NamedTuple
 import numpy as np
 from scipy.optimize import brentq
 
-from finger_sim.auto import choose_method, contact_substeps
+from finger_sim.auto import ERROR_CONTROLLED, choose_method, contact_substeps, integrator_options, warn_unresolved_contact
+from finger_sim.depth_guard import DepthGuard
 from finger_sim.dynamics import FingerSystem
 from finger_sim.effects import ForceElement
 from finger_sim.errors import SimulationDiverged, StabilityError
@@ -95,12 +96,20 @@ class Simulator:
         method = scene.method
         #: steps in contact (or closing a contact within the step) are split in this many (auto only)
         self.substeps = 1
+        #: keyword options of the integrator (auto's error-controlled method: its tolerances)
+        self._options: dict[str, float] = {}
         if method == AUTO:
             method, self.method_reason = choose_method(scene)
-            self.substeps = contact_substeps(scene, METHODS[method].implicit)
+            self._options = integrator_options(scene, method)
+            if method != ERROR_CONTROLLED:  # its error control resolves the contact mode itself
+                self.substeps = contact_substeps(scene, METHODS[method].implicit)
         self._method_cls = METHODS[method]
         self.method = method
         self._check_stability(self._method_cls)
+        #: stops the run when a phalanx's axis enters an object (issue 22); empty without objects
+        self._depth_guard = DepthGuard(self.system.elements, scene.phalanx_radius)
+        if self._depth_guard and scene.method != AUTO and self._method_cls.implicit:
+            warn_unresolved_contact(scene, self._method_cls)
         self._integrator_cls, self.kernel = select_kernel(self._method_cls, self.system, kernel)
         q0, _ = scene.initial_state()
         # every gap of every non-smooth element; empty on a smooth scene, which then pays nothing
@@ -123,7 +132,7 @@ class Simulator:
         """Back to the scene's initial state at t = 0."""
         # A fresh integrator: a warm start kept from the last run (adaptive's step size,
         # rattle's Jacobian) would make the rerun differ in the last bits.
-        self.integrator: Integrator = self._integrator_cls(self.system)
+        self.integrator: Integrator = self._integrator_cls(self.system, **self._options)
         self.step_index = 0
         self.q, self.v = self.scene.initial_state()
         self._resting: _Gap | None = None  # the closed impact gap the finger rests on (a stop)
@@ -131,6 +140,7 @@ class Simulator:
         #: the motor torque at the end of the last step (N·m): what a JointState effort reports
         self.torque = self.scene.torque(0.0)
         self.impacts = 0
+        self._held: tuple[float, TorqueFn] | None = None  # the held torque (N·m) and its function
 
     @property
     def time(self) -> float:
@@ -140,6 +150,14 @@ class Simulator:
     @property
     def state(self) -> State:
         return State(self.time, self.q, self.v)
+
+    @property
+    def error_estimate(self) -> float:
+        """The integrator's estimate of the global θ error at the current state (rad): an
+        error-controlled method's sum of local error estimates (`DormandPrince853.error_estimate`);
+        NaN for a fixed-step method, which does not estimate its error."""
+        estimate = getattr(self.integrator, "error_estimate", None)
+        return math.nan if estimate is None else estimate(self.q)
 
     def step(self, torque: Profile | float | None = None) -> State:
         """Advance one dt under `torque`: the scene's profile if None, a profile, or a held value (N·m)."""
@@ -167,9 +185,15 @@ class Simulator:
             self.torque = segment(t1)
         else:
             value = self.torque = float(profile)
-            self._advance(t0, t1, lambda s: value)
+            if self._held is None or self._held[0] != value:
+                # one function object per held value: an error-controlled method continues its internal
+                # solution from step to step while the value is held (it restarts for a new function)
+                self._held = (value, lambda s: value)
+            self._advance(t0, t1, self._held[1])
         if not math.isfinite(sum(self.q) + sum(self.v)):  # a NaN or inf anywhere makes the sum non-finite
             raise SimulationDiverged(f"non-finite state (step {self.step_index + 1})", method=self.method, t=t1, dt=self.dt)
+        if self._depth_guard:
+            self._depth_guard.check(t1, self.q, self.method)
         self.step_index += 1
         return self.state
 
@@ -448,6 +472,8 @@ class Trajectory:
     method_reason: str
     wall_time: float  # s, stepping only
     outputs: dict[str, np.ndarray] = field(default_factory=dict)
+    #: the integrator's estimate of the θ error at the end (rad; NaN: a fixed-step method, none)
+    error_estimate: float = math.nan
 
     #: The columns every run has; the elements' outputs follow them (`csv_header`).
     CSV_HEADER = "t,theta1,theta2,theta3,theta1_dot,theta2_dot,theta3_dot,energy,constraint_residual"
@@ -463,17 +489,19 @@ class Trajectory:
 
     def summary(self) -> str:
         return summary_line(self.t[-1], self.q[-1], float(self.residual.max()), self.energy[-1] - self.energy[0],
-                            self.method, len(self.t) - 1, self.wall_time)
+                            self.method, len(self.t) - 1, self.wall_time, self.error_estimate)
 
 
 def summary_line(t_end: float, q_end: Sequence[float], max_residual: float, energy_change: float, method: str,
-                 steps: int, wall_time: float) -> str:
-    """The one-line run summary `finger-sim simulate` prints (s, rad, m, J; wall s, NaN for none)."""
+                 steps: int, wall_time: float, error_estimate: float = math.nan) -> str:
+    """The one-line run summary `finger-sim simulate` prints (s, rad, m, J; wall s, NaN for none;
+    error_estimate: the integrator's estimated θ error, rad, NaN for none)."""
     deg = np.degrees(q_end)
     return (
         f"t = {t_end:.4g} s  θ = ({deg[0]:.2f}°, {deg[1]:.2f}°, {deg[2]:.2f}°)  "
         f"max|Φ| = {max_residual:.2e} m  ΔE = {energy_change:+.3e} J  "
         f"method = {method}  steps = {steps}"
+        + (f"  est. error = {error_estimate:.1e} rad" if math.isfinite(error_estimate) else "")
         + (f"  wall = {wall_time:.3f} s" if math.isfinite(wall_time) else "")
     )
 
@@ -504,4 +532,5 @@ def simulate(scene: Scene, *, kernel: str = "auto") -> Trajectory:
         method_reason=sim.method_reason,
         wall_time=wall,
         outputs={name: values[:, i] for i, name in enumerate(names)},
+        error_estimate=sim.error_estimate,
     )

@@ -10,6 +10,8 @@ run, byte for byte.
 
 from __future__ import annotations
 
+import math
+
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -42,11 +44,12 @@ class StreamedRun:
     method: str
     method_reason: str
     wall_time: float  # s, stepping only
+    error_estimate: float = math.nan  # rad, the integrator's estimated θ error at the end (NaN: none)
 
     def summary(self) -> str:
         """The line `Trajectory.summary` prints for the same run."""
         return summary_line(self.t_end, self.q_end, self.max_residual, self.energy_change, self.method, self.steps,
-                            self.wall_time)
+                            self.wall_time, self.error_estimate)
 
 
 def stream_csv(scene: Scene, path: str | Path, *, kernel: str = "auto") -> StreamedRun:
@@ -73,6 +76,7 @@ def stream_csv(scene: Scene, path: str | Path, *, kernel: str = "auto") -> Strea
     return StreamedRun(
         t_end=sim.time, q_end=sim.q, max_residual=max_residual, energy_change=energy - first_energy,
         steps=steps, method=sim.method, method_reason=sim.method_reason, wall_time=wall,
+        error_estimate=sim.error_estimate,
     )
 
 

@@ -26,23 +26,23 @@ def root_of(s) -> complex:
     return fastest_mode(s.build_system(), mcp_range(s))
 
 
-def test_stiff_spring_at_1ms_gets_an_implicit_method():
+def test_stiff_spring_at_1ms_gets_the_error_controlled_method():
+    # issue 17 item 5: not the Python radau (125-146 µs/step) but the compiled dop853, stable there by its error control
     method, reason = auto.choose_method(scene("stiff_spring", dt=1e-3))
-    assert METHODS[method].implicit
-    assert METHODS[method].is_stable(complex(-1e6, 1e6))  # stable on any mode
+    assert method == auto.ERROR_CONTROLLED == "dop853"
+    assert METHODS[method].is_stable(complex(-1e6, 1e6))  # error control shrinks its step on any mode
     assert reason.startswith("stiff scene (fastest mode |s|·dt = 10.8 > 1, not resolved by the step)")
-    assert "1000 Hz" in reason and method in reason
-    # every explicit method is unstable there: the reason says so
-    assert "unstable here: " in reason or not any(not METHODS[m].implicit for m, *_ in auto.RECOMMENDATION["stiff"][1000])
+    assert "rtol = atol = 1e-09 for 1e-06 rad on θ" in reason
 
 
 def test_paper_flexion_at_1ms_gets_an_explicit_method_within_the_target():
     method, reason = auto.choose_method(scene("paper_flexion", dt=1e-3))
     assert not METHODS[method].implicit
     assert reason.startswith("smooth scene (smooth ramp torque, no stops, fastest mode |s|·dt = 0.0108)")
-    assert f"at 1000 Hz the bench measured {method} as the cheapest method within 1e-06 rad" in reason
+    # the table's method is trusted on a scene without events only TABLE_MARGIN inside the tolerance
+    assert f"at 1000 Hz the bench measured {method} as the cheapest method within 1e-07 rad" in reason
     row = dict((m, e) for m, e, _ in auto.RECOMMENDATION["smooth"][1000])
-    assert row[method] <= auto.AUTO_TARGET
+    assert row[method] <= auto.AUTO_TARGET / auto.TABLE_MARGIN
 
 
 def test_the_simulator_stores_and_the_run_reports_the_reason(caplog):

@@ -35,16 +35,17 @@ GRID = [
       for k in (0.0005, 0.002) for s in (0.01, 0.02)),
     _varied("paper_flexion", integrator__method="euler", initial__theta1=0.2, model__geometry__r1=0.047),
     _varied("paper_flexion", integrator__method="dop8", model__damping=0.001, model__gravity=[0.0, -9.81]),
-    _varied("paper_to_stop", model__restitution=0.0),  # rests on the 90° stop from t ≈ 0.425 s
-    _varied("paper_to_stop", model__restitution=0.5, duration=0.45),  # bounces
+    # rk4 named: auto steps a scene with stops on the error-controlled dop853, a per-finger Simulator
+    _varied("paper_to_stop", model__restitution=0.0, integrator__method="rk4"),  # rests on the 90° stop from t ≈ 0.425 s
+    _varied("paper_to_stop", model__restitution=0.5, duration=0.45, integrator__method="rk4"),  # bounces
     _varied("bang_bang", input__torque__amplitude=0.006),  # a switch every 10 ms
     _varied("bang_bang", input__torque={"type": "step", "before": 0.0, "after": 0.01, "at": 0.0105}),
     _varied("free_swing", input__torque={"type": "sine", "amplitude": 0.002, "frequency": 7.0}, duration=0.3),
     _varied("grasp_cylinder", integrator__method="rk4"),  # contact onset located by the Simulator
     _varied("grasp_impact", integrator__method="rk6"),  # onset and release
     _varied("press_table", integrator__method="rk4"),  # the fingertip on a plane
-    _varied("grasp_cylinder"),  # auto: contact substeps, a per-finger Simulator
-    _varied("stiff_spring"),  # auto: radau, a per-finger Simulator
+    _varied("grasp_cylinder"),  # auto: dop853 with events, a per-finger Simulator
+    _varied("stiff_spring"),  # auto: dop853, a per-finger Simulator
 ]
 
 

@@ -136,11 +136,11 @@ def hard_case(request):
     return request.param, scene, sim, xs, tight_reference(scene, np.arange(scene.step_count + 1) * scene.dt)
 
 
-def test_hard_case_is_stepped_by_substepped_rk4(hard_case):
+def test_hard_case_is_stepped_by_the_error_controlled_method(hard_case):
+    # issue 22: auto steps contact on the error-controlled dop853 (before: rk4 in 4 or 18 substeps)
     name, scene, sim, _, _ = hard_case
-    assert (sim.method, scene.dt) == ("rk4", 1e-3)
-    assert sim.substeps == {"grasp_impact": 4, "grasp_rigid": 18}[name]
-    assert f"in {sim.substeps} substeps while in contact" in sim.method_reason
+    assert (sim.method, scene.dt, sim.substeps) == ("dop853", 1e-3, 1)
+    assert "error-controlled dop853" in sim.method_reason
 
 
 def test_hard_case_is_stable_and_bounded(hard_case):

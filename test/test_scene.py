@@ -134,7 +134,7 @@ def refusal(data) -> str:
         ({"model": {"geometry": {"r5": 0.01}}}, "model.geometry: expected only the keys ['L3', 'm1', 'm2', 'm3', 'r1', 'r2', 'r3', 'r4', 'theta4'], got 'r5'"),
         ({"model": {"joint_limits": {"pip": [0, 1]}}}, "model.joint_limits: expected only the keys ['mcp'], got 'pip'"),
         ({"initial": {"theta2": 0.1}}, "initial: expected only the keys ['theta1', 'theta1_dot'], got 'theta2'"),
-        ({"integrator": {"method": "rk4", "tol": 1e-6}}, "integrator: expected only the keys ['dt', 'method'], got 'tol'"),
+        ({"integrator": {"method": "rk4", "tol": 1e-6}}, "integrator: expected only the keys ['dt', 'method', 'tolerance'], got 'tol'"),
         ({"input": {"torque": {"type": "ramp", "offset": 0.0, "slope": 0.01, "phase": 1.0}}}, "input.torque: unknown key; expected only keys ['offset', 'slope'] (and 'type') for type ramp, got 'phase'"),
         # wrong types
         ([1, 2], "scene: expected a mapping, got [1, 2]"),

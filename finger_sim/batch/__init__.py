@@ -176,7 +176,7 @@ class _Planner:
         if method == AUTO:
             # choose_method reads the model, the MCP range, dt, and the torque's switches and kind
             switches = len(scene.torque.breakpoints(0.0, scene.duration))
-            auto_key = None if key is None else (*key, scene.dt, scene.torque.kind, switches)
+            auto_key = None if key is None else (*key, scene.dt, scene.torque.kind, switches, scene.tolerance)
             method = self._auto.get(auto_key) if auto_key is not None else None
             if method is None:
                 method, _ = choose_method(scene)

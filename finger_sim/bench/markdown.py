@@ -287,8 +287,9 @@ def render_hard_cases(tables: Tables) -> list[str]:
         out.append(f"| {row.scene} | {pick} | " + " | ".join(cells) + " |")
     out += [
         "",
-        "On the contact scenes (grasp_impact, grasp_rigid) `auto` itself is run: in contact it splits each step into "
-        "substeps (`finger_sim.auto.contact_substeps`), so its verdict is its own run's, shown in its cell.",
+        "On the contact scenes (grasp_impact, grasp_rigid) `auto` itself is run: it steps them with the "
+        "error-controlled dop853 (`finger_sim.auto.ERROR_CONTROLLED`), so its verdict is its own run's, shown in its cell. "
+        "Issue 22's hard scenes (config/hard/) and auto's error on every shipped scene: docs/auto_accuracy.md.",
     ]
     return out
 
@@ -335,8 +336,9 @@ def render_recommendation(tables: Tables, quick: bool) -> list[str]:
         "",
         "### The table behind `method: auto`",
         "",
-        f"`finger_sim.auto` picks, for a scene's kind and rate, the cheapest method of this table within "
-        f"{auto.AUTO_TARGET:g} rad that is stable at the scene's dt (see its docstring). The full bench writes the "
+        f"`finger_sim.auto` picks, for a smooth or discontinuous scene's rate, the cheapest method of this table within "
+        f"{auto.AUTO_TARGET / auto.TABLE_MARGIN:g} rad that is stable at the scene's dt (see its docstring); scenes with "
+        f"stops, contact or a stiff mode go to the error-controlled {auto.ERROR_CONTROLLED}. The full bench writes the "
         f"table as data, `{RECOMMENDATION_FILE}`, which `auto` loads. This run's table {verdict}",
     ]
     return out

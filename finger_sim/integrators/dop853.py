@@ -15,6 +15,7 @@ after Hairer, Nørsett & Wanner, *Solving ODEs I*, §II.10), with scipy's coeffi
 
 from __future__ import annotations
 
+import bisect
 import math
 
 import numpy as np
@@ -31,6 +32,13 @@ DEFAULT_RTOL = 1e-10
 DEFAULT_ATOL = 1e-12
 #: Attempts allowed for one internal step before the run is declared diverged.
 MAX_ATTEMPTS = 60
+#: The longest internal step, s: a state exactly at rest (zero error) would otherwise grow it without bound.
+MAX_STEP = 0.1
+#: Weight of the 3rd-order estimate in DOP853's error combination |e5|²/√(|e5|² + w|e3|²) (scipy's).
+E3_WEIGHT = 0.01
+#: `error_estimate` remembers this many recent outputs (the states event location tried within
+#: a step); older ones are dropped down to KEEP_OUTPUTS.
+MAX_OUTPUTS, KEEP_OUTPUTS = 4096, 256
 
 _N_STAGES = coefficients.N_STAGES
 #: Stage nodes of one attempt: the 12 stages, t + h, then the 3 extra dense-output stages.
@@ -41,6 +49,7 @@ _C = np.ascontiguousarray(coefficients.C, dtype=np.float64)
 _E3 = np.ascontiguousarray(coefficients.E3, dtype=np.float64)
 _E5 = np.ascontiguousarray(coefficients.E5, dtype=np.float64)
 _D = np.ascontiguousarray(coefficients.D, dtype=np.float64)
+_E53 = np.vstack([_E5, _E3])  # both error estimates in one product
 
 
 class DormandPrince853(Integrator):
@@ -79,27 +88,73 @@ class DormandPrince853(Integrator):
         self._out = np.empty(6)
         #: accepted and rejected internal steps so far (for benchmarks)
         self.accepted = self.rejected = 0
+        self._err = 0.0  # Σ local θ error estimates of the internal solution since its start, rad
+        self._err_old = 0.0  # `_err` at the start of the last accepted step
+        self._estimates: dict[Vec3, float] = {}  # output q → estimated θ error there
+        #: (t, q, q') the internal solution started from at its last restart, or continued from
+        self._origin: tuple[float, Vec3, Vec3] | None = None
+        #: accepted internal steps since then, (t_old, h_old, y_old, dense, err_old, err), and their starts
+        self._history: list[tuple[float, float, np.ndarray, np.ndarray, float, float]] = []
+        self._history_starts: list[float] = []
+        self._keep_history = True
+
+    def error_estimate(self, q: Vec3) -> float:
+        """The estimated θ error (rad) of an output q of this integrator (0 for a state it did not
+        produce): the sum of the local error estimates of the accepted internal steps on the path that
+        led to it, each bounded as √6·norm·(atol + rtol·|θ|), carried through restarts from an
+        earlier output (an impact keeps q). Linear accumulation: error growth or decay along the
+        flow is not modelled."""
+        return self._estimates.get(q, 0.0)
 
     def step(self, t: float, q: Vec3, v: Vec3, dt: float, torque: TorqueFn) -> tuple[Vec3, Vec3]:
         target = t + dt
         last = self._last
-        if not (torque is self._torque and last is not None and last[1] == q and last[2] == v
-                and abs(last[0] - t) <= 1e-9 * dt and target >= self._t_old):
+        if torque is self._torque and self._origin == (t, q, v) and target >= t:
+            pass  # a trial from the internal solution's start (event location): answered from it
+        elif torque is self._torque and last is not None and last[1] == q and last[2] == v \
+                and abs(last[0] - t) <= 1e-9 * dt and target >= self._t_old:
+            self._origin = (t, q, v)  # continuing the last output: later trials start here
+            self._prune(t)
+        else:
             self._restart(t, q, v, dt, torque)
         while self._t < target:
             self._advance(torque)
-        status, q1, v1 = self._numerics.dop853_output(self._model, self._t_old, self._h_old, self._y_old, self._dense,
-                                                      target, self._out)
+        t_old, h_old, y_old, dense, err_old, err = self._segment(target)
+        status, q1, v1 = self._numerics.dop853_output(self._model, t_old, h_old, y_old, dense, target, self._out)
         if status != self._numerics.OK:
             raise SimulationDiverged("non-finite or unprojectable state", method=self.name, t=target, dt=dt)
         self._last = (target, q1, v1)
+        self._remember(q1, target, t_old, h_old, err_old, err)
         return q1, v1
+
+    def _segment(self, target: float) -> tuple[float, float, np.ndarray, np.ndarray, float, float]:
+        """The accepted internal step whose dense output covers `target` (s): the last one, or an
+        earlier one kept in the history since the last restart."""
+        if target >= self._t_old or not self._history:
+            return self._t_old, self._h_old, self._y_old, self._dense, self._err_old, self._err
+        i = max(0, bisect.bisect_right(self._history_starts, target) - 1)
+        return self._history[i]
+
+    def _prune(self, t: float) -> None:
+        """Drop the history of internal steps that end before t (s): no trial starts before it again."""
+        keep = bisect.bisect_right(self._history_starts, t) - 1
+        if keep > 0:
+            del self._history[:keep], self._history_starts[:keep]
+
+    def _remember(self, q: Vec3, target: float, t_old: float, h_old: float, err_old: float, err: float) -> None:
+        """Record the estimate at an output q at time `target` (s), interpolated linearly over the
+        internal step (t_old, h_old) that covers it, whose estimates at its ends are err_old and err."""
+        if len(self._estimates) >= MAX_OUTPUTS:
+            self._estimates = dict(list(self._estimates.items())[-KEEP_OUTPUTS:])
+        x = (target - t_old) / h_old if h_old > 0.0 else 1.0
+        self._estimates[q] = err_old + min(1.0, max(0.0, x)) * (err - err_old)
 
     def run_grid(self, times: np.ndarray, q: Vec3, v: Vec3, torque: TorqueFn) -> np.ndarray:
         """Outputs at times[1:] from (q, q') at times[0], all under one smooth `torque`: the (n, 6)
         projected states (q, q'), the same numbers as n calls of `step` on that grid."""
         n = len(times) - 1
         out = np.empty((n, 6))
+        self._keep_history = False  # one pass over the grid: no trial goes back
         self._restart(float(times[0]), q, v, float(times[1] - times[0]), torque)
         done = 0
         while done < n:
@@ -113,10 +168,17 @@ class DormandPrince853(Integrator):
                 done = end
         a, b, c, d, e, f = out[-1].tolist()
         self._last = (float(times[-1]), (a, b, c), (d, e, f))
+        self._origin = None
+        self._keep_history = True
+        self._remember((a, b, c), float(times[-1]), self._t_old, self._h_old, self._err_old, self._err)
         return out
 
     def _restart(self, t: float, q: Vec3, v: Vec3, dt: float, torque: TorqueFn) -> None:
         self._torque = torque
+        self._origin = (t, q, v)
+        self._history.clear()
+        self._history_starts.clear()
+        self._err = self._err_old = self._estimates.get(q, 0.0)
         self._t = self._t_old = t
         self._y[:3], self._y[3:] = q, v
         self._numerics._rhs(self._model, t, self._y, torque(t), self._f)
@@ -136,18 +198,23 @@ class DormandPrince853(Integrator):
             norm = num.dop853_attempt(self._model, _A, _B, _C, _E3, _E5, _D, t, self._y, self._f, h, taus,
                                       self.rtol, self.atol, self._kk, y_new, self._dense)
             if norm < 1.0:
+                self._err_old = self._err
+                self._err += _theta_error(self._kk, h)
                 factor = num.MAX_FACTOR if norm == 0.0 else min(num.MAX_FACTOR, num.SAFETY * norm**num.ERROR_EXPONENT)
                 self._t_old, self._h_old = t, h
                 self._y_old[:] = self._y
                 self._y[:] = y_new
                 self._f[:] = self._kk[_N_STAGES]
                 self._t = t + h
-                self._h = h * (min(1.0, factor) if rejected else factor)
+                self._h = min(MAX_STEP, h * (min(1.0, factor) if rejected else factor))
                 self.accepted += 1
+                if self._keep_history:
+                    self._history.append((t, h, self._y_old.copy(), self._dense.copy(), self._err_old, self._err))
+                    self._history_starts.append(t)
                 return
-            if not math.isfinite(norm):
-                break
-            h *= max(num.MIN_FACTOR, num.SAFETY * norm**num.ERROR_EXPONENT)
+            # a non-finite trial (e.g. a contact state far outside its law) is rejected like a large
+            # error, as scipy does: the step shrinks by MIN_FACTOR
+            h *= max(num.MIN_FACTOR, num.SAFETY * norm**num.ERROR_EXPONENT) if math.isfinite(norm) else num.MIN_FACTOR
             rejected = True
             self.rejected += 1
         raise SimulationDiverged(f"internal step fell to {h:.3g} s (rtol {self.rtol:g})", method=self.name, t=t)
@@ -155,6 +222,19 @@ class DormandPrince853(Integrator):
     @classmethod
     def is_stable(cls, z: complex) -> bool:
         return True  # error control shrinks the internal step as needed
+
+
+def _theta_error(kk: np.ndarray, h: float) -> float:
+    """The local error estimate of an accepted step on θ (rad): scipy's DOP853 combination of its
+    5th- and 3rd-order estimates, h·e5²/√(e5² + 0.01·e3²), for each angle, the largest of the three.
+    kk: the step's stages (rows, as `dop853_attempt` leaves them); h: its length, s."""
+    (e5, e3) = (_E53 @ kk[: _N_STAGES + 1, :3]).tolist()
+    worst = 0.0
+    for a, b in zip(e5, e3):
+        denominator = a * a + E3_WEIGHT * b * b
+        if denominator > 0.0:
+            worst = max(worst, a * a / math.sqrt(denominator))
+    return abs(h) * worst
 
 
 def _initial_step(y: np.ndarray, f: np.ndarray, rtol: float, atol: float, dt: float) -> float:
