@@ -19,9 +19,9 @@ setup(
         (f"share/{PACKAGE}/urdf", glob("urdf/*.urdf")),
         (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),
     ],
-    package_data={PACKAGE: ["py.typed", "data/*.json", "view/*.html", "view/*.js", "view/*.css"]},
+    package_data={PACKAGE: ["py.typed", "data/*.json", "view/*.html", "view/*.js", "view/*.css", "view/vendor/*"]},
     python_requires=">=3.10",
-    install_requires=["numpy", "scipy", "pyyaml", "matplotlib", "tqdm", "mcap>=1.5", "mcap-ros2-support>=0.6", "rosbags>=0.10", "numba", "plotly>=5"],
+    install_requires=["numpy", "scipy", "pyyaml", "matplotlib", "tqdm", "mcap>=1.5", "mcap-ros2-support>=0.6", "rosbags>=0.10", "numba", "plotly>=7,<8"],
     extras_require={
         # ROS 2 Jazzy's Python stack from PyPI, for machines without a ROS install.
         "ros": [
