@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import csv
 import math
+import sys
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -160,6 +161,8 @@ def read_log(path: Path) -> list[FingerRun]:
     from finger_sim.run_log import JOINT_STATE_TYPE, RunLogError, RunMetadata, check_schema
 
     reader = open_log(path)
+    if reader.truncated:  # as `export` does: the intact part is shown
+        print(f"finger-sim: warning: {reader.truncation}; showing the intact part", file=sys.stderr)
     names = [n for n in reader.metadata if n == METADATA or n.startswith(METADATA + "/")]
     if not names:
         raise ViewInputError(path, f"no '{METADATA}' metadata record: not a finger_node or finger_hand log")
