@@ -23,6 +23,8 @@ ROW_HEIGHT_PX = 170
 #: Rows' vertical gap, px.
 ROW_GAP_PX = 42
 JOINTS = ("mcp", "coupler", "pip")
+#: Margin of a plot's y range, a fraction of the data's span.
+RANGE_PAD = 0.06
 
 
 @dataclass(frozen=True)
@@ -86,6 +88,9 @@ def build_figure(runs: list[FingerRun], t0: float, t1: float) -> go.Figure:
         for name, t, y, is_mode in rows[title][1]:
             fig.add_trace(go.Scatter(x=t, y=y, name=name, mode="lines", line_shape="hv" if is_mode else "linear",
                                      legendgroup=title, hovertemplate=f"{name}: %{{y}}<extra></extra>"), row=i, col=1)
+        numbers = [v for _, _, y, is_mode in rows[title][1] if not is_mode for v in y if v is not None]
+        if numbers:
+            fig.update_yaxes(range=_padded(min(numbers), max(numbers)), row=i, col=1)
     fig.update_xaxes(title_text="t (s)", row=n, col=1)
     fig.update_xaxes(range=[t0, t1], showspikes=True, spikemode="across", spikethickness=1)
     fig.update_layout(height=height, margin=dict(l=70, r=20, t=40, b=50), hovermode="x", template="plotly_white",
@@ -93,3 +98,11 @@ def build_figure(runs: list[FingerRun], t0: float, t1: float) -> go.Figure:
                       shapes=[dict(type="line", xref="x", yref="paper", x0=t0, x1=t0, y0=0, y1=1,
                                    line=dict(color="#d62728", width=1.5))])
     return fig
+
+
+def _padded(low: float, high: float) -> list[float]:
+    """A y range around [low, high] with RANGE_PAD of its span on each side; a constant (plotly
+    would put it at ±1) gets ±RANGE_PAD of its own size."""
+    span = high - low
+    pad = RANGE_PAD * span if span > 0.0 else RANGE_PAD * abs(high) or 1.0
+    return [low - pad, high + pad]
