@@ -141,7 +141,7 @@ def test_vendored_plotly_is_the_plotly_packages_version() -> None:
 
 
 def test_foxglove_layout_shows_the_nodes_topics() -> None:
-    rclpy = pytest.importorskip("rclpy")  # noqa: F841  (the message classes come with the ros extra)
+    pytest.importorskip("rclpy")  # the message classes come with the ros extra
     from finger_sim.ros.interfaces import OUTPUTS
 
     layout = json.loads(LAYOUT.read_text())
@@ -166,3 +166,16 @@ def test_foxglove_layout_shows_the_nodes_topics() -> None:
             if field.startswith("position["):  # labelled by the joint the node puts at that index
                 assert path["label"] == JOINT_NAMES[int(field[9])], path
     assert plotted == {"/joint_states", "/grip_force"}
+
+
+def test_ros_columns_map_back_to_the_paper_state(tmp_path: Path) -> None:
+    scene_path = CONFIG / "paper_flexion.yaml"
+    paper, ros = tmp_path / "paper.csv", tmp_path / "ros.csv"
+    assert main(["simulate", str(scene_path), "--csv", str(paper)]) == 0
+    assert main(["simulate", str(scene_path), "--csv", str(ros), "--columns", "ros"]) == 0
+    scene = load_scene(scene_path)
+    (a,), (b,) = read_run(paper, scene), read_run(ros, scene)
+    assert np.array_equal(a.t, b.t)
+    assert np.abs(a.q - b.q).max() < 1e-12 and np.abs(a.v - b.v).max() < 1e-12  # spec §6 and back
+    assert {"mcp_effort", "torque"} <= {s.name for s in b.signals}
+    assert not {"mcp_position", "tip_x"} & {s.name for s in b.signals}  # drawn, not plotted again
