@@ -62,7 +62,7 @@ SCREENSHOT_DURATION_S = 0.6
 def browser() -> Iterator[Any]:
     """Headless Chromium for the module, closed even when a test fails."""
     if not CHROMIUM.exists():
-        if os.environ.get("CI") == "true":
+        if os.environ.get("CI", "").lower() in ("true", "1", "yes"):
             pytest.fail(f"CI: {CHROMIUM} is missing; .ci/run installs Debian's chromium")
         pytest.skip(f"Debian's Chromium is not installed ({CHROMIUM}; apt-get install chromium)")
     from playwright.sync_api import sync_playwright
