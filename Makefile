@@ -25,6 +25,8 @@ run: $(STAMP)
 	$(VENV)/bin/finger-sim info "$$log" && \
 	$(VENV)/bin/finger-sim export "$$log" --csv out/paper_flexion.csv --plot out/paper_flexion.png && \
 	$(VENV)/bin/finger-sim resim "$$log"
+	log=$$(ls -t bags/paper_flexion_*.mcap | head -n 1) && $(VENV)/bin/finger-sim view "$$log" -o out/paper_flexion.html && \
+	echo "viewer of this run: file://$(CURDIR)/out/paper_flexion.html (open it in a browser)"
 
 test: $(STAMP)
 	$(VENV)/bin/pytest -q

@@ -16,12 +16,13 @@ setup(
         (f"share/{PACKAGE}/config", glob("config/*.yaml")),
         (f"share/{PACKAGE}/config/ros2_control", glob("config/ros2_control/*")),
         (f"share/{PACKAGE}/config/hands", glob("config/hands/*.yaml")),
+        (f"share/{PACKAGE}/config/foxglove", glob("config/foxglove/*.json")),
         (f"share/{PACKAGE}/urdf", glob("urdf/*.urdf")),
         (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),
     ],
-    package_data={PACKAGE: ["py.typed", "data/*.json"]},
+    package_data={PACKAGE: ["py.typed", "data/*.json", "view/*.html", "view/*.js", "view/*.css", "view/vendor/*"]},
     python_requires=">=3.10",
-    install_requires=["numpy", "scipy", "pyyaml", "matplotlib", "tqdm", "mcap>=1.5", "mcap-ros2-support>=0.6", "rosbags>=0.10", "numba"],
+    install_requires=["numpy", "scipy", "pyyaml", "matplotlib", "tqdm", "mcap>=1.5", "mcap-ros2-support>=0.6", "rosbags>=0.10", "numba", "plotly>=7,<8"],
     extras_require={
         # ROS 2 Jazzy's Python stack from PyPI, for machines without a ROS install.
         "ros": [
@@ -34,7 +35,8 @@ setup(
             "ros-jazzy-diagnostic-msgs",
             "ros-jazzy-visualization-msgs",
         ],
-        "test": ["pytest", "pytest-timeout", "hypothesis", "rosbags", "yourdfpy", "colcon-common-extensions"],
+        "test": ["pytest", "pytest-timeout", "hypothesis", "rosbags", "yourdfpy", "colcon-common-extensions",
+                 "playwright", "pillow"],  # playwright drives the system Chromium (.ci/run installs it)
         "bench": ["mujoco"],
     },
     zip_safe=True,

@@ -266,6 +266,16 @@ def _repair(args: argparse.Namespace) -> int:
     return EXIT_DATA_LOST if report.lost else 0
 
 
+@_log_command
+def _view(args: argparse.Namespace) -> int:
+    """The HTML viewer of a log or CSV (finger_sim.view); paths checked before reading."""
+    from finger_sim.view import write_view
+
+    out = check_output_file(args.out or args.run.with_suffix(".html"), argument="-o/--out")
+    print(write_view(args.run, out, scene=args.scene))
+    return 0
+
+
 def _urdf(args: argparse.Namespace) -> int:
     """The URDF of a scene's finger, on stdout or to -o."""
     from finger_sim.urdf import finger_urdf
@@ -390,6 +400,14 @@ def build_parser() -> argparse.ArgumentParser:
     repair.add_argument("log", type=Path)
     repair.add_argument("-o", "--out", type=Path, help="the repaired log (default: <stem>.repaired.mcap next to LOG)")
     repair.set_defaults(func=_repair)
+
+    view = sub.add_parser("view", help="a self-contained HTML viewer of a run: the linkage to scale over a time "
+                                       "slider, plots of every signal under a shared cursor")
+    view.add_argument("run", type=Path, help="a finger_node or finger_hand MCAP log, or a simulate/export CSV")
+    view.add_argument("-o", "--out", type=Path, help="the HTML file (default: RUN with the suffix .html)")
+    view.add_argument("--scene", type=Path, help="the scene of a CSV (geometry, objects, scripted torque); "
+                                                 "a log holds its own")
+    view.set_defaults(func=_view)
 
     urdf = sub.add_parser("urdf", help="the URDF of a scene's finger (links, joints, masses, capsules; spec §6)")
     urdf.add_argument("scene", type=Path, help="scene YAML file (see config/); its model.geometry sets the URDF")
