@@ -98,10 +98,18 @@ class Contact:
         self._r1, self._l3 = r1, l3
         self._k, self._e, self._d = contact.stiffness, contact.exponent, contact.damping
         self._mu, self._vs = contact.friction, contact.slip_velocity
-        # Stiffness and damping of the contact law at DESIGN_FORCE: δ_d = (F_d / k)^(1/e).
-        delta_d = (DESIGN_FORCE / self._k) ** (1.0 / self._e)
-        self._k_design = self._k * self._e * delta_d ** (self._e - 1.0)
-        self._c_design = self._d * DESIGN_FORCE
+        # Each object's k_c and d_c: its own (`ObjectProperties`) or the scene's. The compiled
+        # law has one k_c and d_c, so a scene where an object sets its own steps in Python.
+        self._obj_k = tuple(self._k if o.properties.stiffness is None else o.properties.stiffness for o in self.objects)
+        self._obj_d = tuple(self._d if o.properties.damping is None else o.properties.damping for o in self.objects)
+        if any(k != self._k for k in self._obj_k) or any(d != self._d for d in self._obj_d):
+            self.kernel_code = None  # type: ignore[misc]  # no compiled form: see kernel.layout
+        # Stiffness and damping of the contact law at DESIGN_FORCE: δ_d = (F_d / k)^(1/e),
+        # the stiffest object's.
+        k_max, d_max = max((self._k, *self._obj_k)), max((self._d, *self._obj_d))
+        delta_d = (DESIGN_FORCE / k_max) ** (1.0 / self._e)
+        self._k_design = k_max * self._e * delta_d ** (self._e - 1.0)
+        self._c_design = d_max * DESIGN_FORCE
         self._friction_design = self._mu * DESIGN_FORCE / self._vs
         # Candidates, kept only where some pose can reach them (|p − A| ≤ r1 on the proximal
         # phalanx, ≤ r1 + L3 on the distal one).
@@ -201,9 +209,9 @@ class Contact:
 
     def _forces(self, hit: _Hit, v: Vec3) -> tuple[float, float, float]:
         """(F_n, Fx, Fy), N, of one candidate in contact: Hunt–Crossley normal force plus friction."""
-        _, _, d, _, _, nx, ny, j1x, j1y, j3x, j3y = hit
+        _, i, d, _, _, nx, ny, j1x, j1y, j3x, j3y = hit
         vx, vy = j1x * v[0] + j3x * v[2], j1y * v[0] + j3y * v[2]
-        fn = self._k * d**self._e * (1.0 - self._d * (nx * vx + ny * vy))  # δ' = −n_c·ṗ
+        fn = self._obj_k[i] * d**self._e * (1.0 - self._obj_d[i] * (nx * vx + ny * vy))  # δ' = −n_c·ṗ
         if fn <= 0.0:
             return (0.0, 0.0, 0.0)
         fx, fy = fn * nx, fn * ny
@@ -226,7 +234,7 @@ class Contact:
     def potential(self, q: Vec3) -> float:
         """V_c = Σ k δ^(e+1)/(e+1), J."""
         e1 = self._e + 1.0
-        return sum(self._k * hit[2] ** e1 / e1 for hit in self._hits(q, False))
+        return sum(self._obj_k[hit[1]] * hit[2] ** e1 / e1 for hit in self._hits(q, False))
 
     def modal(self, q: Vec3, n: Vec3) -> tuple[float, float]:
         """(nᵀKn, nᵀCn): the contact's stiffness and damping along a direction n of q.
@@ -238,17 +246,18 @@ class Contact:
         Each sum is then bounded below by the stiffest single candidate at DESIGN_FORCE, so
         the stability check sees the contact mode at poses out of contact too.
         """
-        k, e, n1, n3 = self._k, self._e, n[0], n[2]
+        e, n1, n3 = self._e, n[0], n[2]
         stiff = damp = stiff_floor = damp_floor = 0.0
         for hit in self._hits(q, True):
-            _, _, d, _, _, nx, ny, j1x, j1y, j3x, j3y = hit
+            _, i, d, _, _, nx, ny, j1x, j1y, j3x, j3y = hit
+            k = self._obj_k[i]
             jx, jy = j1x * n1 + j3x * n3, j1y * n1 + j3y * n3
             a2 = (nx * jx + ny * jy) ** 2
             b2 = (nx * jy - ny * jx) ** 2
             if d > 0.0:
                 fn = k * d**e
                 stiff += k * e * d ** (e - 1.0) * a2
-                damp += self._d * fn * a2 + self._mu * fn / self._vs * b2
+                damp += self._obj_d[i] * fn * a2 + self._mu * fn / self._vs * b2
             stiff_floor = max(stiff_floor, self._k_design * a2)
             damp_floor = max(damp_floor, self._c_design * a2 + self._friction_design * b2)
         return (max(stiff, stiff_floor), max(damp, damp_floor))
@@ -291,6 +300,14 @@ class Contact:
             fn, fx, fy = self._forces(hit, v)
             phalanx, i, d, px, py, nx, ny = hit[:7]
             out.append(ContactPoint(PHALANGES[phalanx], self.objects[i].name, (px, py), (nx, ny), d, fn, (fx, fy)))
+        return tuple(out)
+
+    def object_forces(self, t: float, q: Vec3, v: Vec3) -> tuple[float, ...]:
+        """The normal force on each object (N, Σ F_n over its contacts), in `objects` order:
+        what a `break_force` is compared with."""
+        out = [0.0] * len(self.objects)
+        for hit in self._hits(q, False):
+            out[hit[1]] += self._forces(hit, v)[0]
         return tuple(out)
 
     def check_clearance(self, q: Vec3, tolerance: float = OVERLAP_TOLERANCE) -> None:

@@ -25,6 +25,36 @@ NORMALIZE_PASSES = 8
 
 OBJECT_TYPES = ("circle", "plane")
 _OBJECT_KEYS = {"circle": {"name", "type", "center", "radius"}, "plane": {"name", "type", "point", "normal"}}
+#: Optional keys of every object (`ObjectProperties`): its own contact law and its strength.
+_PROPERTY_KEYS = ("stiffness", "damping", "break_force")
+
+
+@dataclass(frozen=True)
+class ObjectProperties:
+    """What an object adds to the scene's contact law: its own stiffness k_c (N/m^e) and
+    Hunt–Crossley damping d_c (s/m), None = `model.contact`'s, and the normal force (N, the
+    sum over the phalanges) beyond which it is crushed, None = unbreakable.
+
+    Crushing is judged by whoever steps the scene (`finger_sim.grasp_objects`): the force law
+    itself does not change until the crushed object is taken out of the scene.
+    """
+
+    stiffness: float | None = None
+    damping: float | None = None
+    break_force: float | None = None
+
+    def __post_init__(self) -> None:
+        for name, low, strict in (("stiffness", 0.0, True), ("damping", 0.0, False), ("break_force", 0.0, True)):
+            value = getattr(self, name)
+            if value is None:
+                continue
+            if not _is_number(value) or value < low or (strict and value == low):
+                raise ConfigError(name, f"a finite number {'>' if strict else '≥'} {low:g}", value)
+            object.__setattr__(self, name, float(value))
+
+    def to_dict(self) -> dict[str, float]:
+        """The keys that are set, as in the scene schema."""
+        return {name: getattr(self, name) for name in _PROPERTY_KEYS if getattr(self, name) is not None}
 
 
 @dataclass(frozen=True)
@@ -34,6 +64,7 @@ class Circle:
     name: str
     center: Vec2
     radius: float
+    properties: ObjectProperties = ObjectProperties()
 
     def __post_init__(self) -> None:
         _check_name(self.name)
@@ -53,6 +84,7 @@ class Plane:
     name: str
     point: Vec2
     normal: Vec2
+    properties: ObjectProperties = ObjectProperties()
 
     def __post_init__(self) -> None:
         _check_name(self.name)
@@ -112,18 +144,20 @@ def objects_from_list(value: Any, key: str = "objects") -> tuple[SceneObject, ..
         kind = item.get("type")
         if kind not in OBJECT_TYPES:
             raise ConfigError(f"{where}.type", f"one of {list(OBJECT_TYPES)}", kind)
-        allowed = _OBJECT_KEYS[kind]
+        required = _OBJECT_KEYS[kind]
+        allowed = required | set(_PROPERTY_KEYS)
         unknown = sorted(set(item) - allowed, key=str)
         if unknown:
             raise ConfigError(where, f"only the keys {sorted(allowed)} for a {kind}", unknown[0])
-        missing = sorted(allowed - set(item))
+        missing = sorted(required - set(item))
         if missing:
             raise ConfigError(f"{where}.{missing[0]}", f"a value (required for a {kind})", None)
         try:
+            props = ObjectProperties(**{k: item[k] for k in _PROPERTY_KEYS if k in item})
             obj: SceneObject = (
-                Circle(item["name"], item["center"], item["radius"])
+                Circle(item["name"], item["center"], item["radius"], props)
                 if kind == "circle"
-                else Plane(item["name"], item["point"], item["normal"])
+                else Plane(item["name"], item["point"], item["normal"], props)
             )
         except ConfigError as exc:
             raise ConfigError(f"{where}.{exc.key}", exc.allowed, exc.got) from None
