@@ -9,7 +9,9 @@ F*_i = 0 (after t = 0).
 Per hold segment (`segment_scores`):
 - settle_time (s): from t_i to the first sample from which |F − F*_i| ≤ 5 % F*_i holds at every
   sample to the segment's end; inf if the last sample is outside that band.
-- overshoot (%): max(0, max F − F*_i) / F*_i · 100 over the segment.
+- overshoot (%): how far F passes F*_i in the direction of the change, / F*_i · 100 over the
+  segment: max(0, max F − F*_i) after a rise (from 0 or a lower setpoint), max(0, F*_i − min F)
+  after a fall.
 - hold_rms (N): √(mean (F − F*_i)²) over the holding window, the samples with
   t ≥ t_i + hold_after in the segment; nan when the window is empty.
 - contact_lost: some sample of the holding window has F = 0 (no object is touched at all).
@@ -85,9 +87,13 @@ def release_time(t: np.ndarray, force: np.ndarray, seg: Segment) -> float:
     return _from_when(t[seg.start:seg.stop], force[seg.start:seg.stop] != 0.0, seg.t0)
 
 
-def overshoot(force: np.ndarray, seg: Segment) -> float:
-    """%: max(0, max F − F*) / F* · 100 over the segment."""
-    return max(0.0, float(force[seg.start:seg.stop].max()) - seg.value) / seg.value * 100.0
+def overshoot(force: np.ndarray, seg: Segment, previous: float = 0.0) -> float:
+    """%: how far F passes the setpoint F* in the direction of the change from the `previous`
+    setpoint (N), / F* · 100 over the segment: max(0, max F − F*) after a rise, max(0, F* − min F)
+    after a fall (F starts above F* there: that is not an overshoot)."""
+    f = force[seg.start:seg.stop]
+    excess = float(f.max()) - seg.value if seg.value >= previous else seg.value - float(f.min())
+    return max(0.0, excess) / seg.value * 100.0
 
 
 def hold_window(t: np.ndarray, seg: Segment, hold_after: float) -> slice:
@@ -117,13 +123,15 @@ def electrical_energy(t: np.ndarray, outputs: Mapping[str, np.ndarray]) -> float
 def task_scores(t: np.ndarray, force: np.ndarray, setpoints: Sequence[tuple[float, float]], hold_after: float,
                 crushed: bool, outputs: Mapping[str, np.ndarray] | None = None) -> Scores:
     """Every metric of METRICS for a run (module docstring): the worst over its segments."""
-    holds = [s for s in segments(t, setpoints) if s.value > 0.0]
-    releases = [s for s in segments(t, setpoints) if s.value == 0.0 and s.t0 > 0.0]
+    segs = segments(t, setpoints)
+    previous = {id(s): (segs[i - 1].value if i else 0.0) for i, s in enumerate(segs)}
+    holds = [s for s in segs if s.value > 0.0]
+    releases = [s for s in segs if s.value == 0.0 and s.t0 > 0.0]
     rms = [hold_rms(t, force, s, hold_after) for s in holds]
     rms = [x for x in rms if not math.isnan(x)]
     return {
         "settle_time": max((settle_time(t, force, s) for s in holds), default=None),
-        "overshoot": max((overshoot(force, s) for s in holds), default=None),
+        "overshoot": max((overshoot(force, s, previous[id(s)]) for s in holds), default=None),
         "hold_rms": max(rms, default=None),
         "release_time": max((release_time(t, force, s) for s in releases), default=None),
         "peak_force": float(force.max()),

@@ -45,8 +45,8 @@ class TaskRun:
     scores: Scores
     passed: dict[str, bool]
     setpoints: tuple[tuple[float, float], ...]  # on the step grid
+    limits: dict[str, float | bool] = field(default_factory=dict)
     wall_time: float = 0.0
-    outputs: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:
@@ -106,7 +106,7 @@ def run_task(task: Task, factory: Factory, *, label: str = "", params: Mapping[s
     samples = {name: np.ascontiguousarray(rows[:, i]) for i, name in enumerate(COLUMNS)}
     grid = tuple((k * dt, v) for k, v in set_steps)
     scores = task_scores(samples["t"], samples["grip_force"], grid, task.hold_after, bool(crushes))
-    return TaskRun(task.name, label, samples, crushes, scores, judge(scores, task.limits), grid, wall)
+    return TaskRun(task.name, label, samples, crushes, scores, judge(scores, task.limits), grid, dict(task.limits), wall)
 
 
 def _outputs(sim: Simulator) -> dict[str, float]:
