@@ -106,7 +106,7 @@ def test_the_shipped_grip_controller_passes_the_suite():
             failed[run.task] = {k: run.scores[k] for k, ok in run.passed.items() if not ok}
     assert not failed
     assert {p.stem for p in installed_tasks()} >= {"hold_cup", "hold_soft", "hold_rigid", "fragile", "staircase",
-                                                    "tip_pull", "release_reopen"}
+                                                    "tip_pull", "release_reopen", "push_while_holding"}
 
 
 def test_an_overshooting_controller_crushes_the_fragile_object_and_fails():
