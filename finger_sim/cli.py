@@ -106,10 +106,10 @@ def _kinematics(args: argparse.Namespace) -> int:
 def _tasks(args: argparse.Namespace) -> int:
     """`finger-sim tasks`: see finger_sim.tasks.suite."""
     from finger_sim.tasks.schema import load_task
-    from finger_sim.tasks.suite import installed_tasks, parse_controllers, run_suite, summary_table, write_report
+    from finger_sim.tasks.suite import chunk_of, installed_tasks, parse_controllers, run_suite, summary_table, write_report
 
     tasks = [load_task(p) for p in (args.task or installed_tasks())]
-    runs = run_suite(tasks, parse_controllers(args.controller, args.param, args.vary))
+    runs = run_suite(tasks, chunk_of(parse_controllers(args.controller, args.param, args.vary), args.chunk))
     command = "finger-sim tasks " + " ".join(sys.argv[2:]) if sys.argv[1:2] == ["tasks"] else ""
     path = write_report(runs, tasks, args.out, figures=not args.no_figures, command=command.strip())
     print(summary_table(runs))
@@ -343,6 +343,8 @@ def build_parser() -> argparse.ArgumentParser:
                        help="a keyword argument of a controller's factory, e.g. grip_pi.kp=0.01")
     tasks.add_argument("--vary", action="append", default=[], metavar="key=v1,v2,...",
                        help="run the first controller over the product of these parameter values (a gain sweep)")
+    tasks.add_argument("--chunk", default="1/1", metavar="i/n",
+                       help="run only the i-th of n equal slices of the controllers (as `sweep --chunk`); default 1/1")
     tasks.add_argument("--out", type=Path, default=Path("out/tasks"), help="folder for report.md, metrics.json, figures")
     tasks.add_argument("--no-figures", action="store_true", help="skip the figures")
     tasks.set_defaults(func=_tasks)

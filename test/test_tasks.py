@@ -220,6 +220,11 @@ def test_tasks_command_writes_report_and_json_and_exits_by_the_result(tmp_path, 
     assert main(["tasks", str(TASKS / "hold_cup.yaml"), "--out", str(out), "--no-figures", "--vary", "ki=2,4"]) == 0
     data = json.loads((out / "metrics.json").read_text())
     assert [d["controller"] for d in data] == ["grip_pi[ki=2]", "grip_pi[ki=4]"]
+    # the same sweep in two chunks: the second chunk's run is the whole sweep's second, bit for bit
+    whole = data
+    assert main(["tasks", str(TASKS / "hold_cup.yaml"), "--out", str(out), "--no-figures", "--vary", "ki=2,4",
+                 "--chunk", "2/2"]) == 0
+    assert json.loads((out / "metrics.json").read_text()) == whole[1:]
     capsys.readouterr()
     assert main(["tasks", str(TASKS / "fragile.yaml"), "--controller", "x=no_such_module:f"]) == 2
     err = capsys.readouterr().err

@@ -80,12 +80,12 @@ def figure(runs: Sequence[TaskRun], path: Path) -> None:
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(3, 1, sharex=True, figsize=(7.5, 6.5))
-    for r in runs:
-        s = r.samples
-        axes[0].plot(s["t"], s["grip_force"], label=r.controller)
-        axes[1].plot(s["t"], [math.degrees(x) for x in s["theta1"]], label=r.controller)
-        axes[2].plot(s["t"], s["command"], label=r.controller)
-    axes[0].plot(runs[0].samples["t"], runs[0].samples["setpoint"], "k--", lw=1, label="setpoint")
+    for i, r in enumerate(runs):
+        s, z = r.samples, len(runs) - i  # the first controller drawn on top
+        axes[0].plot(s["t"], s["grip_force"], label=r.controller, zorder=z)
+        axes[1].plot(s["t"], [math.degrees(x) for x in s["theta1"]], label=r.controller, zorder=z)
+        axes[2].plot(s["t"], s["command"], label=r.controller, zorder=z)
+    axes[0].plot(runs[0].samples["t"], runs[0].samples["setpoint"], "k--", lw=1, label="setpoint", zorder=len(runs) + 1)
     axes[0].set_ylabel("grip force (N)")
     axes[1].set_ylabel("θ1 (°)")
     axes[2].set_ylabel("command (N·m)")

@@ -1,7 +1,7 @@
 """A suite: every task against every controller, a gain sweep over it, and the written report.
 
     finger-sim tasks [TASK.yaml ...] [--controller LABEL=module:callable] [--param LABEL.key=value]
-                     [--vary key=v1,v2,...] [--out DIR] [--no-figures]
+                     [--vary key=v1,v2,...] [--chunk i/n] [--out DIR] [--no-figures]
 
 Without TASK files the installed suite (`config/tasks/*.yaml`) runs; without --controller the
 shipped `grip_pi` and `grip_pi_aggressive`. `--vary` (repeatable) runs the first controller over
@@ -11,6 +11,7 @@ controller column, scored the same way. The exit status is 1 when any run fails 
 
 from __future__ import annotations
 
+import datetime
 import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -19,6 +20,7 @@ from pathlib import Path
 from finger_sim.errors import ConfigError
 from finger_sim.scene_paths import scene_dirs
 from finger_sim.scene_yaml import parse_scene_text
+from finger_sim.sweep import chunk_range, parse_chunk
 from finger_sim.tasks import report
 from finger_sim.tasks.controllers import Factory, load_factory
 from finger_sim.tasks.runner import TaskRun, run_task
@@ -77,6 +79,15 @@ def parse_controllers(specs: Sequence[str], params: Sequence[str], vary: Sequenc
     return out
 
 
+def chunk_of(controllers: Sequence[ControllerSpec], chunk: str) -> list[ControllerSpec]:
+    """The i-th of n contiguous slices of the controllers (`chunk` = "i/n", as `finger-sim sweep
+    --chunk`): a gain sweep split over processes or machines; the slices' reports in order are
+    the whole sweep's."""
+    index, count = parse_chunk(chunk)
+    start, stop = chunk_range(len(controllers), index, count)
+    return list(controllers[start:stop])
+
+
 def run_suite(tasks: Sequence[Task], controllers: Sequence[ControllerSpec]) -> list[TaskRun]:
     """Every task against every controller, task by task."""
     return [run_task(task, c.factory, label=c.label, params=c.params) for task in tasks for c in controllers]
@@ -95,7 +106,7 @@ def write_report(runs: Sequence[TaskRun], tasks: Sequence[Task], out: Path, *, f
     descriptions = {t.name: t.description for t in tasks}
     text = ["# Grasp tasks: scores", ""]
     if command:
-        text += [f"Made by `{command}`.", ""]
+        text += [f"Made by `{command}` on {datetime.date.today().isoformat()}.", ""]
     text += [summary_table(runs), "", report.markdown(runs, descriptions, drawn)]
     path = out / "report.md"
     path.write_text("\n".join(text) + "\n", encoding="utf-8")
