@@ -18,7 +18,8 @@ Schema (every key optional; omitted = the spec's default):
       - {name: cup, type: circle, center: [0.065, 0.040], radius: 0.012}       # m, model plane
       - {name: table, type: plane, point: [0.0, 0.045], normal: [0.0, -1.0]}   # object on the side of −normal
       # optional on any object: its own stiffness (N/m^e) and damping (s/m) overriding model.contact,
-      # and break_force (N): crushed beyond it (finger_sim.grasp_objects)
+      # break_force (N): crushed beyond it (finger_sim.grasp_objects); motion: a prescribed push or
+      # vibration of the object (finger_sim.effects.contact_geometry.ObjectMotion)
     input:
       torque: {type: ramp, offset: 0.001, slope: 0.01}   # N·m, see finger_sim.inputs
     initial: {theta1: 0.0, theta1_dot: 0.0}             # rad, rad/s

@@ -123,8 +123,9 @@ def motion_from_dict(value: Any) -> ObjectMotion:
 @dataclass(frozen=True)
 class ObjectProperties:
     """What an object adds to the scene's contact law: its own stiffness k_c (N/m^e) and
-    Hunt–Crossley damping d_c (s/m), None = `model.contact`'s, and the normal force (N, the
-    sum over the phalanges) beyond which it is crushed, None = unbreakable.
+    Hunt–Crossley damping d_c (s/m), None = `model.contact`'s; the normal force (N, the
+    sum over the phalanges) beyond which it is crushed, None = unbreakable; and its prescribed
+    motion in the model plane, None = fixed in finger_base.
 
     Crushing is judged by whoever steps the scene (`finger_sim.grasp_objects`): the force law
     itself does not change until the crushed object is taken out of the scene.
