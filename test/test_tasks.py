@@ -19,7 +19,7 @@ import pytest
 
 from finger_sim.cli import main
 from finger_sim.effects.contact_geometry import objects_from_list
-from finger_sim.errors import ConfigError
+from finger_sim.errors import ConfigError, FingerSimError
 from finger_sim.scene import load_scene, scene_from_dict
 from finger_sim.simulate import Simulator, simulate
 from finger_sim.tasks import metrics
@@ -95,6 +95,23 @@ def test_metrics_on_a_real_run_match_a_recomputation():
     assert run.scores["peak_force"] == max(f)
     # the values themselves: settles in 0.368 s (closing onto the cup), holds to < 1e-2 N
     assert 0.3 < run.scores["settle_time"] < 0.5 and run.scores["hold_rms"] < 5e-3
+
+
+def test_release_time_and_contact_lost_on_real_runs_match_a_recomputation():
+    task = load_task(TASKS / "release_reopen.yaml")
+    run = run_task(task, grip_pi)
+    t, f = run.samples["t"].tolist(), run.samples["grip_force"].tolist()
+    (t_release, _), (t_regrasp, _) = run.setpoints[1], run.setpoints[2]
+    touching = [k for k in range(len(t)) if t_release - 1e-12 <= t[k] < t_regrasp - 1e-12 and f[k] != 0.0]
+    assert run.scores["release_time"] == pytest.approx(t[touching[-1] + 1] - t_release, abs=1e-12)
+    assert 0.0 < run.scores["release_time"] < 0.1  # the opening torque lifts off within a few steps
+    # an oscillating controller bounces off the cup inside the holding window
+    hot = run_task(load_task(TASKS / "hold_cup.yaml"), grip_pi_aggressive)
+    t, f = hot.samples["t"].tolist(), hot.samples["grip_force"].tolist()
+    lost = [k for k in range(len(t)) if t[k] >= 0.6 - 1e-12 and f[k] == 0.0]
+    assert hot.scores["contact_lost"] is bool(lost) is True
+    assert run.scores["contact_lost"] is False and min(f_ for t_, f_ in zip(run.samples["t"], run.samples["grip_force"])
+                                                       if 0.6 <= t_ < 1.0) > 0.0
 
 
 # -- the suite -------------------------------------------------------------------------------
@@ -199,6 +216,8 @@ def test_bad_tasks_are_refused_naming_the_key(tmp_path):
         load_factory("finger_sim.tasks.controllers:nothing")
     with pytest.raises(ConfigError, match="--param"):
         parse_controllers([], ["nobody.kp=1"], [])
+    with pytest.raises(FingerSimError, match=r"controller 'nan' returned nan at t = 0 s"):
+        run_task(load_task(TASKS / "hold_cup.yaml"), lambda sample_period: lambda t, sp, m: math.nan, label="nan")
 
 
 # -- the command -------------------------------------------------------------------------------

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from finger_sim.errors import FingerSimError
 from finger_sim.grasp_objects import Crush, carry_over, crushed, with_tip_force, without_objects
 from finger_sim.inputs import BREAK_EPS
 from finger_sim.simulate import Simulator, output_names, output_values
@@ -91,7 +92,11 @@ def run_task(task: Task, factory: Factory, *, label: str = "", params: Mapping[s
         if k % task.sample_steps == 0:
             measured = {"theta1": sim.q[0], "theta1_dot": sim.v[0], "grip_force": outputs.get("grip_force", 0.0)}
             measured.update({k_: v for k_, v in outputs.items() if not k_.startswith(UNMEASURED_PREFIX)})
-            pending.append((k + task.delay_steps, float(controller(k * dt, setpoint, measured))))
+            answer = controller(k * dt, setpoint, measured)
+            if not (isinstance(answer, (int, float)) and math.isfinite(answer)):
+                raise FingerSimError(f"controller '{label}' returned {answer!r} at t = {k * dt:g} s in task "
+                                     f"'{task.name}': expected a finite {task.input} command")
+            pending.append((k + task.delay_steps, float(answer)))
         while pending and pending[0][0] <= k:
             command = pending.popleft()[1]
         record(k, outputs)
