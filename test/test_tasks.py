@@ -21,7 +21,7 @@ from finger_sim.cli import main
 from finger_sim.effects.contact_geometry import objects_from_list
 from finger_sim.errors import ConfigError, FingerSimError
 from finger_sim.scene import load_scene, scene_from_dict
-from finger_sim.simulate import Simulator, simulate
+from finger_sim.simulate import Simulator, simulate, state_columns
 from finger_sim.tasks import metrics
 from finger_sim.tasks.controllers import grip_pi, grip_pi_aggressive, load_factory
 from finger_sim.tasks.runner import run_task
@@ -48,7 +48,9 @@ def test_metrics_on_a_synthetic_signal():
     assert s["release_time"] == pytest.approx(0.0, abs=1e-12)  # F = 0 from the change on
     assert s["peak_force"] == 1.2
     assert s["contact_lost"] is False and s["crushed"] is False
-    assert s["electrical_energy"] is None
+    assert s["electrical_energy"] is None and s["motor_work"] is None
+    # τ held over each step: 0.1 N·m over +0.2 rad, then −0.05 N·m over −0.1 rad: 0.02 + 0.005 J
+    assert metrics.motor_work(np.array([0.1, -0.05, 7.0]), np.array([0.0, 0.2, 0.1])) == pytest.approx(0.025, abs=1e-15)
     assert metrics.judge(s, {"overshoot": 20.0, "settle_time": 0.39, "crushed": False}) == {
         "overshoot": True, "settle_time": False, "crushed": True}
 
@@ -112,6 +114,31 @@ def test_release_time_and_contact_lost_on_real_runs_match_a_recomputation():
     assert hot.scores["contact_lost"] is bool(lost) is True
     assert run.scores["contact_lost"] is False and min(f_ for t_, f_ in zip(run.samples["t"], run.samples["grip_force"])
                                                        if 0.6 <= t_ < 1.0) > 0.0
+
+
+def test_motor_work_balances_the_energy_of_a_lossless_run(tmp_path):
+    """No damping anywhere: the energy T + V + V_c gained is the work of the held torques. The
+    commands paired with the step before or after give a work 2 % off (measured)."""
+    data = load_scene(CONFIG / "grasp_cylinder.yaml").to_dict()
+    data["model"]["damping"] = 0.0
+    data["model"]["contact"]["damping"] = 0.0
+    (tmp_path / "lossless.yaml").write_text(scene_from_dict(data).to_yaml())
+    task = task_from_dict({"scene": "lossless.yaml", "duration": 0.6, "setpoints": [{"t": 0.0, "value": 0.5}],
+                           "controller": {"sample_steps": 2, "delay_steps": 3}}, base=tmp_path)
+
+    def two_levels(sample_period, **_):  # closes, then presses harder from 0.25 s
+        return lambda t, setpoint, measured: 0.01 if t < 0.25 else 0.02
+
+    run = run_task(task, two_levels)
+    sim = Simulator(task.scene)  # the same run again, to read the core's energy column at both ends
+    x0 = np.array([[*sim.q, *sim.v]])
+    for tau in run.samples["command"][:-1]:
+        sim.step(float(tau))
+    assert sim.q[0] == run.samples["theta1"][-1]  # bit for bit the task's run
+    e0 = state_columns(sim.system, np.array([0.0]), x0)[0][0]
+    e1 = state_columns(sim.system, np.array([sim.time]), np.array([[*sim.q, *sim.v]]))[0][0]
+    assert run.scores["motor_work"] > 2e-3 and run.samples["grip_force"].max() > 0.5  # it pressed the cup
+    assert e1 - e0 == pytest.approx(run.scores["motor_work"], rel=1e-4)
 
 
 # -- the suite -------------------------------------------------------------------------------

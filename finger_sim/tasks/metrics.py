@@ -21,7 +21,9 @@ segment's end; inf if the last sample still touches.
 
 The task's scores (`task_scores`): the worst over its segments (the largest settle_time,
 overshoot, hold_rms, release_time; contact_lost if any), plus peak_force (N, max F over the run),
-crushed (an object's normal force exceeded its break_force: `finger_sim.grasp_objects`), and
+crushed (an object's normal force exceeded its break_force: `finger_sim.grasp_objects`),
+motor_work (J, the net work of the commanded torque on the MCP joint, Σ τ_k (θ1,k+1 − θ1,k):
+exact for a torque held over each step; None when the command is not a torque), and
 electrical_energy (J, ∫ u·i dt by the trapezoid rule, when the run has the `voltage` and
 `motor_current` outputs of a drive; None otherwise).
 """
@@ -45,6 +47,7 @@ METRICS: dict[str, tuple[str, str]] = {
     "peak_force": ("N", "largest grip force"),
     "crushed": ("", "an object broke"),
     "contact_lost": ("", "no contact at some sample while holding"),
+    "motor_work": ("J", "net work of the torque command, Σ τ Δθ1"),
     "electrical_energy": ("J", "∫ u·i dt (drive scenes)"),
 }
 BOOLEAN_METRICS = frozenset({"crushed", "contact_lost"})
@@ -120,9 +123,16 @@ def electrical_energy(t: np.ndarray, outputs: Mapping[str, np.ndarray]) -> float
     return float(np.trapezoid(outputs[VOLTAGE] * outputs[CURRENT], t))
 
 
+def motor_work(torque: np.ndarray, theta1: np.ndarray) -> float:
+    """J: Σ τ_k (θ1,k+1 − θ1,k), τ_k the torque held over step k (the last sample's is not applied)."""
+    return float(np.dot(torque[:-1], np.diff(theta1)))
+
+
 def task_scores(t: np.ndarray, force: np.ndarray, setpoints: Sequence[tuple[float, float]], hold_after: float,
-                crushed: bool, outputs: Mapping[str, np.ndarray] | None = None) -> Scores:
-    """Every metric of METRICS for a run (module docstring): the worst over its segments."""
+                crushed: bool, outputs: Mapping[str, np.ndarray] | None = None,
+                torque: tuple[np.ndarray, np.ndarray] | None = None) -> Scores:
+    """Every metric of METRICS for a run (module docstring): the worst over its segments.
+    torque: (τ per sample, N·m, held over the step that follows it; θ1 per sample, rad)."""
     segs = segments(t, setpoints)
     previous = {id(s): (segs[i - 1].value if i else 0.0) for i, s in enumerate(segs)}
     holds = [s for s in segs if s.value > 0.0]
@@ -137,6 +147,7 @@ def task_scores(t: np.ndarray, force: np.ndarray, setpoints: Sequence[tuple[floa
         "peak_force": float(force.max()),
         "crushed": crushed,
         "contact_lost": any(contact_lost(t, force, s, hold_after) for s in holds),
+        "motor_work": None if torque is None else motor_work(*torque),
         "electrical_energy": electrical_energy(t, outputs or {}),
     }
 

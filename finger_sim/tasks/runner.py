@@ -110,7 +110,8 @@ def run_task(task: Task, factory: Factory, *, label: str = "", params: Mapping[s
     wall = time.perf_counter() - start
     samples = {name: np.ascontiguousarray(rows[:, i]) for i, name in enumerate(COLUMNS)}
     grid = tuple((k * dt, v) for k, v in set_steps)
-    scores = task_scores(samples["t"], samples["grip_force"], grid, task.hold_after, bool(crushes))
+    torque = (samples["command"], samples["theta1"]) if task.input == "torque" else None
+    scores = task_scores(samples["t"], samples["grip_force"], grid, task.hold_after, bool(crushes), torque=torque)
     return TaskRun(task.name, label, samples, crushes, scores, judge(scores, task.limits), grid, dict(task.limits), wall)
 
 
