@@ -31,8 +31,10 @@ from finger_sim.tasks.schema import Task
 
 #: The columns a task run records at every sample, in this order (N, rad, rad/s, N·m, N).
 COLUMNS = ("t", "grip_force", "setpoint", "theta1", "theta1_dot", "command", "tip_force_x", "tip_force_y", "crushed")
-#: Element outputs that are not measurements a real controller has (the contact wrenches).
+#: Element outputs that are not measurements a real controller has: the contact wrenches and
+#: the power of a prescribed object motion.
 UNMEASURED_PREFIX = "contact_force_"
+UNMEASURED = frozenset({"motion_power"})
 
 
 @dataclass
@@ -90,8 +92,10 @@ def run_task(task: Task, factory: Factory, *, label: str = "", params: Mapping[s
         if k in tip_switch:
             sim = carry_over(sim, with_tip_force(sim.scene, tip_switch[k]))
         if k % task.sample_steps == 0:
-            measured = {"theta1": sim.q[0], "theta1_dot": sim.v[0], "grip_force": outputs.get("grip_force", 0.0)}
-            measured.update({k_: v for k_, v in outputs.items() if not k_.startswith(UNMEASURED_PREFIX)})
+            sensed = {"grip_force": outputs.get("grip_force", 0.0), "theta1": sim.q[0], "theta1_dot": sim.v[0]}
+            measured = {name: sensed[name] for name in MEASURED}
+            measured.update({k_: v for k_, v in outputs.items()
+                             if not k_.startswith(UNMEASURED_PREFIX) and k_ not in UNMEASURED})
             answer = controller(k * dt, setpoint, measured)
             if not (isinstance(answer, (int, float)) and math.isfinite(answer)):
                 raise FingerSimError(f"controller '{label}' returned {answer!r} at t = {k * dt:g} s in task "
@@ -120,5 +124,3 @@ def _outputs(sim: Simulator) -> dict[str, float]:
     elements = sim.system.elements
     return dict(zip(output_names(elements, sim.q), output_values(elements, sim.time, sim.q, sim.v)))
 
-
-__all__ = ["COLUMNS", "MEASURED", "TaskRun", "run_task"]
