@@ -14,6 +14,7 @@ is exceeded at the end of a step is crushed and taken out.
 from __future__ import annotations
 
 import math
+import numbers
 import time
 from collections import deque
 from collections.abc import Mapping
@@ -97,7 +98,7 @@ def run_task(task: Task, factory: Factory, *, label: str = "", params: Mapping[s
             measured.update({k_: v for k_, v in outputs.items()
                              if not k_.startswith(UNMEASURED_PREFIX) and k_ not in UNMEASURED})
             answer = controller(k * dt, setpoint, measured)
-            if not (isinstance(answer, (int, float)) and math.isfinite(answer)):
+            if isinstance(answer, bool) or not (isinstance(answer, numbers.Real) and math.isfinite(answer)):
                 raise FingerSimError(f"controller '{label}' returned {answer!r} at t = {k * dt:g} s in task "
                                      f"'{task.name}': expected a finite {task.input} command")
             pending.append((k + task.delay_steps, float(answer)))
