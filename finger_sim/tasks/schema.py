@@ -70,7 +70,10 @@ class Task:
 def load_task(path: str | Path) -> Task:
     """Read and validate a task file; ConfigError names the file and the key."""
     path = Path(path)
-    data = read_scene_file(path)
+    try:
+        data = read_scene_file(path)
+    except ConfigError as exc:  # the reader names it a scene: this file is a task
+        raise ConfigError(f"task file {path}", exc.allowed.replace("scene", "task"), exc.got) from None
     try:
         return task_from_dict({} if data is None else data, base=path.parent, default_name=safe_name(path.stem))
     except ConfigError as exc:
