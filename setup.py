@@ -17,6 +17,7 @@ setup(
         (f"share/{PACKAGE}/config/ros2_control", glob("config/ros2_control/*")),
         (f"share/{PACKAGE}/config/hands", glob("config/hands/*.yaml")),
         (f"share/{PACKAGE}/config/foxglove", glob("config/foxglove/*.json")),
+        (f"share/{PACKAGE}/config/tasks", glob("config/tasks/*.yaml")),
         (f"share/{PACKAGE}/urdf", glob("urdf/*.urdf")),
         (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),
     ],

@@ -127,6 +127,20 @@ def _kinematics(args: argparse.Namespace) -> int:
     return 0
 
 
+def _tasks(args: argparse.Namespace) -> int:
+    """`finger-sim tasks`: see finger_sim.tasks.suite."""
+    from finger_sim.tasks.schema import load_task
+    from finger_sim.tasks.suite import chunk_of, installed_tasks, parse_controllers, run_suite, summary_table, write_report
+
+    tasks = [load_task(p) for p in (args.task or installed_tasks())]
+    runs = run_suite(tasks, chunk_of(parse_controllers(args.controller, args.param, args.vary), args.chunk))
+    command = "finger-sim tasks " + " ".join(sys.argv[2:]) if sys.argv[1:2] == ["tasks"] else ""
+    path = write_report(runs, tasks, args.out, figures=not args.no_figures, command=command.strip())
+    print(summary_table(runs))
+    print(f"wrote {path} and {args.out / 'metrics.json'}")
+    return 0 if all(r.ok for r in runs) else 1
+
+
 def _log_command(command: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
     """A log subcommand: errors of the MCAP library (independent of the core) become one line too."""
 
@@ -430,6 +444,21 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--max-steps", type=_positive_int, metavar="N",
                        help="refuse a sweep of more than N finger-steps in all (default: 200,000,000)")
     sweep.set_defaults(func=_sweep)
+
+    tasks = sub.add_parser("tasks", help="grade grip controllers on the grasp tasks (config/tasks/): "
+                                         "Markdown report, figures, JSON; exit 1 when a controller fails a task")
+    tasks.add_argument("task", nargs="*", type=Path, help="task YAML files (default: the installed suite)")
+    tasks.add_argument("--controller", action="append", default=[], metavar="LABEL=module:callable",
+                       help="a controller factory (repeat; default: the shipped grip_pi and grip_pi_aggressive)")
+    tasks.add_argument("--param", action="append", default=[], metavar="LABEL.key=value",
+                       help="a keyword argument of a controller's factory, e.g. grip_pi.kp=0.01")
+    tasks.add_argument("--vary", action="append", default=[], metavar="key=v1,v2,...",
+                       help="run the first controller over the product of these parameter values (a gain sweep)")
+    tasks.add_argument("--chunk", default="1/1", metavar="i/n",
+                       help="run only the i-th of n equal slices of the controllers (as `sweep --chunk`); default 1/1")
+    tasks.add_argument("--out", type=Path, default=Path("out/tasks"), help="folder for report.md, metrics.json, figures")
+    tasks.add_argument("--no-figures", action="store_true", help="skip the figures")
+    tasks.set_defaults(func=_tasks)
 
     bench = sub.add_parser("bench", help="work-precision and hard-case report with peers, written to docs/")
     bench.add_argument("--quick", action="store_true", help="a reduced grid for CI (under two minutes)")

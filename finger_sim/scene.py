@@ -17,6 +17,9 @@ Schema (every key optional; omitted = the spec's default):
     objects:                     # omitted or empty = no contact element, no cost (spec §7)
       - {name: cup, type: circle, center: [0.065, 0.040], radius: 0.012}       # m, model plane
       - {name: table, type: plane, point: [0.0, 0.045], normal: [0.0, -1.0]}   # object on the side of −normal
+      # optional on any object: its own stiffness (N/m^e) and damping (s/m) overriding model.contact,
+      # break_force (N): crushed beyond it (finger_sim.grasp_objects); motion: a prescribed push or
+      # vibration of the object (finger_sim.effects.contact_geometry.ObjectMotion)
     input:
       torque: {type: ramp, offset: 0.001, slope: 0.01}   # N·m, see finger_sim.inputs
     initial: {theta1: 0.0, theta1_dot: 0.0}             # rad, rad/s
@@ -306,14 +309,18 @@ def _objects(value: Any) -> tuple[SceneObject, ...]:
             number(obj.radius, f"{where}.radius", maximum=MAX_EXTENT)
         else:
             pair(obj.point, f"{where}.point", MAX_EXTENT)
+        if obj.properties.stiffness is not None:
+            number(obj.properties.stiffness, f"{where}.stiffness", maximum=MAX_CONTACT_STIFFNESS)
+        if obj.properties.damping is not None:
+            number(obj.properties.damping, f"{where}.damping", maximum=MAX_CONTACT_DAMPING)
     return objects
 
 
 def _object_dict(obj: SceneObject) -> dict[str, Any]:
     """One object in the `objects:` schema."""
     if isinstance(obj, Circle):
-        return {"name": obj.name, "type": "circle", "center": list(obj.center), "radius": obj.radius}
-    return {"name": obj.name, "type": "plane", "point": list(obj.point), "normal": list(obj.normal)}
+        return {"name": obj.name, "type": "circle", "center": list(obj.center), "radius": obj.radius, **obj.properties.to_dict()}
+    return {"name": obj.name, "type": "plane", "point": list(obj.point), "normal": list(obj.normal), **obj.properties.to_dict()}
 
 
 def _check_steps(duration: float, dt: float) -> None:

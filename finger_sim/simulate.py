@@ -120,6 +120,8 @@ class Simulator:
         # the gaps grouped by element, in `_gaps` order: each element's gaps are evaluated once per state
         self._gap_elements = tuple((e, tuple(g.index for g in self._gaps if g.element is e))
                                    for e in dict.fromkeys(g.element for g in self._gaps))
+        #: elements whose gaps move with time too (contact with a moving object): asked at (t, q)
+        self._timed = frozenset(e for e, _ in self._gap_elements if getattr(e, "time_varying", False))
         self.reset()
         #: the lean compiled path of `step` (a compiled fixed-step method on a smooth scene), else None
         self.fast_stepper = None
@@ -136,7 +138,7 @@ class Simulator:
         self.step_index = 0
         self.q, self.v = self.scene.initial_state()
         self._resting: _Gap | None = None  # the closed impact gap the finger rests on (a stop)
-        self._gap_cache: tuple[Vec3, Vec3, list[tuple[float, float]]] | None = None  # `_gap_states`' last
+        self._gap_cache: tuple[Vec3, Vec3, list[tuple[float, float]], float] | None = None  # `_gap_states`' last
         #: the motor torque at the end of the last step (N·m): what a JointState effort reports
         self.torque = self.scene.torque(0.0)
         self.impacts = 0
@@ -240,9 +242,13 @@ class Simulator:
         """One integrator step of length h, split in `substeps` equal ones when a contact gap is
         closed at its start or closes within it (gap + NEAR_CONTACT·h·gap' < 0)."""
         for gap in self._kinks:
-            g = gap.element.gaps(q)[gap.index]
-            n = gap.element.gap_gradient(gap.index, q)
-            if g + NEAR_CONTACT * h * min(0.0, n[0] * v[0] + n[1] * v[1] + n[2] * v[2]) < 0.0:
+            if gap.element in self._timed:
+                g, rate = gap.element.gaps_at(t, q)[gap.index], gap.element.gap_rates(t, q, v)[gap.index]
+            else:
+                g = gap.element.gaps(q)[gap.index]
+                n = gap.element.gap_gradient(gap.index, q)
+                rate = n[0] * v[0] + n[1] * v[1] + n[2] * v[2]
+            if g + NEAR_CONTACT * h * min(0.0, rate) < 0.0:
                 m = self.substeps
                 for k in range(m):
                     q, v = self.integrator.step(t + h * k / m, q, v, h / m, torque)
@@ -259,7 +265,7 @@ class Simulator:
         a step): `_bracket` looks for that between the ends.
         """
         first: _Crossing | None = None
-        start, end = self._gap_states(q, v), self._gap_states(q1, v1)
+        start, end = self._gap_states(t, q, v), self._gap_states(t1, q1, v1)
         for gap, (g0, r0), (g1, r1) in zip(self._gaps, start, end):
             if gap.restitution is not None:
                 g0 = max(g0, 0.0)  # an impact gap: the step starts on the open side
@@ -270,19 +276,23 @@ class Simulator:
                     first = crossing
         return first
 
-    def _gap_states(self, q: Vec3, v: Vec3) -> list[tuple[float, float]]:
-        """(gap, gap') of every gap at (q, q') in `_gaps` order: gap' = ∂gap/∂q · q'. The last
-        state asked is kept: a step's end is the next one's start."""
+    def _gap_states(self, t: float, q: Vec3, v: Vec3) -> list[tuple[float, float]]:
+        """(gap, gap') of every gap at (t, q, q') in `_gaps` order: gap' = ∂gap/∂q · q' (+ ∂gap/∂t
+        for a moving object). The last state asked is kept: a step's end is the next one's start."""
         cached = self._gap_cache
-        if cached is not None and cached[0] is q and cached[1] is v:
+        if cached is not None and cached[0] is q and cached[1] is v and (not self._timed or cached[3] == t):
             return cached[2]
         out = []
         for element, indices in self._gap_elements:
+            if element in self._timed:
+                values, rates = element.gaps_at(t, q), element.gap_rates(t, q, v)
+                out.extend((values[i], rates[i]) for i in indices)
+                continue
             values = element.gaps(q)
             for i in indices:
                 n = element.gap_gradient(i, q)
                 out.append((values[i], n[0] * v[0] + n[1] * v[1] + n[2] * v[2]))
-        self._gap_cache = (q, v, out)
+        self._gap_cache = (q, v, out, t)
         return out
 
     def _bracket(self, gap: _Gap, t: float, q: Vec3, v: Vec3, torque: TorqueFn,
@@ -306,7 +316,7 @@ class Simulator:
             return None
         s = sa + x * (sb - sa)
         qs, vs = self._step(t, q, v, s - t, torque)
-        gs, rs = self._gap_states(qs, vs)[self._gaps.index(gap)]
+        gs, rs = self._gap_states(s, qs, vs)[self._gaps.index(gap)]
         mid = (s, gs, rs, qs, vs)
         if (gs < -EVENT_TOLERANCE) != closed:
             return s, gs, qs, vs
@@ -322,10 +332,14 @@ class Simulator:
         on its far side, so that the rest of the step does not see the crossing again.
         """
         step, element, index = self._step, gap.element, gap.index
+        timed = element in self._timed
+
+        def gap_at(s: float, qs: Vec3) -> float:
+            return element.gaps_at(s, qs)[index] if timed else element.gaps(qs)[index]
 
         def at(s: float) -> tuple[float, Vec3, Vec3]:
             qs, vs = step(t, q, v, s - t, torque)
-            return element.gaps(qs)[index], qs, vs
+            return gap_at(s, qs), qs, vs
 
         # g(a) and g(b) lie on opposite sides.
         a, ga = lo
@@ -336,7 +350,7 @@ class Simulator:
             s = b - gb * (b - a) / (gb - ga)
             # A step that starts on the gap (g(t) = 0) crosses at t itself: stepping a
             # zero-length interval would divide by zero in rattle and fail in scipy.
-            gs, qs, vs = at(s) if s > t else (element.gaps(q)[index], q, v)
+            gs, qs, vs = at(s) if s > t else (gap_at(t, q), q, v)
             if abs(gs) <= EVENT_TOLERANCE or s <= a or s >= b:
                 break
             if (gs > 0) == (gb > 0):
@@ -347,7 +361,7 @@ class Simulator:
                 a, ga = s, gs
                 gb = gb / 2 if keep == -1 else gb
                 keep = -1
-        if gap.restitution is None and (gs < -EVENT_TOLERANCE) != (element.gaps(qb)[index] < -EVENT_TOLERANCE):
+        if gap.restitution is None and (gs < -EVENT_TOLERANCE) != (gap_at(b, qb) < -EVENT_TOLERANCE):
             return _Crossing(b, qb, vb, gap)  # the kink's far side
         return _Crossing(s, qs, vs, gap)
 
@@ -447,7 +461,10 @@ def state_columns(system: FingerSystem, t: np.ndarray, x: np.ndarray) -> tuple[n
     rows = x.tolist()
     elements = system.elements
     if elements:
-        energy = energy + np.array([sum(e.potential((r[0], r[1], r[2])) for e in elements) for r in rows])
+        # an element that moves with time (a moving object's contact) stores V at (t, q)
+        energy = energy + np.array([sum(e.potential_at(s, (r[0], r[1], r[2])) if getattr(e, "time_varying", False)
+                                        else e.potential((r[0], r[1], r[2])) for e in elements)
+                                    for s, r in zip(t.tolist(), rows)])
     k1, k2 = p.r4 * math.cos(p.theta4), p.r4 * math.sin(p.theta4)
     f1 = p.r1 * np.cos(q0) + k1 - p.r2 * np.cos(q1) - p.r3 * np.cos(q2)
     f2 = p.r1 * np.sin(q0) + k2 - p.r2 * np.sin(q1) - p.r3 * np.sin(q2)

@@ -98,30 +98,44 @@ class Contact:
         self._r1, self._l3 = r1, l3
         self._k, self._e, self._d = contact.stiffness, contact.exponent, contact.damping
         self._mu, self._vs = contact.friction, contact.slip_velocity
-        # Stiffness and damping of the contact law at DESIGN_FORCE: δ_d = (F_d / k)^(1/e).
-        delta_d = (DESIGN_FORCE / self._k) ** (1.0 / self._e)
-        self._k_design = self._k * self._e * delta_d ** (self._e - 1.0)
-        self._c_design = self._d * DESIGN_FORCE
+        # Each object's k_c and d_c: its own (`ObjectProperties`) or the scene's. The compiled
+        # law has one k_c and d_c, so a scene where an object sets its own steps in Python.
+        self._obj_k = tuple(self._k if o.properties.stiffness is None else o.properties.stiffness for o in self.objects)
+        self._obj_d = tuple(self._d if o.properties.damping is None else o.properties.damping for o in self.objects)
+        # Objects with a prescribed motion (`ObjectMotion`): the gaps, V_c and the force depend
+        # on t too (`gaps_at`, `gap_rates`, `potential_at`), and the Simulator asks for those.
+        self._motions = tuple(o.properties.motion for o in self.objects)
+        self.time_varying = any(m is not None for m in self._motions)
+        if any(k != self._k for k in self._obj_k) or any(d != self._d for d in self._obj_d) or self.time_varying:
+            self.kernel_code = None  # type: ignore[misc]  # no compiled form: see kernel.layout
+        # Stiffness and damping of the contact law at DESIGN_FORCE: δ_d = (F_d / k)^(1/e),
+        # the stiffest object's.
+        k_max, d_max = max((self._k, *self._obj_k)), max((self._d, *self._obj_d))
+        delta_d = (DESIGN_FORCE / k_max) ** (1.0 / self._e)
+        self._k_design = k_max * self._e * delta_d ** (self._e - 1.0)
+        self._c_design = d_max * DESIGN_FORCE
         self._friction_design = self._mu * DESIGN_FORCE / self._vs
         # Candidates, kept only where some pose can reach them (|p − A| ≤ r1 on the proximal
         # phalanx, ≤ r1 + L3 on the distal one).
         prox_circles, dist_circles, ends, tips = [], [], [], []
+        # (A moving object is a candidate wherever it is: it is never dropped nor bounded.)
         for i, obj in enumerate(self.objects):
+            moving = self._motions[i] is not None
             if isinstance(obj, Circle):
                 cx, cy = obj.center
-                if math.hypot(cx, cy) <= r1 + rho1 + obj.radius:
+                if moving or math.hypot(cx, cy) <= r1 + rho1 + obj.radius:
                     prox_circles.append((i, cx, cy, rho1 + obj.radius))
-                if math.hypot(cx, cy) <= r1 + l3 + rho3 + obj.radius:
-                    reach = l3 + rho3 + obj.radius
+                if moving or math.hypot(cx, cy) <= r1 + l3 + rho3 + obj.radius:
+                    reach = math.inf if moving else l3 + rho3 + obj.radius
                     dist_circles.append((i, cx, cy, rho3 + obj.radius, reach * reach))
             else:
                 (ox, oy), (nx, ny) = obj.point, obj.normal
                 height_a = -(nx * ox + ny * oy)  # n·(A − o)
                 for phalanx, rho in ((PROXIMAL, rho1), (DISTAL, rho3)):
-                    if height_a - r1 < rho:
+                    if moving or height_a - r1 < rho:
                         ends.append((phalanx, i, ox, oy, nx, ny, rho))
-                if height_a - r1 - l3 < rho3:
-                    tips.append((i, ox, oy, nx, ny, rho3, l3 + rho3))
+                if moving or height_a - r1 - l3 < rho3:
+                    tips.append((i, ox, oy, nx, ny, rho3, math.inf if moving else l3 + rho3))
         self._prox_circles = tuple(prox_circles)
         self._dist_circles = tuple(dist_circles)
         self._ends = tuple(ends)
@@ -143,8 +157,9 @@ class Contact:
         return tuple(float(x) for x in out)
 
     # -- geometry ------------------------------------------------------------------------
-    def _hits(self, q: Vec3, all_candidates: bool) -> list[_Hit]:
-        """The evaluated candidates at q: those with δ > 0, or every one (for gaps and modal).
+    def _hits(self, q: Vec3, all_candidates: bool, t: float = 0.0) -> list[_Hit]:
+        """The evaluated candidates at q (and t, for moving objects): those with δ > 0, or every
+        one (for gaps and modal).
 
         J_p has two non-zero columns, returned as vectors j1 = ∂p/∂θ1 and j3 = ∂p/∂θ3 (m/rad).
         """
@@ -152,7 +167,10 @@ class Contact:
         c1, s1 = math.cos(q[0]), math.sin(q[0])
         bx, by = r1 * c1, r1 * s1
         out: list[_Hit] = []
+        shift = [m.offset(t) if m is not None else None for m in self._motions] if self.time_varying else None
         for i, cx, cy, rad in self._prox_circles:
+            if shift is not None and shift[i] is not None:
+                cx, cy = cx + shift[i][0], cy + shift[i][1]
             # p = s B (material coordinate s along A→B), ∂p/∂θ1 = s r1 e'(θ1)
             s = (cx * bx + cy * by) / (r1 * r1)
             s = 0.0 if s < 0.0 else (1.0 if s > 1.0 else s)
@@ -166,6 +184,8 @@ class Contact:
         ux = uy = 0.0
         have_u = False
         for i, cx, cy, rad, reach2 in self._dist_circles:
+            if shift is not None and shift[i] is not None:
+                cx, cy = cx + shift[i][0], cy + shift[i][1]
             dx, dy = cx - bx, cy - by
             if dx * dx + dy * dy > reach2 and not all_candidates:
                 continue  # the distal segment lies within L3 of B
@@ -183,10 +203,14 @@ class Contact:
                 nx, ny = (dx / dist, dy / dist) if dist > MIN_DISTANCE else (-uy, ux)
                 out.append((DISTAL, i, d, px, py, nx, ny, -by, bx, -ell * uy, ell * ux))
         for phalanx, i, ox, oy, nx, ny, rho in self._ends:
+            if shift is not None and shift[i] is not None:
+                ox, oy = ox + shift[i][0], oy + shift[i][1]
             d = rho - (nx * (bx - ox) + ny * (by - oy))
             if d > 0.0 or all_candidates:
                 out.append((phalanx, i, d, bx, by, nx, ny, -by, bx, 0.0, 0.0))
         for i, ox, oy, nx, ny, rho, reach in self._tips:
+            if shift is not None and shift[i] is not None:
+                ox, oy = ox + shift[i][0], oy + shift[i][1]
             height_b = nx * (bx - ox) + ny * (by - oy)
             if height_b - reach >= 0.0 and not all_candidates:
                 continue  # the tip is within L3 of B
@@ -199,11 +223,15 @@ class Contact:
                 out.append((DISTAL, i, d, px, py, nx, ny, -by, bx, -l3 * uy, l3 * ux))
         return out
 
-    def _forces(self, hit: _Hit, v: Vec3) -> tuple[float, float, float]:
-        """(F_n, Fx, Fy), N, of one candidate in contact: Hunt–Crossley normal force plus friction."""
-        _, _, d, _, _, nx, ny, j1x, j1y, j3x, j3y = hit
+    def _forces(self, hit: _Hit, v: Vec3, t: float = 0.0) -> tuple[float, float, float]:
+        """(F_n, Fx, Fy), N, of one candidate in contact: Hunt–Crossley normal force plus friction.
+        The velocity is the phalanx's relative to the object (ṗ − ċ for a moving one)."""
+        _, i, d, _, _, nx, ny, j1x, j1y, j3x, j3y = hit
         vx, vy = j1x * v[0] + j3x * v[2], j1y * v[0] + j3y * v[2]
-        fn = self._k * d**self._e * (1.0 - self._d * (nx * vx + ny * vy))  # δ' = −n_c·ṗ
+        if self.time_varying and self._motions[i] is not None:
+            cvx, cvy = self._motions[i].velocity(t)
+            vx, vy = vx - cvx, vy - cvy
+        fn = self._obj_k[i] * d**self._e * (1.0 - self._obj_d[i] * (nx * vx + ny * vy))  # δ' = −n_c·ṗ
         if fn <= 0.0:
             return (0.0, 0.0, 0.0)
         fx, fy = fn * nx, fn * ny
@@ -217,8 +245,8 @@ class Contact:
     def force(self, t: float, q: Vec3, v: Vec3) -> Vec3:
         """Q_c = Σ J_pᵀ F over the candidates in contact, N·m."""
         q1 = q3 = 0.0
-        for hit in self._hits(q, False):
-            _, fx, fy = self._forces(hit, v)
+        for hit in self._hits(q, False, t):
+            _, fx, fy = self._forces(hit, v, t)
             q1 += hit[7] * fx + hit[8] * fy
             q3 += hit[9] * fx + hit[10] * fy
         return (q1, 0.0, q3)
@@ -226,7 +254,42 @@ class Contact:
     def potential(self, q: Vec3) -> float:
         """V_c = Σ k δ^(e+1)/(e+1), J."""
         e1 = self._e + 1.0
-        return sum(self._k * hit[2] ** e1 / e1 for hit in self._hits(q, False))
+        return sum(self._obj_k[hit[1]] * hit[2] ** e1 / e1 for hit in self._hits(q, False))
+
+    def potential_at(self, t: float, q: Vec3) -> float:
+        """V_c at time t (moving objects where they are then), J."""
+        e1 = self._e + 1.0
+        return sum(self._obj_k[hit[1]] * hit[2] ** e1 / e1 for hit in self._hits(q, False, t))
+
+    def gaps_at(self, t: float, q: Vec3) -> tuple[float, ...]:
+        """`gaps` with the moving objects where they are at t (s)."""
+        return tuple(-hit[2] for hit in self._hits(q, True, t))
+
+    def gap_rates(self, t: float, q: Vec3, v: Vec3) -> tuple[float, ...]:
+        """d gap/dt of every candidate at (t, q, q'), m/s: n_c·(J_p q' − ċ) (the object's own
+        velocity ċ moves the gap too; the closest point's sliding is normal to n_c)."""
+        out = []
+        for hit in self._hits(q, True, t):
+            _, i, _, _, _, nx, ny, j1x, j1y, j3x, j3y = hit
+            vx, vy = j1x * v[0] + j3x * v[2], j1y * v[0] + j3y * v[2]
+            if self._motions[i] is not None:
+                cvx, cvy = self._motions[i].velocity(t)
+                vx, vy = vx - cvx, vy - cvy
+            out.append(nx * vx + ny * vy)
+        return tuple(out)
+
+    def motion_power(self, t: float, q: Vec3, v: Vec3) -> float:
+        """W: the power the prescribed motions put into the finger, Σ F·ċ over the contacts with
+        moving objects (F the force on the phalanx): d(T + V + V_c)/dt gains it (spec §7's
+        balance with V_c moving: ∂V_c/∂c·ċ = F_n n_c·ċ, and the damping and friction act on ṗ − ċ)."""
+        power = 0.0
+        for hit in self._hits(q, False, t):
+            motion = self._motions[hit[1]]
+            if motion is not None:
+                _, fx, fy = self._forces(hit, v, t)
+                cvx, cvy = motion.velocity(t)
+                power += fx * cvx + fy * cvy
+        return power
 
     def modal(self, q: Vec3, n: Vec3) -> tuple[float, float]:
         """(nᵀKn, nᵀCn): the contact's stiffness and damping along a direction n of q.
@@ -238,17 +301,18 @@ class Contact:
         Each sum is then bounded below by the stiffest single candidate at DESIGN_FORCE, so
         the stability check sees the contact mode at poses out of contact too.
         """
-        k, e, n1, n3 = self._k, self._e, n[0], n[2]
+        e, n1, n3 = self._e, n[0], n[2]
         stiff = damp = stiff_floor = damp_floor = 0.0
         for hit in self._hits(q, True):
-            _, _, d, _, _, nx, ny, j1x, j1y, j3x, j3y = hit
+            _, i, d, _, _, nx, ny, j1x, j1y, j3x, j3y = hit
+            k = self._obj_k[i]
             jx, jy = j1x * n1 + j3x * n3, j1y * n1 + j3y * n3
             a2 = (nx * jx + ny * jy) ** 2
             b2 = (nx * jy - ny * jx) ** 2
             if d > 0.0:
                 fn = k * d**e
                 stiff += k * e * d ** (e - 1.0) * a2
-                damp += self._d * fn * a2 + self._mu * fn / self._vs * b2
+                damp += self._obj_d[i] * fn * a2 + self._mu * fn / self._vs * b2
             stiff_floor = max(stiff_floor, self._k_design * a2)
             damp_floor = max(damp_floor, self._c_design * a2 + self._friction_design * b2)
         return (max(stiff, stiff_floor), max(damp, damp_floor))
@@ -268,29 +332,40 @@ class Contact:
 
     def outputs(self, t: float, q: Vec3, v: Vec3) -> Mapping[str, float]:
         """grip_force = Σ F_n (N) and the force on each phalanx, N, model plane (sum over objects)."""
-        grip, (prox, dist) = self._totals(q, v)
-        return {
+        grip, (prox, dist) = self._totals(q, v, t)
+        out = {
             "grip_force": grip,
             "contact_force_proximal_x": prox[0],
             "contact_force_proximal_y": prox[1],
             "contact_force_distal_x": dist[0],
             "contact_force_distal_y": dist[1],
         }
+        if self.time_varying:
+            out["motion_power"] = self.motion_power(t, q, v)  # W, only with moving objects
+        return out
 
     # -- reports -------------------------------------------------------------------------
     def wrenches(self, t: float, q: Vec3, v: Vec3) -> tuple[Vec3, Vec3]:
         """(Fx, Fy, Mz) on the proximal and on the distal phalanx: the contact force (N, model
         plane, sum over objects) and its moment about the frame origin A (N·m, about +Z of the
         model plane), each force acting at its contact point p on the phalanx's axis."""
-        return self._totals(q, v)[1]
+        return self._totals(q, v, t)[1]
 
     def contacts(self, t: float, q: Vec3, v: Vec3) -> tuple[ContactPoint, ...]:
         """Every active contact (δ > 0) with its point, normal and force."""
         out = []
-        for hit in self._hits(q, False):
-            fn, fx, fy = self._forces(hit, v)
+        for hit in self._hits(q, False, t):
+            fn, fx, fy = self._forces(hit, v, t)
             phalanx, i, d, px, py, nx, ny = hit[:7]
             out.append(ContactPoint(PHALANGES[phalanx], self.objects[i].name, (px, py), (nx, ny), d, fn, (fx, fy)))
+        return tuple(out)
+
+    def object_forces(self, t: float, q: Vec3, v: Vec3) -> tuple[float, ...]:
+        """The normal force on each object (N, Σ F_n over its contacts), in `objects` order:
+        what a `break_force` is compared with."""
+        out = [0.0] * len(self.objects)
+        for hit in self._hits(q, False, t):
+            out[hit[1]] += self._forces(hit, v, t)[0]
         return tuple(out)
 
     def check_clearance(self, q: Vec3, tolerance: float = OVERLAP_TOLERANCE) -> None:
@@ -313,12 +388,12 @@ class Contact:
             f"'{self.objects[i].name}' overlaps the {phalanx} phalanx by {depth:.4g} m",
         )
 
-    def _totals(self, q: Vec3, v: Vec3) -> tuple[float, tuple[Vec3, Vec3]]:
+    def _totals(self, q: Vec3, v: Vec3, t: float = 0.0) -> tuple[float, tuple[Vec3, Vec3]]:
         """Σ F_n, N, and per phalanx (Fx, Fy, Mz about A)."""
         grip = 0.0
         sums = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]
-        for hit in self._hits(q, False):
-            fn, fx, fy = self._forces(hit, v)
+        for hit in self._hits(q, False, t):
+            fn, fx, fy = self._forces(hit, v, t)
             grip += fn
             acc, px, py = sums[hit[0]], hit[3], hit[4]
             acc[0] += fx

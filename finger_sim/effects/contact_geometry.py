@@ -25,6 +25,132 @@ NORMALIZE_PASSES = 8
 
 OBJECT_TYPES = ("circle", "plane")
 _OBJECT_KEYS = {"circle": {"name", "type", "center", "radius"}, "plane": {"name", "type", "point", "normal"}}
+#: Optional keys of every object (`ObjectProperties`): its own contact law and its strength.
+_PROPERTY_KEYS = ("stiffness", "damping", "break_force")
+#: The kinds of prescribed motion and their keys (besides `type`), `ObjectMotion`.
+_MOTION_KEYS = {"push": {"direction", "distance", "start", "duration"},
+                "vibration": {"direction", "amplitude", "frequency", "start"}}
+#: Bounds of a prescribed motion: its distance or amplitude (m), frequency (Hz), times (s).
+MAX_MOTION_EXTENT = 1.0
+MAX_MOTION_FREQUENCY = 1e3
+MAX_MOTION_TIME = 1e6
+
+
+@dataclass(frozen=True)
+class ObjectMotion:
+    """A prescribed motion of an object in the model plane: its offset from its place in the
+    scene, c(t) = c + s(t) u (m), u the unit `direction`, s(t) ≥ 0 (m) smooth in velocity:
+
+    - push: s = L (1 − cos(π (t − t0) / T)) / 2 over [t0, t0 + T], 0 before, L after: moved
+      by L = `distance` in T = `duration` s from t0 = `start` (a pull is a push away);
+    - vibration: s = A (1 − cos(2π f (t − t0))) / 2 from t0 on, 0 before: back and forth over
+      A = `amplitude` m at f = `frequency` Hz.
+
+    s and s' are continuous (no velocity jump of the object); s'' jumps at the ends of a push
+    and at the start of a vibration, which a step straddles with a local error of order dt³.
+    """
+
+    kind: str
+    direction: tuple[float, float]
+    extent: float  # L or A, m
+    start: float  # t0, s
+    rate: float  # 1/T (push) or f (vibration), 1/s
+
+    def offset(self, t: float) -> tuple[float, float]:
+        """c(t) − c, m."""
+        s = self._s(t)
+        return (s * self.direction[0], s * self.direction[1])
+
+    def velocity(self, t: float) -> tuple[float, float]:
+        """ċ(t), m/s."""
+        x = t - self.start
+        if x <= 0.0 or (self.kind == "push" and x * self.rate >= 1.0):
+            return (0.0, 0.0)
+        w = math.pi * self.rate * (1.0 if self.kind == "push" else 2.0)
+        ds = 0.5 * self.extent * w * math.sin(w * x)
+        return (ds * self.direction[0], ds * self.direction[1])
+
+    def _s(self, t: float) -> float:
+        x = t - self.start
+        if x <= 0.0:
+            return 0.0
+        if self.kind == "push":
+            return self.extent if x * self.rate >= 1.0 else 0.5 * self.extent * (1.0 - math.cos(math.pi * self.rate * x))
+        return 0.5 * self.extent * (1.0 - math.cos(2.0 * math.pi * self.rate * x))
+
+    def to_dict(self) -> dict[str, Any]:
+        """The motion in the scene schema."""
+        if self.kind == "push":
+            return {"type": "push", "direction": list(self.direction), "distance": self.extent, "start": self.start,
+                    "duration": 1.0 / self.rate}
+        return {"type": "vibration", "direction": list(self.direction), "amplitude": self.extent,
+                "frequency": self.rate, "start": self.start}
+
+
+def motion_from_dict(value: Any) -> ObjectMotion:
+    """Validate an object's `motion:` mapping (keys named relative to it, e.g. `motion.distance`)."""
+    if not isinstance(value, dict):
+        raise ConfigError("motion", "a mapping {type: push|vibration, direction, ...}", value)
+    kind = value.get("type")
+    if kind not in _MOTION_KEYS:
+        raise ConfigError("motion.type", f"one of {sorted(_MOTION_KEYS)}", kind)
+    allowed = _MOTION_KEYS[kind]
+    unknown = sorted(set(value) - allowed - {"type"}, key=str)
+    if unknown:
+        raise ConfigError("motion", f"only the keys {sorted(allowed | {'type'})} for a {kind}", unknown[0])
+    missing = sorted(allowed - set(value))
+    if missing:
+        raise ConfigError(f"motion.{missing[0]}", f"a value (required for a {kind})", None)
+    nx, ny = _vec2(value["direction"], "motion.direction")
+    norm = math.hypot(nx, ny)
+    if norm < MIN_NORMAL_NORM:
+        raise ConfigError("motion.direction", "a non-zero direction (it is normalized)", list(value["direction"]))
+
+    def bounded(key: str, high: float) -> float:
+        x = value[key]
+        if not (_is_number(x) and 0.0 < x <= high) and not (key == "start" and _is_number(x) and 0.0 <= x <= high):
+            raise ConfigError(f"motion.{key}", f"a finite number in (0, {high:g}]" if key != "start" else f"a time in [0, {high:g}] s", x)
+        return float(x)
+
+    start = bounded("start", MAX_MOTION_TIME)
+    if kind == "push":
+        return ObjectMotion(kind, (nx / norm, ny / norm), bounded("distance", MAX_MOTION_EXTENT), start,
+                            1.0 / bounded("duration", MAX_MOTION_TIME))
+    return ObjectMotion(kind, (nx / norm, ny / norm), bounded("amplitude", MAX_MOTION_EXTENT), start,
+                        bounded("frequency", MAX_MOTION_FREQUENCY))
+
+
+@dataclass(frozen=True)
+class ObjectProperties:
+    """What an object adds to the scene's contact law: its own stiffness k_c (N/m^e) and
+    Hunt–Crossley damping d_c (s/m), None = `model.contact`'s; the normal force (N, the
+    sum over the phalanges) beyond which it is crushed, None = unbreakable; and its prescribed
+    motion in the model plane, None = fixed in finger_base.
+
+    Crushing is judged by whoever steps the scene (`finger_sim.grasp_objects`): the force law
+    itself does not change until the crushed object is taken out of the scene.
+    """
+
+    stiffness: float | None = None
+    damping: float | None = None
+    break_force: float | None = None
+    motion: ObjectMotion | None = None  # None: fixed in finger_base
+
+    def __post_init__(self) -> None:
+        for name, low, strict in (("stiffness", 0.0, True), ("damping", 0.0, False), ("break_force", 0.0, True)):
+            value = getattr(self, name)
+            if value is None:
+                continue
+            if not _is_number(value) or value < low or (strict and value == low):
+                raise ConfigError(name, f"a finite number {'>' if strict else '≥'} {low:g}", value)
+            object.__setattr__(self, name, float(value))
+
+    def to_dict(self) -> dict[str, Any]:
+        """The keys that are set, as in the scene schema."""
+        out: dict[str, Any] = {name: getattr(self, name) for name in _PROPERTY_KEYS if getattr(self, name) is not None}
+        if self.motion is not None:
+            out["motion"] = self.motion.to_dict()
+        return out
 
 
 @dataclass(frozen=True)
@@ -34,6 +160,7 @@ class Circle:
     name: str
     center: Vec2
     radius: float
+    properties: ObjectProperties = ObjectProperties()
 
     def __post_init__(self) -> None:
         _check_name(self.name)
@@ -53,6 +180,7 @@ class Plane:
     name: str
     point: Vec2
     normal: Vec2
+    properties: ObjectProperties = ObjectProperties()
 
     def __post_init__(self) -> None:
         _check_name(self.name)
@@ -112,18 +240,21 @@ def objects_from_list(value: Any, key: str = "objects") -> tuple[SceneObject, ..
         kind = item.get("type")
         if kind not in OBJECT_TYPES:
             raise ConfigError(f"{where}.type", f"one of {list(OBJECT_TYPES)}", kind)
-        allowed = _OBJECT_KEYS[kind]
+        required = _OBJECT_KEYS[kind]
+        allowed = required | set(_PROPERTY_KEYS) | {"motion"}
         unknown = sorted(set(item) - allowed, key=str)
         if unknown:
             raise ConfigError(where, f"only the keys {sorted(allowed)} for a {kind}", unknown[0])
-        missing = sorted(allowed - set(item))
+        missing = sorted(required - set(item))
         if missing:
             raise ConfigError(f"{where}.{missing[0]}", f"a value (required for a {kind})", None)
         try:
+            motion = motion_from_dict(item["motion"]) if "motion" in item else None
+            props = ObjectProperties(**{k: item[k] for k in _PROPERTY_KEYS if k in item}, motion=motion)
             obj: SceneObject = (
-                Circle(item["name"], item["center"], item["radius"])
+                Circle(item["name"], item["center"], item["radius"], props)
                 if kind == "circle"
-                else Plane(item["name"], item["point"], item["normal"])
+                else Plane(item["name"], item["point"], item["normal"], props)
             )
         except ConfigError as exc:
             raise ConfigError(f"{where}.{exc.key}", exc.allowed, exc.got) from None

@@ -1,0 +1,77 @@
+"""Objects that break, and scene changes at step boundaries, for a Simulator stepped step by step.
+
+An object with a `break_force` (N) is *crushed* at the end of the first step at which the sum of
+the normal forces on it (`Contact.object_forces`) exceeds that force. What happens after
+(**assumption**, the simplest physical reading of a crushed cup): the object gives way at once
+and is taken out of the scene; from the next step on it pushes no more, so the finger, still
+driven, closes through where it was. The event is therefore resolved to one step (dt), not
+located inside it: the force law up to the break is the scene's own, and the break changes no
+state (q, q' carry over), only the set of objects.
+
+A scene change at a step boundary (the object removed, a new `tip_force` of a piecewise-constant
+tip-force profile) builds a Simulator of the changed scene and hands it the state: q, q', the
+step count and the last torque. The new integrator starts fresh (a warm start would have been
+dropped by `Simulator.reset` anyway); a finger resting on a joint stop at that instant is let go
+and, if still pushed into the stop, lands on it again within the next step.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+from finger_sim.effects.contact import Contact
+from finger_sim.scene import Scene
+from finger_sim.simulate import Simulator
+
+
+@dataclass(frozen=True)
+class Crush:
+    """An object crushed at the end of step `step` (time t, s) under `force` N > `break_force` N."""
+
+    object: str
+    t: float
+    step: int
+    force: float
+    break_force: float
+
+    def log_line(self) -> str:
+        """The one-line record a run's log keeps."""
+        return (f"object '{self.object}' crushed at t = {self.t:.6g} s: normal force {self.force:.6g} N "
+                f"> break_force {self.break_force:.6g} N; removed from the scene")
+
+
+def contact_element(sim: Simulator) -> Contact | None:
+    """The contact element of a simulator's system, or None (a scene without objects)."""
+    return next((e for e in sim.system.elements if isinstance(e, Contact)), None)
+
+
+def crushed(sim: Simulator) -> list[Crush]:
+    """The objects of `sim`'s scene whose normal force now exceeds their break_force."""
+    contact = contact_element(sim)
+    if contact is None:
+        return []
+    forces = contact.object_forces(sim.time, sim.q, sim.v)
+    return [Crush(obj.name, sim.time, sim.step_index, f, obj.properties.break_force)
+            for obj, f in zip(contact.objects, forces)
+            if obj.properties.break_force is not None and f > obj.properties.break_force]
+
+
+def without_objects(scene: Scene, names: Iterable[str]) -> Scene:
+    """`scene` with the named objects taken out."""
+    gone = set(names)
+    return dataclasses.replace(scene, objects=tuple(o for o in scene.objects if o.name not in gone))
+
+
+def with_tip_force(scene: Scene, force: tuple[float, float]) -> Scene:
+    """`scene` with a new constant tip force (N, model plane)."""
+    return dataclasses.replace(scene, tip_force=(float(force[0]), float(force[1])))
+
+
+def carry_over(sim: Simulator, scene: Scene) -> Simulator:
+    """A Simulator of `scene` (the same kernel) in the state `sim` has reached: q, q', step, torque."""
+    new = Simulator(scene, kernel=sim.kernel)
+    new.q, new.v, new.step_index, new.torque = sim.q, sim.v, sim.step_index, sim.torque
+    new.impacts = sim.impacts
+    return new

@@ -1,0 +1,127 @@
+"""Run a task against a controller: the scene stepped at its dt, the controller sampled and delayed.
+
+Timing (whole steps of the scene's dt): at every `sample_steps`-th step k the controller gets
+the state at t_k = k·dt (its measured signals) and the setpoint in force at t_k; its command
+acts from step k + `delay_steps` on and is held (zero-order hold) until the next one acts. A
+delay of 0 is an ideal controller answering within the sample; 1, a command that arrives one
+step late (finger_node's loop). Before the first command acts the input is 0.
+
+Scene changes happen at step boundaries (`finger_sim.grasp_objects`): a tip-force disturbance
+switches on and off at the first step at or after its start and end; an object whose break force
+is exceeded at the end of a step is crushed and taken out.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+import time
+from collections import deque
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from finger_sim.errors import FingerSimError
+from finger_sim.grasp_objects import Crush, carry_over, crushed, with_tip_force, without_objects
+from finger_sim.inputs import BREAK_EPS
+from finger_sim.simulate import Simulator, output_names, output_values
+from finger_sim.tasks.controllers import MEASURED, Factory
+from finger_sim.tasks.metrics import Scores, judge, task_scores
+from finger_sim.tasks.schema import Task
+
+#: The columns a task run records at every sample, in this order (N, rad, rad/s, N·m, N).
+COLUMNS = ("t", "grip_force", "setpoint", "theta1", "theta1_dot", "command", "tip_force_x", "tip_force_y", "crushed")
+#: Element outputs that are not measurements a real controller has: the contact wrenches and
+#: the power of a prescribed object motion.
+UNMEASURED_PREFIX = "contact_force_"
+UNMEASURED = frozenset({"motion_power"})
+
+
+@dataclass
+class TaskRun:
+    """One task run: its samples (COLUMNS, one array each), crushes, scores and pass/fail per limit."""
+
+    task: str
+    controller: str
+    samples: dict[str, np.ndarray]
+    crushes: list[Crush]
+    scores: Scores
+    passed: dict[str, bool]
+    setpoints: tuple[tuple[float, float], ...]  # on the step grid
+    limits: dict[str, float | bool] = field(default_factory=dict)
+    wall_time: float = 0.0
+
+    @property
+    def ok(self) -> bool:
+        return all(self.passed.values())
+
+
+def first_step(t: float, dt: float) -> int:
+    """The first step index k with k·dt ≥ t (a time within BREAK_EPS·dt of a step counts as on it)."""
+    return max(0, math.ceil(t / dt - BREAK_EPS))
+
+
+def run_task(task: Task, factory: Factory, *, label: str = "", params: Mapping[str, float] | None = None,
+             kernel: str = "auto") -> TaskRun:
+    """Run `task` against the controller `factory(sample_period, **params)`; score and judge it."""
+    scene = task.scene
+    dt, n = scene.dt, scene.step_count
+    sim = Simulator(scene, kernel=kernel)
+    controller = factory(task.sample_steps * dt, **(params or {}))
+    set_steps = [(first_step(t, dt), v) for t, v in task.setpoints]
+    tip_switch: dict[int, tuple[float, float]] = {}
+    for d in task.disturbances:
+        tip_switch[first_step(d.end, dt)] = scene.tip_force
+    for d in task.disturbances:  # a span starting where another ends wins the step
+        tip_switch[first_step(d.start, dt)] = d.force
+    rows = np.empty((n + 1, len(COLUMNS)))
+    pending: deque[tuple[int, float]] = deque()
+    command, setpoint, crushes = 0.0, 0.0, []
+    si = 0
+    start = time.perf_counter()
+
+    def record(k: int, outputs: Mapping[str, float]) -> None:
+        rows[k] = (k * dt, outputs.get("grip_force", 0.0), setpoint, sim.q[0], sim.v[0], command,
+                   sim.scene.tip_force[0], sim.scene.tip_force[1], len(crushes))
+
+    outputs = _outputs(sim)
+    for k in range(n):
+        while si < len(set_steps) and set_steps[si][0] <= k:
+            setpoint = set_steps[si][1]
+            si += 1
+        if k in tip_switch:
+            sim = carry_over(sim, with_tip_force(sim.scene, tip_switch[k]))
+        if k % task.sample_steps == 0:
+            sensed = {"grip_force": outputs.get("grip_force", 0.0), "theta1": sim.q[0], "theta1_dot": sim.v[0]}
+            measured = {name: sensed[name] for name in MEASURED}
+            measured.update({k_: v for k_, v in outputs.items()
+                             if not k_.startswith(UNMEASURED_PREFIX) and k_ not in UNMEASURED})
+            answer = controller(k * dt, setpoint, measured)
+            if isinstance(answer, bool) or not (isinstance(answer, numbers.Real) and math.isfinite(answer)):
+                raise FingerSimError(f"controller '{label}' returned {answer!r} at t = {k * dt:g} s in task "
+                                     f"'{task.name}': expected a finite {task.input} command")
+            pending.append((k + task.delay_steps, float(answer)))
+        while pending and pending[0][0] <= k:
+            command = pending.popleft()[1]
+        record(k, outputs)
+        sim.step(command)
+        outputs = _outputs(sim)
+        broken = crushed(sim)
+        if broken:  # the sample at the crush keeps the force that broke it (recorded and measured)
+            crushes += broken
+            sim = carry_over(sim, without_objects(sim.scene, (c.object for c in broken)))
+    record(n, outputs)
+    wall = time.perf_counter() - start
+    samples = {name: np.ascontiguousarray(rows[:, i]) for i, name in enumerate(COLUMNS)}
+    grid = tuple((k * dt, v) for k, v in set_steps)
+    torque = (samples["command"], samples["theta1"]) if task.input == "torque" else None
+    scores = task_scores(samples["t"], samples["grip_force"], grid, task.hold_after, bool(crushes), torque=torque)
+    return TaskRun(task.name, label, samples, crushes, scores, judge(scores, task.limits), grid, dict(task.limits), wall)
+
+
+def _outputs(sim: Simulator) -> dict[str, float]:
+    """The scene's element outputs at the simulator's state (grip_force, N, ...)."""
+    elements = sim.system.elements
+    return dict(zip(output_names(elements, sim.q), output_values(elements, sim.time, sim.q, sim.v)))
+

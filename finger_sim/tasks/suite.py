@@ -1,0 +1,136 @@
+"""A suite: every task against every controller, a gain sweep over it, and the written report.
+
+    finger-sim tasks [TASK.yaml ...] [--controller LABEL=module:callable] [--param LABEL.key=value]
+                     [--vary key=v1,v2,...] [--chunk i/n] [--out DIR] [--no-figures]
+
+Without TASK files the installed suite (`config/tasks/*.yaml`) runs; without --controller the
+shipped `grip_pi` and `grip_pi_aggressive`. `--vary` (repeatable) runs the first controller over
+the Cartesian product of the given parameter values (a gain sweep), each combination one more
+controller column, scored the same way. The exit status is 1 when any run fails a task.
+"""
+
+from __future__ import annotations
+
+import datetime
+import itertools
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from finger_sim.errors import ConfigError
+from finger_sim.scene_paths import scene_dirs
+from finger_sim.scene_yaml import parse_scene_text
+from finger_sim.sweep import chunk_range, parse_chunk
+from finger_sim.tasks import report
+from finger_sim.tasks.controllers import Factory, load_factory
+from finger_sim.tasks.runner import TaskRun, run_task
+from finger_sim.tasks.schema import Task, load_task
+
+#: The controllers a suite runs when none is named: the shipped PI and its overshooting variant.
+DEFAULT_CONTROLLERS = ("grip_pi=finger_sim.tasks.controllers:grip_pi",
+                       "grip_pi_aggressive=finger_sim.tasks.controllers:grip_pi_aggressive")
+
+
+@dataclass(frozen=True)
+class ControllerSpec:
+    """A controller column: its label, factory and parameters (passed as keyword arguments)."""
+
+    label: str
+    factory: Factory
+    params: dict[str, float] = field(default_factory=dict)
+
+
+def installed_tasks() -> list[Path]:
+    """The suite's task files: config/tasks/*.yaml of the first scene folder that has them."""
+    for d in scene_dirs():
+        found = sorted((d / "tasks").glob("*.yaml"))
+        if found:
+            return found
+    raise ConfigError("tasks", "task files in an installed config/tasks/ folder", [str(d) for d in scene_dirs()])
+
+
+def parse_controllers(specs: Sequence[str], params: Sequence[str], vary: Sequence[str]) -> list[ControllerSpec]:
+    """--controller LABEL=module:callable, --param LABEL.key=value, --vary key=v1,v2 → the columns."""
+    out: list[ControllerSpec] = []
+    for spec in specs or DEFAULT_CONTROLLERS:
+        label, sep, target = spec.partition("=")
+        if not sep:
+            label, target = spec.rpartition(":")[2], spec
+        if any(c.label == label for c in out):
+            raise ConfigError("--controller", "a label no other controller uses", label)
+        out.append(ControllerSpec(label, load_factory(target), {}))
+    for item in params:
+        key, sep, value = item.partition("=")
+        label, dot, name = key.partition(".")
+        match = [c for c in out if c.label == label]
+        if not (sep and dot and name and match):
+            raise ConfigError("--param", f"LABEL.key=value with LABEL one of {[c.label for c in out]}", item)
+        match[0].params[name] = _number(value, f"--param {key}")
+    if vary:
+        base = out[0]
+        axes = []
+        for item in vary:
+            name, sep, values = item.partition("=")
+            if not (sep and name and values):
+                raise ConfigError("--vary", "key=v1,v2,... (a parameter of the first controller)", item)
+            axes.append([(name, _number(v, f"--vary {name}")) for v in values.split(",")])
+        out = [ControllerSpec(base.label + "[" + ",".join(f"{k}={v:g}" for k, v in combo) + "]", base.factory,
+                              {**base.params, **dict(combo)}) for combo in itertools.product(*axes)]
+    return out
+
+
+def chunk_of(controllers: Sequence[ControllerSpec], chunk: str) -> list[ControllerSpec]:
+    """The i-th of n contiguous slices of the controllers (`chunk` = "i/n", as `finger-sim sweep
+    --chunk`): a gain sweep split over processes or machines; the slices' reports in order are
+    the whole sweep's."""
+    index, count = parse_chunk(chunk)
+    start, stop = chunk_range(len(controllers), index, count)
+    return list(controllers[start:stop])
+
+
+def run_suite(tasks: Sequence[Task], controllers: Sequence[ControllerSpec]) -> list[TaskRun]:
+    """Every task against every controller, task by task."""
+    return [run_task(task, c.factory, label=c.label, params=c.params) for task in tasks for c in controllers]
+
+
+def write_report(runs: Sequence[TaskRun], tasks: Sequence[Task], out: Path, *, figures: bool = True,
+                 command: str = "") -> Path:
+    """report.md, metrics.json and one figure per task (tasks_<name>.png) into `out`; the report's path."""
+    out.mkdir(parents=True, exist_ok=True)
+    drawn: dict[str, str] = {}
+    if figures:
+        for task in tasks:
+            name = f"tasks_{task.name}.png"
+            report.figure([r for r in runs if r.task == task.name], out / name)
+            drawn[task.name] = name
+    descriptions = {t.name: t.description for t in tasks}
+    text = ["# Grasp tasks: scores", ""]
+    if command:
+        text += [f"Made by `{command}` on {datetime.date.today().isoformat()}.", ""]
+    text += [summary_table(runs), "", report.markdown(runs, descriptions, drawn)]
+    path = out / "report.md"
+    path.write_text("\n".join(text) + "\n", encoding="utf-8")
+    (out / "metrics.json").write_text(report.to_json(runs) + "\n", encoding="utf-8")
+    return path
+
+
+def summary_table(runs: Sequence[TaskRun]) -> str:
+    """Pass/fail of every task (rows) per controller (columns), Markdown."""
+    labels = list(dict.fromkeys(r.controller for r in runs))
+    lines = ["| task | " + " | ".join(f"`{c}`" for c in labels) + " |", "|---|" + "---|" * len(labels)]
+    for task in dict.fromkeys(r.task for r in runs):
+        by = {r.controller: r for r in runs if r.task == task}
+        cells = []
+        for c in labels:
+            r = by[c]
+            failed = [k for k, ok in r.passed.items() if not ok]
+            cells.append("pass" if r.ok else "FAIL (" + ", ".join(failed) + ")")
+        lines.append(f"| {task} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _number(text: str, key: str) -> float:
+    value = parse_scene_text(text, key) if text.strip() else None
+    if not isinstance(value, (int, float)) or isinstance(value, bool):
+        raise ConfigError(key, "a number", text)
+    return float(value)
