@@ -18,9 +18,10 @@ if TYPE_CHECKING:
 
 
 def outputs_now(sim: Simulator) -> list[float]:
-    """The drive's outputs at the Simulator's current state, under the input at its time."""
+    """The drive's outputs at the Simulator's current state, under the input of the step that ended
+    there (its left limit at a switch of the input: the mode was decided under it)."""
     system: DrivenSystem = sim.system  # type: ignore[assignment]
-    return list(system.motor_outputs(sim.time, sim.q, sim.v, sim.scene.torque(sim.time)).values())
+    return list(system.motor_outputs(sim.time, sim.q, sim.v, sim.torque).values())
 
 
 def run(sim: Simulator, n: int, *, ledger: bool = True) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, float]]:
