@@ -24,23 +24,31 @@ def outputs_now(sim: Simulator) -> list[float]:
     return list(system.motor_outputs(sim.time, sim.q, sim.v, sim.torque).values())
 
 
-def run(sim: Simulator, n: int, *, ledger: bool = True) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, float]]:
-    """Step `sim` n times: the (n, 6) states after each step, the drive's outputs (n + 1 rows, t = 0
-    first) and, with `ledger`, the energy report between the start and the end (`EnergyLedger.report`)."""
+def steps(sim: Simulator, n: int, ledger: EnergyLedger | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Step `sim` n times: the (n, 6) states and the (n, outputs) drive outputs after each step;
+    with `ledger`, the steps' energy integrals are added to it."""
     system: DrivenSystem = sim.system  # type: ignore[assignment]
-    book = EnergyLedger() if ledger else None
-    system.drive.ledger = book  # type: ignore[attr-defined]
-    q0, v0 = sim.q, sim.v
+    system.drive.ledger = ledger  # type: ignore[attr-defined]
     xs = np.empty((n, 6))
-    rows = [outputs_now(sim)]
+    rows = np.empty((n, len(system.output_names())))
     try:
         for k in range(n):
             state = sim.step()
             xs[k] = (*state.q, *state.v)
-            rows.append(outputs_now(sim))
+            rows[k] = outputs_now(sim)
     finally:
         system.drive.ledger = None  # type: ignore[attr-defined]
-    values = np.array(rows)
+    return xs, rows
+
+
+def run(sim: Simulator, n: int) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, float]]:
+    """Step `sim` n times from its state: the (n, 6) states after each step, the drive's outputs
+    (n + 1 rows, the start first) and the energy report between start and end (`EnergyLedger.report`)."""
+    system: DrivenSystem = sim.system  # type: ignore[assignment]
+    book = EnergyLedger()
+    q0, v0 = sim.q, sim.v
+    first = outputs_now(sim)
+    xs, rows = steps(sim, n, book)
+    values = np.vstack([first, rows])
     outputs = {name: values[:, i] for i, name in enumerate(system.output_names())}
-    report = book.report(system, q0, v0, sim.q, sim.v) if book is not None else {}
-    return xs, outputs, report
+    return xs, outputs, book.report(system, q0, v0, sim.q, sim.v)
