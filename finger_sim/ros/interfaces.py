@@ -27,7 +27,7 @@ from geometry_msgs.msg import PoseStamped, WrenchStamped
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_system_default
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64, Float64MultiArray, String
+from std_msgs.msg import Float64, Float64MultiArray, Int64, String
 from visualization_msgs.msg import MarkerArray
 
 from finger_sim.runtime.commands import joint_effort
@@ -113,6 +113,12 @@ OUTPUTS: dict[str, OutputSpec] = {
                                           reported_by="grip_force"),
     "contact_wrench/distal": OutputSpec("contact_wrench/distal", WrenchStamped, STATE_QOS, acked=True,
                                         reported_by="grip_force"),
+    # the drive (spec §8; finger_sim.ros.motor): what a prosthetic controller reads from the device
+    "motor/current": OutputSpec("motor/current", Float64, STATE_QOS, acked=True, reported_by="motor_current"),
+    "motor/voltage": OutputSpec("motor/voltage", Float64, STATE_QOS, acked=True, reported_by="motor_current"),
+    "motor/angle": OutputSpec("motor/angle", Float64, STATE_QOS, acked=True, reported_by="motor_current"),
+    "motor/encoder": OutputSpec("motor/encoder", Int64, STATE_QOS, acked=True, reported_by="encoder"),
+    "motor/mesh_mode": OutputSpec("motor/mesh_mode", String, STATE_QOS, acked=True, reported_by="motor_current"),
 }
 #: Every command topic (the motor torque, N·m): plain; the message ros2_control's forward command
 #: controller receives on <controller>/commands; what ros2_control's topic-based hardware interface
@@ -122,6 +128,8 @@ COMMAND_INPUTS = (
     InputSpec("effort_commands", Float64MultiArray, lambda msg, joint: (tuple(msg.data), None)),
     InputSpec("joint_command", JointState,
               lambda msg, joint: joint_effort(msg.name, len(msg.position), len(msg.velocity), msg.effort, joint)),
+    # the voltage command of a finger with a drive (V; finger_sim.runtime.drive_commands)
+    InputSpec("motor_voltage", Float64, lambda msg, joint: ((msg.data,), None)),
 )
 
 

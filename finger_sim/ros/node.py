@@ -72,6 +72,7 @@ from finger_sim.errors import FingerSimError, SimulationDiverged
 from finger_sim.log import LogError, McapRecorder
 from finger_sim.ros import conversions, parameters
 from finger_sim.ros.finger import Finger
+from finger_sim.runtime.drive_commands import input_refusal
 from finger_sim.ros.interfaces import COMMAND_INPUTS, OUTPUTS, Endpoint, InputSpec, OutputSpec, command_qos, finger_topic
 from finger_sim.run_log import FINGER_SIM_METADATA, CommandEvent, log_time_offset_ns, run_metadata
 from finger_sim.runtime.diagnostics import Level, LogStatus, Snapshot
@@ -204,7 +205,7 @@ class SteppingNode(Node):
         def on_command(msg: Any) -> None:  # executor thread: hand over, never touch the simulator
             self._record(endpoint[0], msg)
             values, refusal = read(msg, joint)
-            inbox.put(endpoint[0].topic, values, refusal)
+            inbox.put(endpoint[0].topic, values, refusal or input_refusal(spec.topic, finger.driven))
             if self.state is not RunState.RUNNING:  # an idle loop answers refusals without waiting
                 self._wake.set()
 
