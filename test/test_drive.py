@@ -270,3 +270,15 @@ def test_energy_balance_in_contact(drive):
     assert abs(report["residual"]) <= 1e-6 * report["electrical_work"]
     assert report["mesh_loss"] >= -1e-15 and report["dissipated"] >= 0.0
     assert traj.outputs["mesh_loss"].min() >= -1e-12
+
+
+def test_batch_runs_drive_scenes_as_simulate_does():
+    """The compiled batch has no drive: a drive scene's finger runs through its own Simulator, not
+    as a torque-driven finger fed volts."""
+    from finger_sim.batch import run_batch
+
+    scenes = [drive_scene({}, {"type": "constant", "value": u}, duration=0.05) for u in (3.0, 6.0)]
+    result = run_batch(scenes)
+    for i, scene in enumerate(scenes):
+        assert result.q[i].tolist() == simulate(scene, kernel="python").q[-1].tolist()
+    assert not result.compiled.any()

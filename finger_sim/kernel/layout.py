@@ -42,7 +42,9 @@ STATE_NON_FINITE = 5  # the step ended in a non-finite state (the Simulator's ow
 
 
 def model_array(system: "FingerSystem") -> np.ndarray | None:
-    """The flat model of `system` for the kernel, or None when an element has no compiled form."""
+    """The flat model of `system` for the kernel, or None when an element (or the drive) has no compiled form."""
+    if getattr(system, "drive", None) is not None:  # spec §8's drive: stepped by the Python kernel for now
+        return None
     p = system.params
     # the same expressions as FingerSystem.__init__, so the compiled solve sees the same bits
     data = [
