@@ -119,7 +119,7 @@ class Simulator:
         self.reset()
         #: the lean compiled path of `step` (a compiled fixed-step method on a smooth scene), else None
         self.fast_stepper = None
-        if hasattr(self.integrator, "step_plan") and not self._gaps:
+        if hasattr(self.integrator, "step_plan") and not self._gaps and self._drive is None:
             from finger_sim.kernel.integrators import FastStepper  # numba is loaded by now
 
             self.fast_stepper = FastStepper(self.integrator, self.dt, scene.torque)

@@ -10,7 +10,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
 from scipy.integrate import solve_ivp
 
 from finger_sim import kinematics
@@ -30,10 +29,7 @@ from finger_sim.kernel import numerics  # noqa: E402  (needs numba to mean "comp
 from finger_sim.kernel.integrators import compiled_twin  # noqa: E402
 
 CONFIG = Path(__file__).resolve().parents[1] / "config"
-#: The drive (model.drive) has no compiled form yet: its scenes run on the Python kernel only.
-SCENES = [pytest.param(p, marks=pytest.mark.skip(reason="the drive has no compiled form yet"))
-          if "drive" in (yaml.safe_load(p.read_text()).get("model") or {}) else p
-          for p in sorted(CONFIG.glob("*.yaml")) if p.name != "finger_node.yaml"]
+SCENES = sorted(p for p in CONFIG.glob("*.yaml") if p.name != "finger_node.yaml")
 FIXED_STEP = ("euler", "rk4", "rk6", "dop8")
 #: A few hundred steps per scene keep the test fast; paper_to_stop runs whole (its stop
 #: impact comes at step 426 of 600), and contact poses have their own test below.

@@ -23,6 +23,7 @@ The law is the plain float functions `motor_current`, `mesh_torque` and `holding
 from __future__ import annotations
 
 import math
+import weakref
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
@@ -128,6 +129,11 @@ def mesh_torque(c: float, ratio: float, rotor_inertia: float, k_t: float, curren
     return (ratio * k_t * current - nj * a0) / (c + nj * inv_inertia)
 
 
+def unique(c: float, reflected: float) -> bool:
+    """Whether a rolling flank's τ_g is unique: c + N² J_m / M_eff > 0 (§8), with a margin."""
+    return c + reflected > UNIQUENESS_MARGIN * reflected
+
+
 def holding_margin(tau_h: float, tau_a: float, ratio: float, eta_f: float, eta_b: float) -> float:
     """≥ 0 while a stuck mesh holds the load τ_h (N·m on θ1) under the motor's τ_a (N·m), §8.
 
@@ -143,16 +149,62 @@ def holding_margin(tau_h: float, tau_a: float, ratio: float, eta_f: float, eta_b
     return max(min(forward, backward) - tau_h, tau_h - max(forward, backward))
 
 
+def linkage_inertia(r1: float, r2: float, r3: float, m11: float, m22: float, m33: float, cc: float, alpha: float,
+                    q0: float, q1: float, q2: float) -> float:
+    """M_eff = nᵀ M n, kg·m²: the linkage's inertia about θ1, n = ∂q/∂θ1 on Φ = 0 (spec §2, §4).
+
+    r1..r3 m; m11, m22, m33 and cc = m3 r1 L3/2 the mass matrix's constants (kg·m²), α rad."""
+    s1, c1, s2, c2, s3, c3 = math.sin(q0), math.cos(q0), math.sin(q1), math.cos(q1), math.sin(q2), math.cos(q2)
+    # [[r2 s2, r3 s3], [−r2 c2, −r3 c3]] (n2, n3) = (r1 s1, −r1 c1), as kinematics.dependent_rates
+    det = r2 * s2 * (-r3 * c3) - r3 * s3 * (-r2 * c2)
+    b1, b2 = r1 * s1, -r1 * c1
+    n2 = (b1 * (-r3 * c3) - r3 * s3 * b2) / det
+    n3 = (r2 * s2 * b2 - b1 * (-r2 * c2)) / det
+    m13 = cc * math.cos(q0 - q2 - alpha)
+    return m11 + m22 * n2 * n2 + m33 * n3 * n3 + 2.0 * m13 * n3
+
+
+#: Length of the drive's block at the end of the compiled model (`Drive.kernel_block`): mode, c in
+#: drive, c in back, N, J_m, k_t, R, u_max, i_max, then NaN, which marks the block (every other
+#: value of the model is finite).
+KERNEL_BLOCK = 10
+
+
 class Drive:
     """The actuator: the drive's parameters and its discrete state (mesh mode, direction of motion).
 
     `mode` is DRIVE, BACK or STUCK (an ideal gear stays in DRIVE with c = 1); `direction` is the
-    sign of θ1' the rolling mode was entered with (its guards are signed by it)."""
+    sign of θ1' the rolling mode was entered with (its guards are signed by it). The compiled
+    models made from it (`kernel_block`) follow every change of the mode."""
 
     def __init__(self, params: DriveParams) -> None:
         self.params = params
-        self.mode = DRIVE
+        self._mirrors: list[weakref.ref] = []  # compiled models whose block's first slot is the mode
+        self._mode = DRIVE
         self.direction = 1.0
+
+    @property
+    def mode(self) -> int:
+        return self._mode
+
+    @mode.setter
+    def mode(self, value: int) -> None:
+        self._mode = value
+        for ref in self._mirrors:
+            model = ref()
+            if model is not None:
+                model[len(model) - KERNEL_BLOCK] = float(value)
+
+    def kernel_block(self) -> list[float]:
+        """The drive as the compiled model's last KERNEL_BLOCK floats (`finger_sim.kernel.layout`)."""
+        p = self.params
+        return [float(self._mode), self.c(DRIVE), self.c(BACK), p.gear_ratio, p.rotor_inertia, p.torque_constant,
+                p.resistance, p.supply_voltage, p.current_limit, math.nan]
+
+    def mirror(self, model) -> None:  # type: ignore[no-untyped-def]
+        """Keep the mode slot of compiled model `model` (a numpy array ending in `kernel_block`) current."""
+        self._mirrors = [ref for ref in self._mirrors if ref() is not None]
+        self._mirrors.append(weakref.ref(model))
 
     def c(self, mode: int) -> float:
         """The mesh law's coefficient on τ_g in a rolling mode."""
@@ -182,17 +234,9 @@ class DrivenSystem(FingerSystem):
         self.drive = drive
 
     def effective_inertia(self, q: Vec3) -> float:
-        """M_eff = nᵀ M n, kg·m²: the linkage's inertia about θ1, n = ∂q/∂θ1 on Φ = 0."""
-        p = self.params
-        _, t2, t3 = q
-        s1, c1, s2, c2, s3, c3 = math.sin(q[0]), math.cos(q[0]), math.sin(t2), math.cos(t2), math.sin(t3), math.cos(t3)
-        # [[r2 s2, r3 s3], [−r2 c2, −r3 c3]] (n2, n3) = (r1 s1, −r1 c1), as kinematics.dependent_rates
-        det = p.r2 * s2 * (-p.r3 * c3) - p.r3 * s3 * (-p.r2 * c2)
-        b1, b2 = p.r1 * s1, -p.r1 * c1
-        n2 = (b1 * (-p.r3 * c3) - p.r3 * s3 * b2) / det
-        n3 = (p.r2 * s2 * b2 - b1 * (-p.r2 * c2)) / det
-        (m11, _, m13), (_, m22, _), (_, _, m33) = self.mass_matrix(q)
-        return m11 + m22 * n2 * n2 + m33 * n3 * n3 + 2.0 * m13 * n3
+        """M_eff = nᵀ M n, kg·m²: the linkage's inertia about θ1 (`linkage_inertia`)."""
+        r1, r2, r3 = self._r
+        return linkage_inertia(r1, r2, r3, self._m11, self._m22, self._m33, self._c, self.alpha, q[0], q[1], q[2])
 
     def holding_torque(self, t: float, q: Vec3, v: Vec3) -> float:
         """τ_h, N·m: the torque on θ1 that keeps θ1'' = 0 (§8), from the §4 system without mesh torque."""
@@ -213,7 +257,7 @@ class DrivenSystem(FingerSystem):
             return -a0[0] * m_eff, i, ZERO, lam0
         c = drive.c(mode)
         reflected = p.gear_ratio * p.gear_ratio * p.rotor_inertia / m_eff
-        if c + reflected <= UNIQUENESS_MARGIN * reflected:
+        if not unique(c, reflected):
             raise SimulationDiverged(
                 f"the drive's back flank is not unique at θ1 = {q[0]:.6f} rad: N²·J_m + η_b·M_eff = "
                 f"{(c + reflected) * m_eff:.3e} kg·m² ≤ 0 (spec §8; M_eff = {m_eff:.3e} grows without bound near the toggle)",

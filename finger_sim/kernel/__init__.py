@@ -99,8 +99,6 @@ def select(method: type["Integrator"], system: "FingerSystem", kernel: str = "au
 
 
 def _why_not_compiled(method: type["Integrator"], system: "FingerSystem", name: str | None) -> str | None:
-    if getattr(system, "drive", None) is not None:
-        return "the drive (model.drive) has no compiled form yet"
     if name is None:
         return "numba is not installed"
     try:
