@@ -96,6 +96,8 @@ class InputSpec:
     msg_type: type
     read: Callable[[Any, str], tuple[tuple[float, ...], str | None]]
     recorded: bool = True
+    #: subscribed only for a finger with a drive (spec §8: its voltage command)
+    driven_only: bool = False
 
 
 #: Every topic the node publishes, by the key the node publishes it under.
@@ -129,7 +131,7 @@ COMMAND_INPUTS = (
     InputSpec("joint_command", JointState,
               lambda msg, joint: joint_effort(msg.name, len(msg.position), len(msg.velocity), msg.effort, joint)),
     # the voltage command of a finger with a drive (V; finger_sim.runtime.drive_commands)
-    InputSpec("motor_voltage", Float64, lambda msg, joint: ((msg.data,), None)),
+    InputSpec("motor_voltage", Float64, lambda msg, joint: ((msg.data,), None), driven_only=True),
 )
 
 

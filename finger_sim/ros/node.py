@@ -165,7 +165,7 @@ class SteppingNode(Node):
         for f in self.fingers:
             f.connect(fqn, {key: self._publisher(spec, finger_topic(spec.topic, f.spec.name)) for key, spec in OUTPUTS.items()
                             if spec.per_finger and spec.wanted(s, f.reported)},
-                      [self._subscribe(f, spec, qos) for spec in COMMAND_INPUTS])
+                      [self._subscribe(f, spec, qos) for spec in COMMAND_INPUTS if f.driven or not spec.driven_only])
         # bound here, so that a missing table entry fails at start, never inside the stepping loop
         self._clock_out = o.get("clock")  # optional
         self._diagnostics_out, self._description_out = o["diagnostics"], o["robot_description"]
