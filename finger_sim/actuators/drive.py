@@ -119,6 +119,12 @@ def motor_current(u: float, omega_m: float, resistance: float, k_t: float, suppl
     return min(limit, max(-limit, (u - k_t * omega_m) / resistance))
 
 
+def unclamped_current(u: float, omega_m: float, resistance: float, k_t: float, supply: float) -> float:
+    """(sat(u) − k_e ω_m)/R, A: the current limit acts where its magnitude exceeds i_max."""
+    u = min(supply, max(-supply, u))
+    return (u - k_t * omega_m) / resistance
+
+
 def mesh_torque(c: float, ratio: float, rotor_inertia: float, k_t: float, current: float, a0: float,
                 inv_inertia: float) -> float:
     """τ_g (N·m on θ1) of a rolling mesh: c τ_g + N² J_m θ1'' = N k_t i with θ1'' = a0 + τ_g/M_eff.
@@ -182,6 +188,10 @@ class Drive:
         self._mirrors: list[weakref.ref] = []  # compiled models whose block's first slot is the mode
         self._mode = DRIVE
         self.direction = 1.0
+        #: (q, q', (t, u, mode, direction), guards) of the last guard evaluation (`stepping._guards`)
+        self.guard_cache: tuple | None = None
+        #: the compiled model the Simulator steps with (None: the Python kernel)
+        self.kernel_model = None
 
     @property
     def mode(self) -> int:
@@ -219,10 +229,9 @@ class Drive:
                              p.current_limit)
 
     def unclamped_current(self, u: float, theta1_dot: float) -> float:
-        """(sat(u) − k_e ω_m)/R, A: the current limit acts where its magnitude exceeds i_max."""
+        """(sat(u) − k_e ω_m)/R, A (`unclamped_current`)."""
         p = self.params
-        u = min(p.supply_voltage, max(-p.supply_voltage, u))
-        return (u - p.torque_constant * p.gear_ratio * theta1_dot) / p.resistance
+        return unclamped_current(u, p.gear_ratio * theta1_dot, p.resistance, p.torque_constant, p.supply_voltage)
 
 
 class DrivenSystem(FingerSystem):

@@ -80,6 +80,9 @@ class _Event(NamedTuple):
     guard: int
 
 
+_compiled_guards = None  # finger_sim.kernel.numerics.drive_guards, once a compiled Simulator starts
+
+
 def drive_method(method: str, reason: str, auto: bool) -> tuple[str, str]:
     """(method, reason) for a drive scene: auto's choice, or DRIVE_FALLBACK where it cannot step the drive;
     a named method that cannot is refused (ConfigError naming integrator.method)."""
@@ -93,7 +96,12 @@ def drive_method(method: str, reason: str, auto: bool) -> tuple[str, str]:
 
 def start(sim: Simulator) -> None:
     """The mesh mode of the scene's initial state: at rest, the turning-point rule; moving, the flank."""
+    global _compiled_guards
     system: DrivenSystem = sim.system  # type: ignore[assignment]
+    model = getattr(sim.integrator, "model", None)  # a compiled integrator's model: its guards are compiled
+    system.drive.kernel_model, system.drive.guard_cache = model, None
+    if model is not None:
+        from finger_sim.kernel.numerics import drive_guards as _compiled_guards
     u = sim.scene.torque(0.0)
     if sim.v[0] == 0.0:
         sim.v = _turn(system, 0.0, sim.q, u)
@@ -197,15 +205,28 @@ def _roll(system: DrivenSystem, t: float, q: Vec3, v: Vec3, u: float, direction:
 
 
 def _guards(system: DrivenSystem, t: float, q: Vec3, v: Vec3, u: float) -> tuple[float, float, float]:
-    """(turn, flank, limit) of the rolling mesh at a state; ≥ 0 while the mode's conditions hold."""
+    """(turn, flank, limit) of the rolling mesh at a state; ≥ 0 while the mode's conditions hold.
+    On the compiled kernel they are compiled too (`kernel.numerics.drive_guards`, the same arithmetic).
+    The last state asked is kept: a step's end is the next one's start."""
     drive = system.drive
-    p = drive.params
-    limit = p.current_limit - abs(drive.unclamped_current(u, v[0]))
-    if p.ideal:
-        return math.inf, math.inf, limit
-    tau_g = system.mesh(t, q, v, u, drive.mode)[0]
-    s = drive.direction
-    return s * v[0], (s if drive.mode == DRIVE else -s) * tau_g, limit
+    key = (t, u, drive.mode, drive.direction)
+    cached = drive.guard_cache
+    if cached is not None and cached[0] is q and cached[1] is v and cached[2] == key:
+        return cached[3]
+    model = drive.kernel_model
+    if model is not None:
+        out = _compiled_guards(model, t, q[0], q[1], q[2], v[0], v[1], v[2], u, drive.direction)
+    else:
+        p = drive.params
+        limit = p.current_limit - abs(drive.unclamped_current(u, v[0]))
+        if p.ideal:
+            out = (math.inf, math.inf, limit)
+        else:
+            tau_g = system.mesh(t, q, v, u, drive.mode)[0]
+            s = drive.direction
+            out = (s * v[0], (s if drive.mode == DRIVE else -s) * tau_g, limit)
+    drive.guard_cache = (q, v, key, out)
+    return out
 
 
 def _first_event(sim: Simulator, system: DrivenSystem, t: float, q: Vec3, v: Vec3, t1: float, q1: Vec3, v1: Vec3,

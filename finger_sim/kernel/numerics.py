@@ -176,6 +176,7 @@ def generalized_force(m, t, q0, q1, q2, v0, v1, v2, tau):
 
 #: The drive's law (spec §8), compiled from its one definition in finger_sim.actuators.drive.
 motor_current = njit(**JIT)(_drive.motor_current)
+unclamped_current = njit(**JIT)(_drive.unclamped_current)
 mesh_torque = njit(**JIT)(_drive.mesh_torque)
 linkage_inertia = njit(**JIT)(_drive.linkage_inertia)
 unique = njit(**JIT)(_drive.unique)
@@ -196,19 +197,35 @@ def accelerations(m, t, q0, q1, q2, v0, v1, v2, tau):
 def _driven(m, o, t, q0, q1, q2, v0, v1, v2, u):
     """`DrivenSystem.mesh`'s q'' in the mode m[o]: zero when stuck, else the linkage under τ_g.
     A flank that is not unique gives NaN (the Simulator's non-finite check stops the run)."""
-    mode = m[o]
-    if mode == MESH_STUCK:
+    if m[o] == MESH_STUCK:
         return 0.0, 0.0, 0.0
+    return _linkage(m, t, q0, q1, q2, v0, v1, v2, _mesh_torque(m, o, t, q0, q1, q2, v0, v1, v2, u))
+
+
+@njit(**JIT)
+def _mesh_torque(m, o, t, q0, q1, q2, v0, v1, v2, u):
+    """τ_g (N·m) of the rolling mesh in the mode m[o] (`DrivenSystem.mesh`); NaN where not unique."""
     ratio, rotor, k_t = m[o + 3], m[o + 4], m[o + 5]
     i = motor_current(u, ratio * v0, m[o + 6], k_t, m[o + 7], m[o + 8])
     a0 = _linkage(m, t, q0, q1, q2, v0, v1, v2, 0.0)[0]
     m_eff = linkage_inertia(m[4], m[5], m[6], m[0], m[1], m[2], m[3], m[7], q0, q1, q2)
-    c = m[o + 1] if mode == MESH_DRIVE else m[o + 2]
+    c = m[o + 1] if m[o] == MESH_DRIVE else m[o + 2]
     reflected = ratio * ratio * rotor / m_eff
     if not unique(c, reflected):
-        return math.nan, math.nan, math.nan
-    tau_g = mesh_torque(c, ratio, rotor, k_t, i, a0, 1.0 / m_eff)
-    return _linkage(m, t, q0, q1, q2, v0, v1, v2, tau_g)
+        return math.nan
+    return mesh_torque(c, ratio, rotor, k_t, i, a0, 1.0 / m_eff)
+
+
+@njit(**JIT)
+def drive_guards(m, t, q0, q1, q2, v0, v1, v2, u, direction):
+    """(turn, flank, limit) of the rolling mesh: `actuators.stepping._guards`, compiled."""
+    o = m.shape[0] - DRIVE_BLOCK
+    limit = m[o + 8] - abs(unclamped_current(u, m[o + 3] * v0, m[o + 6], m[o + 5], m[o + 7]))
+    if m[o + 1] == 1.0 and m[o + 2] == 1.0:  # an ideal gear: no modes
+        return math.inf, math.inf, limit
+    tau_g = _mesh_torque(m, o, t, q0, q1, q2, v0, v1, v2, u)
+    s = direction
+    return s * v0, (s if m[o] == MESH_DRIVE else -s) * tau_g, limit
 
 
 @njit(**JIT)
