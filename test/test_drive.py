@@ -22,7 +22,7 @@ import reference as ref
 from finger_sim.actuators.drive import BACK, DRIVE, STUCK, DriveParams, DrivenSystem
 from finger_sim.effects.contact import Contact
 from finger_sim.errors import ConfigError, SimulationDiverged
-from finger_sim.scene import Scene, scene_from_dict
+from finger_sim.scene import Scene, load_scene, scene_from_dict
 from finger_sim.simulate import Simulator, simulate
 from test_contact import equilibrium
 
@@ -302,3 +302,30 @@ def test_compiled_and_python_kernels_agree_through_grasp_hold_and_release(method
     assert {DRIVE, BACK} <= modes or STUCK in modes
     worst = max(abs(a - b) for (s, _), (r, _) in zip(runs["python"], runs["compiled"]) for a, b in zip((*s.q, *s.v), (*r.q, *r.v)))
     assert worst <= 1e-13
+
+
+def test_self_locking_mesh_holds_the_finger_on_its_stop_after_the_voltage_drops():
+    """Driven into the MCP stop, the finger rests there; at 0 V the spring pulls it off the stop,
+    but the self-locking mesh sticks at once: it stays on the stop, bit for bit."""
+    scene = drive_scene({}, {"type": "step", "before": 6.0, "after": 0.0, "at": 0.3},
+                        model={"joint_limits": {"mcp": [0.0, 0.5]}, "spring_stiffness": 0.05}, duration=0.5)
+    traj = simulate(scene, kernel="python")
+    after = traj.t > 0.3
+    assert traj.q[-1, 0] == pytest.approx(0.5, abs=1e-9)
+    assert np.all(traj.outputs["mesh_mode"][after] == STUCK)
+    assert np.all(traj.q[after] == traj.q[-1]) and np.all(traj.v[after] == 0.0)
+    back = drive_scene({"efficiency": 0.9, "backward_efficiency": 0.8}, {"type": "step", "before": 6.0, "after": 0.0, "at": 0.3},
+                       model={"joint_limits": {"mcp": [0.0, 0.5]}, "spring_stiffness": 0.05}, duration=0.5)
+    assert simulate(back, kernel="python").q[-1, 0] < 0.5 - 1e-3  # a back-drivable one leaves it
+
+
+def test_drive_grasp_at_1khz_with_auto_sticks_where_the_tight_solve_turns():
+    """The shipped scene as users run it (auto: rk4, 4 substeps in contact, 1 ms) against the forward
+    reference's first turning point, to auto's target of 1e-6 rad."""
+    scene = load_scene(ref.CONFIG / "drive_grasp.yaml")
+    traj = simulate(scene)
+    turn = lambda t, y: y[3]  # noqa: E731
+    turn.terminal, turn.direction = True, -1.0
+    _, hit = reference(scene, lambda t, y: kkt_drive(scene, t, y, ETA_F, 6.0), traj.t[traj.t < 0.3], events=[turn])
+    assert traj.q[-1, 0] == pytest.approx(hit.y_events[-1][0][0], abs=1e-6)
+    assert traj.outputs["mesh_mode"][-1] == STUCK and traj.outputs["motor_current"][-1] == 0.0

@@ -161,7 +161,10 @@ def advance(sim: Simulator, t0: float, t1: float, u_fn: TorqueFn) -> None:
             if release is None:
                 sim.q, sim.v = q, ZERO
                 return
-            t, v, sim._resting = release, ZERO, None
+            sim._resting = None
+            t, v = release, _turn(system, release, q, u_fn(release))  # leaving the stop is a turning point
+            if drive.mode == STUCK:
+                continue
         if t >= t1:
             sim.q, sim.v = q, v
             return
