@@ -14,6 +14,7 @@ Schema (every key optional; omitted = the spec's default):
       geometry: {r1: 0.046, ...} # FingerParams overrides (m, kg, rad)
       phalanx_radius: [0.008, 0.007]   # m: proximal, distal capsule radii (spec §7)
       contact: {stiffness: 1.0e5, exponent: 1.5, damping: 1.5, friction: 0.0, slip_velocity: 1.0e-3}
+      drive: {}                  # a DC motor and gear train (spec §8; {} = its defaults), see finger_sim.actuators
     objects:                     # omitted or empty = no contact element, no cost (spec §7)
       - {name: cup, type: circle, center: [0.065, 0.040], radius: 0.012}       # m, model plane
       - {name: table, type: plane, point: [0.0, 0.045], normal: [0.0, -1.0]}   # object on the side of −normal
@@ -22,6 +23,7 @@ Schema (every key optional; omitted = the spec's default):
       # vibration of the object (finger_sim.effects.contact_geometry.ObjectMotion)
     input:
       torque: {type: ramp, offset: 0.001, slope: 0.01}   # N·m, see finger_sim.inputs
+      # voltage: {type: constant, value: 6.0}            # V, instead of torque when model.drive is set
     initial: {theta1: 0.0, theta1_dot: 0.0}             # rad, rad/s
     duration: 0.3                # s
     integrator: {method: auto, dt: 0.001}               # method: a name in METHODS, or auto
@@ -43,6 +45,7 @@ from pathlib import Path
 from typing import Any
 
 from finger_sim import kinematics
+from finger_sim.actuators.drive import Drive, DriveParams, DrivenSystem, drive_from_dict
 from finger_sim.dynamics import FingerSystem
 from finger_sim.errors import ConfigError
 from finger_sim.effects import ForceElement, build_elements
@@ -57,7 +60,7 @@ from finger_sim.effects.contact_geometry import (
     objects_from_list,
     phalanx_radii_from_value,
 )
-from finger_sim.inputs import BREAK_EPS, Profile, Ramp, profile_from_dict
+from finger_sim.inputs import BREAK_EPS, Constant, Profile, Ramp, profile_from_dict
 from finger_sim.integrators import METHODS
 from finger_sim.model import FingerParams
 from finger_sim.scene_yaml import dump_scene, magnitude, mapping, number, pair, parse_scene_text, read_scene_file, text
@@ -95,6 +98,7 @@ MAX_EXTENT = 10.0
 _TOP_KEYS = {"name", "description", "model", "input", "initial", "duration", "integrator", "objects"}
 _MODEL_KEYS = {
     "spring_stiffness", "damping", "gravity", "tip_force", "joint_limits", "restitution", "geometry", "phalanx_radius", "contact",
+    "drive",
 }
 
 
@@ -114,6 +118,9 @@ class Scene:
     phalanx_radius: Vec2 = PHALANX_RADII
     contact: ContactParams = field(default_factory=ContactParams)
     objects: tuple[SceneObject, ...] = ()
+    #: the drive (spec §8), or None: an ideal torque source
+    drive: DriveParams | None = None
+    #: the scene's input profile: the motor torque τ (N·m), or with a drive the voltage command u (V)
     torque: Profile = field(default_factory=lambda: Ramp(offset=0.001, slope=0.01))
     theta1: float = 0.0
     theta1_dot: float = 0.0
@@ -134,6 +141,8 @@ class Scene:
         return build_elements(self)
 
     def build_system(self) -> FingerSystem:
+        if self.drive is not None:
+            return DrivenSystem(self.params, build_elements(self), Drive(self.drive))
         return FingerSystem(self.params, build_elements(self))
 
     def initial_state(self) -> tuple[kinematics.Vec3, kinematics.Vec3]:
@@ -155,11 +164,13 @@ class Scene:
         }
         if self.mcp_limits is not None:
             model["joint_limits"] = {"mcp": list(self.mcp_limits)}
+        if self.drive is not None:
+            model["drive"] = self.drive.to_dict()
         return {
             "name": self.name,
             "description": self.description,
             "model": model,
-            "input": {"torque": self.torque.to_dict()},
+            "input": {"torque" if self.drive is None else "voltage": self.torque.to_dict()},
             "initial": {"theta1": self.theta1, "theta1_dot": self.theta1_dot},
             "duration": self.duration,
             "integrator": {"method": self.method, "dt": self.dt, "tolerance": self.tolerance},
@@ -216,7 +227,9 @@ def scene_from_dict(data: Any, *, default_name: str = "scene") -> Scene:
     model = mapping(data.get("model", {}), "model", _MODEL_KEYS)
     geometry = mapping(model.get("geometry", {}), "model.geometry", {f.name for f in fields(FingerParams)})
     params = FingerParams(**{k: number(v, f"model.geometry.{k}") for k, v in geometry.items()})
-    inp = mapping(data.get("input", {}), "input", {"torque"})
+    inp = mapping(data.get("input", {}), "input", {"torque", "voltage"})
+    drive = drive_from_dict(model["drive"]) if "drive" in model else None
+    input_key = _input_key(inp, drive)
     initial = mapping(data.get("initial", {}), "initial", {"theta1", "theta1_dot"})
     integ = mapping(data.get("integrator", {}), "integrator", {"method", "dt", "tolerance"})
     method = integ.get("method", Scene.method)
@@ -250,7 +263,9 @@ def scene_from_dict(data: Any, *, default_name: str = "scene") -> Scene:
         phalanx_radius=_phalanx_radius(model.get("phalanx_radius")),
         contact=_contact(model.get("contact")),
         objects=_objects(data.get("objects")),
-        torque=profile_from_dict(inp["torque"]) if "torque" in inp else Ramp(offset=0.001, slope=0.01),
+        drive=drive,
+        torque=(profile_from_dict(inp[input_key], f"input.{input_key}") if input_key in inp
+                else Ramp(offset=0.001, slope=0.01) if drive is None else Constant(value=drive.supply_voltage)),
         theta1=number(initial.get("theta1", Scene.theta1), "initial.theta1"),
         theta1_dot=magnitude(initial.get("theta1_dot", Scene.theta1_dot), "initial.theta1_dot", MAX_RATE),
         duration=duration,
@@ -269,12 +284,23 @@ def scene_from_dict(data: Any, *, default_name: str = "scene") -> Scene:
         raise ConfigError("integrator.dt", f"a step no longer than duration ({scene.duration} s)", scene.dt)
     if scene.dt > scene.torque.shortest_interval():
         raise ConfigError(
-            "input.torque.frequency",
+            f"input.{input_key}.frequency",
             f"at most {0.5 / scene.dt:g} Hz at integrator.dt = {scene.dt:g} s (a step of at most half a period: "
             f"a faster {scene.torque.kind} wave changes direction more than once per step, which the step cannot resolve)",
             scene.torque.to_dict()["frequency"],  # only periodic profiles have a shortest interval
         )
     return scene
+
+
+def _input_key(inp: dict[str, Any], drive: DriveParams | None) -> str:
+    """The input's key: `torque` without a drive, `voltage` with one; the other one is refused."""
+    if drive is not None and "torque" in inp:
+        raise ConfigError("input.torque", "no torque with model.drive (the drive's input is input.voltage, V)",
+                          inp["torque"])
+    if drive is None and "voltage" in inp:
+        raise ConfigError("input.voltage", "a voltage only with model.drive (without it the input is input.torque, N·m)",
+                          inp["voltage"])
+    return "torque" if drive is None else "voltage"
 
 
 def _phalanx_radius(value: Any) -> Vec2:

@@ -19,6 +19,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy.optimize import brentq
 
+from finger_sim.actuators import stepping as drive_stepping
 from finger_sim.auto import ERROR_CONTROLLED, choose_method, contact_substeps, integrator_options, warn_unresolved_contact
 from finger_sim.depth_guard import DepthGuard
 from finger_sim.dynamics import FingerSystem
@@ -100,6 +101,11 @@ class Simulator:
         self._options: dict[str, float] = {}
         if method == AUTO:
             method, self.method_reason = choose_method(scene)
+        #: the drive (spec §8) whose mesh modes this Simulator steps, or None (an ideal torque source)
+        self._drive = getattr(self.system, "drive", None)
+        if self._drive is not None:
+            method, self.method_reason = drive_stepping.drive_method(method, self.method_reason, scene.method == AUTO)
+        if scene.method == AUTO:
             self._options = integrator_options(scene, method)
             if method != ERROR_CONTROLLED:  # its error control resolves the contact mode itself
                 self.substeps = contact_substeps(scene, METHODS[method].implicit)
@@ -125,7 +131,7 @@ class Simulator:
         self.reset()
         #: the lean compiled path of `step` (a compiled fixed-step method on a smooth scene), else None
         self.fast_stepper = None
-        if hasattr(self.integrator, "step_plan") and not self._gaps:
+        if hasattr(self.integrator, "step_plan") and not self._gaps and self._drive is None:
             from finger_sim.kernel.integrators import FastStepper  # numba is loaded by now
 
             self.fast_stepper = FastStepper(self.integrator, self.dt, scene.torque)
@@ -140,7 +146,10 @@ class Simulator:
         self._resting: _Gap | None = None  # the closed impact gap the finger rests on (a stop)
         self._gap_cache: tuple[Vec3, Vec3, list[tuple[float, float]], float] | None = None  # `_gap_states`' last
         #: the motor torque at the end of the last step (N·m): what a JointState effort reports
+        #: (with a drive: the voltage command, V)
         self.torque = self.scene.torque(0.0)
+        if self._drive is not None:
+            drive_stepping.start(self)
         self.impacts = 0
         self._held: tuple[float, TorqueFn] | None = None  # the held torque (N·m) and its function
 
@@ -213,6 +222,9 @@ class Simulator:
 
     def _advance(self, t0: float, t1: float, torque: TorqueFn) -> None:
         """Integrate [t0, t1] under a smooth torque, splitting it at every event on the way."""
+        if self._drive is not None:
+            drive_stepping.advance(self, t0, t1, torque)
+            return
         if not self._gaps:
             self.q, self.v = self.integrator.step(t0, self.q, self.v, t1 - t0, torque)
             return
@@ -491,6 +503,8 @@ class Trajectory:
     outputs: dict[str, np.ndarray] = field(default_factory=dict)
     #: the integrator's estimate of the θ error at the end (rad; NaN: a fixed-step method, none)
     error_estimate: float = math.nan
+    #: a drive scene's energy balance, J (`finger_sim.actuators.stepping.EnergyLedger.report`); else empty
+    energy_report: dict[str, float] = field(default_factory=dict)
 
     #: The columns every run has; the elements' outputs follow them (`csv_header`).
     CSV_HEADER = "t,theta1,theta2,theta3,theta1_dot,theta2_dot,theta3_dot,energy,constraint_residual"
@@ -505,8 +519,13 @@ class Trajectory:
         np.savetxt(path, data, delimiter=",", header=self.csv_header(list(self.outputs)), comments="", fmt="%.17g")
 
     def summary(self) -> str:
-        return summary_line(self.t[-1], self.q[-1], float(self.residual.max()), self.energy[-1] - self.energy[0],
+        line = summary_line(self.t[-1], self.q[-1], float(self.residual.max()), self.energy[-1] - self.energy[0],
                             self.method, len(self.t) - 1, self.wall_time, self.error_estimate)
+        if self.energy_report:
+            from finger_sim.actuators.report import energy_line
+
+            line += "\n" + energy_line(self.energy_report)
+        return line
 
 
 def summary_line(t_end: float, q_end: Sequence[float], max_residual: float, energy_change: float, method: str,
@@ -533,7 +552,14 @@ def simulate(scene: Scene, *, kernel: str = "auto") -> Trajectory:
     sim = Simulator(scene, kernel=offline_kernel(kernel, n))
     x0 = (*sim.q, *sim.v)
     start = time.perf_counter()
-    xs = advance(sim, n)  # in the kernel where it can, else step by step
+    drive_outputs: dict[str, np.ndarray] = {}
+    report: dict[str, float] = {}
+    if sim._drive is not None:  # the mesh mode is discrete state: its outputs are taken as the run goes
+        from finger_sim.actuators import record
+
+        xs, drive_outputs, report = record.run(sim, n)
+    else:
+        xs = advance(sim, n)  # in the kernel where it can, else step by step
     wall = time.perf_counter() - start
     x = np.vstack([x0, xs])
     t = np.arange(n + 1) * sim.dt  # k·dt, as Simulator.time
@@ -548,6 +574,7 @@ def simulate(scene: Scene, *, kernel: str = "auto") -> Trajectory:
         method=sim.method,
         method_reason=sim.method_reason,
         wall_time=wall,
-        outputs={name: values[:, i] for i, name in enumerate(names)},
+        outputs={**{name: values[:, i] for i, name in enumerate(names)}, **drive_outputs},
         error_estimate=sim.error_estimate,
+        energy_report=report,
     )

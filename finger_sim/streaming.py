@@ -60,17 +60,23 @@ def stream_csv(scene: Scene, path: str | Path, *, kernel: str = "auto") -> Strea
     steps = scene.step_count
     sim = Simulator(scene, kernel=offline_kernel(kernel, steps))
     names = output_names(sim.system.elements, sim.q)  # the elements' outputs follow the 9 base columns
+    drive = sim._drive is not None  # then the drive's outputs follow, taken as the run goes (actuators.record)
+    if drive:
+        from finger_sim.actuators import record
+
+        names = (*names, *sim.system.output_names())
     row_format = ",".join([VALUE_FORMAT] * (9 + len(names))) + "\n"
     wall, done = 0.0, 0
     with open(path, "w") as file:
         file.write(Trajectory.csv_header(names) + "\n")
-        first_energy, energy, max_residual = _write_block(file, sim, row_format, 0, np.array([[*sim.q, *sim.v]]))
+        first_energy, energy, max_residual = _write_block(file, sim, row_format, 0, np.array([[*sim.q, *sim.v]]),
+                                                          np.array([record.outputs_now(sim)]) if drive else None)
         while done < steps:
             n = min(BLOCK_STEPS, steps - done)
             start = time.perf_counter()
-            x = advance(sim, n)
+            x, extra = record.steps(sim, n) if drive else (advance(sim, n), None)
             wall += time.perf_counter() - start
-            _, energy, residual = _write_block(file, sim, row_format, done + 1, x)
+            _, energy, residual = _write_block(file, sim, row_format, done + 1, x, extra)
             max_residual = max(max_residual, residual)
             done += n
     return StreamedRun(
@@ -80,11 +86,13 @@ def stream_csv(scene: Scene, path: str | Path, *, kernel: str = "auto") -> Strea
     )
 
 
-def _write_block(file: TextIO, sim: Simulator, row_format: str, k0: int, x: np.ndarray) -> tuple[float, float, float]:
-    """Write the states x (n × 6) of steps k0, k0 + 1, … as CSV rows; (first energy, last energy,
-    max |Φ|) of the block. Its rows live only here, so memory holds one block at a time."""
+def _write_block(file: TextIO, sim: Simulator, row_format: str, k0: int, x: np.ndarray,
+                 extra: np.ndarray | None = None) -> tuple[float, float, float]:
+    """Write the states x (n × 6) of steps k0, k0 + 1, … as CSV rows (then `extra` columns: a drive's
+    outputs); (first energy, last energy, max |Φ|) of the block. Its rows live only here, so memory
+    holds one block at a time."""
     t = np.arange(k0, k0 + len(x)) * sim.dt  # k·dt, as Simulator.time
     energy, residual, values = state_columns(sim.system, t, x)
-    rows = np.column_stack([t, x, energy, residual, values]).tolist()
+    rows = np.column_stack([t, x, energy, residual, values, *(() if extra is None else (extra,))]).tolist()
     file.writelines(map(row_format.__mod__, map(tuple, rows)))
     return float(energy[0]), float(energy[-1]), float(residual.max())

@@ -41,7 +41,8 @@ PACKAGE = Path(finger_sim.__file__).parent
 #: and the MCAP library (like ros/ is to ROS), so it is no core file either.
 ADAPTERS = ("cli.py", "run_log.py")
 CORE_FILES = (sorted(p for p in PACKAGE.glob("*.py") if p.name not in ADAPTERS)
-              + sorted((PACKAGE / "integrators").glob("*.py")) + sorted((PACKAGE / "effects").glob("*.py")))
+              + sorted((PACKAGE / "integrators").glob("*.py")) + sorted((PACKAGE / "effects").glob("*.py"))
+              + sorted((PACKAGE / "actuators").glob("*.py")))
 #: The MCAP library under finger_sim/log: it may import itself, never the core or ROS adapters.
 LOG_FILES = sorted((PACKAGE / "log").glob("*.py"))
 

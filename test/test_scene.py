@@ -28,7 +28,7 @@ LO, HI = assembly_range(FingerParams())
 
 def test_every_scene_is_shipped():
     assert [p.stem for p in SHIPPED] == [
-        "bang_bang", "finger_default", "free_swing", "grasp_cylinder", "grasp_impact", "grasp_rigid",
+        "bang_bang", "drive_grasp", "drive_grasp_backdrivable", "finger_default", "free_swing", "grasp_cylinder", "grasp_impact", "grasp_rigid",
         "paper_flexion", "paper_to_stop", "press_table", "stiff_spring", "toggle_passage",
     ]
 
@@ -45,7 +45,9 @@ def test_shipped_scene_holds_the_numbers_in_its_file(path):
     assert scene.restitution == model.get("restitution", 0.0)
     limits = model.get("joint_limits", {}).get("mcp")
     assert scene.mcp_limits == (tuple(limits) if limits else None)
-    assert scene.torque.to_dict() == raw["input"]["torque"] | ({"offset": 0.0} if raw["input"]["torque"]["type"] == "square" else {})
+    key = "voltage" if "drive" in model else "torque"  # the input of a scene with a drive is its voltage
+    assert scene.torque.to_dict() == raw["input"][key] | ({"offset": 0.0} if raw["input"][key]["type"] == "square" else {})
+    assert (scene.drive is None) == ("drive" not in model)
     assert scene.theta1 == raw.get("initial", {}).get("theta1", 0.0)
     assert scene.theta1_dot == raw.get("initial", {}).get("theta1_dot", 0.0)
     assert scene.duration == raw["duration"]
@@ -130,7 +132,7 @@ def refusal(data) -> str:
     [
         # unknown keys, top level and nested
         ({"modle": {}}, "scene: expected only the keys ['description', 'duration', 'initial', 'input', 'integrator', 'model', 'name', 'objects'], got 'modle'"),
-        ({"model": {"stiffness": 1.0}}, "model: expected only the keys ['contact', 'damping', 'geometry', 'gravity', 'joint_limits', 'phalanx_radius', 'restitution', 'spring_stiffness', 'tip_force'], got 'stiffness'"),
+        ({"model": {"stiffness": 1.0}}, "model: expected only the keys ['contact', 'damping', 'drive', 'geometry', 'gravity', 'joint_limits', 'phalanx_radius', 'restitution', 'spring_stiffness', 'tip_force'], got 'stiffness'"),
         ({"model": {"geometry": {"r5": 0.01}}}, "model.geometry: expected only the keys ['L3', 'm1', 'm2', 'm3', 'r1', 'r2', 'r3', 'r4', 'theta4'], got 'r5'"),
         ({"model": {"joint_limits": {"pip": [0, 1]}}}, "model.joint_limits: expected only the keys ['mcp'], got 'pip'"),
         ({"initial": {"theta2": 0.1}}, "initial: expected only the keys ['theta1', 'theta1_dot'], got 'theta2'"),

@@ -187,7 +187,9 @@ class _Planner:
         known, stops = _events(scene, system)
         # auto splits a contact scene's steps near contact into substeps (Simulator._step): its Simulator runs it
         substeps = contact_substeps(scene) if scene.method == AUTO and scene.objects and not cls.implicit else 1
-        if model is not None and (profile is None or self._twin(cls) is None or not known or substeps != 1):
+        # a drive's mesh modes are events of its Simulator (finger_sim.actuators.stepping): its Simulator runs it
+        if model is not None and (profile is None or self._twin(cls) is None or not known or substeps != 1
+                                  or scene.drive is not None):
             model = None
         if model is None:  # a per-finger Simulator runs it, and checks its stability
             return _Plan(scene, system, method, None, profile, stops)

@@ -4,7 +4,8 @@ The kernel reads the model as pure data, so one compiled function serves every s
 
     [0:10]  m11, m22, m33, c, r1, r2, r3, α, k1 = r4 cos θ4, k2 = r4 sin θ4   (SI, rad)
     [10]    number of force elements
-    then per element, in the system's summation order: code, n, then its n parameters.
+    then per element, in the system's summation order: code, n, then its n parameters;
+    with a drive (spec §8), its block last (`Drive.kernel_block`: the mode, ..., NaN as marker).
 
 An element's compiled form is `kernel_code` (one of the codes below) and `kernel_params()`
 (floats) on the element itself (see `finger_sim.effects.base.ForceElement`); an element
@@ -42,7 +43,8 @@ STATE_NON_FINITE = 5  # the step ended in a non-finite state (the Simulator's ow
 
 
 def model_array(system: "FingerSystem") -> np.ndarray | None:
-    """The flat model of `system` for the kernel, or None when an element has no compiled form."""
+    """The flat model of `system` for the kernel, or None when an element has no compiled form. A drive's
+    mode slot follows the drive's mode (`Drive.mirror`)."""
     p = system.params
     # the same expressions as FingerSystem.__init__, so the compiled solve sees the same bits
     data = [
@@ -56,7 +58,12 @@ def model_array(system: "FingerSystem") -> np.ndarray | None:
             return None
         params = [float(x) for x in element.kernel_params()]
         data += [float(code), float(len(params)), *params]
-    return np.array(data, dtype=np.float64)
+    drive = getattr(system, "drive", None)
+    if drive is None:
+        return np.array(data, dtype=np.float64)
+    model = np.array(data + drive.kernel_block(), dtype=np.float64)
+    drive.mirror(model)
+    return model
 
 
 def tableau_array(a: tuple[tuple[float, ...], ...], b: tuple[float, ...], c: tuple[float, ...]) -> np.ndarray:

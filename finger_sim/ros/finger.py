@@ -13,11 +13,12 @@ from typing import Any
 
 from finger_sim import joints, kinematics
 from finger_sim.log.cdr_writer import JointStateCdr, PoseStampedCdr
-from finger_sim.ros import conversions
+from finger_sim.ros import conversions, motor
 from finger_sim.ros.interfaces import Endpoint
 from finger_sim.run_log import CommandEvent
 from finger_sim.runtime.commands import Inbox, TorqueCommands
 from finger_sim.runtime.diagnostics import DiagnosticsWindow
+from finger_sim.runtime.drive_commands import VoltageCommands
 from finger_sim.runtime.hand_config import FingerSpec
 from finger_sim.runtime.parameters import RunSettings, TorqueSource
 from finger_sim.runtime.simulator import node_simulator
@@ -36,12 +37,18 @@ class Finger:
         self.file_dt = load_scene(spec.scene_path).dt  # the scene file's own dt, for the record
         self.frames = conversions.FingerFrames.from_system(self.sim.system, spec.frame_prefix)
         self.reported = output_names(self.sim.system.elements, self.sim.q)  # e.g. grip_force: contact topics
+        #: with a drive (spec §8) the command is a voltage and the motor's state is published (ros.motor)
+        self.driven = self.scene.drive is not None
+        if self.driven:
+            self.reported = (*self.reported, *self.sim.system.output_names())
         self.contact = conversions.ContactReport.of(self.frames, self.sim.system.elements)  # None: no contact
         self.mcp_joint = spec.frame_prefix + joints.JOINT_NAMES[0]
         scene_driven = settings.torque_source is TorqueSource.SCENE
         self.scene_steps = self.scene.step_count if scene_driven else None
-        self.commands = TorqueCommands(timeline, max_torque=settings.max_torque,
-                                       command_timeout=settings.command_timeout, accepting=not scene_driven)
+        self.commands = (VoltageCommands(timeline, self.scene.drive, command_timeout=settings.command_timeout,
+                                         accepting=not scene_driven) if self.scene.drive is not None else
+                         TorqueCommands(timeline, max_torque=settings.max_torque,
+                                        command_timeout=settings.command_timeout, accepting=not scene_driven))
         self.applied = self.initial_torque()  # N·m, over the last step
         self.max_residual = kinematics.constraint_norm(self.sim.system.params, self.sim.q)
         self.inbox = Inbox()
@@ -92,7 +99,13 @@ class Finger:
         """Publish this finger's joint states and fingertip pose (states) and markers, stamped `stamp` ns."""
         q = self.sim.q
         if states:  # CDR bytes: no message objects, no rclpy serialization
-            publish(self.joints_out, self._joints_cdr(stamp, *conversions.joint_values(self.frames, q, self.sim.v, self.applied)))
+            effort = self.applied
+            if self.driven:  # the mcp effort is the mesh torque on link 1; the motor's state has its own topics
+                state = motor.motor_state(self.sim)
+                effort = state["mesh_torque"]
+                for key, msg in motor.messages(state):
+                    publish(self.outputs[key], msg)
+            publish(self.joints_out, self._joints_cdr(stamp, *conversions.joint_values(self.frames, q, self.sim.v, effort)))
             publish(self.pose_out, self._pose_cdr(stamp, *conversions.fingertip_values(self.frames, q)))
             if self.contact is not None:
                 for key, msg in self.contact.messages(*self.sim.state, stamp):

@@ -27,7 +27,7 @@ from geometry_msgs.msg import PoseStamped, WrenchStamped
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_system_default
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64, Float64MultiArray, String
+from std_msgs.msg import Float64, Float64MultiArray, Int64, String
 from visualization_msgs.msg import MarkerArray
 
 from finger_sim.runtime.commands import joint_effort
@@ -97,6 +97,8 @@ class InputSpec:
     read: Callable[[Any, str], tuple[tuple[float, ...], str | None]]
     recorded: bool = True
     stamped: bool = False  # it has a header whose stamp names the state it answers (lockstep)
+    #: subscribed only for a finger with a drive (spec §8: its voltage command)
+    driven_only: bool = False
 
 
 #: Every topic the node publishes, by the key the node publishes it under.
@@ -114,6 +116,12 @@ OUTPUTS: dict[str, OutputSpec] = {
                                           reported_by="grip_force"),
     "contact_wrench/distal": OutputSpec("contact_wrench/distal", WrenchStamped, STATE_QOS, acked=True,
                                         reported_by="grip_force"),
+    # the drive (spec §8; finger_sim.ros.motor): what a prosthetic controller reads from the device
+    "motor/current": OutputSpec("motor/current", Float64, STATE_QOS, acked=True, reported_by="motor_current"),
+    "motor/voltage": OutputSpec("motor/voltage", Float64, STATE_QOS, acked=True, reported_by="motor_current"),
+    "motor/angle": OutputSpec("motor/angle", Float64, STATE_QOS, acked=True, reported_by="motor_current"),
+    "motor/encoder": OutputSpec("motor/encoder", Int64, STATE_QOS, acked=True, reported_by="encoder"),
+    "motor/mesh_mode": OutputSpec("motor/mesh_mode", String, STATE_QOS, acked=True, reported_by="motor_current"),
 }
 #: Every command topic (the motor torque, N·m): plain; the message ros2_control's forward command
 #: controller receives on <controller>/commands; what ros2_control's topic-based hardware interface
@@ -124,6 +132,8 @@ COMMAND_INPUTS = (
     InputSpec("joint_command", JointState,
               lambda msg, joint: joint_effort(msg.name, len(msg.position), len(msg.velocity), msg.effort, joint),
               stamped=True),
+    # the voltage command of a finger with a drive (V; finger_sim.runtime.drive_commands)
+    InputSpec("motor_voltage", Float64, lambda msg, joint: ((msg.data,), None), driven_only=True),
 )
 
 

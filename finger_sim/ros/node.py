@@ -82,6 +82,7 @@ from finger_sim.log import RECORDING_STATUS, LogError, McapRecorder
 from finger_sim.log.cdr_writer import clock_cdr
 from finger_sim.ros import conversions, parameters
 from finger_sim.ros.finger import Finger
+from finger_sim.runtime.drive_commands import input_refusal
 from finger_sim.ros.interfaces import COMMAND_INPUTS, OUTPUTS, Endpoint, InputSpec, OutputSpec, command_qos, finger_topic
 from finger_sim.run_log import FINGER_SIM_METADATA, CommandEvent, log_time_offset_ns, run_metadata
 from finger_sim.runtime.diagnostics import Level, LogStatus, Snapshot
@@ -185,7 +186,7 @@ class SteppingNode(Node):
         for f in self.fingers:
             f.connect(fqn, {key: self._publisher(spec, finger_topic(spec.topic, f.spec.name)) for key, spec in OUTPUTS.items()
                             if spec.per_finger and spec.wanted(s, f.reported)},
-                      [self._subscribe(f, spec, qos) for spec in COMMAND_INPUTS])
+                      [self._subscribe(f, spec, qos) for spec in COMMAND_INPUTS if f.driven or not spec.driven_only])
         # bound here, so that a missing table entry fails at start, never inside the stepping loop
         self._clock_out = o.get("clock")  # optional
         self._diagnostics_out, self._description_out = o["diagnostics"], o["robot_description"]
@@ -225,7 +226,7 @@ class SteppingNode(Node):
         def on_command(msg: Any) -> None:  # executor thread: hand over, never touch the simulator
             self._record(endpoint[0], msg)
             values, refusal = read(msg, joint)
-            answers = inbox.put(endpoint[0].topic, values, refusal,
+            answers = inbox.put(endpoint[0].topic, values, refusal or input_refusal(spec.topic, finger.driven),
                                 conversions.from_time(msg.header.stamp) if stamped else None)
             if answers or self.state is not RunState.RUNNING:  # an idle loop answers refusals without waiting
                 self._wake.set()

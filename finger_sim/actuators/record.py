@@ -1,0 +1,54 @@
+"""A drive scene's run, step by step: the states and the drive's outputs after every step (spec §8).
+
+The mesh mode is discrete state, not a function of (t, q, q'), so the drive's outputs are taken
+as the run goes, not recomputed from the states afterwards as the force elements' are.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from finger_sim.actuators.drive import DrivenSystem
+from finger_sim.actuators.stepping import EnergyLedger
+
+if TYPE_CHECKING:
+    from finger_sim.simulate import Simulator
+
+
+def outputs_now(sim: Simulator) -> list[float]:
+    """The drive's outputs at the Simulator's current state, under the input of the step that ended
+    there (its left limit at a switch of the input: the mode was decided under it)."""
+    system: DrivenSystem = sim.system  # type: ignore[assignment]
+    return list(system.motor_outputs(sim.time, sim.q, sim.v, sim.torque).values())
+
+
+def steps(sim: Simulator, n: int, ledger: EnergyLedger | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Step `sim` n times: the (n, 6) states and the (n, outputs) drive outputs after each step;
+    with `ledger`, the steps' energy integrals are added to it."""
+    system: DrivenSystem = sim.system  # type: ignore[assignment]
+    system.drive.ledger = ledger  # type: ignore[attr-defined]
+    xs = np.empty((n, 6))
+    rows = np.empty((n, len(system.output_names())))
+    try:
+        for k in range(n):
+            state = sim.step()
+            xs[k] = (*state.q, *state.v)
+            rows[k] = outputs_now(sim)
+    finally:
+        system.drive.ledger = None  # type: ignore[attr-defined]
+    return xs, rows
+
+
+def run(sim: Simulator, n: int) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, float]]:
+    """Step `sim` n times from its state: the (n, 6) states after each step, the drive's outputs
+    (n + 1 rows, the start first) and the energy report between start and end (`EnergyLedger.report`)."""
+    system: DrivenSystem = sim.system  # type: ignore[assignment]
+    book = EnergyLedger()
+    q0, v0 = sim.q, sim.v
+    first = outputs_now(sim)
+    xs, rows = steps(sim, n, book)
+    values = np.vstack([first, rows])
+    outputs = {name: values[:, i] for i, name in enumerate(system.output_names())}
+    return xs, outputs, book.report(system, q0, v0, sim.q, sim.v)

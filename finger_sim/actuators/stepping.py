@@ -1,0 +1,314 @@
+"""The drive's mode changes located inside the step (spec §8), beside the Simulator's gap events.
+
+A rolling mesh (drive or back) has three guards, each evaluated at the ends of an integrator step
+and located by Illinois regula falsi on the step's length when one crosses:
+- turn: direction·θ1' < 0, the finger turns (or stops). There the holding test decides: the mesh
+  sticks (θ1' = 0 exactly from then on) or rolls on in the direction sgn(N τ_a − τ_h);
+- flank: direction·τ_g changes sign against the flank (drive ↔ back), at τ_a = 0;
+- limit: the current limit starts or stops acting (a kink of the force, no mode change).
+A stuck mesh holds q fixed and q' = 0; the holding margin is then a function of time alone, and
+its root (brentq) is where the mesh breaks free. An ideal gear has only the limit guard.
+
+With `Drive.ledger` set, each smooth piece's powers are integrated by 3-point Gauss–Legendre
+quadrature (states at the nodes by the same integrator step from the piece's start), so that the
+energy report (`EnergyLedger`) closes to the integrator's accuracy.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, NamedTuple
+
+import numpy as np
+from scipy.optimize import brentq
+
+from finger_sim.actuators.drive import BACK, DRIVE, STUCK, ZERO, DrivenSystem, holding_margin
+from finger_sim.errors import ConfigError, SimulationDiverged
+from finger_sim.integrators.base import TorqueFn
+from finger_sim.kinematics import Vec3
+
+if TYPE_CHECKING:
+    from finger_sim.simulate import Simulator
+
+#: A one-sided guard (turn, flank) counts as crossed below −GUARD_TOLERANCE (rad/s, N·m).
+GUARD_TOLERANCE = 1e-12
+#: A located guard crossing is bracketed to this fraction of the step.
+LOCATE_TOLERANCE = 1e-13
+MAX_LOCATE_ITERATIONS = 100
+#: Events (mode changes, kinks, impacts) allowed within one step before it is declared chattering.
+MAX_EVENTS_PER_STEP = 16
+#: 3-point Gauss–Legendre nodes and weights on [0, 1] (exact for polynomials of degree 5).
+GAUSS_NODES = (0.5 - math.sqrt(15.0) / 10.0, 0.5, 0.5 + math.sqrt(15.0) / 10.0)
+GAUSS_WEIGHTS = (5.0 / 18.0, 8.0 / 18.0, 5.0 / 18.0)
+TURN, FLANK, LIMIT = 0, 1, 2
+#: Methods that cannot step a drive scene: rattle takes Q and M apart (not the mesh's accelerations),
+#: dop853 evaluates the compiled right-hand side, which has no drive yet.
+UNSUPPORTED_METHODS = ("rattle", "dop853")
+#: auto's choice on a drive scene when the table's is unsupported: explicit, as the table's usual pick.
+DRIVE_FALLBACK = "rk4"
+
+
+@dataclass
+class EnergyLedger:
+    """The drive's energy integrals over a run, J (spec §8's power balance):
+    v i = R i² + d/dt ½ J_m ω_m² + mesh loss + τ_g θ1'."""
+
+    electrical_work: float = 0.0  # ∫ v i dt
+    copper_loss: float = 0.0  # ∫ R i² dt
+    mesh_loss: float = 0.0  # ∫ (τ_a ω_m − τ_g θ1') dt
+    element_work: float = 0.0  # ∫ Σ Q_elements · q' dt (springs, damping, contact, ...)
+    impact_loss: float = 0.0  # kinetic energy (linkage and rotor) taken by stop impacts
+
+    def report(self, system: DrivenSystem, q0: Vec3, v0: Vec3, q1: Vec3, v1: Vec3) -> dict[str, float]:
+        """The balance between two states: each term (J) and `residual`, which closes to the
+        integrator's accuracy: W − copper − mesh − Δ½J_m ω_m² − Δ(T + V) − dissipated − impacts."""
+        rotor = system.rotor_energy(v1) - system.rotor_energy(v0)
+        link = system.energy(q1, v1) - system.energy(q0, v0)
+        dissipated = -self.element_work - (system.potential_energy(q1) - system.potential_energy(q0))
+        residual = (self.electrical_work - self.copper_loss - self.mesh_loss - rotor - link - dissipated
+                    - self.impact_loss)
+        return {"electrical_work": self.electrical_work, "copper_loss": self.copper_loss, "mesh_loss": self.mesh_loss,
+                "rotor_energy_change": rotor, "linkage_energy_change": link, "dissipated": dissipated,
+                "impact_loss": self.impact_loss, "residual": residual}
+
+
+class _Event(NamedTuple):
+    t: float
+    q: Vec3
+    v: Vec3
+    guard: int
+
+
+_compiled_guards = None  # finger_sim.kernel.numerics.drive_guards, once a compiled Simulator starts
+
+
+def drive_method(method: str, reason: str, auto: bool) -> tuple[str, str]:
+    """(method, reason) for a drive scene: auto's choice, or DRIVE_FALLBACK where it cannot step the drive;
+    a named method that cannot is refused (ConfigError naming integrator.method)."""
+    if method not in UNSUPPORTED_METHODS:
+        return method, reason
+    if auto:
+        return DRIVE_FALLBACK, f"{reason}; {method} cannot step the drive, {DRIVE_FALLBACK} instead"
+    raise ConfigError("integrator.method", f"a method that steps the drive (not {', '.join(UNSUPPORTED_METHODS)})",
+                      method)
+
+
+def start(sim: Simulator) -> None:
+    """The mesh mode of the scene's initial state: at rest, the turning-point rule; moving, the flank."""
+    global _compiled_guards
+    system: DrivenSystem = sim.system  # type: ignore[assignment]
+    model = getattr(sim.integrator, "model", None)  # a compiled integrator's model: its guards are compiled
+    system.drive.kernel_model, system.drive.guard_cache = model, None
+    if model is not None:
+        from finger_sim.kernel.numerics import drive_guards as _compiled_guards
+    u = sim.scene.torque(0.0)
+    if sim.v[0] == 0.0:
+        sim.v = _turn(system, 0.0, sim.q, u)
+    else:
+        _roll(system, 0.0, sim.q, sim.v, u, math.copysign(1.0, sim.v[0]))
+
+
+def advance(sim: Simulator, t0: float, t1: float, u_fn: TorqueFn) -> None:
+    """Integrate [t0, t1] of a drive scene under a smooth voltage u(s), splitting it at every mode
+    change, current-limit kink and gap event (stops, contact) on the way."""
+    system: DrivenSystem = sim.system  # type: ignore[assignment]
+    drive = system.drive
+    ledger: EnergyLedger | None = getattr(drive, "ledger", None)
+    t, q, v = t0, sim.q, sim.v
+    for _ in range(MAX_EVENTS_PER_STEP):
+        if drive.mode == STUCK:
+            release = _release_time(system, t, t1, q, u_fn)
+            end = t1 if release is None else release
+            if ledger is not None and end > t:
+                _integrate(ledger, system, t, end, lambda s: (q, ZERO), u_fn)
+            if release is None:
+                sim.q, sim.v = q, ZERO
+                return
+            t, v = release, ZERO
+            _roll(system, t, q, v, u_fn(t), _break_direction(system, t, q, u_fn(t)))
+        q1, v1 = sim._step(t, q, v, t1 - t, u_fn)
+        event = _first_event(sim, system, t, q, v, t1, q1, v1, u_fn)
+        end, qe, ve = (t1, q1, v1) if event is None else (event.t, event.q, event.v)
+        crossing = sim._first_crossing(t, q, v, end, qe, ve, u_fn) if sim._gaps else None
+        if crossing is not None:  # a stop or a contact change first: the mode guards are checked again after it
+            end, qe, ve = crossing.t, crossing.q, crossing.v
+        if ledger is not None:
+            t_, q_, v_ = t, q, v
+            _integrate(ledger, system, t, end, lambda s: sim._step(t_, q_, v_, s - t_, u_fn), u_fn)
+        t, q, v = end, qe, ve
+        if crossing is not None:
+            if crossing.gap.restitution is not None:
+                before = system.kinetic_energy(q, v) + system.rotor_energy(v)
+                v = sim._impact(crossing, u_fn)
+                if ledger is not None:
+                    ledger.impact_loss += before - system.kinetic_energy(q, v) - system.rotor_energy(v)
+                if sim._resting is not None:  # at rest on the stop: the mesh may hold it
+                    v = _turn(system, t, q, u_fn(t))
+                    if drive.mode == STUCK:
+                        sim._resting = None
+        elif event is not None:
+            u = u_fn(t)
+            if event.guard == TURN:
+                v = _turn(system, t, q, u)
+            elif event.guard == FLANK:
+                drive.mode = BACK if drive.mode == DRIVE else DRIVE
+        else:
+            sim.q, sim.v = q1, v1
+            return
+        if sim._resting is not None:
+            release = sim._release_time(sim._resting, t, t1, q, u_fn)
+            if release is None:
+                sim.q, sim.v = q, ZERO
+                return
+            sim._resting = None
+            t, v = release, _turn(system, release, q, u_fn(release))  # leaving the stop is a turning point
+            if drive.mode == STUCK:
+                continue
+        if t >= t1:
+            sim.q, sim.v = q, v
+            return
+    raise SimulationDiverged(f"more than {MAX_EVENTS_PER_STEP} events (mesh modes, current limit, stops, contact) in "
+                             "one step", method=sim.method, t=t0, dt=sim.dt)
+
+
+# -- modes --------------------------------------------------------------------------------
+def _turn(system: DrivenSystem, t: float, q: Vec3, u: float) -> Vec3:
+    """At θ1' = 0: stick if the mesh holds τ_h, else roll towards sgn(N τ_a − τ_h). Returns q' (zero)."""
+    drive = system.drive
+    p = drive.params
+    if p.ideal:
+        return ZERO
+    tau_h = system.holding_torque(t, q, ZERO)
+    tau_a = p.torque_constant * drive.current(u, 0.0)
+    if holding_margin(tau_h, tau_a, p.gear_ratio, p.efficiency, p.backward_efficiency) >= 0.0:
+        drive.mode = STUCK
+        return ZERO
+    _roll(system, t, q, ZERO, u, _break_direction(system, t, q, u))
+    return ZERO
+
+
+def _break_direction(system: DrivenSystem, t: float, q: Vec3, u: float) -> float:
+    """sgn(N τ_a − τ_h) at rest (§8): the way a mesh that does not hold starts to move."""
+    p = system.drive.params
+    excess = p.gear_ratio * p.torque_constant * system.drive.current(u, 0.0) - system.holding_torque(t, q, ZERO)
+    return 1.0 if excess >= 0.0 else -1.0
+
+
+def _roll(system: DrivenSystem, t: float, q: Vec3, v: Vec3, u: float, direction: float) -> None:
+    """Enter the rolling flank whose solution meets its sign condition for motion along `direction`:
+    drive when direction·τ_g ≥ 0, else back (§8: unique while N² J_m + η_b M_eff > 0)."""
+    drive = system.drive
+    drive.direction = direction
+    if drive.params.ideal:
+        drive.mode = DRIVE
+        return
+    tau_d = system.mesh(t, q, v, u, DRIVE)[0]
+    drive.mode = DRIVE if direction * tau_d >= 0.0 else BACK
+
+
+def _guards(system: DrivenSystem, t: float, q: Vec3, v: Vec3, u: float) -> tuple[float, float, float]:
+    """(turn, flank, limit) of the rolling mesh at a state; ≥ 0 while the mode's conditions hold.
+    On the compiled kernel they are compiled too (`kernel.numerics.drive_guards`, the same arithmetic).
+    The last state asked is kept: a step's end is the next one's start."""
+    drive = system.drive
+    key = (t, u, drive.mode, drive.direction)
+    cached = drive.guard_cache
+    if cached is not None and cached[0] is q and cached[1] is v and cached[2] == key:
+        return cached[3]
+    model = drive.kernel_model
+    if model is not None:
+        out = _compiled_guards(model, t, q[0], q[1], q[2], v[0], v[1], v[2], u, drive.direction)
+    else:
+        p = drive.params
+        limit = p.current_limit - abs(drive.unclamped_current(u, v[0]))
+        if p.ideal:
+            out = (math.inf, math.inf, limit)
+        else:
+            tau_g = system.mesh(t, q, v, u, drive.mode)[0]
+            s = drive.direction
+            out = (s * v[0], (s if drive.mode == DRIVE else -s) * tau_g, limit)
+    drive.guard_cache = (q, v, key, out)
+    return out
+
+
+def _first_event(sim: Simulator, system: DrivenSystem, t: float, q: Vec3, v: Vec3, t1: float, q1: Vec3, v1: Vec3,
+                 u_fn: TorqueFn) -> _Event | None:
+    """The earliest guard crossing of the step (t, q, q') → (t1, q1, q1'), located; None if none."""
+    g0 = _guards(system, t, q, v, u_fn(t))
+    g1 = _guards(system, t1, q1, v1, u_fn(t1))
+    first: _Event | None = None
+    for k in (TURN, FLANK, LIMIT):
+        if k == LIMIT:
+            crossed = (g0[k] < 0.0) != (g1[k] < 0.0)
+        else:
+            crossed = g1[k] < -GUARD_TOLERANCE
+        if not crossed:
+            continue
+        event = _locate(sim, system, k, t, q, v, t1, max(g0[k], 0.0) if k != LIMIT else g0[k], (g1[k], q1, v1), u_fn)
+        if first is None or event.t < first.t:
+            first = event
+    return first
+
+
+def _locate(sim: Simulator, system: DrivenSystem, k: int, t: float, q: Vec3, v: Vec3, t1: float, ga: float,
+            hi: tuple[float, Vec3, Vec3], u_fn: TorqueFn) -> _Event:
+    """Where guard k crosses in (t, t1]: Illinois regula falsi on the step's length. Returns the
+    bracket's far side (the guard crossed), so that the rest of the step does not see it again."""
+    a, b = t, t1
+    gb, qb, vb = hi
+    side = ga < 0.0
+    keep = 0
+    for _ in range(MAX_LOCATE_ITERATIONS):
+        if b - a <= LOCATE_TOLERANCE * (t1 - t):
+            break
+        s = b - gb * (b - a) / (gb - ga) if gb != ga else 0.5 * (a + b)
+        if not a < s < b:
+            s = 0.5 * (a + b)
+        qs, vs = sim._step(t, q, v, s - t, u_fn)
+        gs = _guards(system, s, qs, vs, u_fn(s))[k]
+        if k != LIMIT:
+            crossed = gs < 0.0
+        else:
+            crossed = (gs < 0.0) != side
+        if crossed:
+            b, gb, qb, vb = s, gs, qs, vs
+            ga = ga / 2 if keep == 1 else ga
+            keep = 1
+        else:
+            a, ga = s, gs
+            gb = gb / 2 if keep == -1 else gb
+            keep = -1
+    return _Event(b, qb, vb, k)
+
+
+def _release_time(system: DrivenSystem, t: float, t1: float, q: Vec3, u_fn: TorqueFn) -> float | None:
+    """When in [t, t1] a stuck mesh breaks free; None if it holds throughout. q is fixed and q' = 0,
+    so the holding margin is a function of time alone: its root, by brentq."""
+    p = system.drive.params
+
+    def margin(s: float) -> float:
+        tau_a = p.torque_constant * system.drive.current(u_fn(s), 0.0)
+        return holding_margin(system.holding_torque(s, q, ZERO), tau_a, p.gear_ratio, p.efficiency,
+                              p.backward_efficiency)
+
+    if margin(t) < 0.0:
+        return t
+    if margin(t1) >= 0.0:
+        return None
+    return brentq(margin, t, t1, xtol=LOCATE_TOLERANCE * (t1 - t), rtol=4 * np.finfo(float).eps)
+
+
+def _integrate(ledger: EnergyLedger, system: DrivenSystem, a: float, b: float, state_at, u_fn: TorqueFn) -> None:
+    """Add ∫_a^b of the drive's powers (3-point Gauss–Legendre; state_at(s) → (q, q') at s) to the ledger."""
+    h = b - a
+    if h <= 0.0:
+        return
+    for x, w in zip(GAUSS_NODES, GAUSS_WEIGHTS):
+        s = a + x * h
+        qs, vs = state_at(s)
+        elec, copper, mesh, work = system.powers(s, qs, vs, u_fn(s))
+        ledger.electrical_work += w * h * elec
+        ledger.copper_loss += w * h * copper
+        ledger.mesh_loss += w * h * mesh
+        ledger.element_work += w * h * work
