@@ -34,6 +34,11 @@ that step. The others are read-only.
 robot_description (std_msgs/String, transient local): the URDF of the node's scene
 (finger_sim.urdf), published once at start and logged, so Foxglove shows the finger from a log.
 
+/clock (best effort, keep last 1: rclcpp's ClockQoS) carries each published state's stamp and,
+while the run stands still (paused, finished, diverged), the last published one again about
+every IDLE_CLOCK_PERIOD_S of wall time, as simulators do: a use_sim_time client that joins
+then, or lost the last tick of a burst, still reads the time. The repeats are logged like any tick.
+
 /diagnostics (about 1 Hz of wall time, also while paused): runtime.diagnostics, one status per
 finger. A log that cannot be written shows ERROR, one that drops messages WARN, with the count
 lost; another /clock publisher (a second finger with publish_clock true) is warned about once
@@ -92,6 +97,9 @@ PARAMETER_EVENTS = "/parameter_events"
 IDLE_WAIT_S = 0.1
 #: Period of /diagnostics (and of the check for other /clock publishers), wall s.
 DIAGNOSTICS_PERIOD_S = 1.0
+#: Period of the repeated (unchanging) /clock while not running, wall s: a use_sim_time client
+#: that joins late, or lost the last tick of a burst (/clock is best effort), has the time within it.
+IDLE_CLOCK_PERIOD_S = 0.1
 #: Minimum wall time between two warnings about refused commands.
 WARN_THROTTLE_S = 1.0
 #: Wall time a service call waits for the stepping loop to run its job.
@@ -141,6 +149,7 @@ class SteppingNode(Node):
         self._marker_ratio = min(s.marker_rate_hz / s.physics_rate_hz, 1.0)
         self.pacer: Pacer | None = None
         self._clock_msg = None  # reused /clock message
+        self._clock_wall = 0.0  # perf_counter s of the last /clock published
         self._apply_settings(s)
         self._last_published = -1  # stamp of the last published state, ns
         self.steps_total = 0
@@ -308,6 +317,7 @@ class SteppingNode(Node):
                         self._take_changes()
                     if any(f.inbox for f in self.fingers):  # refusals are answered while paused; a valid command waits
                         self._take_commands()
+                    self._repeat_clock()
                     self._sleep(IDLE_WAIT_S)
                 elif self.pacer is not None:
                     self._paced(self.pacer)
@@ -536,11 +546,23 @@ class SteppingNode(Node):
         markers = force or _due(n, self._marker_ratio)
         if states:
             self._last_published = stamp
-            if self._clock_out is not None:
-                self._clock_msg = conversions.clock(stamp, out=self._clock_msg)
-                self._publish(self._clock_out, self._clock_msg)
+            self._publish_clock(stamp)
         for f in self.fingers:
             f.publish_state(self._publish, stamp, states=states, markers=markers)
+
+    def _publish_clock(self, stamp: int) -> None:
+        """/clock at `stamp` ns (published and logged, as `ros2 bag record` would hold it)."""
+        if self._clock_out is not None:
+            self._clock_msg = conversions.clock(stamp, out=self._clock_msg)
+            self._publish(self._clock_out, self._clock_msg)
+            self._clock_wall = time.perf_counter()
+
+    def _repeat_clock(self) -> None:
+        """While not running: the last tick again, every IDLE_CLOCK_PERIOD_S of wall time (a
+        best-effort tick can be lost, and sim time stands still until the next step). It is the
+        last published state's stamp, so that /clock only ever carries the states' sim times."""
+        if self._last_published >= 0 and time.perf_counter() - self._clock_wall >= IDLE_CLOCK_PERIOD_S:
+            self._publish_clock(self._last_published)
 
     def _publish(self, out: Endpoint, msg: Any) -> None:
         """Every outgoing message passes here, from the stepping thread, at sim time self.stamp_ns.
