@@ -222,6 +222,8 @@ def choose_method(scene: Scene) -> tuple[str, str]:
         return FALLBACK, f"{kind} scene ({why}); no measurements for it: {FALLBACK}, stable at every dt"
     rate, rate_text = table_rate(list(rows), scene.dt)
     method, because = pick(rows[rate], root, scene.dt / substeps)
-    reason = f"{kind} scene ({why}); at {rate_text} {because}"
+    label = "contact" if kind == "stops" and scene.objects else kind  # a contact scene uses the bench's stops row
+    row = f", the bench's '{kind}' row" if label != kind else ""
+    reason = f"{label} scene ({why}{row}); at {rate_text} {because}"
     LOG.info("method auto → %s: %s", method, reason)
     return method, reason

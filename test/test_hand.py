@@ -108,7 +108,8 @@ def test_three_fingers_one_clock_their_own_runs_one_log(launcher, ros_client, tm
                                      QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                                                 durability=DurabilityPolicy.TRANSIENT_LOCAL))
     ros_client.wait_for(lambda: description, "robot_description")
-    expected = hand_urdf([(f.frame_prefix, load_scene(f.scene_path).params, f.pose) for f in fingers], mcp_effort=0.05)
+    expected = hand_urdf([(f.frame_prefix, load_scene(f.scene_path).params, f.pose, load_scene(f.scene_path).mcp_limits)
+                          for f in fingers], mcp_effort=0.05)
     assert description[0].data == expected
 
     # one log holding all three fingers' topics, read by rosbags

@@ -535,7 +535,8 @@ def test_robot_description_reaches_a_late_subscriber_and_the_log(launcher, ros_c
     descriptions = ros_client.collect(String, "/robot_description", late)
     ros_client.wait_for(lambda: descriptions, "robot_description for a late subscriber")
     scene = load_scene(PAPER)
-    expected = finger_urdf(scene.params, prefix="index_", radii=scene.phalanx_radius, mcp_effort=0.05)
+    expected = finger_urdf(scene.params, prefix="index_", radii=scene.phalanx_radius, mcp_effort=0.05,
+                           mcp_limits=scene.mcp_limits)
     assert descriptions[0].data == expected
     assert 'name="index_mcp_joint"' in expected and 'name="index_fingertip"' in expected
     assert node.stop() == 0

@@ -78,7 +78,7 @@ from finger_sim.log import LogError, McapRecorder
 from finger_sim.ros import conversions, parameters
 from finger_sim.ros.finger import Finger
 from finger_sim.ros.interfaces import COMMAND_INPUTS, OUTPUTS, Endpoint, InputSpec, OutputSpec, command_qos, finger_topic
-from finger_sim.run_log import FINGER_SIM_METADATA, CommandEvent, log_time_offset_ns, run_metadata
+from finger_sim.run_log import FINGER_SIM_METADATA, NS_PER_S, CommandEvent, log_time_offset_ns, run_metadata, stamp_ns
 from finger_sim.runtime.diagnostics import Level, LogStatus, Snapshot
 from finger_sim.runtime.hand_config import FingerSpec
 from finger_sim.runtime.log_paths import UnwritableLog, create_log_file
@@ -535,8 +535,12 @@ class SteppingNode(Node):
 
     def _where(self) -> str:
         """Machine-readable position in time: clock (s, /clock), time (s, the scene's), step, episode."""
-        return (f"clock={self.stamp_ns * 1e-9!r} time={self.sim.time!r} step={self.sim.step_index} "
+        return (f"clock={self.stamp_ns / NS_PER_S!r} time={self._episode_time()!r} step={self.sim.step_index} "
                 f"episode={self.timeline.episode}")
+
+    def _episode_time(self) -> float:
+        """The scene's time in this episode, s: step·dt rounded to the ns grid of the stamps (no float noise)."""
+        return stamp_ns(0, self.sim.step_index, self.dt) / NS_PER_S
 
     # -- output (stepping loop) --------------------------------------------------------------
     def _publish_state(self, *, force: bool = False) -> None:
@@ -612,7 +616,7 @@ class SteppingNode(Node):
                 state=self.state.value, diverged=self.state is RunState.DIVERGED, scene=f.scene.name,
                 scene_file=str(f.spec.scene_path), method=f.sim.method, dt=self.dt,
                 dt_source=f"physics_rate_hz {s.physics_rate_hz:g} (scene file: {f.file_dt!r} s)",
-                torque_source=s.torque_source.value, clock_s=self.stamp_ns * 1e-9, time_s=sim.time, step=sim.step_index,
+                torque_source=s.torque_source.value, clock_s=self.stamp_ns / NS_PER_S, time_s=self._episode_time(), step=sim.step_index,
                 episode=self.timeline.episode, realtime_factor_target=s.realtime_factor, steps_total=self.steps_total,
                 run_wall_s=run_wall, max_residual_m=f.max_residual, torque=f.applied,
                 commands_received=f.inbox.received, log=log, clock_publishers=clocks)
@@ -636,7 +640,7 @@ class FingerNode(SteppingNode):
     def _description(self) -> str:
         f = self.fingers[0]
         return finger_urdf(f.scene.params, prefix=f.spec.frame_prefix, radii=f.scene.phalanx_radius,
-                           mcp_effort=self.settings.max_torque)
+                           mcp_effort=self.settings.max_torque, mcp_limits=f.scene.mcp_limits)
 
     def _log_name(self) -> str:
         return self.fingers[0].scene.name
