@@ -160,10 +160,11 @@ def _export(args: argparse.Namespace) -> int:
 
 def _export_finger(args: argparse.Namespace, reader, finger: str, csv: Path | None, plot: Path | None) -> None:  # type: ignore[no-untyped-def]
     """One finger of a log ('' for finger_node's) as CSV and plot."""
-    from finger_sim.run_log import load_run, trajectory_from_log
+    from finger_sim.run_log import load_run, logged_outputs, trajectory_from_log
 
     run = load_run(reader, events=False, finger=finger)
     traj = trajectory_from_log(run)
+    traj.outputs = logged_outputs(reader, run, finger)  # a contact scene's forces, as simulate writes them
     who = f" finger '{finger}'" if finger else ""
     print(f"{args.log}:{who} {len(traj.t)} joint states of scene '{run.scene.name}' ({run.torque_source} torque)")
     if len(traj.t):
@@ -181,7 +182,7 @@ def _export_finger(args: argparse.Namespace, reader, finger: str, csv: Path | No
     if plot and len(traj.t):
         from finger_sim.plots import plot_angles
 
-        plot_angles(traj.t, traj.q, plot, f"{run.scene.name}{who}: logged by finger_node ({traj.method})")
+        plot_angles(traj.t, traj.q, plot, f"{run.scene.name}{who}: logged by finger_node ({traj.method})", traj.outputs)
         print(f"wrote {plot}")
 
 

@@ -414,6 +414,44 @@ def logged_samples(run: RecordedRun) -> Iterator[tuple[float, Vec3, Vec3, float]
         yield stamp / NS_PER_S, q, v, torque
 
 
+#: The contact topics of a finger (finger_sim.ros.interfaces): grip force and each phalanx's wrench.
+GRIP_FORCE_TOPIC = "grip_force"
+WRENCH_TOPICS = {"proximal": "contact_wrench/proximal", "distal": "contact_wrench/distal"}
+
+
+def logged_outputs(reader: LogReader, run: RecordedRun, finger: str = "") -> dict[str, np.ndarray]:
+    """The force columns `simulate --csv` writes for a contact scene, from the log's contact topics,
+    one value per recorded joint state (NaN where none was logged at its stamp); {} without them.
+
+    grip_force (N) from `grip_force` (a Float64: matched by log time, stamp + log_time_offset_ns);
+    contact_force_<phalanx>_x/_y (N, model plane) from `contact_wrench/<phalanx>`
+    (WrenchStamped in finger_base, where a model (X, Y) is (X, 0, −Y)).
+    """
+    ending = f"/{finger}/" if finger else "/"
+    topics = {name: next((t for t in sorted(reader.topics, key=len) if t.endswith(ending + name)), None)
+              for name in (GRIP_FORCE_TOPIC, *WRENCH_TOPICS.values())}  # the shortest: un-namespaced first
+    if topics[GRIP_FORCE_TOPIC] is None:
+        return {}
+    row = {stamp: i for i, (stamp, _) in enumerate(run.joint_states)}
+    columns = ["grip_force"] + [f"contact_force_{p}_{a}" for p in WRENCH_TOPICS for a in ("x", "y")]
+    out = {name: np.full(len(run.joint_states), np.nan) for name in columns}
+    by_topic = {t: name for name, t in topics.items() if t is not None}
+    offset = run.metadata.log_time_offset_ns
+    for message in reader.messages(list(by_topic)):
+        name, msg = by_topic[message.topic], message.msg
+        if name == GRIP_FORCE_TOPIC:
+            i = row.get(message.log_time_ns - offset)
+            if i is not None:
+                out["grip_force"][i] = msg.data
+            continue
+        i = row.get(msg.header.stamp.sec * NS_PER_S + msg.header.stamp.nanosec)
+        if i is not None:
+            phalanx = name.rsplit("/", 1)[1]
+            out[f"contact_force_{phalanx}_x"][i] = msg.wrench.force.x
+            out[f"contact_force_{phalanx}_y"][i] = -msg.wrench.force.z + 0.0
+    return out
+
+
 def trajectory_from_log(run: RecordedRun) -> Trajectory:
     """The recorded joint states as a Trajectory in the paper's coordinates (the simulate CSV's columns)."""
     p = run.scene.params

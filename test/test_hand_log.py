@@ -1,5 +1,6 @@
 """`finger-sim export` and `resim` on a finger_hand log (issue 19, item 2): every finger, or one
-with --finger NAME; resim reproduces every finger bit for bit.
+with --finger NAME; resim reproduces every finger bit for bit. The export of a contact finger
+has simulate's force columns, from the log's contact topics (item 6).
 
 References: each finger's own offline run (a Simulator of its scene at the hand's 1 kHz, the
 scene's torque profile), and the log's own joint states (resim compares with them exactly).
@@ -18,7 +19,7 @@ import numpy as np
 import pytest
 
 from finger_sim.scene import load_scene
-from finger_sim.simulate import Simulator
+from finger_sim.simulate import Simulator, Trajectory, output_names, output_values
 
 HAND = "finger_sim.ros.hand"
 CONFIG = Path(__file__).resolve().parents[1] / "config"
@@ -47,6 +48,15 @@ def paper_rows(path: Path) -> np.ndarray:
     header, _, body = path.read_text().partition("\n")
     assert header.startswith("t,theta1,theta2,theta3,theta1_dot,theta2_dot,theta3_dot"), header
     return np.array([[float(x) for x in row[:7]] for row in csv.reader(io.StringIO(body)) if row])
+
+
+def offline_forces(scene: str) -> tuple[str, np.ndarray]:
+    """`simulate --csv`'s header and force columns (the elements' outputs) of the scene's own run."""
+    sim = Simulator(load_scene(CONFIG / f"{scene}.yaml").with_overrides(dt=1.0 / RATE))
+    states = [sim.state] + [sim.step(None) for _ in range(STEPS)]
+    names = output_names(sim.system.elements, sim.q)
+    values = [output_values(sim.system.elements, s.t, s.q, s.v) for s in states]
+    return Trajectory.csv_header(names), np.array(values)
 
 
 @pytest.fixture(scope="module")
@@ -87,6 +97,14 @@ def test_export_writes_one_csv_per_finger_or_the_one_asked_for(hand_log: Path, t
         np.testing.assert_allclose(got, offline(scene), rtol=0, atol=TOL, err_msg=name)
         assert (tmp_path / f"hand_{name}.png").stat().st_size > 0
     assert not (tmp_path / "hand.csv").exists()
+    # the contact finger's forces: the columns (and values) simulate writes, from the log's contact topics
+    header, forces = offline_forces(SCENES["ring"])
+    text = (tmp_path / "hand_ring.csv").read_text()
+    assert text.partition("\n")[0] == header and "grip_force" in header
+    rows = np.array([[float(x) for x in row] for row in csv.reader(io.StringIO(text.partition("\n")[2])) if row])
+    np.testing.assert_allclose(rows[:, 9:], forces, rtol=1e-12, atol=1e-12)
+    assert forces[:, 0].max() > 0.1  # it did grip
+    assert (tmp_path / "hand_index.csv").read_text().partition("\n")[0] == Trajectory.csv_header(())
 
     one = run_cli("export", hand_log, "--finger", "middle", "--csv", tmp_path / "middle.csv")
     assert one.returncode == 0, one.stdout + one.stderr

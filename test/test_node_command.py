@@ -95,3 +95,23 @@ def test_the_node_command_drives_a_running_node(launcher, ros_client):
 def test_no_node_is_one_line_naming_the_service(launcher):
     line = one_line_error(node_cli(launcher, "--node", "/nobody", "reset", timeout=1.0))
     assert "no service /nobody/reset within 1 s" in line and "ROS_DOMAIN_ID=" in line
+
+
+def test_pub_delivers_one_float(launcher, ros_client):
+    """`node pub` (for the README's grip setpoint): one Float64, to a reliable and a best-effort subscriber."""
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from std_msgs.msg import Float64
+
+    reliable = ros_client.collect(Float64, "/grip_setpoint")
+    best_effort = ros_client.collect(Float64, "/grip_setpoint", QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
+    done = subprocess.Popen([str(FINGER_SIM), "node", "pub", "/grip_setpoint", "0.5"], env=launcher.env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        ros_client.wait_for(lambda: (reliable and best_effort) or done.poll() is not None, "the setpoint at both subscribers")
+        out, err = done.communicate(timeout=TIMEOUT_S)
+    finally:
+        done.kill()
+    assert done.returncode == 0, err
+    ros_client.wait_for(lambda: reliable and best_effort, "the setpoint at both subscribers")
+    assert out == "published 0.5 on /grip_setpoint (2 subscribers)\n"
+    assert [m.data for m in reliable] == [m.data for m in best_effort] == [0.5]

@@ -257,8 +257,11 @@ class SteppingNode(Node):
         """Close the MCAP log with its summary and index; safe to call twice."""
         if self.recorder is not None:
             self.recorder.close()
-            self.get_logger().info(f"log {self.recorder.path}: {self.recorder.written} messages written, "
-                                   f"{self.recorder.dropped} dropped")
+            # after Ctrl-C the context is shut down: the node's logger would fail to reach /rosout
+            # ("Failed to publish log message to rosout"), a logger of another name writes to the console only
+            logger = self.get_logger() if self.context.ok() else rclpy.logging.get_logger(f"{self.get_name()}.exit")
+            logger.info(f"log {self.recorder.path}: {self.recorder.written} messages written, "
+                        f"{self.recorder.dropped} dropped")
 
     # -- life cycle (main thread) ----------------------------------------------------------
     def start(self) -> None:

@@ -1,6 +1,7 @@
 """`finger-sim node ...`: talk to a running finger_node or finger_hand through rclpy, where ros2cli is absent.
 
     finger-sim node torque 0.01          # motor_torque (std_msgs/Float64), like `ros2 topic pub --once`
+    finger-sim node pub TOPIC 0.5        # one std_msgs/Float64 on any topic (e.g. /grip_setpoint)
     finger-sim node pause | resume       # ~/pause (std_srvs/SetBool)
     finger-sim node step [N]             # ~/step N times (each advances steps_per_trigger steps)
     finger-sim node reset                # ~/reset (std_srvs/Trigger)
@@ -37,6 +38,10 @@ SPIN_SLICE_S = 0.05  # wall s of one executor turn while waiting
 #: Wall s without the node counting a torque before it is sent again (diagnostics come at about 1 Hz).
 RESEND_S = 2.5
 ECHO_DEPTH = 100
+#: Wall s `pub` stays after publishing, for best-effort subscribers (which acknowledge nothing).
+LINGER_S = 0.25
+#: Wall s `pub` waits between its publisher's match and the message (the subscribers' side of the match).
+MATCH_SETTLE_S = 0.25
 
 
 class NodeCommandError(FingerSimError):
@@ -166,6 +171,27 @@ def _torque(client: _Client, args: argparse.Namespace) -> int:
     raise NodeCommandError(f"{args.node} did not count the torque on {topic} within {client.timeout_s:g} s")
 
 
+def _pub(client: _Client, args: argparse.Namespace) -> int:
+    """One std_msgs/Float64 on TOPIC, reliable, once every subscriber has matched and acknowledged."""
+    from rclpy.duration import Duration
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from std_msgs.msg import Float64
+
+    publisher = client.node.create_publisher(Float64, args.topic, QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE))
+    graph = client.node
+    # every subscriber the graph knows of matched (not only the first), then a moment for the
+    # subscribers' side of the match, without which a best-effort reader drops the message
+    subscribers = client.wait_for(lambda: (n := publisher.get_subscription_count()) >= max(1, graph.count_subscribers(args.topic))
+                                  and n, f"subscriber on {args.topic}")
+    client.wait_for(lambda: False, "", timeout_s=MATCH_SETTLE_S)
+    publisher.publish(Float64(data=args.value))
+    if not publisher.wait_for_all_acked(Duration(seconds=client.timeout_s)):
+        raise NodeCommandError(f"the subscribers of {args.topic} did not acknowledge within {client.timeout_s:g} s")
+    time.sleep(LINGER_S)  # a best-effort subscriber acknowledges nothing: give it the message's way there
+    print(f"published {args.value!r} on {args.topic} ({subscribers} subscribers)")
+    return 0
+
+
 def _get(client: _Client, args: argparse.Namespace) -> int:
     print(f"{args.param} = {_read_parameter(client, args)!r}")
     return 0
@@ -247,6 +273,6 @@ def plain(value: Any) -> Any:
 
 
 ACTIONS: dict[str, Callable[[_Client, argparse.Namespace], int]] = {
-    "torque": _torque, "pause": _pause, "resume": _pause, "step": _step, "reset": _reset,
+    "torque": _torque, "pub": _pub, "pause": _pause, "resume": _pause, "step": _step, "reset": _reset,
     "get": _get, "set": _set, "echo": _echo,
 }
