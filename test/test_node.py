@@ -380,7 +380,7 @@ def test_several_fingers_in_namespaces(launcher, ros_client):
     "params, names",
     [
         (dict(physics_rate_hz=-5.0), ["physics_rate_hz", "out of range"]),
-        (dict(physics_rate_hz=500), ["physics_rate_hz", "DOUBLE"]),
+        (dict(physics_rate_hz="fast"), ["physics_rate_hz", "DOUBLE"]),  # an int is taken as a float (issue 19)
         (dict(torque_source="joystick"), ["torque_source", "joystick"]),
         (dict(scene="no_such_scene"), ["scene", "no_such_scene", "paper_flexion"]),
         (dict(scene="STIFF_RK4"), ["integrator.method", "rk4", "physics_rate_hz"]),

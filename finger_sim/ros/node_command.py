@@ -178,11 +178,14 @@ def _pub(client: _Client, args: argparse.Namespace) -> int:
     from std_msgs.msg import Float64
 
     publisher = client.node.create_publisher(Float64, args.topic, QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE))
-    graph = client.node
-    # every subscriber the graph knows of matched (not only the first), then a moment for the
-    # subscribers' side of the match, without which a best-effort reader drops the message
-    subscribers = client.wait_for(lambda: (n := publisher.get_subscription_count()) >= max(1, graph.count_subscribers(args.topic))
-                                  and n, f"subscriber on {args.topic}")
+
+    def all_matched() -> int:
+        """The matched subscriptions once every one the graph knows of has matched (not only the first); else 0."""
+        matched = publisher.get_subscription_count()
+        return matched if matched >= max(1, client.node.count_subscribers(args.topic)) else 0
+
+    subscribers = client.wait_for(all_matched, f"subscriber on {args.topic}")
+    # a moment for the subscribers' side of the match, without which a best-effort reader drops the message
     client.wait_for(lambda: False, "", timeout_s=MATCH_SETTLE_S)
     publisher.publish(Float64(data=args.value))
     if not publisher.wait_for_all_acked(Duration(seconds=client.timeout_s)):
