@@ -246,16 +246,17 @@ def choose_method(scene: Scene) -> tuple[str, str]:
     root = fastest_mode(scene.build_system(), mcp_range(scene))
     kind, why = scene_kind(scene, root)
     rows = RECOMMENDATION.get(kind, {})
+    label = "contact" if kind == "stops" and scene.objects else kind  # contact shares the stops row's kind
     if kind in ("smooth", "discontinuous") and rows:
         rate, rate_text = table_rate(list(rows), scene.dt)
         target = scene.tolerance / TABLE_MARGIN
         method, because = pick(rows[rate], root, scene.dt, target)
         if any(Row(*row).method == method and Row(*row).error <= target for row in rows[rate]):
-            reason = f"{kind} scene ({why}); at {rate_text} {because}"
+            reason = f"{label} scene ({why}); at {rate_text} {because}"
             LOG.info("method auto → %s: %s", method, reason)
             return method, reason
     rtol, _ = error_control(scene.tolerance)
-    reason = (f"{kind} scene ({why}); error-controlled {ERROR_CONTROLLED} at rtol = atol = {rtol:.0e} for "
+    reason = (f"{label} scene ({why}); error-controlled {ERROR_CONTROLLED} at rtol = atol = {rtol:.0e} for "
               f"{scene.tolerance:g} rad on θ, events located inside the step; the run reports its estimated error"
               + realtime_note(scene, root))
     LOG.info("method auto → %s: %s", ERROR_CONTROLLED, reason)

@@ -18,6 +18,7 @@ from finger_sim.errors import ConfigError, FingerSimError
 from finger_sim.integrators import METHODS
 from finger_sim.kernel import KERNELS
 from finger_sim.model import FingerParams
+from finger_sim.node_command_args import add_parser as add_node_parser
 from finger_sim.output_paths import check_output_dir, check_output_file, check_plot_file
 from finger_sim.scene import AUTO, Scene, load_scene
 
@@ -211,21 +212,42 @@ def _info(args: argparse.Namespace) -> int:
     return EXIT_TRUNCATED if reader.truncated else 0
 
 
+def _per_finger(path: Path, finger: str, fingers: list[str]) -> Path:
+    """An output path of one finger: `path` itself for a one-finger export, else <stem>_<finger><suffix>."""
+    return path if len(fingers) == 1 else path.with_name(f"{path.stem}_{finger}{path.suffix}")
+
+
 @_log_command
 def _export(args: argparse.Namespace) -> int:
-    from finger_sim.run_log import load_run, trajectory_from_log
-    from finger_sim.run_log_checks import check_states
+    from finger_sim.run_log import select_fingers
 
-    csv = check_output_file(args.csv, argument="--csv") if args.csv else None
-    plot = check_plot_file(args.plot, argument="--plot") if args.plot else None
-    check_distinct({"LOG": args.log}, {"--csv": csv, "--plot": plot})
     reader = _open_log(args.log, salvage=args.salvage)
     if _incomplete(reader, args):
         return EXIT_INCOMPLETE
-    run = load_run(reader)  # with its events: a reset may repeat a stamp (run_log_checks)
+    fingers = select_fingers(reader, args.finger)
+    outputs = [(f, check_output_file(_per_finger(args.csv, f, fingers), argument="--csv") if args.csv else None,
+                check_plot_file(_per_finger(args.plot, f, fingers), argument="--plot") if args.plot else None)
+               for f in fingers]
+    label = (lambda option, f: option) if len(fingers) == 1 else (lambda option, f: f"{option} ({f})")
+    check_distinct({"LOG": args.log}, {label("--csv", f): c for f, c, _ in outputs} | {label("--plot", f): p for f, _, p in outputs})
+    for finger, csv, plot in outputs:
+        _export_finger(args, reader, finger, csv, plot)
+    if _salvaged(reader, "export"):
+        return EXIT_DATA_LOST
+    return EXIT_TRUNCATED if reader.truncated else 0
+
+
+def _export_finger(args: argparse.Namespace, reader, finger: str, csv: Path | None, plot: Path | None) -> None:  # type: ignore[no-untyped-def]
+    """One finger of a log ('' for finger_node's) as CSV and plot; its states checked first (run_log_checks)."""
+    from finger_sim.run_log import load_run, logged_outputs, trajectory_from_log
+    from finger_sim.run_log_checks import check_states
+
+    run = load_run(reader, finger=finger)  # with its events: a reset may repeat a stamp (run_log_checks)
     check_states(run, args.log)
     traj = trajectory_from_log(run)
-    print(f"{args.log}: {len(traj.t)} joint states of scene '{run.scene.name}' ({run.torque_source} torque)")
+    traj.outputs = logged_outputs(reader, run, finger)  # a contact scene's forces, as simulate writes them
+    who = f" finger '{finger}'" if finger else ""
+    print(f"{args.log}:{who} {len(traj.t)} joint states of scene '{run.scene.name}' ({run.torque_source} torque)")
     if len(traj.t):
         print(traj.summary())
     if csv:
@@ -243,26 +265,26 @@ def _export(args: argparse.Namespace) -> int:
         from finger_sim.plots import plot_angles
 
         with atomic_path(plot) as part:
-            plot_angles(traj.t, traj.q, part, f"{run.scene.name}: logged by finger_node ({traj.method})")
+            plot_angles(traj.t, traj.q, part, f"{run.scene.name}{who}: logged by finger_node ({traj.method})", traj.outputs)
         print(f"wrote {plot}")
-    if _salvaged(reader, "export"):
-        return EXIT_DATA_LOST
-    return EXIT_TRUNCATED if reader.truncated else 0
 
 
 @_log_command
 def _resim(args: argparse.Namespace) -> int:
-    from finger_sim.run_log import load_run, resimulate
+    from finger_sim.run_log import load_run, resimulate, select_fingers
     from finger_sim.run_log_checks import check_states
 
     reader = _open_log(args.log, salvage=args.salvage)
     if _incomplete(reader, args):
         return EXIT_INCOMPLETE
-    run = load_run(reader)
-    check_states(run, args.log)
-    result = resimulate(run, kernel=args.kernel, max_steps=args.max_steps)
-    print(result.summary())
-    if not result.exact:
+    exact = True
+    for finger in select_fingers(reader, args.finger):
+        run = load_run(reader, finger=finger)
+        check_states(run, args.log)
+        result = resimulate(run, kernel=args.kernel, max_steps=args.max_steps)
+        print((f"{finger}: " if finger else "") + result.summary())
+        exact = exact and result.exact
+    if not exact:
         return EXIT_DEVIATION
     if _salvaged(reader, "resim"):
         return EXIT_DATA_LOST
@@ -297,7 +319,7 @@ def _urdf(args: argparse.Namespace) -> int:
     scene = load_scene(args.scene)
     out = check_output_file(args.out, argument="-o/--out") if args.out else None
     check_distinct({"SCENE": args.scene}, {"-o/--out": out})
-    text = finger_urdf(scene.params, prefix=args.prefix)
+    text = finger_urdf(scene.params, prefix=args.prefix, mcp_limits=scene.mcp_limits)
     if out is None:
         sys.stdout.write(text)
     else:
@@ -318,10 +340,29 @@ def _sweep(args: argparse.Namespace) -> int:
     return 0
 
 
+#: Where `bench` writes without --out: the full grid into docs/ (its committed results), a
+#: --quick run into out/ (ignored by git), so that a quick check never replaces the full results.
+BENCH_OUT, QUICK_BENCH_OUT = Path("docs"), Path("out") / "bench_quick"
+
+
+def bench_out(args: argparse.Namespace) -> Path:
+    """The folder `bench` writes to: --out, else BENCH_OUT or, with --quick, QUICK_BENCH_OUT."""
+    if args.out is not None:
+        return args.out
+    return QUICK_BENCH_OUT if args.quick else BENCH_OUT
+
+
 def _bench(args: argparse.Namespace) -> int:
     from finger_sim.bench.report import run_bench
 
-    return run_bench(quick=args.quick, out=check_output_dir(args.out, argument="--out"), argv=sys.argv)
+    return run_bench(quick=args.quick, out=check_output_dir(bench_out(args), argument="--out"), argv=sys.argv)
+
+
+def _node(args: argparse.Namespace) -> int:
+    """`finger-sim node ...` (finger_sim.ros.node_command): rclpy is imported only when it runs."""
+    from finger_sim.ros.node_command import run
+
+    return run(args)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -395,6 +436,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help="export a log whose recorder dropped messages (else exit 7)")
     export.add_argument("--salvage", action="store_true",
                         help="read past damaged chunks (each named on stderr; exit status 6)")
+    export.add_argument("--finger", metavar="NAME", help="one finger of a finger_hand log (default: every finger, "
+                        "each to <stem>_<finger><suffix> of --csv and --plot)")
     export.set_defaults(func=_export)
 
     resim = sub.add_parser("resim", help="re-simulate a node's MCAP log and report the deviation from it")
@@ -407,6 +450,7 @@ def build_parser() -> argparse.ArgumentParser:
                        help=f"refuse a re-simulation of more than N steps in all (default: {DEFAULT_MAX_STEPS:,})")
     resim.add_argument("--salvage", action="store_true",
                        help="read past damaged chunks (each named on stderr; exit status 6)")
+    resim.add_argument("--finger", metavar="NAME", help="one finger of a finger_hand log (default: every finger)")
     resim.set_defaults(func=_resim)
 
     repair = sub.add_parser("repair", help="rewrite the readable part of a cut log (kill -9, full disk) as a "
@@ -423,7 +467,8 @@ def build_parser() -> argparse.ArgumentParser:
                                                  "a log holds its own")
     view.set_defaults(func=_view)
 
-    urdf = sub.add_parser("urdf", help="the URDF of a scene's finger (links, joints, masses, capsules; spec §6)")
+    urdf = sub.add_parser("urdf", help="the URDF of a scene's finger (links, joints, masses, capsules, the scene's "
+                                       "MCP stops as limits; spec §6)")
     urdf.add_argument("scene", type=Path, help="scene YAML file (see config/); its model.geometry sets the URDF")
     urdf.add_argument("-o", "--out", type=Path, help="write the URDF to this file (default: stdout)")
     urdf.add_argument("--prefix", default="", help="prepended to every link and joint name (finger_node's frame_prefix)")
@@ -462,8 +507,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     bench = sub.add_parser("bench", help="work-precision and hard-case report with peers, written to docs/")
     bench.add_argument("--quick", action="store_true", help="a reduced grid for CI (under two minutes)")
-    bench.add_argument("--out", type=Path, default=Path("docs"), help="folder for performance.md and figures")
+    bench.add_argument("--out", type=Path, help="folder for performance.md and figures (default: docs/, "
+                       "with --quick out/bench_quick/)")
     bench.set_defaults(func=_bench)
+    add_node_parser(sub, _node)
     return parser
 
 

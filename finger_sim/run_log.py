@@ -299,15 +299,41 @@ class RecordedRun:
         return self.scene.dt
 
 
-def load_run(reader: LogReader, *, events: bool = True) -> RecordedRun:
-    """Metadata, command events (unless `events` is False) and joint states of a node's log.
+def log_fingers(reader: LogReader) -> list[str]:
+    """The fingers of a log: [''] for finger_node's one finger (record `finger_sim`), else the
+    names of a finger_hand log's fingers (records `finger_sim/<name>`), in the order they were written."""
+    if FINGER_SIM_METADATA in reader.metadata:
+        return [""]
+    prefix = FINGER_SIM_METADATA + "/"
+    names = [name.removeprefix(prefix) for name in reader.metadata if name.startswith(prefix)]
+    if not names:
+        reader.metadata_record(FINGER_SIM_METADATA)  # raises MissingMetadataError naming what is there
+    return names
+
+
+def select_fingers(reader: LogReader, finger: str | None) -> list[str]:
+    """`finger` (checked against the log's fingers), or every finger of the log when None."""
+    fingers = log_fingers(reader)
+    if finger is None:
+        return fingers
+    if finger not in fingers:
+        known = ", ".join(repr(f) for f in fingers) if fingers != [""] else "none: a one-finger finger_node log"
+        raise RunLogError(reader.path, f"--finger {finger!r}: no such finger in the log (fingers: {known})")
+    return [finger]
+
+
+def load_run(reader: LogReader, *, events: bool = True, finger: str = "") -> RecordedRun:
+    """Metadata, command events (unless `events` is False) and joint states of a node's log;
+    `finger`: one finger of a finger_hand log (log_fingers), '' for finger_node's.
 
     RunLogError names what is missing or foreign (a topic whose schema is not the one expected).
     """
-    meta = RunMetadata.from_dict(reader.metadata_record(FINGER_SIM_METADATA), reader.path)
+    record = FINGER_SIM_METADATA + (f"/{finger}" if finger else "")
+    meta = RunMetadata.from_dict(reader.metadata_record(record), reader.path)
     run = RecordedRun(metadata=meta)
-    states = _states_topic(reader)
-    log_topics = [t for t in reader.topics if t.endswith("/command_log")] if events else []
+    states = _states_topic(reader, finger)
+    ending = f"/{finger}/command_log" if finger else "/command_log"
+    log_topics = [t for t in reader.topics if t.endswith(ending)] if events else []
     for topic in log_topics:
         check_schema(reader, reader.topics[topic], COMMAND_LOG_TYPE)
     order: list[int] | None = None
@@ -338,12 +364,14 @@ def load_run(reader: LogReader, *, events: bool = True) -> RecordedRun:
     return run
 
 
-def _states_topic(reader: LogReader) -> str:
-    """The node's joint-state topic (`/joint_states`, maybe namespaced), its schema checked."""
-    found = sorted(t for t in reader.topics if t.rsplit("/", 1)[-1] == "joint_states")
+def _states_topic(reader: LogReader, finger: str = "") -> str:
+    """The node's joint-state topic (`/joint_states`, or `/<finger>/joint_states`, maybe
+    namespaced), its schema checked."""
+    ending = f"/{finger}/joint_states" if finger else "/joint_states"
+    found = sorted(t for t in reader.topics if t.endswith(ending))
     if not found:
-        reader.require_topics(["/joint_states"])  # raises MissingTopicsError naming what is there
-    topic = "/joint_states" if "/joint_states" in found else found[0]
+        reader.require_topics([ending])  # raises MissingTopicsError naming what is there
+    topic = ending if ending in found else found[0]
     check_schema(reader, reader.topics[topic], JOINT_STATE_TYPE)
     return topic
 
@@ -368,10 +396,13 @@ def check_schema(reader: LogReader, topic: TopicInfo, type_name: str) -> None:
 
 
 def _joint_order(reader: LogReader, names: list[str]) -> list[int]:
+    """Where each of JOINT_NAMES is in `names`, under the finger's frame prefix (the one of the first joint)."""
+    prefix = next((n[:-len(JOINT_NAMES[0])] for n in names if n.endswith(JOINT_NAMES[0])), "")
     try:
-        return [names.index(n) for n in JOINT_NAMES]
+        return [names.index(prefix + n) for n in JOINT_NAMES]
     except ValueError:
-        raise RunLogError(reader.path, f"joint states: expected joints {list(JOINT_NAMES)}, got {names}") from None
+        raise RunLogError(reader.path, f"joint states: expected joints {list(JOINT_NAMES)} (with one frame "
+                                       f"prefix), got {names}") from None
 
 
 # -- export ----------------------------------------------------------------------------------------
@@ -385,6 +416,44 @@ def logged_samples(run: RecordedRun) -> Iterator[tuple[float, Vec3, Vec3, float]
     for (stamp, state), torque in zip(run.joint_states, run.torques):
         q, v = paper_coordinates(state[:3], state[3:], q_ext, alpha)
         yield stamp / NS_PER_S, q, v, torque
+
+
+#: The contact topics of a finger (finger_sim.ros.interfaces): grip force and each phalanx's wrench.
+GRIP_FORCE_TOPIC = "grip_force"
+WRENCH_TOPICS = {"proximal": "contact_wrench/proximal", "distal": "contact_wrench/distal"}
+
+
+def logged_outputs(reader: LogReader, run: RecordedRun, finger: str = "") -> dict[str, np.ndarray]:
+    """The force columns `simulate --csv` writes for a contact scene, from the log's contact topics,
+    one value per recorded joint state (NaN where none was logged at its stamp); {} without them.
+
+    grip_force (N) from `grip_force` (a Float64: matched by log time, stamp + log_time_offset_ns);
+    contact_force_<phalanx>_x/_y (N, model plane) from `contact_wrench/<phalanx>`
+    (WrenchStamped in finger_base, where a model (X, Y) is (X, 0, −Y)).
+    """
+    ending = f"/{finger}/" if finger else "/"
+    topics = {name: next((t for t in sorted(reader.topics, key=len) if t.endswith(ending + name)), None)
+              for name in (GRIP_FORCE_TOPIC, *WRENCH_TOPICS.values())}  # the shortest: un-namespaced first
+    if topics[GRIP_FORCE_TOPIC] is None:
+        return {}
+    row = {stamp: i for i, (stamp, _) in enumerate(run.joint_states)}
+    columns = ["grip_force"] + [f"contact_force_{p}_{a}" for p in WRENCH_TOPICS for a in ("x", "y")]
+    out = {name: np.full(len(run.joint_states), np.nan) for name in columns}
+    by_topic = {t: name for name, t in topics.items() if t is not None}
+    offset = run.metadata.log_time_offset_ns
+    for message in reader.messages(list(by_topic)):
+        name, msg = by_topic[message.topic], message.msg
+        if name == GRIP_FORCE_TOPIC:
+            i = row.get(message.log_time_ns - offset)
+            if i is not None:
+                out["grip_force"][i] = msg.data
+            continue
+        i = row.get(msg.header.stamp.sec * NS_PER_S + msg.header.stamp.nanosec)
+        if i is not None:
+            phalanx = name.rsplit("/", 1)[1]
+            out[f"contact_force_{phalanx}_x"][i] = msg.wrench.force.x
+            out[f"contact_force_{phalanx}_y"][i] = -msg.wrench.force.z + 0.0
+    return out
 
 
 def trajectory_from_log(run: RecordedRun) -> Trajectory:

@@ -35,12 +35,14 @@ BAR_SECTION = (0.004, 0.002)
 #: Inertia about a rod's own axis, as a fraction of its transverse inertia: slender rods have
 #: none (spec §2), but URDF tools refuse a zero principal moment.
 AXIAL_INERTIA_FRACTION = 1e-6
-#: Velocity limit of every joint, rad/s: the model has none, URDF requires one.
+#: Velocity limit of every joint, rad/s: a placeholder (the model has no speed limit, URDF
+#: requires one); each joint says so in a comment.
 VELOCITY_LIMIT = 1000.0
 #: Effort limit of mcp_joint, N·m: finger_node's default max_torque.
 MCP_EFFORT_LIMIT = 0.05
-#: Limits of the passive joints, rad: one turn; the loop, not the joint, bounds them.
-PASSIVE_LIMITS = (-math.pi, math.pi)
+#: Poses of mcp_joint's range at which the passive joints' range is sampled (then refined).
+PASSIVE_SAMPLES = 721
+_VELOCITY_NOTE = f"velocity {VELOCITY_LIMIT:g} rad/s is a placeholder: the model has no speed limit, URDF requires one"
 #: Materials (r, g, b, a), as finger_node's markers draw the links.
 MATERIALS = {
     "ground": (0.5, 0.5, 0.5, 1.0),
@@ -65,22 +67,25 @@ _HAND_COMMENT = f"""
 
 
 class FingerMount(NamedTuple):
-    """One finger of a hand: its name prefix, parameters and base pose in `hand_base`."""
+    """One finger of a hand: its name prefix, parameters, base pose in `hand_base` and MCP stops (θ1, rad)."""
 
     prefix: str
     params: FingerParams
     pose: BasePose
+    mcp_limits: tuple[float, float] | None = None
 
 
 def finger_urdf(params: FingerParams, *, prefix: str = "", radii: tuple[float, float] = PHALANX_RADII,
-                mcp_effort: float = MCP_EFFORT_LIMIT) -> str:
+                mcp_effort: float = MCP_EFFORT_LIMIT, mcp_limits: tuple[float, float] | None = None) -> str:
     """URDF (an XML string) of one finger; `prefix` goes before every link and joint name.
 
     radii: (ρ1, ρ3), m, of the proximal and distal capsules. mcp_effort: N·m, the effort
-    limit of mcp_joint.
+    limit of mcp_joint. mcp_limits: the scene's MCP stops (θ1, rad; Scene.mcp_limits), which
+    bound mcp_joint within the linkage's assembly range; None: the assembly range alone.
+    The passive joints' limits are the range the closed loop gives them over mcp_joint's.
     """
     robot = _robot(f"{_checked_prefix(prefix)}finger", _finger_comment(params, prefix))
-    _add_finger(robot, params, prefix, _checked_radii(radii), _checked_effort(mcp_effort))
+    _add_finger(robot, params, prefix, _checked_radii(radii), _checked_effort(mcp_effort), mcp_limits)
     return _serialize(robot)
 
 
@@ -97,7 +102,7 @@ def hand_urdf(mounts: Sequence[FingerMount | tuple[str, FingerParams, BasePose]]
     robot = _robot("finger_hand", _HAND_COMMENT)
     _link(robot, HAND_BASE)
     seen: set[str] = set()
-    for prefix, params, pose in (FingerMount(*m) for m in mounts):
+    for prefix, params, pose, stops in (FingerMount(*m) for m in mounts):
         if _checked_prefix(prefix) in seen:
             raise ConfigError("fingers.prefix", "a prefix that no other finger has", prefix)
         seen.add(prefix)
@@ -106,11 +111,12 @@ def hand_urdf(mounts: Sequence[FingerMount | tuple[str, FingerParams, BasePose]]
         robot.append(ET.Comment(_finger_comment(params, prefix)))
         _joint(robot, f"{prefix}finger_mount", "fixed", HAND_BASE, f"{prefix}finger_base",
                (pose[0], pose[1], pose[2]), (pose[3], pose[4], pose[5]))
-        _add_finger(robot, params, prefix, checked, effort)
+        _add_finger(robot, params, prefix, checked, effort, stops)
     return _serialize(robot)
 
 
-def _add_finger(robot: ET.Element, p: FingerParams, prefix: str, radii: tuple[float, float], mcp_effort: float) -> None:
+def _add_finger(robot: ET.Element, p: FingerParams, prefix: str, radii: tuple[float, float], mcp_effort: float,
+                mcp_limits: tuple[float, float] | None) -> None:
     """Append one finger's links and joints to `robot`."""
     q_ext = kinematics.extended_pose(p)
     d = kinematics.points(p, q_ext, kinematics.distal_offset(p))["D"]
@@ -124,20 +130,25 @@ def _add_finger(robot: ET.Element, p: FingerParams, prefix: str, radii: tuple[fl
     link = _link(robot, proximal)
     _rod_inertial(link, p.m1, p.r1)
     _capsule(link, p.r1, rho1, "proximal")
-    kind, limits = _mcp_kind(p, q_ext)
-    _joint(robot, f"{prefix}{_MCP}", kind, base, proximal, _ZERO, (0.0, q_ext[0], 0.0), mcp_effort, limits)
+    kind, limits, source = _mcp_kind(p, q_ext, mcp_limits)
+    _joint(robot, f"{prefix}{_MCP}", kind, base, proximal, _ZERO, (0.0, q_ext[0], 0.0), mcp_effort, limits,
+           f"limits: {source}; effort: finger_node's max_torque; {_VELOCITY_NOTE}")
+    coupler_range, pip_range = _passive_ranges(p, q_ext, limits)
+    passive = (f"limits: the range the closed loop gives this joint over {prefix}{_MCP}'s; effort 0: "
+               f"not actuated; {_VELOCITY_NOTE}")
 
     link = _link(robot, coupler)
     _rod_inertial(link, p.m2, p.r2)
     _bar(link, (0.5 * p.r2, 0.0, 0.0), 0.0, p.r2, "coupler")
-    _joint(robot, f"{prefix}{_COUPLER}", "revolute", base, coupler, _plane(*d), (0.0, q_ext[1], 0.0), 0.0, PASSIVE_LIMITS)
+    _joint(robot, f"{prefix}{_COUPLER}", "revolute", base, coupler, _plane(*d), (0.0, q_ext[1], 0.0), 0.0, coupler_range,
+           passive)
     _frame(robot, f"{prefix}coupler_pin", coupler, (p.r2, 0.0, 0.0))
 
     link = _link(robot, distal)
     _rod_inertial(link, p.m3, p.L3)
     _capsule(link, p.L3, rho3, "distal")
     # ψ_ext = θ3_ext + α = θ1_ext: the distal frame starts aligned with the proximal one.
-    _joint(robot, f"{prefix}{_PIP}", "revolute", proximal, distal, (p.r1, 0.0, 0.0), _ZERO, 0.0, PASSIVE_LIMITS)
+    _joint(robot, f"{prefix}{_PIP}", "revolute", proximal, distal, (p.r1, 0.0, 0.0), _ZERO, 0.0, pip_range, passive)
     _frame(robot, f"{prefix}distal_pin", distal, _pin_on_distal(p))
     _frame(robot, f"{prefix}fingertip", distal, (p.L3, 0.0, 0.0))
 
@@ -169,16 +180,52 @@ def _finger_comment(p: FingerParams, prefix: str) -> str:
   {prefix}{_MCP} through the loop. Take all three from finger_node's joint_states
   (never from joint_state_publisher's sliders, which would open the loop).
   Only {prefix}{_MCP} is actuated (the motor torque); the passive joints' effort limit is 0.
+  Each joint's comment says where its limits come from and which are placeholders.
 """
 
 
-def _mcp_kind(p: FingerParams, q_ext: kinematics.Vec3) -> tuple[str, tuple[float, float] | None]:
-    """mcp_joint's type and limits, rad: revolute over the assemblable range (toggle to toggle),
-    continuous when the crank turns fully."""
+def _mcp_kind(p: FingerParams, q_ext: kinematics.Vec3,
+              stops: tuple[float, float] | None) -> tuple[str, tuple[float, float] | None, str]:
+    """mcp_joint's type, limits (joint position, rad) and where they come from: the scene's
+    stops within the assemblable range (toggle to toggle); continuous when the crank turns fully
+    and there are no stops."""
     lo, hi = kinematics.assembly_range(p)
-    if math.isinf(lo):
-        return "continuous", None
-    return "revolute", (lo - q_ext[0], hi - q_ext[0])
+    if stops is None:
+        if math.isinf(lo):
+            return "continuous", None, "none: the crank turns fully and the scene has no MCP stops"
+        return "revolute", (lo - q_ext[0], hi - q_ext[0]), "the linkage's assembly range (toggle to toggle); no MCP stops"
+    if not (len(stops) == 2 and all(math.isfinite(v) for v in stops) and max(lo, stops[0]) < min(hi, stops[1])):
+        raise ConfigError("mcp_limits", f"MCP stops (θ1, rad) overlapping the assembly range [{lo:g}, {hi:g}]", stops)
+    lower, upper = max(lo, stops[0]), min(hi, stops[1])
+    clipped = "" if (lower, upper) == tuple(stops) else " (clipped to the assembly range)"
+    return "revolute", (lower - q_ext[0], upper - q_ext[0]), f"the scene's MCP stops (joint_limits.mcp){clipped}"
+
+
+def _passive_ranges(p: FingerParams, q_ext: kinematics.Vec3,
+                    mcp: tuple[float, float] | None) -> tuple[tuple[float, float], tuple[float, float]]:
+    """(lower, upper) of coupler_joint and pip_joint, rad, over mcp_joint's range (a full turn when
+    continuous): sampled at PASSIVE_SAMPLES poses, each extreme refined by a bounded scalar search."""
+    from scipy.optimize import minimize_scalar
+
+    alpha = kinematics.distal_offset(p)
+    lo, hi = (-math.pi, math.pi) if mcp is None else (mcp[0] + q_ext[0], mcp[1] + q_ext[0])
+    grid = [lo + (hi - lo) * i / (PASSIVE_SAMPLES - 1) for i in range(PASSIVE_SAMPLES)]
+
+    def joint(index: int, theta1: float) -> float:
+        return joints.joint_positions(kinematics.assemble(p, min(max(theta1, lo), hi)), q_ext, alpha)[index]
+
+    ranges = []
+    for index in (1, 2):
+        values = [joint(index, t) for t in grid]
+        extremes = []
+        for sign in (1.0, -1.0):  # the minimum, then the maximum
+            k = min(range(PASSIVE_SAMPLES), key=lambda i: sign * values[i])
+            a, b = grid[max(k - 1, 0)], grid[min(k + 1, PASSIVE_SAMPLES - 1)]
+            found = minimize_scalar(lambda t: sign * joint(index, t), bounds=(a, b), method="bounded",
+                                    options={"xatol": 1e-12}).fun if b > a else sign * values[k]
+            extremes.append(sign * min(found, sign * values[k]))
+        ranges.append((extremes[0], extremes[1]))
+    return ranges[0], ranges[1]
 
 
 def _robot(name: str, comment: str) -> ET.Element:
@@ -201,7 +248,8 @@ def _frame(robot: ET.Element, name: str, parent: str, xyz: _Vec) -> None:
 
 
 def _joint(robot: ET.Element, name: str, kind: str, parent: str, child: str, xyz: _Vec, rpy: _Vec,
-           effort: float = 0.0, limits: tuple[float, float] | None = None) -> None:
+           effort: float = 0.0, limits: tuple[float, float] | None = None, note: str = "") -> None:
+    """A joint; `note`: a comment before its <limit> saying where each limit comes from."""
     joint = ET.SubElement(robot, "joint", name=name, type=kind)
     ET.SubElement(joint, "parent", link=parent)
     ET.SubElement(joint, "child", link=child)
@@ -210,6 +258,8 @@ def _joint(robot: ET.Element, name: str, kind: str, parent: str, child: str, xyz
         return
     ET.SubElement(joint, "axis", xyz="0 1 0")
     attrs = {"effort": _num(effort), "velocity": _num(VELOCITY_LIMIT)}
+    if note:
+        joint.append(ET.Comment(f" {note} "))
     if limits is not None:
         attrs.update(lower=_num(limits[0]), upper=_num(limits[1]))
     ET.SubElement(joint, "limit", attrs)

@@ -125,3 +125,10 @@ def test_explicit_methods_stay_refused_where_auto_is_not_used():
     assert (err.method, err.scene, err.dt) == ("rk4", "stiff_spring", 1e-3)
     assert abs(err.mode) * err.dt > 2.8 and stable_at(METHODS["rk4"], err.mode, err.safe_dt)
     assert f"or dt ≤ {err.safe_dt:.3g} s" in str(err)
+
+
+def test_a_contact_scene_is_called_one():
+    """issue 19, item 11: the reason names a contact scene as such (it uses the stops row)."""
+    _, reason = auto.choose_method(scene("grasp_cylinder"))
+    assert reason.startswith("contact scene (events of model.contact")
+    assert auto.choose_method(scene("paper_to_stop"))[1].startswith("stops scene (")

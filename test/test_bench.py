@@ -8,7 +8,9 @@ install it when not.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import io
 import json
 import math
 import os
@@ -60,9 +62,27 @@ except ImportError:
 def bench(tmp_path_factory):
     """(out folder, the measurements, the report's tables) of one --quick run."""
     out = tmp_path_factory.mktemp("bench")
-    measured = measure(quick=True, argv=["finger-sim", "bench", "--quick", "--out", str(out)])
+    progress = io.StringIO()  # not a terminal, as in CI
+    with contextlib.redirect_stderr(progress):
+        measured = measure(quick=True, argv=["finger-sim", "bench", "--quick", "--out", str(out)])
     tables = write_report(measured, out)
+    BENCH_STDERR.append(progress.getvalue())
     return out, measured, tables
+
+
+#: What the bench fixture's run wrote to its (non-terminal) stderr.
+BENCH_STDERR: list[str] = []
+
+
+def test_a_quick_run_keeps_the_committed_results_and_a_log_clean(bench):
+    """issue 19, item 7: `bench --quick` writes to out/bench_quick/ unless told (docs/ holds the full
+    grid's committed results), and draws no progress bar into a non-terminal stderr."""
+    from finger_sim.cli import bench_out, build_parser
+
+    assert bench_out(build_parser().parse_args(["bench", "--quick"])) == Path("out/bench_quick")
+    assert bench_out(build_parser().parse_args(["bench"])) == Path("docs")
+    assert bench_out(build_parser().parse_args(["bench", "--quick", "--out", "docs"])) == Path("docs")
+    assert BENCH_STDERR == [""]
 
 
 def finite(run: Run) -> bool:

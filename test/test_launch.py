@@ -254,3 +254,15 @@ def test_robot_description_with_a_frame_prefix_names_the_nodes_prefixed_joints(l
     assert links and all(name.startswith("index_") for name in links | set(joints))
     assert "index_finger_base" in links
     assert {name for name, kind in joints.items() if kind != "fixed"} == {f"index_{n}" for n in JOINT_NAMES}
+
+
+def test_package_xml_exec_depends_on_what_the_launch_file_uses():
+    """issue 19, item 11: every ROS package the launch file imports or starts a node from is an
+    exec_depend, so that rosdep installs it (read from the launch file's source, not listed here)."""
+    tree = ast.parse(LAUNCH.read_text())
+    imported = {node.module.split(".")[0] for node in ast.walk(tree) if isinstance(node, ast.ImportFrom) and node.module}
+    started = {kw.value.value for node in ast.walk(tree) if isinstance(node, ast.Call)
+               for kw in node.keywords if kw.arg == "package" and isinstance(kw.value, ast.Constant)}
+    assert {"launch", "launch_ros", "robot_state_publisher"} <= imported | started
+    depends = {e.text for e in ET.parse(ROOT / "package.xml").getroot().iter("exec_depend")}
+    assert (imported | started) - {"__future__"} <= depends

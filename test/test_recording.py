@@ -310,6 +310,7 @@ def test_round_trip_read_by_rosbags_and_mcap(launcher, ros_client, tmp_path):
     assert node.stop() == 0, output(node)
     out = output(node)
     assert "Traceback" not in out, out
+    assert "Failed to publish log message to rosout" not in out, out  # Ctrl-C is quiet (issue 19, item 11)
     path = the_log(bags)
     reported, n_written, n_dropped = written(out)
     assert (reported, n_dropped) == (path, 0)

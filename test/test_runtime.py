@@ -168,8 +168,9 @@ def test_node_settings_defaults_and_rules():
                                                                                   CommandQos.SYSTEM_DEFAULT, 1000)
     assert s.to_values()["torque_source"] == "topic" and set(s.to_values()) == {p.name for p in NODE_PARAMETERS}
     assert NodeSettings.from_values({"command_qos": "reliable"}).command_qos is CommandQos.RELIABLE
+    assert NodeSettings.from_values({"physics_rate_hz": 500}).physics_rate_hz == 500.0  # an int for a float (issue 19)
     bad = [
-        ({"physics_rate_hz": 500}, "parameter 'physics_rate_hz': expected type float, got 500 (a float parameter needs a decimal point"),
+        ({"physics_rate_hz": "500"}, "parameter 'physics_rate_hz': expected type float, got '500'"),
         ({"physics_rate_hz": -5.0}, "parameter 'physics_rate_hz': expected a value in [1, 100000], got -5.0"),
         ({"command_depth": 0}, "parameter 'command_depth': expected a value in [1, 100000], got 0"),
         ({"torque_source": "joystick"}, "parameter 'torque_source': expected one of ['topic', 'scene'], got 'joystick'"),

@@ -261,13 +261,49 @@ def test_bad_arguments_are_refused_by_name(call, key):
 
 
 # -- the installed copy and the ros2_control example -----------------------------------
-def test_the_installed_copy_is_the_generators_output_for_the_default_parameters():
-    assert INSTALLED.read_text() == finger_urdf(FingerParams())
+def test_the_installed_copy_is_the_generators_output_for_the_default_scene():
+    default = load_scene(ref.CONFIG / "finger_default.yaml")
+    assert default.params == FingerParams()
+    assert INSTALLED.read_text() == finger_urdf(FingerParams(), mcp_limits=default.mcp_limits)
+
+
+def limit(robot_xml: str, joint: str) -> tuple[float, float, float, float]:
+    element = ET.fromstring(robot_xml.split("\n", 1)[1]).find(f"joint[@name='{joint}']/limit")
+    return tuple(float(element.get(k)) for k in ("lower", "upper", "effort", "velocity"))
+
+
+def test_limits_are_the_scenes_stops_and_the_loops_ranges():
+    """issue 19, item 4: mcp_joint's limits are the scene's stops (θ1 − θ1_ext), not the toggles;
+    the passive joints' are the range the loop gives them over it (an independent sweep of the
+    closed-form assembly, spec §6's joint formulas written out here); placeholders are labelled."""
+    scene = load_scene(ref.CONFIG / "finger_default.yaml")
+    p = scene.params
+    text = finger_urdf(p, mcp_limits=scene.mcp_limits, mcp_effort=0.03)
+    ext = kinematics.extended_pose(p)
+    lower, upper, effort, _ = limit(text, "mcp_joint")
+    assert (lower, upper, effort) == (scene.mcp_limits[0] - ext[0], scene.mcp_limits[1] - ext[0], 0.03)
+    alpha = ext[0] - ext[2]
+    sweep = np.linspace(*scene.mcp_limits, 20_001)
+    poses = np.array([kinematics.assemble(p, t) for t in sweep])
+    coupler = poses[:, 1] - ext[1]  # θ2 − θ2_ext
+    pip = poses[:, 2] + alpha - poses[:, 0]  # β = ψ − θ1, ψ = θ3 + α
+    for joint, values in (("coupler_joint", coupler), ("pip_joint", pip)):
+        lo, hi, eff, _ = limit(text, joint)
+        assert eff == 0.0
+        assert lo <= values.min() + 1e-12 and hi >= values.max() - 1e-12, joint  # every pose inside
+        assert values.min() - lo < 1e-6 and hi - values.max() < 1e-6, joint  # and no wider than the sweep
+    assert text.count("is a placeholder: the model has no speed limit") == 3
+    assert "limits: the scene's MCP stops (joint_limits.mcp)" in text
+    # without stops: toggle to toggle, said so
+    lo, hi = kinematics.assembly_range(p)
+    assert limit(finger_urdf(p), "mcp_joint")[:2] == (lo - ext[0], hi - ext[0])
+    assert "the linkage's assembly range (toggle to toggle); no MCP stops" in finger_urdf(p)
 
 
 def test_cli_prints_the_urdf_of_a_scene(capsys):
     assert cli(["urdf", str(ref.CONFIG / "paper_flexion.yaml"), "--prefix", "thumb_"]) == 0
-    assert capsys.readouterr().out == finger_urdf(P, prefix="thumb_")
+    limits = load_scene(ref.CONFIG / "paper_flexion.yaml").mcp_limits
+    assert capsys.readouterr().out == finger_urdf(P, prefix="thumb_", mcp_limits=limits)
     assert cli(["urdf", str(ref.CONFIG / "paper_flexion.yaml"), "--prefix", "a b"]) == 2
     assert "prefix" in capsys.readouterr().err
 

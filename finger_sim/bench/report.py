@@ -49,11 +49,12 @@ def measure(*, quick: bool, argv: list[str]) -> Measurements:
     folder = config_dir()
     scenes = {name: load_scene(folder / f"{name}.yaml") for name in ALL_SCENES}
     refs: dict[str, Reference] = {}
-    for name in tqdm(ALL_SCENES, desc="references", file=sys.stderr, leave=False):
+    # disable=None: no bar unless stderr is a terminal (a CI log or a pipe gets no flood of updates)
+    for name in tqdm(ALL_SCENES, desc="references", file=sys.stderr, leave=False, disable=None):
         refs[name] = build_reference(scenes[name], quick=quick, spacing=SPACING)
     todo = tasks(scenes, refs, quick=quick)
     runs: list[Run] = []
-    with tqdm(total=len(todo), desc="bench", file=sys.stderr, unit="run") as bar:
+    with tqdm(total=len(todo), desc="bench", file=sys.stderr, unit="run", disable=None) as bar:
         for task in todo:
             bar.set_postfix_str(task.label, refresh=False)
             runs.append(task.call())

@@ -183,6 +183,10 @@ class LogReader:
             raise MissingMetadataError(self.path, name, self.metadata)
         return dict(self.metadata[name])
 
+    def channel_metadata(self, topic: str) -> list[dict[str, str]]:
+        """The metadata of each channel on `topic` (e.g. rosbag2's 'offered_qos_profiles'), in id order."""
+        return [dict(c.metadata) for _, c in sorted(self._channels.items()) if c.topic == topic]
+
     def require_topics(self, topics: Iterable[str]) -> None:
         """Raise MissingTopicsError unless every topic in `topics` is in the log."""
         missing = set(topics) - self.topics.keys()

@@ -40,6 +40,11 @@ command publisher on every finger. realtime_factor is not used.
 robot_description (std_msgs/String, transient local): the URDF of the node's scene
 (finger_sim.urdf), published once at start and logged, so Foxglove shows the finger from a log.
 
+/clock (best effort, keep last 1: rclcpp's ClockQoS) carries each published state's stamp and,
+while the run stands still (paused, finished, diverged), the last published one again about
+every IDLE_CLOCK_PERIOD_S of wall time, as simulators do: a use_sim_time client that joins
+then, or lost the last tick of a burst, still reads the time. The repeats are logged like any tick.
+
 /diagnostics (about 1 Hz of wall time, also while paused): runtime.diagnostics, one status per
 finger. A log that cannot be written shows ERROR, one that drops messages WARN, with the count
 lost; another /clock publisher (a second finger with publish_clock true) is warned about once
@@ -84,7 +89,7 @@ from finger_sim.ros import conversions, parameters
 from finger_sim.ros.finger import Finger
 from finger_sim.runtime.drive_commands import input_refusal
 from finger_sim.ros.interfaces import COMMAND_INPUTS, OUTPUTS, Endpoint, InputSpec, OutputSpec, command_qos, finger_topic
-from finger_sim.run_log import FINGER_SIM_METADATA, CommandEvent, log_time_offset_ns, run_metadata
+from finger_sim.run_log import FINGER_SIM_METADATA, NS_PER_S, CommandEvent, log_time_offset_ns, run_metadata, stamp_ns
 from finger_sim.runtime.diagnostics import Level, LogStatus, Snapshot
 from finger_sim.runtime.hand_config import FingerSpec
 from finger_sim.runtime.log_paths import UnwritableLog, create_log_file
@@ -105,6 +110,9 @@ IDLE_WAIT_S = 0.1
 DIAGNOSTICS_PERIOD_S = 1.0
 #: Characters of an rmw/rclpy error shown when the node cannot be created (it may echo the name).
 MAX_START_ERROR = 400
+#: Period of the repeated (unchanging) /clock while not running, wall s: a use_sim_time client
+#: that joins late, or lost the last tick of a burst (/clock is best effort), has the time within it.
+IDLE_CLOCK_PERIOD_S = 0.1
 #: Minimum wall time between two warnings about refused commands.
 WARN_THROTTLE_S = 1.0
 #: Wall time a service call waits for the stepping loop to run its job.
@@ -159,6 +167,7 @@ class SteppingNode(Node):
         self._marker_ratio = min(s.marker_rate_hz / s.physics_rate_hz, 1.0)
         self.pacer: Pacer | None = None
         self.recorder: McapRecorder | UnwritableLog | None = None  # opened at the end of __init__
+        self._clock_wall = 0.0  # perf_counter s of the last /clock published
         self._apply_settings(s)
         self._last_published = -1  # stamp of the last published state, ns
         self.steps_total = 0
@@ -273,8 +282,11 @@ class SteppingNode(Node):
         """Close the MCAP log with its summary and index; safe to call twice."""
         if self.recorder is not None:
             self.recorder.close()
-            self.get_logger().info(f"log {self.recorder.path}: {self.recorder.written} messages written, "
-                                   f"{self.recorder.dropped} dropped")
+            # after Ctrl-C the context is shut down: the node's logger would fail to reach /rosout
+            # ("Failed to publish log message to rosout"), a logger of another name writes to the console only
+            logger = self.get_logger() if self.context.ok() else rclpy.logging.get_logger(f"{self.get_name()}.exit")
+            logger.info(f"log {self.recorder.path}: {self.recorder.written} messages written, "
+                        f"{self.recorder.dropped} dropped")
 
     # -- life cycle (main thread) ----------------------------------------------------------
     def start(self) -> None:
@@ -334,6 +346,7 @@ class SteppingNode(Node):
                         self._take_changes()
                     if any(f.inbox for f in self.fingers):  # refusals are answered while paused; a valid command waits
                         self._take_commands()
+                    self._repeat_clock()
                     self._sleep(IDLE_WAIT_S)
                 elif self._lockstep:
                     self._lockstep_turn()
@@ -585,8 +598,12 @@ class SteppingNode(Node):
 
     def _where(self) -> str:
         """Machine-readable position in time: clock (s, /clock), time (s, the scene's), step, episode."""
-        return (f"clock={self.stamp_ns * 1e-9!r} time={self.sim.time!r} step={self.sim.step_index} "
+        return (f"clock={self.stamp_ns / NS_PER_S!r} time={self._episode_time()!r} step={self.sim.step_index} "
                 f"episode={self.timeline.episode}")
+
+    def _episode_time(self) -> float:
+        """The scene's time in this episode, s: step·dt rounded to the ns grid of the stamps (no float noise)."""
+        return stamp_ns(0, self.sim.step_index, self.dt) / NS_PER_S
 
     # -- output (stepping loop) --------------------------------------------------------------
     def _publish_state(self, *, force: bool = False) -> None:
@@ -600,10 +617,22 @@ class SteppingNode(Node):
                 self._awaited_since = time.perf_counter()
                 for f in self.fingers:
                     f.inbox.expect(stamp)
-            if self._clock_out is not None:
-                self._publish(self._clock_out, clock_cdr(stamp))
+            self._publish_clock(stamp)
         for f in self.fingers:
             f.publish_state(self._publish, stamp, states=states, markers=markers)
+
+    def _publish_clock(self, stamp: int) -> None:
+        """/clock at `stamp` ns (published and logged, as `ros2 bag record` would hold it)."""
+        if self._clock_out is not None:
+            self._publish(self._clock_out, clock_cdr(stamp))
+            self._clock_wall = time.perf_counter()
+
+    def _repeat_clock(self) -> None:
+        """While not running: the last tick again, every IDLE_CLOCK_PERIOD_S of wall time (a
+        best-effort tick can be lost, and sim time stands still until the next step). It is the
+        last published state's stamp, so that /clock only ever carries the states' sim times."""
+        if self._last_published >= 0 and time.perf_counter() - self._clock_wall >= IDLE_CLOCK_PERIOD_S:
+            self._publish_clock(self._last_published)
 
     def _publish(self, out: Endpoint, msg: Any) -> None:
         """Every outgoing message passes here, from the stepping thread, at sim time self.stamp_ns.
@@ -653,7 +682,7 @@ class SteppingNode(Node):
                 state=self.state.value, diverged=self.state is RunState.DIVERGED, scene=f.scene.name,
                 scene_file=str(f.spec.scene_path), method=f.sim.method, dt=self.dt,
                 dt_source=f"physics_rate_hz {s.physics_rate_hz:g} (scene file: {f.file_dt!r} s)",
-                torque_source=s.torque_source.value, clock_s=self.stamp_ns * 1e-9, time_s=sim.time, step=sim.step_index,
+                torque_source=s.torque_source.value, clock_s=self.stamp_ns / NS_PER_S, time_s=self._episode_time(), step=sim.step_index,
                 episode=self.timeline.episode, realtime_factor_target=s.realtime_factor, steps_total=self.steps_total,
                 run_wall_s=run_wall, max_residual_m=f.max_residual, torque=f.applied,
                 commands_received=f.inbox.received, log=log, clock_publishers=clocks,
@@ -678,7 +707,7 @@ class FingerNode(SteppingNode):
     def _description(self) -> str:
         f = self.fingers[0]
         return finger_urdf(f.scene.params, prefix=f.spec.frame_prefix, radii=f.scene.phalanx_radius,
-                           mcp_effort=self.settings.max_torque)
+                           mcp_effort=self.settings.max_torque, mcp_limits=f.scene.mcp_limits)
 
     def _log_name(self) -> str:
         return self.fingers[0].scene.name

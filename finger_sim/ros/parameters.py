@@ -1,12 +1,17 @@
-"""Declare a parameter table (finger_sim.runtime.parameters) on an rclpy node, once, with descriptors."""
+"""Declare a parameter table (finger_sim.runtime.parameters) on an rclpy node, once, with descriptors.
+
+An integer given for a float parameter (`physics_rate_hz:=1000`, `ros2 param set ... 2`) is
+taken as that float, as rclcpp's users expect; every other type mismatch is refused.
+"""
 
 from __future__ import annotations
 
 from typing import Any
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
-from rclpy.exceptions import ParameterException
+from rclpy.exceptions import InvalidParameterTypeException, ParameterException
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 
 from finger_sim.runtime.parameters import Param, ParameterError
 
@@ -28,10 +33,27 @@ def declare(node: Node, table: tuple[Param, ...]) -> dict[str, Any]:
     rclpy checks the type and range of an override against the descriptor; its refusal
     becomes a ParameterError naming the parameter.
     """
+    floats = {p.name for p in table if isinstance(p.default, float)}
+    node.add_pre_set_parameters_callback(lambda params: [_as_float(q) if q.name in floats else q for q in params])
     values = {}
     for p in table:
         try:
-            values[p.name] = node.declare_parameter(p.name, p.default, descriptor(p)).value
+            try:
+                values[p.name] = node.declare_parameter(p.name, p.default, descriptor(p)).value
+            except InvalidParameterTypeException:
+                # rclpy applies no pre-set callback to overrides: an int override is read here
+                override = node._parameter_overrides.get(p.name)  # noqa: SLF001 - no public accessor
+                if p.name not in floats or override is None or _as_float(override) is override:
+                    raise
+                values[p.name] = node.declare_parameter(p.name, float(override.value), descriptor(p),
+                                                        ignore_override=True).value
         except ParameterException as exc:  # a wrong type, or out of the descriptor's range
             raise ParameterError(p.name, str(exc).removesuffix(f": {p.name}")) from None
     return values
+
+
+def _as_float(param: Parameter) -> Parameter:
+    """An integer parameter as the same float; any other parameter unchanged."""
+    if param.type_ is Parameter.Type.INTEGER:
+        return Parameter(param.name, Parameter.Type.DOUBLE, float(param.value))
+    return param

@@ -34,9 +34,14 @@ reader); a truncated log is read in file order, which is recording order. A read
 decompresses chunks ahead of the player (ReadAhead), so that reading a chunk does not delay
 the messages due meanwhile. docs/replay_performance.md has measured figures.
 
-QoS: data topics reliable, volatile, keep-last QOS_DEPTH (bursts and slow subscribers are
-absorbed without blocking the player); /clock best effort, keep-last 1 (rclcpp's ClockQoS,
-what rosbag2's player and rclpy's TimeSource use).
+QoS: each topic is offered with the reliability and durability its publishers offered when
+recorded (the channel's `offered_qos_profiles`, finger_sim.log.qos), as `ros2 bag play` does:
+reliable if every recorded publisher was, else best effort; transient local (latched, e.g.
+robot_description, which RViz's RobotModel subscribes to transient local) if every one was,
+with the largest recorded depth, else volatile; a mix is warned about. Volatile data topics
+keep the last QOS_DEPTH (bursts and slow subscribers are absorbed without blocking the
+player); a topic recorded without QoS is reliable and volatile. /clock: best effort,
+keep-last 1 (rclcpp's ClockQoS, what rosbag2's player and rclpy's TimeSource use).
 
 Delivery: volatile topics reach only subscribers that are matched when a message goes out, so
 `--wait-for-subscribers S` holds the start until every publisher has one (or S passes), and
@@ -69,6 +74,7 @@ from types import FrameType
 from typing import Any
 
 import rclpy
+import yaml
 from mcap.records import Channel, Message, Schema
 from rclpy.duration import Duration
 from rclpy.node import Node
@@ -88,6 +94,7 @@ from finger_sim.log import (
     read_log,
 )
 from finger_sim.log.definitions import message_definition, normalize_type_name
+from finger_sim.log.qos import OFFERED_QOS_PROFILES
 
 PROG = "finger_replay"
 CLOCK_TOPIC = "/clock"
@@ -204,6 +211,48 @@ def plan_replay(
         origin_ns=reader.start_ns + round(start_offset_s * 1e9),
         message_count=count,
     )
+
+
+#: rmw's numbers for the policies, as Humble's rosbag2 writes them into offered_qos_profiles.
+_RMW_RELIABILITY = {1: "reliable", 2: "best_effort"}
+_RMW_DURABILITY = {1: "transient_local", 2: "volatile"}
+
+
+def recorded_qos(channels: Iterable[dict[str, str]], default: QoSProfile) -> tuple[QoSProfile, str]:
+    """The QoS to offer a topic with, from its channels' `offered_qos_profiles` (rosbag2's YAML),
+    and a description of mixed recorded policies ('' when they agree).
+
+    rosbag2's player rule: reliable only if every recorded publisher was, transient local only
+    if every one was (then with the largest recorded depth). Without a readable record: `default`.
+    """
+    offers = []
+    for metadata in channels:
+        try:
+            entries = yaml.safe_load(metadata.get(OFFERED_QOS_PROFILES, "") or "[]")
+        except yaml.YAMLError:
+            continue
+        for entry in entries if isinstance(entries, list) else ():
+            if isinstance(entry, dict):
+                offers.append((_policy_name(entry.get("reliability"), _RMW_RELIABILITY),
+                               _policy_name(entry.get("durability"), _RMW_DURABILITY), entry.get("depth")))
+    offers = [o for o in offers if o[0] in ("reliable", "best_effort") and o[1] in ("volatile", "transient_local")]
+    if not offers:
+        return default, ""
+    reliabilities, durabilities = {o[0] for o in offers}, {o[1] for o in offers}
+    mixed = [", ".join(sorted(p)) for p in (reliabilities, durabilities) if len(p) > 1]
+    latched = durabilities == {"transient_local"}
+    depths = [d for _, _, d in offers if isinstance(d, int) and d > 0]
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST,
+        depth=max(depths, default=1) if latched else default.depth,
+        reliability=ReliabilityPolicy.RELIABLE if reliabilities == {"reliable"} else ReliabilityPolicy.BEST_EFFORT,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
+    ), " and ".join(mixed)
+
+
+def _policy_name(value: Any, numbers: dict[int, str]) -> str:
+    """A policy as rmw's string ('reliable'), from Jazzy's string or Humble's number."""
+    return numbers.get(value, "") if isinstance(value, int) else str(value)
 
 
 def raw_messages(
@@ -378,12 +427,12 @@ class Player:
         warn: Callable[[str], None],
     ) -> None:
         self._reader, self._plan, self._rate, self._stop, self._warn = reader, plan, rate, stop, warn
-        self._publishers: dict[str, Publisher] = {
-            topic: node.create_publisher(
-                message_class(topic, type_name), topic, CLOCK_QOS if topic == CLOCK_TOPIC else DATA_QOS
-            )
-            for topic, type_name in plan.topics.items()
-        }
+        self._publishers: dict[str, Publisher] = {}
+        for topic, type_name in plan.topics.items():
+            qos, mix = recorded_qos(reader.channel_metadata(topic), CLOCK_QOS if topic == CLOCK_TOPIC else DATA_QOS)
+            if mix:
+                warn(f"{topic}: its recorded publishers offered {mix}; offering the policy every subscriber matches")
+            self._publishers[topic] = node.create_publisher(message_class(topic, type_name), topic, qos)
         self._clock_publisher: Publisher | None = None
         if plan.clock is ClockSource.GENERATED:
             self._clock_publisher = node.create_publisher(message_class(CLOCK_TOPIC, CLOCK_TYPE),

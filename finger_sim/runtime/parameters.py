@@ -2,8 +2,8 @@
 
 The table is the one source of truth: finger_sim.ros.parameters declares it with rclpy
 (descriptors carry the description, range and read-only flag, so `ros2 param describe`
-shows them), and `check()` validates values without ROS (types as ROS types them: a float
-parameter needs a decimal point; ranges inclusive; choices). Cross-parameter rules are in
+shows them), and `check()` validates values without ROS (types as ROS types them, except that
+an integer is taken for a float parameter, as 1000 for 1000.0; ranges inclusive; choices). Cross-parameter rules are in
 `RunSettings.from_values` (and its subclasses' `_rules`).
 
 Most parameters are read once at start (read-only). RUNTIME_PARAMETERS (max_torque,
@@ -28,8 +28,7 @@ class ParameterError(FingerSimError, ValueError):
 
     def __init__(self, name: str, problem: str) -> None:
         self.name = name
-        hint = " (a float parameter needs a decimal point, e.g. 500.0)" if "type" in problem.lower() else ""
-        super().__init__(f"parameter '{name}': {problem}{hint}")
+        super().__init__(f"parameter '{name}': {problem}")
 
     @classmethod
     def expected(cls, name: str, allowed: str, got: Any) -> ParameterError:
@@ -50,6 +49,8 @@ class Param:
     def check(self, value: Any) -> Value:
         """`value` if it has this parameter's type and lies in its range and choices, else ParameterError."""
         kind = type(self.default)
+        if kind is float and type(value) is int:  # physics_rate_hz:=1000 means 1000.0
+            value = float(value)
         if type(value) is not kind:
             raise ParameterError.expected(self.name, f"type {kind.__name__}", value)
         if self.range is not None and not self.range[0] <= value <= self.range[1]:
