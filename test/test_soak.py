@@ -62,13 +62,15 @@ def test_closed_loop_soak_holds_memory_and_real_time(launcher, ros_client, tmp_p
         windows.append((float(v["clock"]), float(v["realtime_factor"]), int(v["commands_received"])))
     out = tmp_path / "soak.csv"
     out.write_text("t_s,rss_mb\n" + "".join(f"{t:.1f},{m:.2f}\n" for t, m in samples))
+    (tmp_path / "soak_windows.csv").write_text("sim_t_s,window_rtf\n" + "".join(f"{c:.3f},{r:.4f}\n" for c, r, _ in windows))
     judged = [m for t, m in samples if t >= WARMUP_S]
     base = judged[0]
     late = [(c, r) for c, r, _ in windows if c >= WARMUP_S]
     worst = min(late, key=lambda w: w[1])
     print(f"\nsoak {SOAK_S:g} s: RSS {samples[0][1]:.1f} MB at start, {base:.1f} MB after warm-up, "
           f"{min(judged):.1f}..{max(judged):.1f} MB after it, {samples[-1][1]:.1f} MB at the end; "
-          f"worst window RTF {worst[1]:.4f} at sim t = {worst[0]:.0f} s; {len(late)} windows; "
+          f"worst window RTF {worst[1]:.4f} at sim t = {worst[0]:.0f} s; {len(late)} windows, "
+          f"{sum(r < MIN_WINDOW_RTF for _, r in late)} below {MIN_WINDOW_RTF}; "
           f"commands received {windows[-1][2]}; samples in {out}")
     assert max(abs(m - base) for m in judged) <= RSS_BAND_MB
     assert worst[1] >= MIN_WINDOW_RTF
