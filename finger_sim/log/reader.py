@@ -19,7 +19,7 @@ import io
 import os
 import struct
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, BinaryIO, NamedTuple
@@ -97,7 +97,6 @@ class Damage:
 
     error: CorruptLogError
     messages: int = 0
-    chunks: int = field(default=1)
 
 
 class LogReader:
