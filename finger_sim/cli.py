@@ -207,8 +207,8 @@ def _info(args: argparse.Namespace) -> int:
         lost = sum(d.messages for d in damage)
         print(f"Chunks:   {reader.chunk_count - len(damage)} of {reader.chunk_count} pass their CRC"
               + (f"; {len(damage)} DAMAGED, holding {lost} messages (`finger-sim repair` keeps the rest)" if damage else ""))
-        if _salvaged(reader, "info"):
-            return EXIT_DATA_LOST
+    if _salvaged(reader, "info"):  # also damage met while scanning a log without a summary
+        return EXIT_DATA_LOST
     return EXIT_TRUNCATED if reader.truncated else 0
 
 

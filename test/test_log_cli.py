@@ -293,8 +293,7 @@ def test_truncated_log_is_read_up_to_the_cut(node_log: NodeLog, tmp_path: Path, 
 
 @pytest.mark.parametrize("command", ["export", "resim"])
 def test_corrupt_chunk(node_log: NodeLog, tmp_path: Path, command: str) -> None:
-    """Bytes overwritten inside a chunk of a complete log. (`info` reads only the summary, like
-    `ros2 bag info` and `mcap info`: the damage shows when the messages are read.)"""
+    """Bytes overwritten inside a chunk of a complete log (`info` and `--salvage`: test_hostile_io)."""
     chunk = node_log.chunks[2]
     data = bytearray(node_log.path.read_bytes())
     middle = chunk.chunk_start_offset + chunk.chunk_length // 2

@@ -15,10 +15,11 @@ in the others only the wanted records are parsed.
 from __future__ import annotations
 
 import functools
+import io
 import os
 import struct
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, BinaryIO, NamedTuple
@@ -98,7 +99,6 @@ class Damage:
 
     error: CorruptLogError
     messages: int = 0
-    chunks: int = field(default=1)
 
 
 class LogReader:
@@ -257,8 +257,7 @@ class LogReader:
                 mcap = SeekingReader(file, validate_crcs=True, record_size_limit=self.size)
                 yield from mcap.iter_messages(topics=wanted, start_time=start_ns, log_time_order=True)
             except Exception as exc:  # mcap raises assorted types on damaged records
-                text = str(exc)
-                problem = f"{type(exc).__name__}: {text}" if text else repr(exc)
+                problem = _brief(exc)
                 raise CorruptLogError(self.path, None, f"cannot read a message ({problem})") from exc
 
     def _file_order(self, wanted: frozenset[str] | None, start_ns: int) -> Iterator[tuple[Schema | None, Channel, Message]]:
@@ -305,7 +304,7 @@ class LogReader:
             raise
         except Exception as exc:  # mcap's parser, decompressors and the CRC check raise assorted types
             raise CorruptLogError(
-                self.path, index.chunk_start_offset, f"chunk does not decompress or fails its CRC ({exc!r})"
+                self.path, index.chunk_start_offset, f"chunk does not decompress or fails its CRC ({_brief(exc)})"
             ) from exc
 
     def _scanned_file_order(self, wanted: frozenset[str] | None, start_ns: int) -> Iterator[tuple[Schema | None, Channel, Message]]:
@@ -364,7 +363,7 @@ class LogReader:
 
     def _open(self) -> BinaryIO:
         try:
-            return self.path.open("rb")
+            return _BoundedReader(io.FileIO(self.path, "rb"), self.size)
         except OSError as exc:
             raise LogFileError(self.path, f"cannot open ({exc.strerror or exc})") from exc
 
@@ -449,7 +448,7 @@ class LogReader:
                     if not self._complete and _runs_past_end(file, offset, self.size):
                         yield _Truncated(offset)
                         return
-                    damage = self._damaged(CorruptLogError(self.path, offset, f"malformed record ({exc!r})"), exc)
+                    damage = self._damaged(CorruptLogError(self.path, offset, f"malformed record ({_brief(exc)})"), exc)
                     yield damage
                     start = next((i.chunk_start_offset for i in self._chunk_indexes if i.chunk_start_offset > offset), None)
                     break
@@ -469,7 +468,7 @@ class LogReader:
                         contents = breakup_chunk(record, validate_crc=True)
                     except Exception as exc:  # decompressors and the CRC check raise assorted types
                         error = exc if isinstance(exc, CorruptLogError) else CorruptLogError(
-                            self.path, offset, f"chunk does not decompress or fails its CRC ({exc!r})")
+                            self.path, offset, f"chunk does not decompress or fails its CRC ({_brief(exc)})")
                         lost = self._damaged(error, exc)
                         yield lost
                         continue
@@ -536,7 +535,7 @@ class LogReader:
         try:
             decoder = DecoderFactory().decoder_for(channel.message_encoding, schema)
         except Exception as exc:  # the .msg parser raises assorted types on a bad schema
-            raise LogDecodeError(self.path, channel.topic, f"bad schema ({exc!r})") from exc
+            raise LogDecodeError(self.path, channel.topic, f"bad schema ({_brief(exc)})") from exc
         if decoder is None:
             encodings = f"message encoding {channel.message_encoding!r} with schema encoding "
             encodings += repr(schema.encoding if schema else "none")
@@ -547,7 +546,7 @@ class LogReader:
         try:
             return decoder(message.data)
         except Exception as exc:  # the CDR reader raises assorted types on bad data
-            problem = f"message at {message.log_time} ns: {exc!r}"
+            problem = f"message at {message.log_time} ns: {_brief(exc)}"
             raise LogDecodeError(self.path, channel.topic, problem) from exc
 
 
@@ -570,7 +569,7 @@ class _RosbagsDecoders:
         try:
             self._store.register(get_types_from_msg(schema.data.decode(), schema.name))
         except Exception as exc:  # rosbags' parser and type store raise assorted types on a bad schema
-            raise LogDecodeError(self._reader.path, channel.topic, f"bad schema ({exc!r})") from exc
+            raise LogDecodeError(self._reader.path, channel.topic, f"bad schema ({_brief(exc)})") from exc
         return functools.partial(self._store.deserialize_cdr, typename=schema.name)
 
 
@@ -600,6 +599,33 @@ def _chunk_messages(
                 yield target[0], target[1], message
     except (struct.error, ValueError) as exc:
         raise CorruptLogError(path, offset, f"chunk holds a malformed record ({exc})") from exc
+
+
+class _BoundedReader(io.BufferedReader):
+    """A log file whose reads never ask for more than the file holds: mcap's parsers read a length
+    field and then that many bytes, and CPython allocates a read's full size before it reads, so a
+    damaged string length (4 GB) would be allocated although the file is a few kB."""
+
+    def __init__(self, raw: io.FileIO, size: int) -> None:
+        super().__init__(raw)
+        self._size = size
+
+    def read(self, n: int | None = -1) -> bytes:
+        if n is not None and n > 0:
+            n = min(n, max(0, self._size - self.tell()))
+            if n == 0:
+                return b""
+        return super().read(n)
+
+
+#: Characters of a library's exception text put into an error message (it may hold a whole record).
+_MAX_CAUSE_CHARS = 200
+
+
+def _brief(exc: BaseException) -> str:
+    """repr() of an exception for a message, cut to _MAX_CAUSE_CHARS (a UnicodeDecodeError's repr holds its bytes)."""
+    text = repr(exc) if not isinstance(exc, UnicodeError) else f"{type(exc).__name__}({str(exc)!r})"
+    return text if len(text) <= _MAX_CAUSE_CHARS else text[:_MAX_CAUSE_CHARS] + "…"
 
 
 def read_log(path: str | os.PathLike[str], *, expected_topics: Iterable[str] = (), salvage: bool = False) -> LogReader:

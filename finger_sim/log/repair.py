@@ -110,9 +110,15 @@ def _source(log: Path) -> LogReader | None:
         return LogReader(log, salvage=True)
     except NotMcapError:
         with contextlib.suppress(OSError):
-            if log.is_file() and MCAP0_MAGIC.startswith(log.read_bytes()[:len(MCAP0_MAGIC) + 1]):
+            if log.is_file() and MCAP0_MAGIC.startswith(_head(log, len(MCAP0_MAGIC) + 1)):
                 return None
         raise
+
+
+def _head(path: Path, size: int) -> bytes:
+    """The first `size` bytes of a file (not the whole of it)."""
+    with path.open("rb") as f:
+        return f.read(size)
 
 
 def _empty(writer: Writer) -> tuple[tuple[int, int, int, int], None]:

@@ -438,6 +438,7 @@ class Player:
             self._clock_publisher = node.create_publisher(message_class(CLOCK_TOPIC, CLOCK_TYPE),
                                                           CLOCK_TOPIC, CLOCK_QOS)
         self._by_channel: dict[int, Publisher] = {}
+        self._node_types = node_topic_types()  # imported here, not at the first message: it would delay the pass
         self.stats = ReplayStats()
 
     @property
@@ -543,7 +544,7 @@ class Player:
         """The publisher of a channel met for the first time; warns if its definition differs."""
         publisher = self._publishers[channel.topic]
         self._by_channel[channel.id] = publisher
-        expected = next((t for name, t in node_topic_types().items() if f"/{channel.topic.lstrip('/')}".endswith(f"/{name}")),
+        expected = next((t for name, t in self._node_types.items() if f"/{channel.topic.lstrip('/')}".endswith(f"/{name}")),
                         None)
         recorded = schema.name if schema is not None else "(no schema)"
         if expected is not None and recorded != expected:  # republished as recorded, but not silently
