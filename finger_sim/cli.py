@@ -66,7 +66,8 @@ def _simulate(args: argparse.Namespace) -> int:
         from finger_sim.csv_columns import write_paper, write_ros
 
         if args.columns == "ros":
-            samples = ((t, tuple(q), tuple(v), scene.torque(t)) for t, q, v in zip(traj.t, traj.q, traj.v))
+            efforts = traj.outputs.get("mesh_torque", [scene.torque(t) for t in traj.t])  # with a drive: τ_g
+            samples = ((t, tuple(q), tuple(v), e) for t, q, v, e in zip(traj.t, traj.q, traj.v, efforts))
             write_ros(csv, scene.build_system(), samples, every=args.every, total=len(traj.t))
         else:
             write_paper(csv, traj, every=args.every)
