@@ -88,7 +88,8 @@ def _simulate(args: argparse.Namespace) -> int:
 
         with atomic_path(csv) as part:
             if args.columns == "ros":
-                samples = ((t, tuple(q), tuple(v), scene.torque(t)) for t, q, v in zip(traj.t, traj.q, traj.v))
+                efforts = traj.outputs.get("mesh_torque", [scene.torque(t) for t in traj.t])  # with a drive: τ_g
+                samples = ((t, tuple(q), tuple(v), e) for t, q, v, e in zip(traj.t, traj.q, traj.v, efforts))
                 write_ros(part, scene.build_system(), samples, every=args.every, total=len(traj.t))
             else:
                 write_paper(part, traj, every=args.every)

@@ -27,6 +27,7 @@ from typing import TextIO
 import numpy as np
 
 from finger_sim import kinematics
+from finger_sim.actuators import record
 from finger_sim.dynamics import FingerSystem
 from finger_sim.joints import joint_positions, joint_velocities, pip_stiffness
 from finger_sim.kernel import offline_kernel
@@ -149,26 +150,29 @@ def write_paper(path: str | Path, traj: Trajectory, *, every: int = 1, desc: str
 def write_simulated(path: str | Path, scene: Scene, *, columns: str, every: int = 1, kernel: str = "auto") -> Simulator:
     """Run `scene` and write its CSV as it steps (memory stays flat); returns the Simulator at the end.
 
-    ros: the torque column is the scene's profile τ(t) at each state's time.
+    ros: the torque column is the scene's profile τ(t) at each state's time (with a drive: the mesh
+    torque on link 1). A drive's outputs are taken as the run goes (`actuators.record`).
     """
     sim = Simulator(scene, kernel=offline_kernel(kernel, scene.step_count))
     system = sim.system
+    drive = scene.drive is not None
 
-    def states() -> Iterator[tuple[float, Vec3, Vec3]]:
+    def states() -> Iterator[tuple[float, Vec3, Vec3, list[float]]]:
         s = sim.state
-        yield s.t, s.q, s.v
+        yield s.t, s.q, s.v, record.outputs_now(sim) if drive else []
         for _ in range(scene.step_count):
             s = sim.step()
-            yield s.t, s.q, s.v
+            yield s.t, s.q, s.v, record.outputs_now(sim) if drive else []
 
     total, desc = scene.step_count + 1, f"simulate {scene.name}"
     if columns == "ros":
-        write_ros(path, system, ((t, q, v, scene.torque(t)) for t, q, v in states()), every=every,
-                  total=total, desc=desc)
+        effort = system.output_names().index("mesh_torque") if drive else None  # type: ignore[attr-defined]
+        write_ros(path, system, ((t, q, v, scene.torque(t) if effort is None else extra[effort])
+                                 for t, q, v, extra in states()), every=every, total=total, desc=desc)
         return sim
     p = scene.params
-    names = output_names(system.elements, sim.q)
-    rows = ((t, *q, *v, system.energy(q, v), kinematics.constraint_norm(p, q), *output_values(system.elements, t, q, v))
-            for t, q, v in states())
+    names = output_names(system.elements, sim.q) + (system.output_names() if drive else ())  # type: ignore[attr-defined]
+    rows = ((t, *q, *v, system.energy(q, v), kinematics.constraint_norm(p, q), *output_values(system.elements, t, q, v),
+             *extra) for t, q, v, extra in states())
     write_rows(path, Trajectory.csv_header(names), rows, every=every, total=total, desc=desc)
     return sim

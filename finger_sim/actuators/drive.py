@@ -192,6 +192,8 @@ class Drive:
         self.guard_cache: tuple | None = None
         #: the compiled model the Simulator steps with (None: the Python kernel)
         self.kernel_model = None
+        #: an `actuators.stepping.EnergyLedger` the steps add their energy integrals to, or None
+        self.ledger = None
 
     @property
     def mode(self) -> int:

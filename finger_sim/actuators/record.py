@@ -28,7 +28,7 @@ def steps(sim: Simulator, n: int, ledger: EnergyLedger | None = None) -> tuple[n
     """Step `sim` n times: the (n, 6) states and the (n, outputs) drive outputs after each step;
     with `ledger`, the steps' energy integrals are added to it."""
     system: DrivenSystem = sim.system  # type: ignore[assignment]
-    system.drive.ledger = ledger  # type: ignore[attr-defined]
+    system.drive.ledger = ledger
     xs = np.empty((n, 6))
     rows = np.empty((n, len(system.output_names())))
     try:
@@ -37,7 +37,7 @@ def steps(sim: Simulator, n: int, ledger: EnergyLedger | None = None) -> tuple[n
             xs[k] = (*state.q, *state.v)
             rows[k] = outputs_now(sim)
     finally:
-        system.drive.ledger = None  # type: ignore[attr-defined]
+        system.drive.ledger = None
     return xs, rows
 
 

@@ -80,7 +80,7 @@ class _Event(NamedTuple):
     guard: int
 
 
-_compiled_guards = None  # finger_sim.kernel.numerics.drive_guards, once a compiled Simulator starts
+_compiled_guards = None  # finger_sim.kernel.drive.drive_guards, once a compiled Simulator starts
 
 
 def drive_method(method: str, reason: str, auto: bool) -> tuple[str, str]:
@@ -101,7 +101,7 @@ def start(sim: Simulator) -> None:
     model = getattr(sim.integrator, "model", None)  # a compiled integrator's model: its guards are compiled
     system.drive.kernel_model, system.drive.guard_cache = model, None
     if model is not None:
-        from finger_sim.kernel.numerics import drive_guards as _compiled_guards
+        from finger_sim.kernel.drive import drive_guards as _compiled_guards
     u = sim.scene.torque(0.0)
     if sim.v[0] == 0.0:
         sim.v = _turn(system, 0.0, sim.q, u)
@@ -114,7 +114,7 @@ def advance(sim: Simulator, t0: float, t1: float, u_fn: TorqueFn) -> None:
     change, current-limit kink and gap event (stops, contact) on the way."""
     system: DrivenSystem = sim.system  # type: ignore[assignment]
     drive = system.drive
-    ledger: EnergyLedger | None = getattr(drive, "ledger", None)
+    ledger: EnergyLedger | None = drive.ledger
     t, q, v = t0, sim.q, sim.v
     for _ in range(MAX_EVENTS_PER_STEP):
         if drive.mode == STUCK:

@@ -60,10 +60,16 @@ class CompiledRungeKutta(Integrator):
             self.tableau = np.zeros((3, 0))
         #: the distinct stage nodes c: τ is evaluated at t + c·dt for each
         self.nodes = distinct_nodes(ref.C) if issubclass(ref, ExplicitRungeKutta) else (0.0,)
+        #: the compiled single step; with a drive (spec §8) the same step applying it (kernel.drive)
+        self._single_step = numerics.rk_step_tuple
+        if getattr(system, "drive", None) is not None:
+            from finger_sim.kernel.drive import driven_rk_step_tuple
+
+            self._single_step = driven_rk_step_tuple
         # Load the compiled step now (from numba's disk cache: ~0.3-1 s the first time in a
         # process), not inside the first paced step of the node.
-        numerics.rk_step_tuple(self.model, self.tableau, 0.0, WARM_UP_STATE, WARM_UP_STATE, 0.0,
-                               tuple(0.0 for _ in self.nodes))
+        self._single_step(self.model, self.tableau, 0.0, WARM_UP_STATE, WARM_UP_STATE, 0.0,
+                          tuple(0.0 for _ in self.nodes))
 
     def step_plan(self, dt: float) -> np.ndarray:
         """This method on this system at step dt as one array for `numerics.fast_step` and
@@ -82,7 +88,7 @@ class CompiledRungeKutta(Integrator):
 
     def step(self, t: float, q: Vec3, v: Vec3, dt: float, torque: TorqueFn) -> tuple[Vec3, Vec3]:
         taus = tuple([torque(t + c * dt) for c in self.nodes])
-        status, q1, v1 = numerics.rk_step_tuple(self.model, self.tableau, t, q, v, dt, taus)
+        status, q1, v1 = self._single_step(self.model, self.tableau, t, q, v, dt, taus)
         if status != numerics.OK:
             check_status(status, self.name, t, q)
         return q1, v1

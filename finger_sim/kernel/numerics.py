@@ -24,7 +24,6 @@ except ImportError:  # no numba: the same functions run as plain Python (slow, s
         return lambda function: function
 
 
-from finger_sim.actuators import drive as _drive
 from finger_sim.effects.contact import MIN_DISTANCE
 from finger_sim.inputs import BREAK_EPS, CONSTANT, RAMP, SINE, SQUARE, STEP
 from finger_sim.kernel.layout import (BREAKPOINT, CONTACT, DAMPING, GRAVITY, HEADER, NON_FINITE, NOT_CONVERGED, OK,
@@ -174,62 +173,8 @@ def generalized_force(m, t, q0, q1, q2, v0, v1, v2, tau):
     return f1, f2, f3
 
 
-#: The drive's law (spec §8), compiled from its one definition in finger_sim.actuators.drive.
-motor_current = njit(**JIT)(_drive.motor_current)
-unclamped_current = njit(**JIT)(_drive.unclamped_current)
-mesh_torque = njit(**JIT)(_drive.mesh_torque)
-linkage_inertia = njit(**JIT)(_drive.linkage_inertia)
-unique = njit(**JIT)(_drive.unique)
-DRIVE_BLOCK = _drive.KERNEL_BLOCK
-MESH_DRIVE, MESH_STUCK = _drive.DRIVE, _drive.STUCK
-
-
 @njit(**JIT)
 def accelerations(m, t, q0, q1, q2, v0, v1, v2, tau):
-    """q'' (rad/s²): `FingerSystem.accelerations`, or with a drive (the model ends in its block,
-    marked by NaN) `DrivenSystem.accelerations`, τ then the voltage command (V)."""
-    if math.isnan(m[m.shape[0] - 1]):
-        return _driven(m, m.shape[0] - DRIVE_BLOCK, t, q0, q1, q2, v0, v1, v2, tau)
-    return _linkage(m, t, q0, q1, q2, v0, v1, v2, tau)
-
-
-@njit(**JIT)
-def _driven(m, o, t, q0, q1, q2, v0, v1, v2, u):
-    """`DrivenSystem.mesh`'s q'' in the mode m[o]: zero when stuck, else the linkage under τ_g.
-    A flank that is not unique gives NaN (the Simulator's non-finite check stops the run)."""
-    if m[o] == MESH_STUCK:
-        return 0.0, 0.0, 0.0
-    return _linkage(m, t, q0, q1, q2, v0, v1, v2, _mesh_torque(m, o, t, q0, q1, q2, v0, v1, v2, u))
-
-
-@njit(**JIT)
-def _mesh_torque(m, o, t, q0, q1, q2, v0, v1, v2, u):
-    """τ_g (N·m) of the rolling mesh in the mode m[o] (`DrivenSystem.mesh`); NaN where not unique."""
-    ratio, rotor, k_t = m[o + 3], m[o + 4], m[o + 5]
-    i = motor_current(u, ratio * v0, m[o + 6], k_t, m[o + 7], m[o + 8])
-    a0 = _linkage(m, t, q0, q1, q2, v0, v1, v2, 0.0)[0]
-    m_eff = linkage_inertia(m[4], m[5], m[6], m[0], m[1], m[2], m[3], m[7], q0, q1, q2)
-    c = m[o + 1] if m[o] == MESH_DRIVE else m[o + 2]
-    reflected = ratio * ratio * rotor / m_eff
-    if not unique(c, reflected):
-        return math.nan
-    return mesh_torque(c, ratio, rotor, k_t, i, a0, 1.0 / m_eff)
-
-
-@njit(**JIT)
-def drive_guards(m, t, q0, q1, q2, v0, v1, v2, u, direction):
-    """(turn, flank, limit) of the rolling mesh: `actuators.stepping._guards`, compiled."""
-    o = m.shape[0] - DRIVE_BLOCK
-    limit = m[o + 8] - abs(unclamped_current(u, m[o + 3] * v0, m[o + 6], m[o + 5], m[o + 7]))
-    if m[o + 1] == 1.0 and m[o + 2] == 1.0:  # an ideal gear: no modes
-        return math.inf, math.inf, limit
-    tau_g = _mesh_torque(m, o, t, q0, q1, q2, v0, v1, v2, u)
-    s = direction
-    return s * v0, (s if m[o] == MESH_DRIVE else -s) * tau_g, limit
-
-
-@njit(**JIT)
-def _linkage(m, t, q0, q1, q2, v0, v1, v2, tau):
     """q'' (rad/s²) of the index-1 system: `FingerSystem.accelerations`, same Schur complement."""
     m11, m22, m33, cc, r1, r2, r3, alpha = m[0], m[1], m[2], m[3], m[4], m[5], m[6], m[7]
     s1, c1 = math.sin(q0), math.cos(q0)
