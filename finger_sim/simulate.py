@@ -104,7 +104,8 @@ class Simulator:
         #: the drive (spec §8) whose mesh modes this Simulator steps, or None (an ideal torque source)
         self._drive = getattr(self.system, "drive", None)
         if self._drive is not None:
-            method, self.method_reason = drive_stepping.drive_method(method, self.method_reason, scene.method == AUTO)
+            method, self.method_reason = drive_stepping.drive_method(method, self.method_reason, scene.method == AUTO,
+                                                                     self._stable_under_auto)
         if scene.method == AUTO:
             self._options = integrator_options(scene, method)
             if method != ERROR_CONTROLLED:  # its error control resolves the contact mode itself
@@ -209,6 +210,12 @@ class Simulator:
         return self.state
 
     # -- internals ---------------------------------------------------------------------
+    def _stable_under_auto(self, name: str) -> bool:
+        """Whether method `name` is stable on the scene's fastest mode at auto's (sub)step for it."""
+        cls = METHODS[name]
+        root = fastest_mode(self.system, mcp_range(self.scene))
+        return stable_at(cls, root, self.dt / contact_substeps(self.scene, cls.implicit), False)
+
     def _check_stability(self, cls: type[Integrator]) -> None:
         """StabilityError unless `cls` is stable on the scene's fastest mode at its (sub)step; a named
         method on a scene with contact must also resolve that mode (`stability.stable_at`). auto

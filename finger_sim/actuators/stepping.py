@@ -16,6 +16,8 @@ energy report (`EnergyLedger`) closes to the integrator's accuracy.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, NamedTuple
@@ -45,8 +47,9 @@ TURN, FLANK, LIMIT = 0, 1, 2
 #: Methods that cannot step a drive scene: rattle takes Q and M apart (not the mesh's accelerations),
 #: dop853 evaluates the compiled right-hand side, which has no drive yet.
 UNSUPPORTED_METHODS = ("rattle", "dop853")
-#: auto's choice on a drive scene when the table's is unsupported: explicit, as the table's usual pick.
-DRIVE_FALLBACK = "rk4"
+#: auto's choices on a drive scene when its own is unsupported, in order: explicit (the table's usual
+#: pick), then L-stable where the explicit one is unstable at the step (a stiff scene at a coarse dt).
+DRIVE_FALLBACKS = ("rk4", "radau")
 
 
 @dataclass
@@ -83,13 +86,15 @@ class _Event(NamedTuple):
 _compiled_guards = None  # finger_sim.kernel.drive.drive_guards, once a compiled Simulator starts
 
 
-def drive_method(method: str, reason: str, auto: bool) -> tuple[str, str]:
-    """(method, reason) for a drive scene: auto's choice, or DRIVE_FALLBACK where it cannot step the drive;
-    a named method that cannot is refused (ConfigError naming integrator.method)."""
+def drive_method(method: str, reason: str, auto: bool, stable: Callable[[str], bool]) -> tuple[str, str]:
+    """(method, reason) for a drive scene: auto's choice, or where it cannot step the drive the first of
+    DRIVE_FALLBACKS that is `stable` at the scene's step (auto's substeps included); a named method that
+    cannot is refused (ConfigError naming integrator.method)."""
     if method not in UNSUPPORTED_METHODS:
         return method, reason
     if auto:
-        return DRIVE_FALLBACK, f"{reason}; {method} cannot step the drive, {DRIVE_FALLBACK} instead"
+        fallback = next((m for m in DRIVE_FALLBACKS if stable(m)), DRIVE_FALLBACKS[-1])
+        return fallback, f"{reason}; {method} cannot step the drive, {fallback} instead"
     raise ConfigError("integrator.method", f"a method that steps the drive (not {', '.join(UNSUPPORTED_METHODS)})",
                       method)
 
