@@ -53,6 +53,9 @@ MCAP_ROS2, ROSBAGS = "mcap_ros2", "rosbags"  # message decoders
 DECODERS = (MCAP_ROS2, ROSBAGS)
 _INFO_VALUE_CHARS = 60  # metadata values longer than this (or multi-line) are summarised in info()
 
+#: Longest parser message quoted in a CorruptLogError (characters): the error stays one readable line.
+MAX_REASON = 200
+
 
 @dataclass(frozen=True)
 class TopicInfo:
@@ -372,7 +375,9 @@ class LogReader:
                 if not self._complete and _runs_past_end(file, offset, self.size):
                     yield _Truncated(offset)
                     return
-                raise CorruptLogError(self.path, offset, f"malformed record ({exc!r})") from exc
+                # str, not repr: a UnicodeDecodeError's repr holds the whole record (100 kB of metadata)
+                reason = f"{type(exc).__name__}: {exc}"
+                raise CorruptLogError(self.path, offset, f"malformed record ({reason[:MAX_REASON]})") from exc
             if isinstance(record, DataEnd):
                 if not self._complete:  # the data is whole, the summary or the closing magic is cut
                     yield _Truncated(file.tell())
