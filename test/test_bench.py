@@ -311,7 +311,7 @@ def test_contact_speed_table_times_auto_against_the_free_space_step():
     assert contact.ratio == pytest.approx(contact.us_per_step / by_scene[cr.FREE_SCENE].us_per_step)
     assert contact.spread[0] <= contact.us_per_step <= contact.spread[1]
     text = "\n".join(cr.render_speed(cr.ContactReport((), rows, 1, "cmd", measured_at(), 0.0)))
-    assert f"| grasp_impact | python | {contact.method} | {contact.substeps} |" in text
+    assert f"| grasp_impact | {contact.kernel} | {contact.method} | {contact.substeps} |" in text
 
 
 def test_contact_comparison_renders_every_run_against_the_reference(bench):
