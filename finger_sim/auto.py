@@ -14,13 +14,10 @@ Three steps, each stated in the reason `choose_method` returns (and logs):
    none is stable, FALLBACK (L-stable). The bench report calls the same `pick`.
 
 Contact (spec §7) adds a mode of 10²–10⁴ rad/s that exists only while a phalanx touches an
-object. Rather than an implicit method for the whole run, auto steps such a scene with the table's
-explicit choice and `contact_substeps` divides each step that is in contact (or closes a contact
-gap within it) into m equal substeps, m sized by the contact mode (CONTACT_SUBSTEP_MODE_DT):
-the Simulator already splits steps at contact onset and release, so the free flight keeps the
-plain step. Measured on grasp_impact and grasp_rigid at dt = 1 ms against a DOP853 solve at
-rtol 1e-12 restarted at the events (README "Grasping"): radau costs 10–30× the free step there,
-the substepped explicit step about 1–2×.
+object. Before issue 22 auto stepped such a scene with the table's explicit choice split into m
+substeps in contact (`contact_substeps`, still what `finger_sim.batch` asks); that missed the
+tolerance on scenes the table had not seen (up to 1.4e-4 rad), so contact now goes to the
+error-controlled path below.
 
 The promise (issue 22): `auto` delivers the scene's `integrator.tolerance` (AUTO_TARGET by default) on θ,
 checked per run rather than per table. The table's fixed-step method is kept only where the scene has no
