@@ -88,10 +88,13 @@ def rollout(scene: str | Path | Scene, *, control: Any = None, initial_state: An
     q = _output("q", q, nbatch, nstep)
     v = _output("v", v, nbatch, nstep)
     sims = [Simulator(s) for s in scenes]
-    for i in range(nbatch):
-        scene_i = scenes[rows_scene[i]]
-        q[i, 0], v[i, 0] = (scene_i.initial_state() if start_arr is None
-                            else _start(scene_i, float(start_arr[i, 0]), float(start_arr[i, 1]), i))
+    starts: dict[tuple[int, float, float], tuple[tuple[float, ...], tuple[float, ...]]] = {}
+    for i, j in enumerate(rows_scene.tolist()):
+        theta1, rate = (scenes[j].theta1, scenes[j].theta1_dot) if start_arr is None else start_arr[i].tolist()
+        start = starts.get((j, theta1, rate))
+        if start is None:  # assembled and checked once per distinct (scene, θ1, θ1')
+            start = starts[(j, theta1, rate)] = _start(scenes[j], theta1, rate, i)
+        q[i, 0], v[i, 0] = start
     held = control_arr is not None
     compiled = np.array([sims[j].fast_stepper is not None and (held or sims[j].fast_stepper.profile is not None)
                          for j in rows_scene.tolist()], dtype=bool)

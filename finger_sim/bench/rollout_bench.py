@@ -93,7 +93,7 @@ def main(argv: list[str] | None = None) -> None:
     steps = n * nstep
     print(f"# {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; nbatch {n}, {nstep} steps of {dt:g} s, "
           f"{args.threads} threads, medians of {args.repeats}; mujoco {mujoco.__version__}")
-    print("| path | CPU µs / finger-step | wall-free CPU s | max \\|θ − θ_ref\\| rad |")
+    print("| path | CPU µs / finger-step | CPU s | max \\|θ − θ_ref\\| rad |")
     print("|---|---:|---:|---:|")
     for name, samples in times.items():
         med = statistics.median(samples)
