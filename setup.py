@@ -21,7 +21,7 @@ setup(
     ],
     package_data={PACKAGE: ["py.typed", "data/*.json"]},
     python_requires=">=3.10",
-    install_requires=["numpy", "scipy", "pyyaml", "matplotlib", "tqdm", "mcap>=1.5", "mcap-ros2-support>=0.6", "rosbags>=0.10", "numba"],
+    install_requires=["numpy", "scipy", "pyyaml", "matplotlib", "tqdm", "mcap>=1.5", "mcap-ros2-support>=0.6", "rosbags>=0.10", "numba", "SALib"],
     extras_require={
         # ROS 2 Jazzy's Python stack from PyPI, for machines without a ROS install.
         "ros": [
@@ -34,7 +34,10 @@ setup(
             "ros-jazzy-diagnostic-msgs",
             "ros-jazzy-visualization-msgs",
         ],
-        "test": ["pytest", "pytest-timeout", "hypothesis", "rosbags", "yourdfpy", "colcon-common-extensions"],
+        "test": ["pytest", "pytest-timeout", "hypothesis", "rosbags", "yourdfpy", "colcon-common-extensions",
+                 "distributed", "pyarrow"],
+        # `finger-sim sweep --dask ADDRESS` and Parquet output
+        "cluster": ["distributed", "pyarrow"],
         "bench": ["mujoco"],
     },
     zip_safe=True,

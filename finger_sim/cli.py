@@ -211,7 +211,9 @@ def _sweep(args: argparse.Namespace) -> int:
 
     out = check_output_file(args.out, argument="--out")
     plot = check_plot_file(args.plot, argument="--plot") if args.plot else None
-    print(sweep(args.scene, args.vary, out, plot=plot, chunk=args.chunk, max_steps=args.max_steps or DEFAULT_MAX_SWEEP_STEPS))
+    parquet = check_output_file(args.parquet, argument="--parquet") if args.parquet else None
+    print(sweep(args.scene, args.vary, out, plot=plot, chunk=args.chunk, max_steps=args.max_steps or DEFAULT_MAX_SWEEP_STEPS,
+                dask=args.dask, parquet=parquet))
     return 0
 
 
@@ -318,6 +320,9 @@ def build_parser() -> argparse.ArgumentParser:
                             "are the whole sweep's); default 1/1")
     sweep.add_argument("--max-steps", type=_positive_int, metavar="N",
                        help="refuse a sweep of more than N finger-steps in all (default: 200,000,000)")
+    sweep.add_argument("--dask", metavar="ADDRESS", help="run the chunks on the Dask scheduler at ADDRESS "
+                       "(tcp://host:8786; workers need finger_sim installed, not the scene file)")
+    sweep.add_argument("--parquet", type=Path, help="write the rows as Parquet too (pyarrow)")
     sweep.set_defaults(func=_sweep)
 
     bench = sub.add_parser("bench", help="work-precision and hard-case report with peers, written to docs/")
