@@ -51,7 +51,8 @@ class RolloutResult:
     """Every row at every step, t = 0 included. t: (nstep + 1,) s; q, v: (nbatch, nstep + 1, 3)
     rad and rad/s; outputs: the force elements' outputs (as `Trajectory.outputs`, e.g.
     grip_force, N) name → (nbatch, nstep + 1), NaN for rows whose scene lacks that output;
-    methods: each row's method (auto resolved); compiled: (nbatch,) bool, stepped in the compiled loop."""
+    methods: each row's method (auto resolved); compiled: (nbatch,) bool, stepped in the compiled loop;
+    scenes: each row's scene (rows with the same params share one)."""
 
     t: np.ndarray
     q: np.ndarray
@@ -59,6 +60,7 @@ class RolloutResult:
     outputs: dict[str, np.ndarray]
     methods: tuple[str, ...]
     compiled: np.ndarray
+    scenes: tuple[Scene, ...]
 
 
 def rollout(scene: str | Path | Scene, *, control: Any = None, initial_state: Any = None,
@@ -103,8 +105,9 @@ def rollout(scene: str | Path | Scene, *, control: Any = None, initial_state: An
     for i in np.flatnonzero(~compiled).tolist():
         _run_stepped(sims[rows_scene[i]], q, v, i, 0, None if control_arr is None else control_arr[i])
     t = np.arange(nstep + 1) * dt  # k·dt, as Simulator.time
-    return RolloutResult(t, q, v, _outputs(sims, rows_scene, t, q, v), tuple(sims[j].method for j in rows_scene.tolist()),
-                         compiled)
+    rows = rows_scene.tolist()
+    return RolloutResult(t, q, v, _outputs(sims, rows_scene, t, q, v), tuple(sims[j].method for j in rows), compiled,
+                         tuple(scenes[j] for j in rows))
 
 
 def _array(name: str, value: Any, ndim: int) -> np.ndarray:
