@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 import re
+import textwrap
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -45,6 +46,9 @@ MAX_RUNS = 2**20
 QUANTILES = (0.01, 0.99)
 #: Fingertip paths drawn in the envelope plot (a random subset of the runs).
 PLOTTED_PATHS = 200
+#: The plotted paths' deviation from the nominal path is drawn this many times larger (tolerances
+#: of a tenth of a millimetre would not show on a path of centimetres).
+MAGNIFY = 20.0
 _DIST = re.compile(r"^\s*([A-Za-z0-9_.]+)\s*=\s*(normal|uniform)\s*\(\s*([^,()]+)\s*,\s*([^,()]+)\s*\)\s*$")
 #: SALib's names of the distributions; its "norm" bounds are (mean, sd), "unif" (low, high).
 SALIB_DISTS = {"normal": "norm", "uniform": "unif"}
@@ -88,9 +92,10 @@ class SampleResult:
     outputs: dict[str, np.ndarray]  # name → (runs,)
     sobol: dict[str, dict[str, np.ndarray]]  # output → {"S1", "S1_conf", "ST", "ST_conf"} each (D,)
     at: float  # s
+    t: np.ndarray  # (steps + 1,) s
     nominal_tip: np.ndarray  # (steps + 1, 2) m
-    tip_low: np.ndarray  # (steps + 1, 2) m: the per-step minimum of tip x and y over the runs
-    tip_high: np.ndarray  # (steps + 1, 2) m
+    deviation_max: np.ndarray  # (steps + 1,) m: the largest fingertip distance from the nominal one over the runs
+    deviation_rms: np.ndarray  # (steps + 1,) m: its root mean square over the runs
     tip_paths: np.ndarray  # (≤ PLOTTED_PATHS, steps + 1, 2) m
 
     @property
@@ -147,7 +152,7 @@ def run_sample(scene: str | Path | Scene, dists: Sequence[str | Dist], n: int, s
     nominal_tip = _tips(base, nominal.q[0])
     names = ["theta1", "theta2", "theta3", "tip_x", "tip_y", "tip_deviation", *nominal.outputs]
     outputs = {name: np.empty(len(draws)) for name in names}
-    low, high = nominal_tip.copy(), nominal_tip.copy()
+    dev_max, dev_sq = np.zeros(len(nominal_tip)), np.zeros(len(nominal_tip))
     rng = np.random.default_rng(seed)
     shown = set(rng.choice(len(draws), min(PLOTTED_PATHS, len(draws)), replace=False).tolist())
     paths = []
@@ -159,9 +164,10 @@ def run_sample(scene: str | Path | Scene, dists: Sequence[str | Dist], n: int, s
             i = lo + r
             outputs["theta1"][i], outputs["theta2"][i], outputs["theta3"][i] = res.q[r, index]
             outputs["tip_x"][i], outputs["tip_y"][i] = tip[index]
-            outputs["tip_deviation"][i] = float(np.hypot(*(tip - nominal_tip).T).max())
-            np.minimum(low, tip, out=low)
-            np.maximum(high, tip, out=high)
+            distance = np.hypot(*(tip - nominal_tip).T)
+            outputs["tip_deviation"][i] = float(distance.max())
+            np.maximum(dev_max, distance, out=dev_max)
+            dev_sq += distance**2
             if i in shown:
                 paths.append(tip)
         for name, values in res.outputs.items():
@@ -174,7 +180,8 @@ def run_sample(scene: str | Path | Scene, dists: Sequence[str | Dist], n: int, s
             continue
         s = sobol_analyze.analyze(problem(parsed), y, calc_second_order=False, seed=seed)
         sobol[name] = {k: np.asarray(s[k]) for k in ("S1", "S1_conf", "ST", "ST_conf")}
-    return SampleResult(keys, draws, outputs, sobol, t_at, nominal_tip, low, high, np.array(paths))
+    return SampleResult(keys, draws, outputs, sobol, t_at, nominal.t, nominal_tip, dev_max,
+                        np.sqrt(dev_sq / len(draws)), np.array(paths))
 
 
 def report(result: SampleResult, scene_name: str, n: int, seed: int) -> str:
@@ -195,28 +202,36 @@ def report(result: SampleResult, scene_name: str, n: int, seed: int) -> str:
 
 
 def plot_envelope(result: SampleResult, path: Path, title: str) -> None:
-    """The nominal fingertip path, the sampled paths and the band between their per-step extremes, mm."""
+    """The fingertip-path envelope: the sampled paths around the nominal one with their deviation
+    magnified MAGNIFY×; the distance from the nominal fingertip against time (largest and RMS over
+    the runs); and the histogram of each run's largest distance. mm."""
     from finger_sim.plots import plt
 
-    fig, (ax, ax_dev) = plt.subplots(1, 2, figsize=(11, 5))
+    fig, (ax, ax_t, ax_h) = plt.subplots(1, 3, figsize=(14, 4.8))
+    nominal = 1e3 * result.nominal_tip
     for tip in result.tip_paths:
-        ax.plot(1e3 * tip[:, 0], 1e3 * tip[:, 1], color="tab:blue", alpha=0.08, lw=0.8)
-    ax.plot(1e3 * result.nominal_tip[:, 0], 1e3 * result.nominal_tip[:, 1], color="k", lw=1.2, label="nominal")
-    ax.plot(1e3 * result.tip_low[:, 0], 1e3 * result.tip_low[:, 1], "--", color="tab:red", lw=0.8,
-            label="per-step min of x, y")
-    ax.plot(1e3 * result.tip_high[:, 0], 1e3 * result.tip_high[:, 1], ":", color="tab:red", lw=0.8,
-            label="per-step max of x, y")
+        shown = nominal + MAGNIFY * (1e3 * tip - nominal)
+        ax.plot(shown[:, 0], shown[:, 1], color="tab:blue", alpha=0.1, lw=0.8)
+    ax.plot(nominal[:, 0], nominal[:, 1], color="k", lw=1.2, label="nominal")
+    ax.plot([], [], color="tab:blue", label=f"{len(result.tip_paths)} sampled runs, deviation ×{MAGNIFY:g}")
     ax.set_aspect("equal")
     ax.set_xlabel("X (mm)")
     ax.set_ylabel("Y (mm)")
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=7, loc="lower left")
-    ax.set_title(title, fontsize=9)
-    dev = 1e3 * result.outputs["tip_deviation"]
-    ax_dev.hist(dev, bins=40, color="tab:blue")
-    ax_dev.set_xlabel("largest fingertip distance from the nominal path over the run (mm)")
-    ax_dev.set_ylabel("runs")
-    ax_dev.grid(True, alpha=0.3)
+    ax.set_title("fingertip paths", fontsize=9)
+    ax_t.plot(result.t, 1e3 * result.deviation_max, color="tab:red", label=f"largest of {len(result.draws)} runs")
+    ax_t.plot(result.t, 1e3 * result.deviation_rms, color="tab:blue", label="RMS over the runs")
+    ax_t.set_xlabel("t (s)")
+    ax_t.set_ylabel("fingertip distance from nominal (mm)")
+    ax_t.grid(True, alpha=0.3)
+    ax_t.legend(fontsize=7)
+    ax_t.set_title("envelope width against time", fontsize=9)
+    ax_h.hist(1e3 * result.outputs["tip_deviation"], bins=40, color="tab:blue")
+    ax_h.set_xlabel("each run's largest distance from the nominal path (mm)")
+    ax_h.set_ylabel("runs")
+    ax_h.grid(True, alpha=0.3)
+    fig.suptitle(title, fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
@@ -235,6 +250,6 @@ def sample(scene: Path, dists: Sequence[str], n: int, seed: int, *, at: float | 
 
         write_parquet(parquet, result.header, result.rows())
     if plot is not None:
-        plot_envelope(result, plot, f"{Path(scene).name}: fingertip paths of {len(result.draws)} runs "
-                                    f"({', '.join(str(d) for d in dists)})")
+        plot_envelope(result, plot, f"{Path(scene).name}: {len(result.draws)} runs (n = {n}, seed {seed}); "
+                                    + "; ".join(textwrap.shorten(str(d), 60) for d in dists))
     return report(result, Path(scene).name, n, seed)

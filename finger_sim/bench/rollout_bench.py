@@ -33,6 +33,8 @@ SCENE = Path(__file__).resolve().parents[2] / "config" / "paper_flexion.yaml"
 MUJOCO_INTEGRATOR = "RK4"
 #: The random controls' range, N·m: the paper's ramp spans 1-4 N·mm.
 CONTROL_RANGE = (0.0, 0.004)
+#: Rows of the warm-up call of each path.
+WARM_UP_ROWS = 16
 
 
 def _cpu(run):  # type: ignore[no-untyped-def]
@@ -67,19 +69,19 @@ def main(argv: list[str] | None = None) -> None:
     zeros = np.zeros((n, 2))
 
     cases = {
-        "finger_sim.rollout, paper run": lambda: rollout(scene, initial_state=zeros, nthread=args.threads),
-        "mujoco.rollout, paper run": lambda: mujoco.rollout.rollout(model, datas, mj_init, mj_ctrl),
-        "finger_sim.rollout, random control": lambda: rollout(scene, control=random_ctrl, nthread=args.threads),
-        "mujoco.rollout, random control": lambda: mujoco.rollout.rollout(model, datas, mj_init,
-                                                                        random_ctrl[:, :, None]),
+        "finger_sim.rollout, paper run": lambda k: rollout(scene, initial_state=zeros[:k], nthread=args.threads),
+        "mujoco.rollout, paper run": lambda k: mujoco.rollout.rollout(model, datas, mj_init[:k], mj_ctrl[:k]),
+        "finger_sim.rollout, random control": lambda k: rollout(scene, control=random_ctrl[:k], nthread=args.threads),
+        "mujoco.rollout, random control": lambda k: mujoco.rollout.rollout(model, datas, mj_init[:k],
+                                                                          random_ctrl[:k, :, None]),
     }
-    for run in cases.values():  # warm up: numba's cache load, MuJoCo's thread pool
-        run()
+    for run in cases.values():  # warm up on a few rows: numba's cache load, MuJoCo's thread pool
+        run(WARM_UP_ROWS)
     times: dict[str, list[float]] = {name: [] for name in cases}
     last: dict[str, object] = {}
     for _ in range(args.repeats):
         for name, run in cases.items():
-            cpu, last[name] = _cpu(run)
+            cpu, last[name] = _cpu(lambda: run(n))
             times[name].append(cpu)
 
     ref = solve(scene, method="DOP853", rtol=REFERENCE_RTOL).states(np.arange(nstep + 1) * dt)[:, :3]
