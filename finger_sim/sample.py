@@ -49,6 +49,8 @@ PLOTTED_PATHS = 200
 #: The plotted paths' deviation from the nominal path is drawn this many times larger (tolerances
 #: of a tenth of a millimetre would not show on a path of centimetres).
 MAGNIFY = 20.0
+#: Characters per line of the envelope plot's title.
+TITLE_WIDTH = 150
 _DIST = re.compile(r"^\s*([A-Za-z0-9_.]+)\s*=\s*(normal|uniform)\s*\(\s*([^,()]+)\s*,\s*([^,()]+)\s*\)\s*$")
 #: SALib's names of the distributions; its "norm" bounds are (mean, sd), "unif" (low, high).
 SALIB_DISTS = {"normal": "norm", "uniform": "unif"}
@@ -231,7 +233,7 @@ def plot_envelope(result: SampleResult, path: Path, title: str) -> None:
     ax_h.set_xlabel("each run's largest distance from the nominal path (mm)")
     ax_h.set_ylabel("runs")
     ax_h.grid(True, alpha=0.3)
-    fig.suptitle(title, fontsize=9)
+    fig.suptitle("\n".join(textwrap.wrap(title, TITLE_WIDTH)), fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
@@ -251,5 +253,5 @@ def sample(scene: Path, dists: Sequence[str], n: int, seed: int, *, at: float | 
         write_parquet(parquet, result.header, result.rows())
     if plot is not None:
         plot_envelope(result, plot, f"{Path(scene).name}: {len(result.draws)} runs (n = {n}, seed {seed}); "
-                                    + "; ".join(textwrap.shorten(str(d), 60) for d in dists))
+                                    + "; ".join(dists))
     return report(result, Path(scene).name, n, seed)
