@@ -11,6 +11,7 @@ $(STAMP): setup.py setup.cfg package.xml
 	test -x $(PY) || python3 -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e ".[ros,test,bench]"
+	$(PY) -m finger_sim.kernel.warm  # numba's cache, so that make run and the first runs do not compile
 	touch $(STAMP)
 
 # DDS stays on loopback, in a domain of its own (override: make run ROS_DOMAIN_ID=n).

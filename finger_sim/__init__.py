@@ -5,3 +5,13 @@ from ROS or MCAP; `finger_sim.ros` and `finger_sim.log` are adapters over it.
 """
 
 __version__ = "0.1.0"
+
+
+def __getattr__(name: str):  # type: ignore[no-untyped-def]
+    """`from finger_sim import rollout` (finger_sim.rollouts.rollout), imported on first use so
+    that `import finger_sim` stays light."""
+    if name == "rollout":
+        from finger_sim.rollouts import rollout
+
+        return rollout
+    raise AttributeError(f"module 'finger_sim' has no attribute {name!r}")

@@ -336,8 +336,22 @@ def _sweep(args: argparse.Namespace) -> int:
 
     out = check_output_file(args.out, argument="--out")
     plot = check_plot_file(args.plot, argument="--plot") if args.plot else None
-    check_distinct({"SCENE": args.scene}, {"--out": out, "--plot": plot})
-    print(sweep(args.scene, args.vary, out, plot=plot, chunk=args.chunk, max_steps=args.max_steps or DEFAULT_MAX_SWEEP_STEPS))
+    parquet = check_output_file(args.parquet, argument="--parquet") if args.parquet else None
+    check_distinct({"SCENE": args.scene}, {"--out": out, "--plot": plot, "--parquet": parquet})
+    print(sweep(args.scene, args.vary, out, plot=plot, chunk=args.chunk, max_steps=args.max_steps or DEFAULT_MAX_SWEEP_STEPS,
+                dask=args.dask, parquet=parquet))
+    return 0
+
+
+def _sample(args: argparse.Namespace) -> int:
+    """Paths are checked before the first run; refusals name the key or option."""
+    from finger_sim.sample import sample
+
+    out = check_output_file(args.out, argument="--out") if args.out else None
+    parquet = check_output_file(args.parquet, argument="--parquet") if args.parquet else None
+    plot = check_plot_file(args.plot, argument="--plot") if args.plot else None
+    check_distinct({"SCENE": args.scene}, {"--out": out, "--parquet": parquet, "--plot": plot})
+    print(sample(args.scene, args.dist, args.n, args.seed, at=args.at, out=out, parquet=parquet, plot=plot))
     return 0
 
 
@@ -489,6 +503,9 @@ def build_parser() -> argparse.ArgumentParser:
                             "are the whole sweep's); default 1/1")
     sweep.add_argument("--max-steps", type=_positive_int, metavar="N",
                        help="refuse a sweep of more than N finger-steps in all (default: 200,000,000)")
+    sweep.add_argument("--dask", metavar="ADDRESS", help="run the chunks on the Dask scheduler at ADDRESS "
+                       "(tcp://host:8786; workers need finger_sim installed, not the scene file)")
+    sweep.add_argument("--parquet", type=Path, help="write the rows as Parquet too (pyarrow)")
     sweep.set_defaults(func=_sweep)
 
     tasks = sub.add_parser("tasks", help="grade grip controllers on the grasp tasks (config/tasks/): "
@@ -505,6 +522,21 @@ def build_parser() -> argparse.ArgumentParser:
     tasks.add_argument("--out", type=Path, default=Path("out/tasks"), help="folder for report.md, metrics.json, figures")
     tasks.add_argument("--no-figures", action="store_true", help="skip the figures")
     tasks.set_defaults(func=_tasks)
+
+    sample = sub.add_parser("sample", help="Monte Carlo over toleranced scene values: the spread of the outputs and "
+                                           "their Sobol sensitivity indices (SALib)")
+    sample.add_argument("scene", type=Path, help="scene YAML file (see config/)")
+    sample.add_argument("--dist", action="append", required=True, metavar="KEY=normal(mean,sd)",
+                        help="a dotted scene key and its distribution, normal(mean,sd) or uniform(low,high), SI; "
+                             "repeat for more keys")
+    sample.add_argument("-n", type=_positive_int, required=True,
+                        help="base sample size, a power of two: n·(keys + 2) runs (Saltelli's design)")
+    sample.add_argument("--seed", type=int, default=0, help="seed of the draws (default 0): same seed, same runs")
+    sample.add_argument("--at", type=float, help="time of the θ, fingertip and grip outputs, s (default: the end)")
+    sample.add_argument("--out", type=Path, help="write one CSV row per run: the drawn values and the outputs")
+    sample.add_argument("--parquet", type=Path, help="the same rows as Parquet (pyarrow)")
+    sample.add_argument("--plot", type=Path, help="write the fingertip-path envelope (.png, .pdf, .svg, ...)")
+    sample.set_defaults(func=_sample)
 
     bench = sub.add_parser("bench", help="work-precision and hard-case report with peers, written to docs/")
     bench.add_argument("--quick", action="store_true", help="a reduced grid for CI (under two minutes)")

@@ -9,6 +9,7 @@ impact, a contact onset) are located inside the step and the step is split there
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Sequence
@@ -17,13 +18,12 @@ from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
-from scipy.optimize import brentq
 
 from finger_sim.actuators import stepping as drive_stepping
 from finger_sim.auto import ERROR_CONTROLLED, choose_method, contact_substeps, integrator_options, warn_unresolved_contact
 from finger_sim.depth_guard import DepthGuard
 from finger_sim.dynamics import FingerSystem
-from finger_sim.effects import ForceElement
+from finger_sim.effects import EFFECTS, Effect, ForceElement
 from finger_sim.errors import SimulationDiverged, StabilityError
 from finger_sim.inputs import BREAK_EPS, HELD_ARRAY, Profile
 from finger_sim.integrators import METHODS, Integrator, TorqueFn
@@ -89,53 +89,30 @@ class Simulator:
 
     def __init__(self, scene: Scene, *, kernel: str = "auto") -> None:
         """kernel: "auto" (compiled where numba and the scene allow), "compiled", "python", or a
-        kernel name recorded by an earlier run; `self.kernel` names the one that runs."""
+        kernel name recorded by an earlier run; `self.kernel` names the one that runs. The set-up
+        (system, method choice, stability check, compiled plan) is kept per scene (`_setup`)."""
         self.scene = scene
-        self.system = scene.build_system()
-        self.dt = scene.dt
-        self.method_reason = ""
-        method = scene.method
+        # the registered effects are part of the key: a plug-in registered later builds another system
+        effects = tuple(EFFECTS.values())
+        # a drive holds its mesh mode: each Simulator of a drive scene builds its own system
+        cached = _hashable(scene) and scene.drive is None
+        setup = _setup(scene, kernel, effects) if cached else _setup.__wrapped__(scene, kernel, effects)
+        self.system, self.dt, self.method, self.method_reason = setup.system, scene.dt, setup.method, setup.reason
         #: steps in contact (or closing a contact within the step) are split in this many (auto only)
-        self.substeps = 1
+        self.substeps = setup.substeps
         #: keyword options of the integrator (auto's error-controlled method: its tolerances)
-        self._options: dict[str, float] = {}
-        if method == AUTO:
-            method, self.method_reason = choose_method(scene)
+        self._options = setup.options
         #: the drive (spec §8) whose mesh modes this Simulator steps, or None (an ideal torque source)
         self._drive = getattr(self.system, "drive", None)
-        if self._drive is not None:
-            method, self.method_reason = drive_stepping.drive_method(method, self.method_reason, scene.method == AUTO,
-                                                                     self._stable_under_auto)
-        if scene.method == AUTO:
-            self._options = integrator_options(scene, method)
-            if method != ERROR_CONTROLLED:  # its error control resolves the contact mode itself
-                self.substeps = contact_substeps(scene, METHODS[method].implicit)
-        self._method_cls = METHODS[method]
-        self.method = method
-        self._check_stability(self._method_cls)
+        self._method_cls, self._integrator_cls, self.kernel = setup.method_cls, setup.integrator_cls, setup.kernel
         #: stops the run when a phalanx's axis enters an object (issue 22); empty without objects
-        self._depth_guard = DepthGuard(self.system.elements, scene.phalanx_radius)
-        if self._depth_guard and scene.method != AUTO and self._method_cls.implicit:
-            warn_unresolved_contact(scene, self._method_cls)
-        self._integrator_cls, self.kernel = select_kernel(self._method_cls, self.system, kernel)
-        q0, _ = scene.initial_state()
-        # every gap of every non-smooth element; empty on a smooth scene, which then pays nothing
-        self._gaps = tuple(
-            _Gap(e, i, e.impact(i)) for e in self.system.elements if not e.smooth for i in range(len(e.gaps(q0)))
-        )
-        self._kinks = tuple(gap for gap in self._gaps if gap.restitution is None) if self.substeps > 1 else ()
-        # the gaps grouped by element, in `_gaps` order: each element's gaps are evaluated once per state
-        self._gap_elements = tuple((e, tuple(g.index for g in self._gaps if g.element is e))
-                                   for e in dict.fromkeys(g.element for g in self._gaps))
+        self._depth_guard = setup.depth_guard
+        self._gaps, self._kinks, self._gap_elements = setup.gaps, setup.kinks, setup.gap_elements
         #: elements whose gaps move with time too (contact with a moving object): asked at (t, q)
         self._timed = frozenset(e for e, _ in self._gap_elements if getattr(e, "time_varying", False))
         self.reset()
         #: the lean compiled path of `step` (a compiled fixed-step method on a smooth scene), else None
-        self.fast_stepper = None
-        if hasattr(self.integrator, "step_plan") and not self._gaps and self._drive is None:
-            from finger_sim.kernel.integrators import FastStepper  # numba is loaded by now
-
-            self.fast_stepper = FastStepper(self.integrator, self.dt, scene.torque)
+        self.fast_stepper = setup.fast_stepper
 
     def reset(self) -> None:
         """Back to the scene's initial state at t = 0."""
@@ -210,23 +187,6 @@ class Simulator:
         return self.state
 
     # -- internals ---------------------------------------------------------------------
-    def _stable_under_auto(self, name: str) -> bool:
-        """Whether method `name` is stable on the scene's fastest mode at auto's (sub)step for it."""
-        cls = METHODS[name]
-        root = fastest_mode(self.system, mcp_range(self.scene))
-        return stable_at(cls, root, self.dt / contact_substeps(self.scene, cls.implicit), False)
-
-    def _check_stability(self, cls: type[Integrator]) -> None:
-        """StabilityError unless `cls` is stable on the scene's fastest mode at its (sub)step; a named
-        method on a scene with contact must also resolve that mode (`stability.stable_at`). auto
-        resolves the contact mode by its substeps (auto.CONTACT_SUBSTEP_MODE_DT)."""
-        root = fastest_mode(self.system, mcp_range(self.scene))
-        contact = self.scene.method != AUTO and has_contact(self.system, self.scene.initial_state()[0])
-        if not stable_at(cls, root, self.dt / self.substeps, contact):
-            raise StabilityError(cls.name, self.scene.name, self.dt, root, largest_stable_dt(cls, root, self.dt, contact),
-                                 f"a method with a bounded stability region must resolve the contact mode, |s|·dt ≤ {CONTACT_RESOLUTION:g}"
-                                 if contact and stable_at(cls, root, self.dt) else "")
-
     def _advance(self, t0: float, t1: float, torque: TorqueFn) -> None:
         """Integrate [t0, t1] under a smooth torque, splitting it at every event on the way."""
         if self._drive is not None:
@@ -420,7 +380,99 @@ class Simulator:
             return t
         if push(t1) > 0.0:
             return None
+        from scipy.optimize import brentq  # here: a release from a stop is rare, scipy.optimize costs ≈ 0.15 s to import
+
         return brentq(push, t, t1, xtol=RELEASE_TOLERANCE * (t1 - t), rtol=4 * np.finfo(float).eps)
+
+
+#: Scenes whose Simulator set-up is kept (`_setup`): a node's resets, a rollout's rows, a test's reruns.
+SETUP_CACHE_SIZE = 256
+
+
+class _Setup(NamedTuple):
+    """What a Simulator of one scene needs before its first step; immutable, shared by its Simulators."""
+
+    system: FingerSystem
+    method: str
+    reason: str
+    substeps: int
+    options: dict[str, float]
+    method_cls: type[Integrator]
+    integrator_cls: type[Integrator]
+    kernel: str
+    gaps: tuple[_Gap, ...]
+    kinks: tuple[_Gap, ...]
+    gap_elements: tuple[tuple[ForceElement, tuple[int, ...]], ...]
+    depth_guard: DepthGuard
+    fast_stepper: object  # kernel.integrators.FastStepper | None
+
+
+def _hashable(scene: Scene) -> bool:
+    try:
+        hash(scene)
+    except TypeError:
+        return False
+    return True
+
+
+@functools.lru_cache(maxsize=SETUP_CACHE_SIZE)
+def _setup(scene: Scene, kernel: str, effects: tuple[Effect, ...]) -> _Setup:
+    """The set-up of a Simulator of `scene` on `kernel`: method (auto resolved), stability check,
+    integrator class, the non-smooth elements' gaps and the compiled fast path. Kept per scene
+    (a frozen value) and registry of effects (`effects.EFFECTS`, what builds the system), so a
+    scene seen before costs a dictionary look-up."""
+    system = scene.build_system()
+    reason = ""
+    method = scene.method
+    substeps = 1
+    options: dict[str, float] = {}
+    if method == AUTO:
+        method, reason = choose_method(scene)
+    if getattr(system, "drive", None) is not None:
+        method, reason = drive_stepping.drive_method(method, reason, scene.method == AUTO,
+                                                     lambda name: _stable_under_auto(scene, system, name))
+    if scene.method == AUTO:
+        options = integrator_options(scene, method)
+        if method != ERROR_CONTROLLED:  # its error control resolves the contact mode itself
+            substeps = contact_substeps(scene, METHODS[method].implicit)
+    method_cls = METHODS[method]
+    _check_stability(scene, system, method_cls, substeps)
+    depth_guard = DepthGuard(system.elements, scene.phalanx_radius)
+    if depth_guard and scene.method != AUTO and method_cls.implicit:
+        warn_unresolved_contact(scene, method_cls)
+    integrator_cls, kernel_name = select_kernel(method_cls, system, kernel)
+    q0, _ = scene.initial_state()
+    # every gap of every non-smooth element; empty on a smooth scene, which then pays nothing
+    gaps = tuple(_Gap(e, i, e.impact(i)) for e in system.elements if not e.smooth for i in range(len(e.gaps(q0))))
+    kinks = tuple(gap for gap in gaps if gap.restitution is None) if substeps > 1 else ()
+    # the gaps grouped by element, in `gaps` order: each element's gaps are evaluated once per state
+    gap_elements = tuple((e, tuple(g.index for g in gaps if g.element is e))
+                         for e in dict.fromkeys(g.element for g in gaps))
+    fast_stepper = None
+    if hasattr(integrator_cls, "step_plan") and not gaps and getattr(system, "drive", None) is None:
+        from finger_sim.kernel.integrators import FastStepper  # numba is loaded by now
+
+        fast_stepper = FastStepper(integrator_cls(system), scene.dt, scene.torque)  # type: ignore[arg-type]
+    return _Setup(system, method, reason, substeps, options, method_cls, integrator_cls, kernel_name, gaps, kinks,
+                  gap_elements, depth_guard, fast_stepper)
+
+
+def _stable_under_auto(scene: Scene, system: FingerSystem, name: str) -> bool:
+    """Whether method `name` is stable on the scene's fastest mode at auto's (sub)step for it."""
+    cls = METHODS[name]
+    return stable_at(cls, fastest_mode(system, mcp_range(scene)), scene.dt / contact_substeps(scene, cls.implicit), False)
+
+
+def _check_stability(scene: Scene, system: FingerSystem, cls: type[Integrator], substeps: int) -> None:
+    """StabilityError unless `cls` is stable on the scene's fastest mode at its (sub)step; a named
+    method on a scene with contact must also resolve that mode (`stability.stable_at`). auto
+    resolves the contact mode by its substeps (auto.CONTACT_SUBSTEP_MODE_DT)."""
+    root = fastest_mode(system, mcp_range(scene))
+    contact = scene.method != AUTO and has_contact(system, scene.initial_state()[0])
+    if not stable_at(cls, root, scene.dt / substeps, contact):
+        raise StabilityError(cls.name, scene.name, scene.dt, root, largest_stable_dt(cls, root, scene.dt, contact),
+                             f"a method with a bounded stability region must resolve the contact mode, |s|·dt ≤ {CONTACT_RESOLUTION:g}"
+                             if contact and stable_at(cls, root, scene.dt) else "")
 
 
 def _predicted_crossing(ga: float, ra: float, gb: float, rb: float, h: float, closed: bool) -> float | None:

@@ -57,8 +57,36 @@ def mcp_range(scene: Scene) -> tuple[float, float]:
     return scene.mcp_limits or kinematics.assembly_range(scene.params)
 
 
+#: Fastest modes kept by model (`_mode_key`): the method choice and the stability check of one
+#: Simulator ask for the same one, and a sweep asks again for every run of the same finger.
+MODE_CACHE_SIZE = 4096
+_MODES: dict[tuple, complex] = {}
+
+
+def _mode_key(system: FingerSystem, theta1_range: tuple[float, float]) -> tuple | None:
+    """The system as numbers (parameters and the compiled kernel's flat model of its elements,
+    which is all its dynamics), and the range; None when an element has no flat form."""
+    from finger_sim.kernel.layout import model_array
+
+    model = model_array(system)
+    return None if model is None else (system.params, model.tobytes(), tuple(theta1_range))
+
+
 def fastest_mode(system: FingerSystem, theta1_range: tuple[float, float]) -> complex:
-    """The modal root of largest magnitude over poses θ1 in theta1_range (rad, e.g. `mcp_range`), 1/s."""
+    """The modal root of largest magnitude over poses θ1 in theta1_range (rad, e.g. `mcp_range`), 1/s.
+    Kept per model (`_mode_key`): the same finger asked again costs a look-up."""
+    key = _mode_key(system, theta1_range)
+    if key is not None and key in _MODES:
+        return _MODES[key]
+    root = _fastest_mode(system, theta1_range)
+    if key is not None:
+        if len(_MODES) >= MODE_CACHE_SIZE:
+            _MODES.pop(next(iter(_MODES)))  # the oldest
+        _MODES[key] = root
+    return root
+
+
+def _fastest_mode(system: FingerSystem, theta1_range: tuple[float, float]) -> complex:
     lo, hi = kinematics.assembly_range(system.params)
     lo, hi = max(theta1_range[0], lo + TOGGLE_MARGIN), min(theta1_range[1], hi - TOGGLE_MARGIN)
     worst = 0j

@@ -286,12 +286,15 @@ def plot_tips(scenes: Sequence[Scene], paths: Sequence, labels: Sequence[str], p
 
 
 def sweep(scene: Path, vary: Sequence[str], out: Path, *, plot: Path | None = None, chunk: str = "1/1",
-          max_steps: int = DEFAULT_MAX_SWEEP_STEPS) -> str:
+          max_steps: int = DEFAULT_MAX_SWEEP_STEPS, dask: str | None = None, parquet: Path | None = None) -> str:
     """The `finger-sim sweep` command: run a chunk, write its CSV (and plot); a one-line summary.
-    A progress bar (tqdm) is drawn on stderr when it is a terminal."""
+    A progress bar (tqdm) is drawn on stderr when it is a terminal. dask: a scheduler address,
+    the whole sweep's chunks run there (`finger_sim.cluster`); parquet: the rows as Parquet too."""
     index, count = parse_chunk(chunk)
     varies = [parse_vary(v) for v in vary]
     start, stop = chunk_range(combination_count(varies), index, count)
+    if dask is not None:
+        return _sweep_on_dask(scene, vary, out, dask, chunk=chunk, plot=plot, max_steps=max_steps, parquet=parquet)
     bar = Progress(stop - start)  # a bar on a terminal, a line per quarter otherwise
     try:
         result = run_chunk(scene, varies, index, count, max_steps=max_steps, record=plot is not None,
@@ -299,9 +302,30 @@ def sweep(scene: Path, vary: Sequence[str], out: Path, *, plot: Path | None = No
     finally:
         bar.close()
     write_rows(out, result.header, result.rows)
+    if parquet is not None:
+        from finger_sim.parquet_rows import write_parquet
+
+        write_parquet(parquet, result.header, result.rows)
     if plot is not None:
         labels = [", ".join(f"{v.key}={r[v.key]}" for v in varies) for r in result.rows]
         plot_tips(result.scenes, result.trajectories, labels, plot,
                   f"{Path(scene).name}: fingertip paths of {len(result.rows)} runs ({', '.join(v.key for v in varies)})")
     part = f" (chunk {index}/{count}: runs {start + 1}..{stop} of {combination_count(varies)})" if count > 1 else ""
     return f"{len(result.rows)} runs{part}; wrote {out}" + (f" and {plot}" if plot is not None else "")
+
+
+def _sweep_on_dask(scene: Path, vary: Sequence[str], out: Path, address: str, *, chunk: str, plot: Path | None,
+                   max_steps: int, parquet: Path | None) -> str:
+    """`finger-sim sweep … --dask ADDRESS`: every chunk on the cluster, the rows to CSV (and Parquet)."""
+    from finger_sim.cluster import sweep_on_dask
+    from finger_sim.parquet_rows import write_parquet
+
+    if chunk != "1/1":
+        raise ConfigError("--chunk", "1/1 with --dask (the cluster runs every chunk)", chunk)
+    if plot is not None:
+        raise ConfigError("--plot", "no --plot with --dask (a plot holds every run's angles in this process)", str(plot))
+    result = sweep_on_dask(scene, vary, address, max_steps=max_steps)
+    write_rows(out, result.header, result.rows)
+    if parquet is not None:
+        write_parquet(parquet, result.header, result.rows)
+    return f"{len(result.rows)} runs on the Dask cluster at {address}; wrote {out}" + (f" and {parquet}" if parquet else "")

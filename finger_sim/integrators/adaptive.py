@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 
-from scipy.integrate import solve_ivp
 
 from finger_sim.dynamics import FingerSystem
 from finger_sim.errors import SimulationDiverged
@@ -38,6 +37,8 @@ class AdaptiveReference(Integrator):
         self._h: float | None = None
 
     def step(self, t: float, q: Vec3, v: Vec3, dt: float, torque: TorqueFn) -> tuple[Vec3, Vec3]:
+        from scipy.integrate import solve_ivp  # here: importing scipy.integrate costs ≈ 0.3 s, only this method needs it
+
         rhs = self.system.rhs
         first = min(self._h, dt) if self._h and dt > 0.0 else None  # dt = 0: an event on the step end
         sol = solve_ivp(lambda s, y: rhs(s, y, torque), (t, t + dt), [*q, *v], method=self.method, rtol=self.rtol, atol=self.atol, first_step=first)

@@ -1,8 +1,8 @@
 """Side-by-side costs of the compiled and the Python path, against scipy and against MuJoCo.
 
-    python -m finger_sim.kernel.benchmark [SCENE.yaml]     # kernel table (docs/kernel.md)
-    python -m finger_sim.kernel.benchmark wp               # work-precision against scipy (docs/speed.md)
-    python -m finger_sim.kernel.benchmark e2e              # whole processes against MuJoCo (docs/speed.md)
+    python -m finger_sim.bench.kernel_bench [SCENE.yaml]     # kernel table (docs/kernel.md)
+    python -m finger_sim.bench.kernel_bench wp               # work-precision against scipy (docs/speed.md)
+    python -m finger_sim.bench.kernel_bench e2e              # whole processes against MuJoCo (docs/speed.md)
 
 Prints medians of REPEATS runs in one process (both paths interleaved, so machine load
 hits both alike): µs per step in `Simulator.step` and in `simulate`'s whole-run loop for the
@@ -151,7 +151,7 @@ def end_to_end(scene_path: Path, durations: tuple[float, ...] = (30.0, 300.0), r
     out = Path(tempfile.mkdtemp())
     commands = {
         "finger-sim simulate": lambda d, p: [cli, "simulate", str(scene_path), "--t-end", f"{d:g}", "--csv", str(p)],
-        "MuJoCo RK4 loop": lambda d, p: [sys.executable, "-m", "finger_sim.kernel.benchmark", "mujoco-csv",
+        "MuJoCo RK4 loop": lambda d, p: [sys.executable, "-m", "finger_sim.bench.kernel_bench", "mujoco-csv",
                                          str(scene_path), f"{d:g}", str(p)],
     }
     medians: dict[tuple[str, float], tuple[float, float]] = {}

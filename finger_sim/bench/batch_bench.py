@@ -1,6 +1,6 @@
 """The batch's cost against N, and against a Python loop over Simulator, side by side.
 
-    python -m finger_sim.batch.benchmark [--repeats 5] [--largest 10000]
+    python -m finger_sim.bench.batch_bench [--repeats 5] [--largest 10000]
 
 The scenes are the paper's run (config/paper_flexion.yaml, rk6 under auto) with the torque
 slope and the spring varied over a grid (N runs: the first N of 100 slopes × 100 springs).
