@@ -260,6 +260,26 @@ def choose_method(scene: Scene) -> tuple[str, str]:
     return ERROR_CONTROLLED, reason
 
 
+def fixed_step_method(scene: Scene) -> tuple[str, str]:
+    """(method, reason) for `method: auto` where ERROR_CONTROLLED cannot run (an element without a
+    compiled form, e.g. an object with its own contact law or motion): the table's cheapest method
+    that is stable at its step (dt, or dt/m in contact: `contact_substeps`). The run's tolerance is
+    not checked on this path, and the reason says so."""
+    root = fastest_mode(scene.build_system(), mcp_range(scene))
+    substeps = contact_substeps(scene)
+    kind, why = scene_kind(scene, root, substeps)
+    rows = RECOMMENDATION.get(kind, {})
+    label = "contact" if kind == "stops" and scene.objects else kind
+    note = f"{ERROR_CONTROLLED} needs a compiled form of every element, so the tolerance is not checked"
+    if not rows:
+        return FALLBACK, f"{label} scene ({why}); {note}; {FALLBACK}, stable at every dt"
+    rate, rate_text = table_rate(list(rows), scene.dt)
+    method, because = pick(rows[rate], root, scene.dt / substeps)
+    reason = f"{label} scene ({why}); {note}; at {rate_text} {because}"
+    LOG.info("method auto → %s: %s", method, reason)
+    return method, reason
+
+
 def realtime_note(scene: Scene, root: complex) -> str:
     """"" when ERROR_CONTROLLED is predicted to step `scene` in real time at 1/dt, else "; " and what it
     cannot do and what would: the internal steps per output step that its fastest mode `root` (1/s) forces

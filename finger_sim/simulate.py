@@ -20,7 +20,8 @@ from typing import NamedTuple
 import numpy as np
 
 from finger_sim.actuators import stepping as drive_stepping
-from finger_sim.auto import ERROR_CONTROLLED, choose_method, contact_substeps, integrator_options, warn_unresolved_contact
+from finger_sim.auto import (ERROR_CONTROLLED, choose_method, contact_substeps, fixed_step_method, integrator_options,
+                             warn_unresolved_contact)
 from finger_sim.depth_guard import DepthGuard
 from finger_sim.dynamics import FingerSystem
 from finger_sim.effects import EFFECTS, Effect, ForceElement
@@ -29,9 +30,9 @@ from finger_sim.inputs import BREAK_EPS, HELD_ARRAY, Profile
 from finger_sim.integrators import METHODS, Integrator, TorqueFn
 from finger_sim.kernel import offline_kernel
 from finger_sim.kernel import select as select_kernel
-from finger_sim.kernel.runner import advance
-from finger_sim.kernel.layout import BREAKPOINT
+from finger_sim.kernel.layout import BREAKPOINT, model_array
 from finger_sim.kernel.layout import OK as FAST_OK
+from finger_sim.kernel.runner import advance
 from finger_sim.kinematics import Vec3
 from finger_sim.scene import AUTO, Scene
 from finger_sim.stability import CONTACT_RESOLUTION, fastest_mode, has_contact, largest_stable_dt, mcp_range, stable_at
@@ -428,6 +429,8 @@ def _setup(scene: Scene, kernel: str, effects: tuple[Effect, ...]) -> _Setup:
     options: dict[str, float] = {}
     if method == AUTO:
         method, reason = choose_method(scene)
+        if method == ERROR_CONTROLLED and getattr(system, "drive", None) is None and model_array(system) is None:
+            method, reason = fixed_step_method(scene)
     if getattr(system, "drive", None) is not None:
         method, reason = drive_stepping.drive_method(method, reason, scene.method == AUTO,
                                                      lambda name: _stable_under_auto(scene, system, name))
