@@ -66,7 +66,7 @@ def test_metrics_edge_cases_by_hand():
     s2 = metrics.task_scores(t, f2, [(0.0, 1.0), (0.3, 0.5)], hold_after=0.1, crushed=False)
     assert s2["overshoot"] == pytest.approx(20.0, abs=1e-9)
     # electrical energy with a drive's outputs: ∫ u i dt of u = 2 V, i = t A over 0.5 s = 0.25 J
-    e = metrics.electrical_energy(t, {"voltage": np.full(6, 2.0), "motor_current": t})
+    e = metrics.electrical_energy(t, {"motor_voltage": np.full(6, 2.0), "motor_current": t})
     assert e == pytest.approx(0.25, abs=1e-12)
     assert metrics.judge({"hold_rms": math.nan}, {"hold_rms": 1.0}) == {"hold_rms": False}
 
