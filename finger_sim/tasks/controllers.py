@@ -7,11 +7,14 @@ period in s, params from the command line) and returns the controller: a callabl
 
 called every `sample_steps` steps with the sample time t (s), the grip-force setpoint (N) and
 the measured signals a real controller has (`MEASURED`, plus a drive's outputs when the scene
-has one); it returns the scene input it commands (torque N·m today, `controller.input`).
+has one); it returns the scene input it commands (torque N·m, or a drive scene's voltage V: the task's
+`controller.input`; a factory whose controllers command a voltage says so by `factory.input =
+"voltage"`, and a suite runs it on the tasks of that input only).
 
 Shipped factories: `grip_pi` (finger_sim.runtime.grip.GripController, the law of
-finger_grip_controller: close, hold by PI, open) and `grip_pi_aggressive` (the same law closing
-fast with high gains: it overshoots, for comparison).
+finger_grip_controller: close, hold by PI, open), `grip_pi_aggressive` (the same law closing
+fast with high gains: it overshoots, for comparison) and `grip_voltage` (a drive scene: PI on the
+grip force commanding voltage, then 0 V once settled: the self-locking gear holds).
 """
 
 from __future__ import annotations
@@ -121,3 +124,11 @@ def grip_voltage(sample_period: float, **params: float) -> Controller:
         return min(max(u, -p["max_voltage"]), p["max_voltage"])
 
     return control
+
+
+grip_voltage.input = "voltage"  # type: ignore[attr-defined]
+
+
+def commanded_input(factory: Factory) -> str:
+    """The scene input a factory's controllers command: its `input` attribute, else "torque"."""
+    return getattr(factory, "input", "torque")

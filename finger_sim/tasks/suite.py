@@ -26,14 +26,15 @@ from finger_sim.scene_paths import scene_dirs
 from finger_sim.scene_yaml import parse_scene_text
 from finger_sim.sweep import chunk_range, parse_chunk
 from finger_sim.tasks import report
-from finger_sim.tasks.controllers import Factory, load_factory
+from finger_sim.tasks.controllers import Factory, commanded_input, load_factory
 from finger_sim.tasks.ros_runner import run_ros_task
 from finger_sim.tasks.runner import TaskRun, run_task
 from finger_sim.tasks.schema import Task, load_task
 
 #: The controllers a suite runs when none is named: the shipped PI and its overshooting variant.
 DEFAULT_CONTROLLERS = ("grip_pi=finger_sim.tasks.controllers:grip_pi",
-                       "grip_pi_aggressive=finger_sim.tasks.controllers:grip_pi_aggressive")
+                       "grip_pi_aggressive=finger_sim.tasks.controllers:grip_pi_aggressive",
+                       "grip_voltage=finger_sim.tasks.controllers:grip_voltage")
 
 
 @dataclass(frozen=True)
@@ -104,7 +105,8 @@ def chunk_of(controllers: Sequence[ControllerSpec], chunk: str) -> list[Controll
 
 
 def run_suite(tasks: Sequence[Task], controllers: Sequence[ControllerSpec], workdir: Path | None = None) -> list[TaskRun]:
-    """Every task against every controller, task by task; a ROS controller's files (scene, logs,
+    """Every task against every controller that commands its input, task by task (a torque
+    controller skips a drive task, a voltage controller the others); a ROS controller's files (scene, logs,
     node output) go to `workdir`/ros/<task>_<label>/ (default: a temporary folder)."""
     runs = []
     with tempfile.TemporaryDirectory(prefix="finger_tasks_") as tmp:
@@ -112,8 +114,10 @@ def run_suite(tasks: Sequence[Task], controllers: Sequence[ControllerSpec], work
             for c in controllers:
                 if c.ros_executable is None:
                     assert c.factory is not None
+                    if commanded_input(c.factory) != task.input:
+                        continue
                     runs.append(run_task(task, c.factory, label=c.label, params=c.params))
-                else:
+                elif task.input == "torque":  # the ROS path drives a torque today
                     folder = (workdir or Path(tmp)) / "ros" / f"{task.name}_{safe_name(c.label)}"
                     runs.append(run_ros_task(task, c.ros_executable, folder, label=c.label, params=c.params))
     return runs
@@ -148,6 +152,9 @@ def summary_table(runs: Sequence[TaskRun]) -> str:
         by = {r.controller: r for r in runs if r.task == task}
         cells = []
         for c in labels:
+            if c not in by:
+                cells.append("—")  # the controller commands another input than the task's
+                continue
             r = by[c]
             failed = [k for k, ok in r.passed.items() if not ok]
             cells.append("pass" if r.ok else "FAIL (" + ", ".join(failed) + ")")
