@@ -145,7 +145,10 @@ def test_motor_work_balances_the_energy_of_a_lossless_run(tmp_path):
 def test_the_shipped_grip_controller_passes_the_suite():
     failed = {}
     for path in installed_tasks():
-        run = run_task(load_task(path), grip_pi, label="grip_pi")
+        task = load_task(path)
+        if task.input != "torque":  # the drive task: grip_voltage's (test_tasks_drive)
+            continue
+        run = run_task(task, grip_pi, label="grip_pi")
         if not run.ok:
             failed[run.task] = {k: run.scores[k] for k, ok in run.passed.items() if not ok}
     assert not failed
