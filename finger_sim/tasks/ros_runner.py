@@ -7,7 +7,8 @@ The runner starts, on the loopback interface and in the current ROS_DOMAIN_ID:
   `setpoint` parameter, `sample_period` = the scene's dt, the given parameters, and two remaps:
   its `grip_force` comes from the runner (`RELAY_TOPIC`), its `/clock` from nowhere (it then
   advances its law by `sample_period` per sample, as the offline path does);
-- itself, an rclpy node that relays grip_force sample k to the controller, and before it, at a
+- itself (first, then finger_node, then the controller once the node's grip_force is matched
+  with the runner: the node's first state waits for a controller), an rclpy node that relays grip_force sample k to the controller, and before it, at a
   setpoint change of the task, publishes the new setpoint on `grip_setpoint` and waits
   SETPOINT_LEAD wall seconds, so that the controller has it before the sample it answers.
 
@@ -115,13 +116,17 @@ def run_ros_task(task: Task, executable: str, workdir: Path, *, label: str = "",
     procs: list[tuple[subprocess.Popen, Path]] = []
     try:
         with _Relay(changes, n) as relay:
-            for cmd, name in ((controller_cmd, "controller"), (node_cmd, "finger_node")):
+            # finger_node first, and the controller only once the runner sees the node's grip_force:
+            # the node's first state waits for the controller, so the runner misses no sample
+            for cmd, name in ((node_cmd, "finger_node"), (controller_cmd, "controller")):
                 out = workdir / f"{name}.out"
                 with out.open("wb") as sink:
                     procs.append((subprocess.Popen(cmd, env=env, stdout=sink, stderr=subprocess.STDOUT,
                                                    start_new_session=True), out))
+                if name == "finger_node":
+                    relay.wait_for_node(START_TIMEOUT, procs)
             relay.wait(START_TIMEOUT + WALL_PER_SIM_SECOND * n * dt, procs)
-        for proc, out in reversed(procs):  # finger_node first: it closes its log
+        for proc, out in procs:  # finger_node first: it closes its log
             _stop(proc)
         status = procs[-1][0].returncode
         if status != 0:
@@ -188,7 +193,7 @@ class _Relay:
         qos = QoSProfile(depth=DEPTH)
         self._relay = self._node.create_publisher(Float64, RELAY_TOPIC, qos)
         self._setpoint = self._node.create_publisher(Float64, "grip_setpoint", qos)
-        self._node.create_subscription(Float64, "grip_force", self._on_force, qos)
+        self._force = self._node.create_subscription(Float64, "grip_force", self._on_force, qos)
         self._executor = SingleThreadedExecutor(context=self._context)
         self._executor.add_node(self._node)
         self._thread = threading.Thread(target=self._spin, daemon=True)
@@ -225,13 +230,25 @@ class _Relay:
         if k >= self._last:
             self._done.set()
 
+    def wait_for_node(self, timeout: float, procs: list[tuple[subprocess.Popen, Path]]) -> None:
+        """Until the runner's grip_force subscription is matched with finger_node's publisher."""
+        deadline = time.monotonic() + timeout
+        while self._force.get_publisher_count() == 0:
+            self._check(procs)
+            if time.monotonic() > deadline:
+                raise FingerSimError(f"finger_node's grip_force did not reach the task runner within {timeout:g} s")
+            time.sleep(0.05)
+
+    def _check(self, procs: list[tuple[subprocess.Popen, Path]]) -> None:
+        for proc, out in procs:
+            if proc.poll() is not None:
+                raise FingerSimError(f"{out.stem} exited with status {proc.returncode} during the task; see {out}")
+
     def wait(self, timeout: float, procs: list[tuple[subprocess.Popen, Path]]) -> None:
         """Until state `last` was relayed; FingerSimError if a node exits or the time runs out."""
         deadline = time.monotonic() + timeout
         while not self._done.wait(0.1):
-            for proc, out in procs:
-                if proc.poll() is not None:
-                    raise FingerSimError(f"{out.stem} exited with status {proc.returncode} during the task; see {out}")
+            self._check(procs)
             if time.monotonic() > deadline:
                 raise FingerSimError(f"the ROS task run did not reach its last step within {timeout:g} s "
                                      f"({self._count} samples relayed)")
