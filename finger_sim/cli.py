@@ -135,7 +135,8 @@ def _tasks(args: argparse.Namespace) -> int:
     from finger_sim.tasks.suite import chunk_of, installed_tasks, parse_controllers, run_suite, summary_table, write_report
 
     tasks = [load_task(p) for p in (args.task or installed_tasks())]
-    runs = run_suite(tasks, chunk_of(parse_controllers(args.controller, args.param, args.vary), args.chunk))
+    controllers = parse_controllers(args.controller, args.param, args.vary, args.ros_controller)
+    runs = run_suite(tasks, chunk_of(controllers, args.chunk), args.out)
     command = "finger-sim tasks " + " ".join(sys.argv[2:]) if sys.argv[1:2] == ["tasks"] else ""
     path = write_report(runs, tasks, args.out, figures=not args.no_figures, command=command.strip())
     print(summary_table(runs))
@@ -513,6 +514,9 @@ def build_parser() -> argparse.ArgumentParser:
     tasks.add_argument("task", nargs="*", type=Path, help="task YAML files (default: the installed suite)")
     tasks.add_argument("--controller", action="append", default=[], metavar="LABEL=module:callable",
                        help="a controller factory (repeat; default: the shipped grip_pi and grip_pi_aggressive)")
+    tasks.add_argument("--ros-controller", action="append", default=[], metavar="LABEL=EXECUTABLE",
+                       help="a ROS 2 controller node (e.g. finger_grip_controller) run through finger_node in lockstep "
+                            "on ROS_DOMAIN_ID, loopback only (repeatable)")
     tasks.add_argument("--param", action="append", default=[], metavar="LABEL.key=value",
                        help="a keyword argument of a controller's factory, e.g. grip_pi.kp=0.01")
     tasks.add_argument("--vary", action="append", default=[], metavar="key=v1,v2,...",

@@ -66,7 +66,7 @@ def test_metrics_edge_cases_by_hand():
     s2 = metrics.task_scores(t, f2, [(0.0, 1.0), (0.3, 0.5)], hold_after=0.1, crushed=False)
     assert s2["overshoot"] == pytest.approx(20.0, abs=1e-9)
     # electrical energy with a drive's outputs: ∫ u i dt of u = 2 V, i = t A over 0.5 s = 0.25 J
-    e = metrics.electrical_energy(t, {"voltage": np.full(6, 2.0), "motor_current": t})
+    e = metrics.electrical_energy(t, {"motor_voltage": np.full(6, 2.0), "motor_current": t})
     assert e == pytest.approx(0.25, abs=1e-12)
     assert metrics.judge({"hold_rms": math.nan}, {"hold_rms": 1.0}) == {"hold_rms": False}
 
@@ -145,7 +145,10 @@ def test_motor_work_balances_the_energy_of_a_lossless_run(tmp_path):
 def test_the_shipped_grip_controller_passes_the_suite():
     failed = {}
     for path in installed_tasks():
-        run = run_task(load_task(path), grip_pi, label="grip_pi")
+        task = load_task(path)
+        if task.input != "torque":  # the drive task: grip_voltage's (test_tasks_drive)
+            continue
+        run = run_task(task, grip_pi, label="grip_pi")
         if not run.ok:
             failed[run.task] = {k: run.scores[k] for k, ok in run.passed.items() if not ok}
     assert not failed

@@ -7,11 +7,14 @@ period in s, params from the command line) and returns the controller: a callabl
 
 called every `sample_steps` steps with the sample time t (s), the grip-force setpoint (N) and
 the measured signals a real controller has (`MEASURED`, plus a drive's outputs when the scene
-has one); it returns the scene input it commands (torque N·m today, `controller.input`).
+has one); it returns the scene input it commands (torque N·m, or a drive scene's voltage V: the task's
+`controller.input`; a factory whose controllers command a voltage says so by `factory.input =
+"voltage"`, and a suite runs it on the tasks of that input only).
 
 Shipped factories: `grip_pi` (finger_sim.runtime.grip.GripController, the law of
-finger_grip_controller: close, hold by PI, open) and `grip_pi_aggressive` (the same law closing
-fast with high gains: it overshoots, for comparison).
+finger_grip_controller: close, hold by PI, open), `grip_pi_aggressive` (the same law closing
+fast with high gains: it overshoots, for comparison) and `grip_voltage` (a drive scene: PI on the
+grip force commanding voltage, then 0 V once settled: the self-locking gear holds).
 """
 
 from __future__ import annotations
@@ -76,3 +79,56 @@ def grip_pi(sample_period: float, **params: float) -> Controller:
 def grip_pi_aggressive(sample_period: float, **params: float) -> Controller:
     """grip_pi with AGGRESSIVE settings (params override them)."""
     return grip_pi(sample_period, **{**AGGRESSIVE, **params})
+
+
+#: grip_voltage defaults: closing voltage (V; ≈ 1.85 N at stall on the cup with the default drive),
+#: PI gains on the grip-force error (V/N, V/(N·s)), voltage limit (V, the default drive's supply),
+#: the band (fraction of the setpoint) and time (s) in it after which the voltage goes off, the
+#: contact threshold (N) and the opening voltage (V) and time (s) on a setpoint of 0.
+GRIP_VOLTAGE = {"closing_voltage": 2.0, "kp": 1.0, "ki": 20.0, "max_voltage": 6.0, "lock_band": 0.05,
+                "lock_after": 0.05, "contact_threshold": 0.01, "opening_voltage": 2.0, "opening_time": 0.2}
+
+
+def grip_voltage(sample_period: float, **params: float) -> Controller:
+    """A grip controller for a self-locking drive, commanding the motor voltage (V): with a setpoint
+    F* > 0 it applies `closing_voltage` until contact (grip_force > contact_threshold), then
+    u = closing_voltage + kp·e + ki·∫e dt on e = F* − grip_force, |u| ≤ max_voltage; once |e| has
+    stayed within lock_band·F* for lock_after s it switches the voltage off (0 V, for good until
+    the setpoint changes): the self-locking gear holds the grip without power. A setpoint of 0
+    opens: −opening_voltage for opening_time s, then 0 V. params: GRIP_VOLTAGE overrides."""
+    unknown = set(params) - set(GRIP_VOLTAGE)
+    if unknown:
+        raise ConfigError("controller parameter", f"one of {sorted(GRIP_VOLTAGE)}", sorted(unknown))
+    p = {**GRIP_VOLTAGE, **params}
+    state = {"setpoint": 0.0, "integral": 0.0, "in_band": 0.0, "locked": False, "since": 0.0, "touched": False}
+
+    def control(t: float, setpoint: float, measured: Mapping[str, float]) -> float:
+        if setpoint != state["setpoint"]:
+            state.update(setpoint=setpoint, integral=0.0, in_band=0.0, locked=False, since=t)
+        force = measured["grip_force"]
+        if setpoint == 0.0:
+            return -p["opening_voltage"] if t - state["since"] < p["opening_time"] and t > 0.0 else 0.0
+        if state["locked"]:
+            return 0.0
+        if not state["touched"]:
+            state["touched"] = force > p["contact_threshold"]
+            if not state["touched"]:
+                return p["closing_voltage"]
+        error = setpoint - force
+        state["integral"] += error * sample_period
+        state["in_band"] = state["in_band"] + sample_period if abs(error) <= p["lock_band"] * setpoint else 0.0
+        if state["in_band"] >= p["lock_after"]:
+            state["locked"] = True
+            return 0.0
+        u = p["closing_voltage"] + p["kp"] * error + p["ki"] * state["integral"]
+        return min(max(u, -p["max_voltage"]), p["max_voltage"])
+
+    return control
+
+
+grip_voltage.input = "voltage"  # type: ignore[attr-defined]
+
+
+def commanded_input(factory: Factory) -> str:
+    """The scene input a factory's controllers command: its `input` attribute, else "torque"."""
+    return getattr(factory, "input", "torque")

@@ -24,7 +24,7 @@ overshoot, hold_rms, release_time; contact_lost if any), plus peak_force (N, max
 crushed (an object's normal force exceeded its break_force: `finger_sim.grasp_objects`),
 motor_work (J, the net work of the commanded torque on the MCP joint, Σ τ_k (θ1,k+1 − θ1,k):
 exact for a torque held over each step; None when the command is not a torque), and
-electrical_energy (J, ∫ u·i dt by the trapezoid rule, when the run has the `voltage` and
+electrical_energy (J, ∫ u·i dt by the trapezoid rule, when the run has the `motor_voltage` and
 `motor_current` outputs of a drive; None otherwise).
 """
 
@@ -52,7 +52,7 @@ METRICS: dict[str, tuple[str, str]] = {
 }
 BOOLEAN_METRICS = frozenset({"crushed", "contact_lost"})
 #: The drive outputs electrical_energy integrates (a scene with a DC-motor drive reports them).
-VOLTAGE, CURRENT = "voltage", "motor_current"
+VOLTAGE, CURRENT = "motor_voltage", "motor_current"
 
 Scores = dict[str, "float | bool | None"]
 

@@ -79,17 +79,22 @@ def figure(runs: Sequence[TaskRun], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(3, 1, sharex=True, figsize=(7.5, 6.5))
+    driven = "motor_current" in runs[0].samples  # a drive task: the command is a voltage; draw the current
+    fig, axes = plt.subplots(4 if driven else 3, 1, sharex=True, figsize=(7.5, 8.0 if driven else 6.5))
     for i, r in enumerate(runs):
         s, z = r.samples, len(runs) - i  # the first controller drawn on top
         axes[0].plot(s["t"], s["grip_force"], label=r.controller, zorder=z)
         axes[1].plot(s["t"], [math.degrees(x) for x in s["theta1"]], label=r.controller, zorder=z)
         axes[2].plot(s["t"], s["command"], label=r.controller, zorder=z)
+        if driven:
+            axes[3].plot(s["t"], s["motor_current"], label=r.controller, zorder=z)
     axes[0].plot(runs[0].samples["t"], runs[0].samples["setpoint"], "k--", lw=1, label="setpoint", zorder=len(runs) + 1)
     axes[0].set_ylabel("grip force (N)")
     axes[1].set_ylabel("θ1 (°)")
-    axes[2].set_ylabel("command (N·m)")
-    axes[2].set_xlabel("t (s)")
+    axes[2].set_ylabel("command (V)" if driven else "command (N·m)")
+    if driven:
+        axes[3].set_ylabel("motor current (A)")
+    axes[-1].set_xlabel("t (s)")
     axes[0].legend(fontsize=8)
     axes[0].set_title(runs[0].task)
     for ax in axes:

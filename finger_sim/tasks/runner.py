@@ -32,6 +32,8 @@ from finger_sim.tasks.schema import Task
 
 #: The columns a task run records at every sample, in this order (N, rad, rad/s, N·m, N).
 COLUMNS = ("t", "grip_force", "setpoint", "theta1", "theta1_dot", "command", "tip_force_x", "tip_force_y", "crushed")
+#: The drive's outputs a run on a drive scene records too (V, A; spec §8), for electrical_energy.
+DRIVE_COLUMNS = ("motor_voltage", "motor_current")
 #: Element outputs that are not measurements a real controller has: the contact wrenches and
 #: the power of a prescribed object motion.
 UNMEASURED_PREFIX = "contact_force_"
@@ -75,7 +77,8 @@ def run_task(task: Task, factory: Factory, *, label: str = "", params: Mapping[s
         tip_switch[first_step(d.end, dt)] = scene.tip_force
     for d in task.disturbances:  # a span starting where another ends wins the step
         tip_switch[first_step(d.start, dt)] = d.force
-    rows = np.empty((n + 1, len(COLUMNS)))
+    drive_columns = DRIVE_COLUMNS if scene.drive is not None else ()
+    rows = np.empty((n + 1, len(COLUMNS) + len(drive_columns)))
     pending: deque[tuple[int, float]] = deque()
     command, setpoint, crushes = 0.0, 0.0, []
     si = 0
@@ -83,7 +86,7 @@ def run_task(task: Task, factory: Factory, *, label: str = "", params: Mapping[s
 
     def record(k: int, outputs: Mapping[str, float]) -> None:
         rows[k] = (k * dt, outputs.get("grip_force", 0.0), setpoint, sim.q[0], sim.v[0], command,
-                   sim.scene.tip_force[0], sim.scene.tip_force[1], len(crushes))
+                   sim.scene.tip_force[0], sim.scene.tip_force[1], len(crushes), *(outputs[c] for c in drive_columns))
 
     outputs = _outputs(sim)
     for k in range(n):
@@ -106,22 +109,27 @@ def run_task(task: Task, factory: Factory, *, label: str = "", params: Mapping[s
             command = pending.popleft()[1]
         record(k, outputs)
         sim.step(command)
-        outputs = _outputs(sim)
+        outputs = _outputs(sim, command)
         broken = crushed(sim)
         if broken:  # the sample at the crush keeps the force that broke it (recorded and measured)
             crushes += broken
             sim = carry_over(sim, without_objects(sim.scene, (c.object for c in broken)))
     record(n, outputs)
     wall = time.perf_counter() - start
-    samples = {name: np.ascontiguousarray(rows[:, i]) for i, name in enumerate(COLUMNS)}
+    samples = {name: np.ascontiguousarray(rows[:, i]) for i, name in enumerate(COLUMNS + drive_columns)}
     grid = tuple((k * dt, v) for k, v in set_steps)
     torque = (samples["command"], samples["theta1"]) if task.input == "torque" else None
-    scores = task_scores(samples["t"], samples["grip_force"], grid, task.hold_after, bool(crushes), torque=torque)
+    scores = task_scores(samples["t"], samples["grip_force"], grid, task.hold_after, bool(crushes),
+                         outputs={c: samples[c] for c in drive_columns}, torque=torque)
     return TaskRun(task.name, label, samples, crushes, scores, judge(scores, task.limits), grid, dict(task.limits), wall)
 
 
-def _outputs(sim: Simulator) -> dict[str, float]:
-    """The scene's element outputs at the simulator's state (grip_force, N, ...)."""
+def _outputs(sim: Simulator, voltage: float = 0.0) -> dict[str, float]:
+    """The scene's element outputs at the simulator's state (grip_force, N, ...), and with a drive
+    its outputs under the held `voltage` command (motor_voltage V, motor_current A, ...; spec §8)."""
     elements = sim.system.elements
-    return dict(zip(output_names(elements, sim.q), output_values(elements, sim.time, sim.q, sim.v)))
+    out = dict(zip(output_names(elements, sim.q), output_values(elements, sim.time, sim.q, sim.v)))
+    if sim.scene.drive is not None:
+        out.update(sim.system.motor_outputs(sim.time, sim.q, sim.v, voltage))
+    return out
 

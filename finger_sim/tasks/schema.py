@@ -36,8 +36,8 @@ _KEYS = {"name", "description", "scene", "objects", "duration", "controller", "s
 #: Longest task, s; and most setpoint changes and disturbances (a task is a short script).
 MAX_DURATION = 600.0
 MAX_EVENTS = 1000
-#: The scene input a controller may command today (a drive scene adds `voltage`).
-INPUTS = ("torque",)
+#: The scene inputs a controller may command: a torque (N·m), or a drive scene's voltage (V).
+INPUTS = ("torque", "voltage")
 #: The default holding window: from this long after a setpoint change, s.
 HOLD_AFTER = 0.4
 
@@ -100,9 +100,12 @@ def task_from_dict(data: Any, *, base: Path, default_name: str = "task") -> Task
     ctrl = mapping(data.get("controller", {}), "controller", {"sample_steps", "delay_steps", "input"})
     sample_steps = _whole(ctrl.get("sample_steps", 1), "controller.sample_steps", 1)
     delay_steps = _whole(ctrl.get("delay_steps", 1), "controller.delay_steps", 0)
-    inp = ctrl.get("input", "torque")
+    scene_input = "torque" if scene.drive is None else "voltage"
+    inp = ctrl.get("input", scene_input)
     if inp not in INPUTS:
         raise ConfigError("controller.input", f"one of {list(INPUTS)} (the scene input the controller commands)", inp)
+    if inp != scene_input:
+        raise ConfigError("controller.input", f"'{scene_input}', the input of the scene '{scene.name}'", inp)
     return Task(
         name=name,
         description=text(data.get("description", ""), "description", 4096),

@@ -1,10 +1,12 @@
 """A suite: every task against every controller, a gain sweep over it, and the written report.
 
-    finger-sim tasks [TASK.yaml ...] [--controller LABEL=module:callable] [--param LABEL.key=value]
-                     [--vary key=v1,v2,...] [--chunk i/n] [--out DIR] [--no-figures]
+    finger-sim tasks [TASK.yaml ...] [--controller LABEL=module:callable] [--ros-controller LABEL=EXECUTABLE]
+                     [--param LABEL.key=value] [--vary key=v1,v2,...] [--chunk i/n] [--out DIR] [--no-figures]
 
 Without TASK files the installed suite (`config/tasks/*.yaml`) runs; without --controller the
-shipped `grip_pi` and `grip_pi_aggressive`. `--vary` (repeatable) runs the first controller over
+shipped `grip_pi` and `grip_pi_aggressive`. `--ros-controller` adds a ROS 2 controller node run
+through finger_node in lockstep (`finger_sim.tasks.ros_runner`; its --param values become the
+node's parameters). `--vary` (repeatable) runs the first controller over
 the Cartesian product of the given parameter values (a gain sweep), each combination one more
 controller column, scored the same way. The exit status is 1 when any run fails a task.
 """
@@ -13,22 +15,26 @@ from __future__ import annotations
 
 import datetime
 import itertools
+import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from finger_sim.errors import ConfigError
+from finger_sim.scene import safe_name
 from finger_sim.scene_paths import scene_dirs
 from finger_sim.scene_yaml import parse_scene_text
 from finger_sim.sweep import chunk_range, parse_chunk
 from finger_sim.tasks import report
-from finger_sim.tasks.controllers import Factory, load_factory
+from finger_sim.tasks.controllers import Factory, commanded_input, load_factory
+from finger_sim.tasks.ros_runner import run_ros_task
 from finger_sim.tasks.runner import TaskRun, run_task
 from finger_sim.tasks.schema import Task, load_task
 
 #: The controllers a suite runs when none is named: the shipped PI and its overshooting variant.
 DEFAULT_CONTROLLERS = ("grip_pi=finger_sim.tasks.controllers:grip_pi",
-                       "grip_pi_aggressive=finger_sim.tasks.controllers:grip_pi_aggressive")
+                       "grip_pi_aggressive=finger_sim.tasks.controllers:grip_pi_aggressive",
+                       "grip_voltage=finger_sim.tasks.controllers:grip_voltage")
 
 
 @dataclass(frozen=True)
@@ -36,8 +42,9 @@ class ControllerSpec:
     """A controller column: its label, factory and parameters (passed as keyword arguments)."""
 
     label: str
-    factory: Factory
+    factory: Factory | None
     params: dict[str, float] = field(default_factory=dict)
+    ros_executable: str | None = None  # a ROS 2 controller node instead of a factory
 
 
 def installed_tasks() -> list[Path]:
@@ -49,16 +56,25 @@ def installed_tasks() -> list[Path]:
     raise ConfigError("tasks", "task files in an installed config/tasks/ folder", [str(d) for d in scene_dirs()])
 
 
-def parse_controllers(specs: Sequence[str], params: Sequence[str], vary: Sequence[str]) -> list[ControllerSpec]:
-    """--controller LABEL=module:callable, --param LABEL.key=value, --vary key=v1,v2 → the columns."""
+def parse_controllers(specs: Sequence[str], params: Sequence[str], vary: Sequence[str],
+                      ros_specs: Sequence[str] = ()) -> list[ControllerSpec]:
+    """--controller LABEL=module:callable, --ros-controller LABEL=EXECUTABLE, --param LABEL.key=value,
+    --vary key=v1,v2 → the columns."""
     out: list[ControllerSpec] = []
-    for spec in specs or DEFAULT_CONTROLLERS:
+    for spec in specs or ([] if ros_specs else DEFAULT_CONTROLLERS):
         label, sep, target = spec.partition("=")
         if not sep:
             label, target = spec.rpartition(":")[2], spec
         if any(c.label == label for c in out):
             raise ConfigError("--controller", "a label no other controller uses", label)
         out.append(ControllerSpec(label, load_factory(target), {}))
+    for spec in ros_specs:
+        label, sep, target = spec.partition("=")
+        if not sep:
+            label = target = spec
+        if not target or any(c.label == label for c in out):
+            raise ConfigError("--ros-controller", "LABEL=EXECUTABLE with a label no other controller uses", spec)
+        out.append(ControllerSpec(label, None, {}, target))
     for item in params:
         key, sep, value = item.partition("=")
         label, dot, name = key.partition(".")
@@ -75,7 +91,7 @@ def parse_controllers(specs: Sequence[str], params: Sequence[str], vary: Sequenc
                 raise ConfigError("--vary", "key=v1,v2,... (a parameter of the first controller)", item)
             axes.append([(name, _number(v, f"--vary {name}")) for v in values.split(",")])
         out = [ControllerSpec(base.label + "[" + ",".join(f"{k}={v:g}" for k, v in combo) + "]", base.factory,
-                              {**base.params, **dict(combo)}) for combo in itertools.product(*axes)]
+                              {**base.params, **dict(combo)}, base.ros_executable) for combo in itertools.product(*axes)]
     return out
 
 
@@ -88,9 +104,23 @@ def chunk_of(controllers: Sequence[ControllerSpec], chunk: str) -> list[Controll
     return list(controllers[start:stop])
 
 
-def run_suite(tasks: Sequence[Task], controllers: Sequence[ControllerSpec]) -> list[TaskRun]:
-    """Every task against every controller, task by task."""
-    return [run_task(task, c.factory, label=c.label, params=c.params) for task in tasks for c in controllers]
+def run_suite(tasks: Sequence[Task], controllers: Sequence[ControllerSpec], workdir: Path | None = None) -> list[TaskRun]:
+    """Every task against every controller that commands its input, task by task (a torque
+    controller skips a drive task, a voltage controller the others); a ROS controller's files (scene, logs,
+    node output) go to `workdir`/ros/<task>_<label>/ (default: a temporary folder)."""
+    runs = []
+    with tempfile.TemporaryDirectory(prefix="finger_tasks_") as tmp:
+        for task in tasks:
+            for c in controllers:
+                if c.ros_executable is None:
+                    assert c.factory is not None
+                    if commanded_input(c.factory) != task.input:
+                        continue
+                    runs.append(run_task(task, c.factory, label=c.label, params=c.params))
+                elif task.input == "torque":  # the ROS path drives a torque today
+                    folder = (workdir or Path(tmp)) / "ros" / f"{task.name}_{safe_name(c.label)}"
+                    runs.append(run_ros_task(task, c.ros_executable, folder, label=c.label, params=c.params))
+    return runs
 
 
 def write_report(runs: Sequence[TaskRun], tasks: Sequence[Task], out: Path, *, figures: bool = True,
@@ -122,6 +152,9 @@ def summary_table(runs: Sequence[TaskRun]) -> str:
         by = {r.controller: r for r in runs if r.task == task}
         cells = []
         for c in labels:
+            if c not in by:
+                cells.append("—")  # the controller commands another input than the task's
+                continue
             r = by[c]
             failed = [k for k, ok in r.passed.items() if not ok]
             cells.append("pass" if r.ok else "FAIL (" + ", ".join(failed) + ")")

@@ -1,0 +1,278 @@
+"""Run a task against a ROS 2 controller node: finger_node in lockstep, the node's MCAP log scored.
+
+The runner starts, on the loopback interface and in the current ROS_DOMAIN_ID:
+- finger_node on the task's scene (written to `<workdir>/scene.yaml`) with `lockstep:=true`,
+  `command_qos:=reliable`, `realtime_factor:=0` and its log in `<workdir>/log/`;
+- the controller executable (e.g. `finger_grip_controller`) with the task's first setpoint as its
+  `setpoint` parameter, `sample_period` = the scene's dt, the given parameters, and two remaps:
+  its `grip_force` comes from the runner (`RELAY_TOPIC`), its `/clock` from nowhere (it then
+  advances its law by `sample_period` per sample, as the offline path does);
+- itself (first, then finger_node, then the controller once the node's grip_force is matched
+  with the runner: the node's first state waits for a controller), an rclpy node that relays grip_force sample k to the controller, and before it, at a
+  setpoint change of the task, publishes the new setpoint on `grip_setpoint` and waits
+  SETPOINT_LEAD wall seconds, so that the controller has it before the sample it answers.
+
+finger_node steps k+1 only when the answer to state k has come, so the run is repeatable bit for
+bit. Timing: the answer to state k acts over the step k → k+1 (sample_steps 1, delay_steps 0,
+whatever the task file says; `lockstep_task`). After the task's last step the runner stops both
+nodes (SIGINT, then SIGKILL; also on any failure) and scores the log with `task_scores`.
+
+Not covered yet (refused with a ConfigError): tip-force disturbances and breakable objects
+(finger_node has neither a tip-force command nor crushing).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+
+from finger_sim.errors import ConfigError, FingerSimError
+from finger_sim.scene_yaml import dump_scene
+from finger_sim.tasks.metrics import judge, task_scores
+from finger_sim.tasks.runner import COLUMNS, TaskRun, first_step
+from finger_sim.tasks.schema import Task
+
+#: The topic on which the runner hands grip_force samples to the controller.
+RELAY_TOPIC = "task_runner/grip_force"
+#: Where the controller's /clock goes (nothing publishes there: it counts samples instead).
+NO_CLOCK_TOPIC = "task_runner/no_clock"
+#: Wall seconds between a setpoint change and the sample that must see it (a local reliable
+#: message takes well under 1 ms; a loaded machine may delay it by far more).
+SETPOINT_LEAD = 0.3
+#: Wall seconds finger_node waits for an answer before stepping on (never, for a live controller).
+LOCKSTEP_TIMEOUT = 60.0
+#: Wall seconds: nodes to start and discover each other; the whole run per simulated second.
+START_TIMEOUT = 60.0
+WALL_PER_SIM_SECOND = 120.0
+#: Wall seconds a node gets to exit on SIGINT before it is killed.
+STOP_TIMEOUT = 15.0
+#: finger_node's torque limit: the largest allowed, so that only the controller saturates.
+NODE_MAX_TORQUE = 100.0
+#: The depth of the runner's reliable subscriptions and publishers (never drops a sample).
+DEPTH = 1000
+
+
+def lockstep_task(task: Task) -> Task:
+    """`task` with the lockstep timing: every step sampled, the answer acting over the next step."""
+    return dataclasses.replace(task, sample_steps=1, delay_steps=0)
+
+
+def check_supported(task: Task) -> None:
+    """ConfigError when the task needs what finger_node cannot do yet."""
+    if task.disturbances:
+        raise ConfigError(f"task '{task.name}'", "no tip-force disturbances with --ros-controller "
+                          "(finger_node has no tip-force command)", f"{len(task.disturbances)} disturbances")
+    breakable = [o.name for o in task.scene.objects if o.properties.break_force is not None]
+    if breakable:
+        raise ConfigError(f"task '{task.name}'", "no object with a break_force with --ros-controller "
+                          "(finger_node does not crush objects)", breakable)
+    if task.input != "torque":
+        raise ConfigError(f"task '{task.name}'", "a torque input with --ros-controller", task.input)
+
+
+def find_executable(name: str) -> str:
+    """The controller executable: this Python's bin folder first, then PATH."""
+    found = shutil.which(name, path=os.pathsep.join([str(Path(sys.executable).parent), os.environ.get("PATH", "")]))
+    if found is None:
+        raise ConfigError("--ros-controller", "an executable ROS 2 controller node (e.g. finger_grip_controller)", name)
+    return found
+
+
+def run_ros_task(task: Task, executable: str, workdir: Path, *, label: str = "",
+                 params: Mapping[str, float] | None = None) -> TaskRun:
+    """Run `task` against the controller node `executable` (name or path) with `params`; score it."""
+    check_supported(task)
+    task = lockstep_task(task)
+    scene = task.scene
+    dt, n = scene.dt, scene.step_count
+    workdir.mkdir(parents=True, exist_ok=True)
+    (workdir / "scene.yaml").write_text(dump_scene(scene.to_dict()), encoding="utf-8")
+    log_dir = workdir / "log"
+    env = {**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "PYTHONUNBUFFERED": "1"}
+    for key in ("ROS_LOCALHOST_ONLY", "ROS_STATIC_PEERS", "ROS_DISCOVERY_SERVER"):
+        env.pop(key, None)
+    os.environ.update(ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")  # the runner's own participant
+    node_cmd = [sys.executable, "-m", "finger_sim.ros.node", "--ros-args",
+                *_params(scene=str(workdir / "scene.yaml"), lockstep=True, command_qos="reliable",
+                         lockstep_timeout=LOCKSTEP_TIMEOUT, realtime_factor=0.0, marker_rate_hz=0.0,
+                         physics_rate_hz=1.0 / dt, max_torque=NODE_MAX_TORQUE, command_timeout=0.0,
+                         record_dir=str(log_dir))]
+    controller_cmd = [find_executable(executable), "--ros-args",
+                      *_params(**{"setpoint": task.setpoints[0][1], "sample_period": dt, **(params or {})}),
+                      "-r", f"grip_force:={RELAY_TOPIC}", "-r", f"/clock:={NO_CLOCK_TOPIC}"]
+    changes = {first_step(t, dt): v for t, v in task.setpoints[1:]}
+    start = time.perf_counter()
+    procs: list[tuple[subprocess.Popen, Path]] = []
+    try:
+        with _Relay(changes, n) as relay:
+            # finger_node first, and the controller only once the runner sees the node's grip_force:
+            # the node's first state waits for the controller, so the runner misses no sample
+            for cmd, name in ((node_cmd, "finger_node"), (controller_cmd, "controller")):
+                out = workdir / f"{name}.out"
+                with out.open("wb") as sink:
+                    procs.append((subprocess.Popen(cmd, env=env, stdout=sink, stderr=subprocess.STDOUT,
+                                                   start_new_session=True), out))
+                if name == "finger_node":
+                    relay.wait_for_node(START_TIMEOUT, procs)
+            relay.wait(START_TIMEOUT + WALL_PER_SIM_SECOND * n * dt, procs)
+        for proc, out in procs:  # finger_node first: it closes its log
+            _stop(proc)
+        status = procs[-1][0].returncode
+        if status != 0:
+            raise FingerSimError(f"finger_node exited with status {status}; see {procs[-1][1]}")
+    finally:
+        for proc, _ in procs:
+            _stop(proc)
+    wall = time.perf_counter() - start
+    samples = read_samples(log_dir, n, task.setpoints, dt)
+    grid = tuple((first_step(t, dt) * dt, v) for t, v in task.setpoints)
+    scores = task_scores(samples["t"], samples["grip_force"], grid, task.hold_after, False,
+                         torque=(samples["command"], samples["theta1"]))
+    return TaskRun(task.name, label, samples, [], scores, judge(scores, task.limits), grid, dict(task.limits), wall)
+
+
+def read_samples(log_dir: Path, n: int, setpoints: tuple[tuple[float, float], ...], dt: float) -> dict[str, np.ndarray]:
+    """The COLUMNS of states 0..n from finger_node's log (rosbags): joint_states by stamp, grip_force
+    by log time (sim time); command k is the mcp effort of state k+1 (it acted over step k → k+1)."""
+    from rosbags.highlevel import AnyReader
+
+    logs = sorted(log_dir.glob("*.mcap"))
+    if len(logs) != 1:
+        raise FingerSimError(f"expected one MCAP log in {log_dir}, found {len(logs)}")
+    step_ns = round(dt * 1e9)
+    states: dict[int, tuple[float, float, float]] = {}
+    force: dict[int, float] = {}
+    with AnyReader(logs) as reader:
+        wanted = [c for c in reader.connections if c.topic in ("/joint_states", "/grip_force")]
+        for conn, log_time, raw in reader.messages(connections=wanted):
+            msg = reader.deserialize(raw, conn.msgtype)
+            if conn.topic == "/joint_states":
+                k = (msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec) // step_ns
+                states[k] = (msg.position[0], msg.velocity[0], msg.effort[0])
+            else:
+                force[log_time // step_ns] = msg.data
+    missing = [k for k in range(n + 1) if k not in states or k not in force]
+    if missing:
+        raise FingerSimError(f"the log {logs[0]} lacks the states of {len(missing)} steps (first: {missing[0]})")
+    rows = np.zeros((n + 1, len(COLUMNS)))
+    set_steps = [(first_step(t, dt), v) for t, v in setpoints]
+    for k in range(n + 1):
+        theta, rate, _ = states[k]
+        setpoint = [v for s, v in set_steps if s <= k][-1]
+        rows[k, :6] = (k * dt, force[k], setpoint, theta, rate, states[min(k + 1, n)][2])
+    return {name: np.ascontiguousarray(rows[:, i]) for i, name in enumerate(COLUMNS)}
+
+
+class _Relay:
+    """The runner's rclpy node: relays grip_force k to the controller, a setpoint change first."""
+
+    def __init__(self, changes: Mapping[int, float], last: int) -> None:
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.qos import QoSProfile
+        from std_msgs.msg import Float64
+
+        self._rclpy, self._float = rclpy, Float64
+        self._changes, self._last = changes, last
+        self._count = 0
+        self._done = threading.Event()
+        self._context = rclpy.Context()
+        rclpy.init(context=self._context)
+        self._node = rclpy.create_node("finger_task_runner", context=self._context)
+        qos = QoSProfile(depth=DEPTH)
+        self._relay = self._node.create_publisher(Float64, RELAY_TOPIC, qos)
+        self._setpoint = self._node.create_publisher(Float64, "grip_setpoint", qos)
+        self._force = self._node.create_subscription(Float64, "grip_force", self._on_force, qos)
+        self._executor = SingleThreadedExecutor(context=self._context)
+        self._executor.add_node(self._node)
+        self._thread = threading.Thread(target=self._spin, daemon=True)
+
+    def __enter__(self) -> _Relay:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._executor.shutdown()
+        self._node.destroy_node()
+        self._rclpy.try_shutdown(context=self._context)
+        self._thread.join(STOP_TIMEOUT)
+
+    def _spin(self) -> None:
+        try:
+            self._executor.spin()
+        except Exception:  # noqa: BLE001 - the executor stops when the context shuts down
+            pass
+
+    def _on_force(self, msg) -> None:
+        k = self._count
+        self._count += 1
+        if k == 0:  # the controller's subscriptions must be matched before the first sample goes
+            deadline = time.monotonic() + START_TIMEOUT
+            while min(self._relay.get_subscription_count(), self._setpoint.get_subscription_count()) == 0:
+                if time.monotonic() > deadline:
+                    return  # wait() reports the stalled run
+                time.sleep(0.01)
+        if k in self._changes:
+            self._setpoint.publish(self._float(data=self._changes[k]))
+            time.sleep(SETPOINT_LEAD)
+        self._relay.publish(msg)
+        if k >= self._last:
+            self._done.set()
+
+    def wait_for_node(self, timeout: float, procs: list[tuple[subprocess.Popen, Path]]) -> None:
+        """Until the runner's grip_force subscription is matched with finger_node's publisher."""
+        deadline = time.monotonic() + timeout
+        while self._force.get_publisher_count() == 0:
+            self._check(procs)
+            if time.monotonic() > deadline:
+                raise FingerSimError(f"finger_node's grip_force did not reach the task runner within {timeout:g} s")
+            time.sleep(0.05)
+
+    def _check(self, procs: list[tuple[subprocess.Popen, Path]]) -> None:
+        for proc, out in procs:
+            if proc.poll() is not None:
+                raise FingerSimError(f"{out.stem} exited with status {proc.returncode} during the task; see {out}")
+
+    def wait(self, timeout: float, procs: list[tuple[subprocess.Popen, Path]]) -> None:
+        """Until state `last` was relayed; FingerSimError if a node exits or the time runs out."""
+        deadline = time.monotonic() + timeout
+        while not self._done.wait(0.1):
+            self._check(procs)
+            if time.monotonic() > deadline:
+                raise FingerSimError(f"the ROS task run did not reach its last step within {timeout:g} s "
+                                     f"({self._count} samples relayed)")
+
+
+def _params(**values: object) -> list[str]:
+    """`-p key:=value` arguments (booleans as true/false, numbers with every digit)."""
+    out = []
+    for key, value in values.items():
+        text = ("true" if value else "false") if isinstance(value, bool) else (
+            repr(float(value)) if isinstance(value, float) and math.isfinite(value) else str(value))
+        out += ["-p", f"{key}:={text}"]
+    return out
+
+
+def _stop(proc: subprocess.Popen) -> None:
+    """SIGINT to the process's group, SIGKILL after STOP_TIMEOUT; nothing if it has exited."""
+    if proc.poll() is not None:
+        return
+    try:
+        os.killpg(proc.pid, signal.SIGINT)
+        proc.wait(STOP_TIMEOUT)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+    except ProcessLookupError:
+        pass
