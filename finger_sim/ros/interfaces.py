@@ -115,6 +115,9 @@ OUTPUTS: dict[str, OutputSpec] = {
     "command_log": OutputSpec("~/command_log", DiagnosticStatus, EVENT_QOS, acked=True),
     # contact (spec §7; conversions.ContactReport): Σ F_n (N) and each phalanx's wrench in finger_base
     "grip_force": OutputSpec("grip_force", Float64, STATE_QOS, acked=True, reported_by="grip_force"),
+    # grip_force with the state's stamp (conversions.GRIP_FORCE_STAMPED: wrench.force.x = Σ F_n, N)
+    "grip_force_stamped": OutputSpec("grip_force_stamped", WrenchStamped, STATE_QOS, acked=True,
+                                     reported_by="grip_force"),
     "contact_wrench/proximal": OutputSpec("contact_wrench/proximal", WrenchStamped, STATE_QOS, acked=True,
                                           reported_by="grip_force"),
     "contact_wrench/distal": OutputSpec("contact_wrench/distal", WrenchStamped, STATE_QOS, acked=True,
