@@ -50,7 +50,8 @@ class FingerHand(SteppingNode):
         if len(radii) > 1:  # hand_urdf draws every finger's capsules alike
             raise ConfigError(f"parameter 'hand' ({self.hand_path}): model.phalanx_radius",
                               "the same radii in every finger's scene", sorted(radii))
-        return hand_urdf([(f.spec.frame_prefix, f.scene.params, f.spec.pose, f.scene.mcp_limits) for f in self.fingers],
+        return hand_urdf([(f.spec.frame_prefix, f.scene.params, f.spec.pose, f.scene.mcp_limits, f.scene.drive)
+                          for f in self.fingers],
                          radii=radii.pop(), mcp_effort=self.settings.max_torque)
 
     def _log_name(self) -> str:

@@ -712,7 +712,7 @@ class FingerNode(SteppingNode):
     def _description(self) -> str:
         f = self.fingers[0]
         return finger_urdf(f.scene.params, prefix=f.spec.frame_prefix, radii=f.scene.phalanx_radius,
-                           mcp_effort=self.settings.max_torque, mcp_limits=f.scene.mcp_limits)
+                           mcp_effort=self.settings.max_torque, mcp_limits=f.scene.mcp_limits, drive=f.scene.drive)
 
     def _log_name(self) -> str:
         return self.fingers[0].scene.name
