@@ -208,6 +208,13 @@ def test_node_contact_topics_match_the_offline_run(launcher, ros_client, tmp_pat
     assert len(distal_log) == steps + 1
     assert all(m.wrench.torque.y == ref[t // DT_NS][1][1][2] for t, m in distal_log)
 
+    # the viewer plots grip_force once: the stamped copy is no second signal
+    from finger_sim.view.source import read_log
+
+    (run,) = read_log(log)
+    names = {sig.name for sig in run.signals}
+    assert "grip_force" in names and not any(n.startswith("grip_force_stamped") for n in names), names
+
     # resim takes the log with its stamped grip force: every state reproduced bit for bit
     done = subprocess.run([str(Path(sys.executable).parent / "finger-sim"), "resim", str(log)], capture_output=True,
                           text=True, timeout=120, check=False)
