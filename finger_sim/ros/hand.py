@@ -11,8 +11,9 @@ parameters are finger_node's (without scene and frame_prefix); ~/pause, ~/step a
 on the whole hand. robot_description is finger_sim.urdf.hand_urdf: every finger under
 hand_base at its pose. /joint_states holds every finger's joints (prefixed names, fingers in the
 hand file's order) in one message per published state, stamped as the fingers' own, so that
-robot_state_publisher with robot_description publishes the whole hand's /tf. The log (<record_dir>/<hand>_<UTC start>.mcap) holds every finger's
-topics and one metadata record per finger (`finger_sim/<name>`).
+robot_state_publisher with robot_description publishes the whole hand's /tf. The log
+(<record_dir>/<hand>_<UTC start>.mcap) holds every finger's topics, the merged /joint_states and
+one metadata record per finger (`finger_sim/<name>`).
 
     finger_hand --ros-args -p hand:=three_fingers
 """
