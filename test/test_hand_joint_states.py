@@ -14,6 +14,7 @@ import pytest
 
 rclpy = pytest.importorskip("rclpy")
 
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Float64, String  # noqa: E402
@@ -53,8 +54,16 @@ def test_merged_joint_states_are_the_fingers_own_at_the_same_stamp(launcher, ros
     publishers = {name: ros_client.publisher(Float64, f"/{name}/motor_torque", RELIABLE) for name in fingers}
     ros_client.wait_for(lambda: all(p.get_subscription_count() for p in publishers.values())
                         and ros_client.node.count_publishers("/joint_states") == 1, "the hand's topics")
+    diagnostics = ros_client.collect(DiagnosticArray, "/diagnostics")
+
+    def received(name: str) -> int:
+        counts = [int(conversions.parse_values(s)["commands_received"]) for d in diagnostics for s in d.status
+                  if s.name == f"/finger_hand: {name} simulation"]
+        return max(counts, default=-1)
+
     for name, torque in TORQUES.items():
         publishers[name].publish(Float64(data=torque))
+    ros_client.wait_for(lambda: all(received(n) == 1 for n in fingers), "every finger's command counted (about 1 Hz)")
     answer = ros_client.call(Trigger, "/finger_hand/step")
     assert answer.success, answer.message
     end = round(float(answer.message.split("clock=")[1].split()[0]) * 1e9)
