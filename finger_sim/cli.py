@@ -321,7 +321,7 @@ def _urdf(args: argparse.Namespace) -> int:
     scene = load_scene(args.scene)
     out = check_output_file(args.out, argument="-o/--out") if args.out else None
     check_distinct({"SCENE": args.scene}, {"-o/--out": out})
-    text = finger_urdf(scene.params, prefix=args.prefix, mcp_limits=scene.mcp_limits)
+    text = finger_urdf(scene.params, prefix=args.prefix, mcp_limits=scene.mcp_limits, drive=scene.drive)
     if out is None:
         sys.stdout.write(text)
     else:

@@ -15,16 +15,18 @@ DEFAULT_TIMEOUT_S = 10.0
 
 def add_parser(sub: Any, handler: Callable[[argparse.Namespace], int]) -> None:
     """The `node` subcommand on finger-sim's subparsers, run by `handler`."""
-    node = sub.add_parser("node", help="talk to a running finger_node or finger_hand (torque, pause, resume, step, "
+    node = sub.add_parser("node", help="talk to a running finger_node or finger_hand (torque, voltage, pause, resume, step, "
                                        "reset, get/set a parameter, echo a topic) without ros2cli")
     node.add_argument("--node", default=DEFAULT_NODE, metavar="NAME",
                       help=f"the node's full name (default {DEFAULT_NODE}; /finger_hand for a hand)")
-    node.add_argument("--finger", default="", metavar="NAME", help="a hand's finger, for torque (/NAME/motor_torque)")
+    node.add_argument("--finger", default="", metavar="NAME", help="a hand's finger, for torque and voltage (/NAME/motor_torque)")
     node.add_argument("--timeout", type=float, default=DEFAULT_TIMEOUT_S, metavar="S",
                       help=f"wall seconds to wait for the node (default {DEFAULT_TIMEOUT_S:g})")
     actions = node.add_subparsers(dest="action", required=True)
     torque = actions.add_parser("torque", help="hold this motor torque, N·m (motor_torque)")
     torque.add_argument("value", type=float)
+    voltage = actions.add_parser("voltage", help="hold this motor voltage, V, on a scene with a drive (motor_voltage)")
+    voltage.add_argument("value", type=float)
     pub = actions.add_parser("pub", help="publish one std_msgs/Float64 on a topic, e.g. /grip_setpoint 0.5")
     pub.add_argument("topic")
     pub.add_argument("value", type=float)

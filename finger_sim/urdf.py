@@ -25,6 +25,7 @@ from collections.abc import Sequence
 from typing import NamedTuple
 
 from finger_sim import joints, kinematics
+from finger_sim.actuators.drive import DriveParams
 from finger_sim.effects.contact_geometry import PHALANX_RADII  # (ρ1, ρ3), m: spec §7's contact capsules
 from finger_sim.errors import ConfigError
 from finger_sim.model import FingerParams
@@ -73,19 +74,33 @@ class FingerMount(NamedTuple):
     params: FingerParams
     pose: BasePose
     mcp_limits: tuple[float, float] | None = None
+    drive: DriveParams | None = None
+
+
+def drive_speed_limit(drive: DriveParams) -> float:
+    """No-load MCP speed of a drive, rad/s: u_max / (k_e N), with k_e = k_t in SI (spec §8)."""
+    return drive.supply_voltage / (drive.torque_constant * drive.gear_ratio)
+
+
+def drive_effort_limit(drive: DriveParams) -> float:
+    """Stall torque of a drive on θ1, N·m: η_f N k_t i_max (spec §8)."""
+    return drive.efficiency * drive.gear_ratio * drive.torque_constant * drive.current_limit
 
 
 def finger_urdf(params: FingerParams, *, prefix: str = "", radii: tuple[float, float] = PHALANX_RADII,
-                mcp_effort: float = MCP_EFFORT_LIMIT, mcp_limits: tuple[float, float] | None = None) -> str:
+                mcp_effort: float = MCP_EFFORT_LIMIT, mcp_limits: tuple[float, float] | None = None,
+                drive: DriveParams | None = None) -> str:
     """URDF (an XML string) of one finger; `prefix` goes before every link and joint name.
 
     radii: (ρ1, ρ3), m, of the proximal and distal capsules. mcp_effort: N·m, the effort
     limit of mcp_joint. mcp_limits: the scene's MCP stops (θ1, rad; Scene.mcp_limits), which
     bound mcp_joint within the linkage's assembly range; None: the assembly range alone.
+    drive: the scene's drive (spec §8), whose no-load speed and stall torque then are
+    mcp_joint's velocity and effort limits (mcp_effort is not used).
     The passive joints' limits are the range the closed loop gives them over mcp_joint's.
     """
     robot = _robot(f"{_checked_prefix(prefix)}finger", _finger_comment(params, prefix))
-    _add_finger(robot, params, prefix, _checked_radii(radii), _checked_effort(mcp_effort), mcp_limits)
+    _add_finger(robot, params, prefix, _checked_radii(radii), _checked_effort(mcp_effort), mcp_limits, drive)
     return _serialize(robot)
 
 
@@ -102,7 +117,7 @@ def hand_urdf(mounts: Sequence[FingerMount | tuple[str, FingerParams, BasePose]]
     robot = _robot("finger_hand", _HAND_COMMENT)
     _link(robot, HAND_BASE)
     seen: set[str] = set()
-    for prefix, params, pose, stops in (FingerMount(*m) for m in mounts):
+    for prefix, params, pose, stops, drive in (FingerMount(*m) for m in mounts):
         if _checked_prefix(prefix) in seen:
             raise ConfigError("fingers.prefix", "a prefix that no other finger has", prefix)
         seen.add(prefix)
@@ -111,12 +126,12 @@ def hand_urdf(mounts: Sequence[FingerMount | tuple[str, FingerParams, BasePose]]
         robot.append(ET.Comment(_finger_comment(params, prefix)))
         _joint(robot, f"{prefix}finger_mount", "fixed", HAND_BASE, f"{prefix}finger_base",
                (pose[0], pose[1], pose[2]), (pose[3], pose[4], pose[5]))
-        _add_finger(robot, params, prefix, checked, effort, stops)
+        _add_finger(robot, params, prefix, checked, effort, stops, drive)
     return _serialize(robot)
 
 
 def _add_finger(robot: ET.Element, p: FingerParams, prefix: str, radii: tuple[float, float], mcp_effort: float,
-                mcp_limits: tuple[float, float] | None) -> None:
+                mcp_limits: tuple[float, float] | None, drive: DriveParams | None = None) -> None:
     """Append one finger's links and joints to `robot`."""
     q_ext = kinematics.extended_pose(p)
     d = kinematics.points(p, q_ext, kinematics.distal_offset(p))["D"]
@@ -131,8 +146,13 @@ def _add_finger(robot: ET.Element, p: FingerParams, prefix: str, radii: tuple[fl
     _rod_inertial(link, p.m1, p.r1)
     _capsule(link, p.r1, rho1, "proximal")
     kind, limits, source = _mcp_kind(p, q_ext, mcp_limits)
-    _joint(robot, f"{prefix}{_MCP}", kind, base, proximal, _ZERO, (0.0, q_ext[0], 0.0), mcp_effort, limits,
-           f"limits: {source}; effort: finger_node's max_torque; {_VELOCITY_NOTE}")
+    if drive is None:
+        _joint(robot, f"{prefix}{_MCP}", kind, base, proximal, _ZERO, (0.0, q_ext[0], 0.0), mcp_effort, limits,
+               f"limits: {source}; effort: finger_node's max_torque; {_VELOCITY_NOTE}")
+    else:
+        _joint(robot, f"{prefix}{_MCP}", kind, base, proximal, _ZERO, (0.0, q_ext[0], 0.0), drive_effort_limit(drive),
+               limits, f"limits: {source}; effort: the drive's stall torque eta_f N k_t i_max; velocity: its "
+               "no-load speed u_max / (k_e N) (spec section 8)", velocity=drive_speed_limit(drive))
     coupler_range, pip_range = _passive_ranges(p, q_ext, limits)
     passive = (f"limits: the range the closed loop gives this joint over {prefix}{_MCP}'s; effort 0: "
                f"not actuated; {_VELOCITY_NOTE}")
@@ -248,8 +268,9 @@ def _frame(robot: ET.Element, name: str, parent: str, xyz: _Vec) -> None:
 
 
 def _joint(robot: ET.Element, name: str, kind: str, parent: str, child: str, xyz: _Vec, rpy: _Vec,
-           effort: float = 0.0, limits: tuple[float, float] | None = None, note: str = "") -> None:
-    """A joint; `note`: a comment before its <limit> saying where each limit comes from."""
+           effort: float = 0.0, limits: tuple[float, float] | None = None, note: str = "",
+           velocity: float = VELOCITY_LIMIT) -> None:
+    """A joint; `note`: a comment before its <limit> saying where each limit comes from; velocity, rad/s."""
     joint = ET.SubElement(robot, "joint", name=name, type=kind)
     ET.SubElement(joint, "parent", link=parent)
     ET.SubElement(joint, "child", link=child)
@@ -257,7 +278,7 @@ def _joint(robot: ET.Element, name: str, kind: str, parent: str, child: str, xyz
     if kind == "fixed":
         return
     ET.SubElement(joint, "axis", xyz="0 1 0")
-    attrs = {"effort": _num(effort), "velocity": _num(VELOCITY_LIMIT)}
+    attrs = {"effort": _num(effort), "velocity": _num(velocity)}
     if note:
         joint.append(ET.Comment(f" {note} "))
     if limits is not None:

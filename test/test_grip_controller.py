@@ -11,6 +11,8 @@ geometry for the markers. Each DDS test has its own ROS_DOMAIN_ID and loopback d
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -151,11 +153,12 @@ def test_node_contact_topics_match_the_offline_run(launcher, ros_client, tmp_pat
     grip force as logged equal the offline run's at the same sim times, bit for bit."""
     node = launcher.node(NODE, dict(scene=str(CUP), torque_source="scene", realtime_factor=0.0, start_paused=True))
     grips = ros_client.collect(Float64, "/grip_force")
+    stamped = ros_client.collect(WrenchStamped, "/grip_force_stamped")
     wrenches = {ph: ros_client.collect(WrenchStamped, f"/contact_wrench/{ph}") for ph in PHALANGES}
     markers = ros_client.collect(MarkerArray, "/finger_markers")
 
     def heard():  # step the paused node until every topic reaches us: from then on they are matched
-        if grips and markers and all(wrenches.values()):
+        if grips and stamped and markers and all(wrenches.values()):
             return True
         ros_client.call(Trigger, "/finger_node/step")
         return False
@@ -180,20 +183,43 @@ def test_node_contact_topics_match_the_offline_run(launcher, ros_client, tmp_pat
     # live grip forces (no stamp) arrive in order: a subsequence of the offline run's
     it = iter(g for g, _ in ref)
     assert all(any(g.data == r for r in it) for g in grips), "grip_force out of order or not the offline run's"
+    # the stamped grip force (issue 19, item 11): wrench.force.x = Σ F_n of the state at its stamp
+    assert len(stamped) > 100
+    for msg in stamped:
+        n, rem = divmod(stamp(msg), DT_NS)
+        w = msg.wrench
+        assert rem == 0 and msg.header.frame_id == "finger_base"
+        assert (w.force.x, w.force.y, w.force.z, w.torque.x, w.torque.y, w.torque.z) == (ref[n][0], 0.0, 0.0, 0.0, 0.0, 0.0)
     cups = [m for array in markers for m in array.markers if m.ns == "cup"]
     assert cups and all(m.type == Marker.CYLINDER and m.scale.x == 0.024 for m in cups)
 
     # the log: every state's grip force and wrenches, stamped with sim time (read by rosbags)
     (log,) = (tmp_path / "bags").glob("*.mcap")
     with AnyReader([log]) as reader:
-        connections = [c for c in reader.connections if c.topic in ("/grip_force", "/contact_wrench/distal")]
+        connections = [c for c in reader.connections if c.topic in ("/grip_force", "/grip_force_stamped", "/contact_wrench/distal")]
         logged = [(c.topic, t, reader.deserialize(raw, c.msgtype)) for c, t, raw in reader.messages(connections=connections)]
     grip_log = {t: m.data for topic, t, m in logged if topic == "/grip_force"}
     assert sorted(grip_log) == [n * DT_NS for n in range(steps + 1)]
     assert [grip_log[n * DT_NS] for n in range(steps + 1)] == [g for g, _ in ref]
+    stamped_log = {t: (m.header.stamp.sec * 10**9 + m.header.stamp.nanosec, m.wrench.force.x)
+                   for topic, t, m in logged if topic == "/grip_force_stamped"}
+    assert stamped_log == {t: (t, g) for t, g in grip_log.items()}  # log time = stamp (record_time sim)
     distal_log = [(t, m) for topic, t, m in logged if topic == "/contact_wrench/distal"]
     assert len(distal_log) == steps + 1
     assert all(m.wrench.torque.y == ref[t // DT_NS][1][1][2] for t, m in distal_log)
+
+    # the viewer plots grip_force once: the stamped copy is no second signal
+    from finger_sim.view.source import read_log
+
+    (run,) = read_log(log)
+    names = {sig.name for sig in run.signals}
+    assert "grip_force" in names and not any(n.startswith("grip_force_stamped") for n in names), names
+
+    # resim takes the log with its stamped grip force: every state reproduced bit for bit
+    done = subprocess.run([str(Path(sys.executable).parent / "finger-sim"), "resim", str(log)], capture_output=True,
+                          text=True, timeout=120, check=False)
+    assert done.returncode == 0 and f"resim: {steps + 1} recorded states reproduced bit for bit" in done.stdout, \
+        done.stdout + done.stderr
 
 
 # -- the grip controller in the loop ---------------------------------------------------------

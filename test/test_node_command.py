@@ -29,6 +29,7 @@ STEPS_PER_TRIGGER = 10
 PUBLISH_HZ = 50.0  # a state every 10 steps: one for each ~/step call
 TORQUE = 0.01  # N·m
 TIMEOUT_S = 60.0
+DRIVE_GRASP = Path(__file__).resolve().parents[1] / "config" / "drive_grasp.yaml"
 
 
 def node_cli(launcher, *args: object, timeout: float = 20.0) -> subprocess.CompletedProcess:
@@ -115,3 +116,33 @@ def test_pub_delivers_one_float(launcher, ros_client):
     ros_client.wait_for(lambda: reliable and best_effort, "the setpoint at both subscribers")
     assert out == "published 0.5 on /grip_setpoint (2 subscribers)\n"
     assert [m.data for m in reliable] == [m.data for m in best_effort] == [0.5]
+
+
+def test_voltage_drives_a_node_with_a_drive(launcher, ros_client):
+    """`finger-sim node voltage 3` on drive_grasp (spec §8): the node holds 3 V from the step it
+    takes effect; its joint states equal an offline Simulator of the scene fed 3 V from there."""
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64
+
+    from finger_sim.ros import conversions
+
+    rate, volts, steps = 1000.0, 3.0, 3 * STEPS_PER_TRIGGER
+    launcher.node(NODE, dict(scene=str(DRIVE_GRASP), start_paused=True, steps_per_trigger=STEPS_PER_TRIGGER,
+                             command_timeout=0.0, physics_rate_hz=rate, record=False))
+    states = ros_client.collect(JointState, "/joint_states")
+    voltages = ros_client.collect(Float64, "/motor/voltage")
+    assert "motor voltage 3.0 V sent to /motor_voltage" in ok(node_cli(launcher, "voltage", volts))
+    answer = ok(node_cli(launcher, "step", 3))
+    assert answer.strip() == "clock=0.03 time=0.03 step=30 episode=0", answer
+    ros_client.wait_for(lambda: any(conversions.from_time(m.header.stamp) == 30_000_000 for m in states),
+                        "the state at step 30")
+    (last,) = [m for m in states if conversions.from_time(m.header.stamp) == 30_000_000]
+
+    sim = Simulator(load_scene(DRIVE_GRASP).with_overrides(dt=1.0 / rate))
+    for _ in range(steps):
+        sim.step(volts)  # paused at step 0: the voltage holds from the first step
+    p = sim.scene.params
+    assert last.position.tolist() == list(joints.joint_positions(sim.q, kinematics.extended_pose(p), kinematics.distal_offset(p)))
+    assert last.effort[0] == sim.system.motor_outputs(sim.time, sim.q, sim.v, sim.torque)["mesh_torque"]
+    assert voltages and voltages[-1].data == volts
+    assert last.position[0] > 0.0  # the motor did turn the finger

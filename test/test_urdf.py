@@ -300,6 +300,34 @@ def test_limits_are_the_scenes_stops_and_the_loops_ranges():
     assert "the linkage's assembly range (toggle to toggle); no MCP stops" in finger_urdf(p)
 
 
+#: spec §8's default drive (its parameter table), SI: R Ω, k_t N·m/A, u_max V, i_max A, N, η_f
+SPEC_DRIVE = dict(resistance=8.0, torque_constant=4.0e-3, supply_voltage=6.0, current_limit=0.5, gear_ratio=300.0,
+                  efficiency=0.4)
+
+
+@pytest.mark.parametrize("scene_name", ["drive_grasp", "drive_grasp_backdrivable"])
+def test_a_drive_gives_mcp_joint_its_speed_and_torque_limits(scene_name, capsys):
+    """issue 19, item 4: with a drive, mcp_joint's velocity limit is the no-load speed
+    u_max/(k_e N) and its effort limit the stall torque η_f N k_t i_max (spec §8; k_e = k_t in
+    SI), from the scene file's own drive values over the spec's defaults; no placeholder on it."""
+    path = ref.CONFIG / f"{scene_name}.yaml"
+    d = {**SPEC_DRIVE, **yaml.safe_load(path.read_text())["model"]["drive"]}
+    speed = d["supply_voltage"] / (d["torque_constant"] * d["gear_ratio"])
+    stall = d["efficiency"] * d["gear_ratio"] * d["torque_constant"] * d["current_limit"]
+    assert cli(["urdf", str(path)]) == 0
+    text = capsys.readouterr().out
+    _, _, effort, velocity = limit(text, "mcp_joint")
+    assert velocity == pytest.approx(speed, rel=1e-15) and effort == pytest.approx(stall, rel=1e-15)
+    if scene_name == "drive_grasp":  # spec §8's derived figures at the defaults
+        assert (velocity, effort) == (pytest.approx(5.0, rel=1e-15), pytest.approx(0.24, rel=1e-15))
+    assert text.count("is a placeholder") == 2  # the passive joints' velocity only
+    assert "no-load speed u_max / (k_e N)" in text and "stall torque eta_f N k_t i_max" in text
+    # a hand of such a finger: the same limits on its prefixed mcp_joint
+    scene = load_scene(path)
+    hand = hand_urdf([("a_", scene.params, (0.0,) * 6, scene.mcp_limits, scene.drive)])
+    assert limit(hand, "a_mcp_joint")[2:] == (effort, velocity)
+
+
 def test_cli_prints_the_urdf_of_a_scene(capsys):
     assert cli(["urdf", str(ref.CONFIG / "paper_flexion.yaml"), "--prefix", "thumb_"]) == 0
     limits = load_scene(ref.CONFIG / "paper_flexion.yaml").mcp_limits

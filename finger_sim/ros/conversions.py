@@ -46,6 +46,10 @@ NS_PER_S = 1_000_000_000
 #: The element output that marks a scene with contact (N): its elements' reports become the
 #: grip_force and contact_wrench topics (keys of finger_sim.ros.interfaces.OUTPUTS).
 GRIP_FORCE = "grip_force"
+#: grip_force with its state's stamp: geometry_msgs/WrenchStamped whose wrench.force.x is Σ F_n
+#: (N, a magnitude, not a direction of header.frame_id), every other field 0; a stamped type of
+#: common_interfaces that a controller pairs with its time (std_msgs has no stamped Float64).
+GRIP_FORCE_STAMPED = "grip_force_stamped"
 PHALANGES = ("proximal", "distal")
 WRENCH_KEYS = tuple(f"contact_wrench/{phalanx}" for phalanx in PHALANGES)
 
@@ -276,6 +280,8 @@ class ContactReport:
             if not callable(getattr(e, "wrenches", None)):  # at start, never in the stepping loop
                 raise TypeError(f"{type(e).__name__} reports {GRIP_FORCE} but has no wrenches(t, q, v)")
         self._grip = Float64()
+        self._grip_stamped = WrenchStamped()
+        self._grip_stamped.header.frame_id = frames.base_frame
         self._wrenches: list[WrenchStamped | None] = [None] * len(PHALANGES)
 
     @classmethod
@@ -285,7 +291,7 @@ class ContactReport:
         return report if report.elements else None
 
     def messages(self, t: float, q: Vec3, v: Vec3, stamp_ns: int) -> list[tuple[str, Float64 | WrenchStamped]]:
-        """[(output key, message)]: grip_force, then contact_wrench/proximal and /distal."""
+        """[(output key, message)]: grip_force, grip_force_stamped, then contact_wrench/proximal and /distal."""
         grip, sums = 0.0, [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]
         for e in self.elements:
             grip += e.outputs(t, q, v)[GRIP_FORCE]
@@ -293,8 +299,9 @@ class ContactReport:
                 acc[0] += wrench[0]
                 acc[1] += wrench[1]
                 acc[2] += wrench[2]
-        self._grip.data = grip
-        out: list[tuple[str, Float64 | WrenchStamped]] = [(GRIP_FORCE, self._grip)]
+        self._grip.data = self._grip_stamped.wrench.force.x = grip
+        to_time(stamp_ns, self._grip_stamped.header.stamp)
+        out: list[tuple[str, Float64 | WrenchStamped]] = [(GRIP_FORCE, self._grip), (GRIP_FORCE_STAMPED, self._grip_stamped)]
         for i, (key, acc) in enumerate(zip(WRENCH_KEYS, sums)):
             self._wrenches[i] = contact_wrench(self.frames, tuple(acc), stamp_ns, out=self._wrenches[i])  # type: ignore[arg-type]
             out.append((key, self._wrenches[i]))

@@ -12,6 +12,7 @@ from collections.abc import Callable
 from typing import Any
 
 from finger_sim import joints, kinematics
+from finger_sim.kinematics import Vec3
 from finger_sim.log.cdr_writer import JointStateCdr, PoseStampedCdr
 from finger_sim.ros import conversions, motor
 from finger_sim.ros.interfaces import Endpoint
@@ -57,6 +58,8 @@ class Finger:
         # the hot messages as CDR bytes, laid out once (finger_sim.log.cdr_writer)
         self._joints_cdr = JointStateCdr(self.frames.base_frame, self.frames.joint_names)
         self._pose_cdr = PoseStampedCdr(self.frames.base_frame)
+        #: the positions, velocities and efforts of the last published joint states (`publish_state`)
+        self.joint_values: tuple[Vec3, Vec3, Vec3] = ((0.0,) * 3,) * 3
         self.outputs: dict[str, Endpoint] = {}  # this finger's publishers by OUTPUTS key (`connect`)
         self.inputs: list[Endpoint] = []
         self.diag_name = self.event_name = self.hardware_id = ""
@@ -105,7 +108,8 @@ class Finger:
                 effort = state["mesh_torque"]
                 for key, msg in motor.messages(state):
                     publish(self.outputs[key], msg)
-            publish(self.joints_out, self._joints_cdr(stamp, *conversions.joint_values(self.frames, q, self.sim.v, effort)))
+            self.joint_values = conversions.joint_values(self.frames, q, self.sim.v, effort)
+            publish(self.joints_out, self._joints_cdr(stamp, *self.joint_values))
             publish(self.pose_out, self._pose_cdr(stamp, *conversions.fingertip_values(self.frames, q)))
             if self.contact is not None:
                 for key, msg in self.contact.messages(*self.sim.state, stamp):

@@ -9,8 +9,11 @@ the installed `three_fingers`): each has its own command and state topics in its
 so the fingers never drift apart in sim time and /clock has one publisher. The run's other
 parameters are finger_node's (without scene and frame_prefix); ~/pause, ~/step and ~/reset act
 on the whole hand. robot_description is finger_sim.urdf.hand_urdf: every finger under
-hand_base at its pose. The log (<record_dir>/<hand>_<UTC start>.mcap) holds every finger's
-topics and one metadata record per finger (`finger_sim/<name>`).
+hand_base at its pose. /joint_states holds every finger's joints (prefixed names, fingers in the
+hand file's order) in one message per published state, stamped as the fingers' own, so that
+robot_state_publisher with robot_description publishes the whole hand's /tf. The log
+(<record_dir>/<hand>_<UTC start>.mcap) holds every finger's topics, the merged /joint_states and
+one metadata record per finger (`finger_sim/<name>`).
 
     finger_hand --ros-args -p hand:=three_fingers
 """
@@ -21,10 +24,11 @@ import sys
 from typing import Any
 
 from finger_sim.errors import ConfigError
+from finger_sim.log.cdr_writer import JointStateCdr
 from finger_sim.ros.node import SteppingNode, run
 from finger_sim.runtime.hand_config import FingerSpec, load_hand, resolve_hand
 from finger_sim.runtime.parameters import HAND_PARAMETERS, HandSettings
-from finger_sim.urdf import hand_urdf
+from finger_sim.urdf import HAND_BASE, hand_urdf
 
 NODE_NAME = "finger_hand"
 
@@ -34,6 +38,8 @@ class FingerHand(SteppingNode):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, HAND_PARAMETERS, HandSettings, **kwargs)
+        self._merged_out = self._outputs["hand_joint_states"]
+        self._merged_cdr = JointStateCdr(HAND_BASE, [n for f in self.fingers for n in f.frames.joint_names])
 
     def _finger_specs(self) -> list[FingerSpec]:
         assert isinstance(self.settings, HandSettings)
@@ -45,11 +51,17 @@ class FingerHand(SteppingNode):
         if len(radii) > 1:  # hand_urdf draws every finger's capsules alike
             raise ConfigError(f"parameter 'hand' ({self.hand_path}): model.phalanx_radius",
                               "the same radii in every finger's scene", sorted(radii))
-        return hand_urdf([(f.spec.frame_prefix, f.scene.params, f.spec.pose, f.scene.mcp_limits) for f in self.fingers],
+        return hand_urdf([(f.spec.frame_prefix, f.scene.params, f.spec.pose, f.scene.mcp_limits, f.scene.drive)
+                          for f in self.fingers],
                          radii=radii.pop(), mcp_effort=self.settings.max_torque)
 
     def _log_name(self) -> str:
         return self.hand_path.stem
+
+    def _publish_run_state(self, stamp: int) -> None:
+        """/joint_states: the fingers' joint states just published, merged in finger order."""
+        position, velocity, effort = (tuple(x for f in self.fingers for x in f.joint_values[i]) for i in range(3))
+        self._publish(self._merged_out, self._merged_cdr(stamp, position, velocity, effort))
 
 
 def main(args: list[str] | None = None) -> int:

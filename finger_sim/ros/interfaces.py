@@ -31,7 +31,7 @@ from std_msgs.msg import Float64, Float64MultiArray, Int64, String
 from visualization_msgs.msg import MarkerArray
 
 from finger_sim.runtime.commands import joint_effort
-from finger_sim.runtime.parameters import CommandQos, RunSettings
+from finger_sim.runtime.parameters import CommandQos, HandSettings, RunSettings
 
 #: History depth of the state and log publishers (reliable, volatile).
 STATE_DEPTH = 10
@@ -105,6 +105,9 @@ class InputSpec:
 OUTPUTS: dict[str, OutputSpec] = {
     "clock": OutputSpec("/clock", Clock, CLOCK_QOS, enabled=lambda s: s.publish_clock, per_finger=False),
     "joint_states": OutputSpec("joint_states", JointState, STATE_QOS, acked=True),
+    # finger_hand: every finger's joints (prefixed names) in one message per state, for robot_state_publisher
+    "hand_joint_states": OutputSpec("joint_states", JointState, STATE_QOS, acked=True, per_finger=False,
+                                    enabled=lambda s: isinstance(s, HandSettings)),
     "fingertip_pose": OutputSpec("fingertip_pose", PoseStamped, STATE_QOS, acked=True),
     "markers": OutputSpec("finger_markers", MarkerArray, STATE_QOS, enabled=lambda s: s.marker_rate_hz > 0),
     "diagnostics": OutputSpec("/diagnostics", DiagnosticArray, STATE_QOS, acked=True, per_finger=False),
@@ -112,6 +115,9 @@ OUTPUTS: dict[str, OutputSpec] = {
     "command_log": OutputSpec("~/command_log", DiagnosticStatus, EVENT_QOS, acked=True),
     # contact (spec §7; conversions.ContactReport): Σ F_n (N) and each phalanx's wrench in finger_base
     "grip_force": OutputSpec("grip_force", Float64, STATE_QOS, acked=True, reported_by="grip_force"),
+    # grip_force with the state's stamp (conversions.GRIP_FORCE_STAMPED: wrench.force.x = Σ F_n, N)
+    "grip_force_stamped": OutputSpec("grip_force_stamped", WrenchStamped, STATE_QOS, acked=True,
+                                     reported_by="grip_force"),
     "contact_wrench/proximal": OutputSpec("contact_wrench/proximal", WrenchStamped, STATE_QOS, acked=True,
                                           reported_by="grip_force"),
     "contact_wrench/distal": OutputSpec("contact_wrench/distal", WrenchStamped, STATE_QOS, acked=True,

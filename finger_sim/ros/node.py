@@ -620,6 +620,11 @@ class SteppingNode(Node):
             self._publish_clock(stamp)
         for f in self.fingers:
             f.publish_state(self._publish, stamp, states=states, markers=markers)
+        if states:
+            self._publish_run_state(stamp)
+
+    def _publish_run_state(self, stamp: int) -> None:
+        """What the run publishes beside its fingers' states at `stamp` ns (a subclass's; none here)."""
 
     def _publish_clock(self, stamp: int) -> None:
         """/clock at `stamp` ns (published and logged, as `ros2 bag record` would hold it)."""
@@ -707,7 +712,7 @@ class FingerNode(SteppingNode):
     def _description(self) -> str:
         f = self.fingers[0]
         return finger_urdf(f.scene.params, prefix=f.spec.frame_prefix, radii=f.scene.phalanx_radius,
-                           mcp_effort=self.settings.max_torque, mcp_limits=f.scene.mcp_limits)
+                           mcp_effort=self.settings.max_torque, mcp_limits=f.scene.mcp_limits, drive=f.scene.drive)
 
     def _log_name(self) -> str:
         return self.fingers[0].scene.name

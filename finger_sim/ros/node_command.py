@@ -1,6 +1,7 @@
 """`finger-sim node ...`: talk to a running finger_node or finger_hand through rclpy, where ros2cli is absent.
 
     finger-sim node torque 0.01          # motor_torque (std_msgs/Float64), like `ros2 topic pub --once`
+    finger-sim node voltage 3            # motor_voltage (std_msgs/Float64, V) of a scene with a drive (spec §8)
     finger-sim node pub TOPIC 0.5        # one std_msgs/Float64 on any topic (e.g. /grip_setpoint)
     finger-sim node pause | resume       # ~/pause (std_srvs/SetBool)
     finger-sim node step [N]             # ~/step N times (each advances steps_per_trigger steps)
@@ -10,11 +11,11 @@
     finger-sim node echo TOPIC [-n N]    # like `ros2 topic echo`: each message a YAML document
 
 `--node NAME` (default /finger_node; /finger_hand for a hand) names the node; `--finger NAME`
-sends a hand's finger its torque (/NAME/motor_torque). The command joins the ROS graph as any
+sends a hand's finger its torque (/NAME/motor_torque) or voltage. The command joins the ROS graph as any
 ROS process does (ROS_DOMAIN_ID, ROS_AUTOMATIC_DISCOVERY_RANGE), uses only the node's standard
 interfaces, so it works beside ros2cli, and waits at most --timeout wall seconds for the node.
 
-A torque is published until the node counts it: its /diagnostics (about 1 Hz) report one more
+A torque (or voltage) is published until the node counts it: its /diagnostics (about 1 Hz) report one more
 command received. The command topic is best effort (ros2_control's system default), and a
 message sent just after discovery can be lost; counting it is the only proof it arrived.
 Errors are one line (exit status 2); Ctrl-C ends `echo` with status 0.
@@ -142,13 +143,20 @@ def _reset(client: _Client, args: argparse.Namespace) -> int:
     return 0
 
 
-def _torque(client: _Client, args: argparse.Namespace) -> int:
+#: action → (command topic, what it is, unit): a finger's held command (std_msgs/Float64)
+COMMAND_TOPICS = {"torque": ("motor_torque", "motor torque", "N·m"), "voltage": ("motor_voltage", "motor voltage", "V")}
+
+
+def _command(client: _Client, args: argparse.Namespace) -> int:
+    """The torque (motor_torque) or, for a finger with a drive, the voltage (motor_voltage), sent
+    until the node counts it."""
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from std_msgs.msg import Float64
 
+    leaf, what, unit = COMMAND_TOPICS[args.action]
     namespace = args.node.rstrip("/").rsplit("/", 1)[0]
-    topic = f"{namespace}/{args.finger + '/' if args.finger else ''}motor_torque"
+    topic = f"{namespace}/{args.finger + '/' if args.finger else ''}{leaf}"
     status = f"{args.node.rstrip('/')}: {args.finger + ' ' if args.finger else ''}simulation"
     counts: list[int] = []
 
@@ -166,9 +174,9 @@ def _torque(client: _Client, args: argparse.Namespace) -> int:
     while time.monotonic() < deadline:
         publisher.publish(Float64(data=args.value))
         if client.wait_for(lambda: counts[-1] > before, "", timeout_s=min(RESEND_S, deadline - time.monotonic())):
-            print(f"motor torque {args.value!r} N·m sent to {topic} (the node counts {counts[-1]} commands received)")
+            print(f"{what} {args.value!r} {unit} sent to {topic} (the node counts {counts[-1]} commands received)")
             return 0
-    raise NodeCommandError(f"{args.node} did not count the torque on {topic} within {client.timeout_s:g} s")
+    raise NodeCommandError(f"{args.node} did not count the {what} on {topic} within {client.timeout_s:g} s")
 
 
 def _pub(client: _Client, args: argparse.Namespace) -> int:
@@ -276,6 +284,6 @@ def plain(value: Any) -> Any:
 
 
 ACTIONS: dict[str, Callable[[_Client, argparse.Namespace], int]] = {
-    "torque": _torque, "pub": _pub, "pause": _pause, "resume": _pause, "step": _step, "reset": _reset,
+    "torque": _command, "voltage": _command, "pub": _pub, "pause": _pause, "resume": _pause, "step": _step, "reset": _reset,
     "get": _get, "set": _set, "echo": _echo,
 }

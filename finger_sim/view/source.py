@@ -34,9 +34,9 @@ ROS_VELOCITIES = ("mcp_velocity", "coupler_velocity", "pip_velocity")
 DRAWN_COLUMNS = frozenset({*PAPER_ANGLES, *ROS_POSITIONS, "tip_x", "tip_y", "tip_z",
                            "tip_qx", "tip_qy", "tip_qz", "tip_qw", "tip_pitch"})
 #: Log topics of a finger that are not signals: the state (read separately), what the drawing
-#: shows already, the run's bookkeeping.
+#: shows already, the run's bookkeeping, grip_force_stamped (grip_force again, with its stamp).
 NOT_SIGNALS = frozenset({"joint_states", "fingertip_pose", "finger_markers", "robot_description", "command_log",
-                         "clock", "diagnostics", "parameter_events"})
+                         "clock", "diagnostics", "parameter_events", "grip_force_stamped"})
 FLOAT64 = "std_msgs/msg/Float64"
 STRING = "std_msgs/msg/String"
 WRENCH = "geometry_msgs/msg/WrenchStamped"
