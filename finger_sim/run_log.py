@@ -505,12 +505,12 @@ class ResimResult:
 
 def _recorded_method(scene: Scene, method: str) -> Scene:
     """The scene to resimulate: under `method: auto`, a log made when auto chose another method (before
-    issue 22 moved scenes with events to dop853) is re-run with the method that made it."""
-    from finger_sim.auto import choose_method
+    auto moved scenes with events to the error-controlled dop853) is re-run with the method that made it.
+    Today's choice is the Simulator's (auto's, then a drive's fallback), not `choose_method`'s alone."""
     from finger_sim.integrators import METHODS
     from finger_sim.scene import AUTO
 
-    if scene.method != AUTO or method not in METHODS or method == choose_method(scene)[0]:
+    if scene.method != AUTO or method not in METHODS or method == Simulator(scene, kernel="python").method:
         return scene
     return scene.with_overrides(method=method)
 
