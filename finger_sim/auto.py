@@ -14,12 +14,12 @@ Three steps, each stated in the reason `choose_method` returns (and logs):
    none is stable, FALLBACK (L-stable). The bench report calls the same `pick`.
 
 Contact (spec §7) adds a mode of 10²–10⁴ rad/s that exists only while a phalanx touches an
-object. Before issue 22 auto stepped such a scene with the table's explicit choice split into m
+object. Before the accuracy promise, auto stepped such a scene with the table's explicit choice split into m
 substeps in contact (`contact_substeps`, still what `finger_sim.batch` asks); that missed the
 tolerance on scenes the table had not seen (up to 1.4e-4 rad), so contact now goes to the
 error-controlled path below.
 
-The promise (issue 22): `auto` delivers the scene's `integrator.tolerance` (AUTO_TARGET by default) on θ,
+The promise: `auto` delivers the scene's `integrator.tolerance` (AUTO_TARGET by default) on θ,
 checked per run rather than per table. The table's fixed-step method is kept only where the scene has no
 events and is not stiff (kinds *smooth* and *discontinuous*: the fast compiled path) and the bench measured it
 TABLE_MARGIN times inside the tolerance; every other scene (stops, contact, stiff) is stepped by the
@@ -68,11 +68,11 @@ MAX_CONTACT_SUBSTEPS = 32
 #: FALLBACK in contact: each substep h = dt/m resolves the contact's oscillatory mode, ω_c·h ≤ this.
 IMPLICIT_CONTACT_MODE_DT = 0.5
 #: The error-controlled method auto steps every scene with events (stops, contact) or a stiff mode with:
-#: compiled, stable wherever its error control lets it be, and far cheaper than radau (issue 17).
+#: compiled, stable wherever its error control lets it be, and far cheaper than radau.
 ERROR_CONTROLLED = "dop853"
 #: Its rtol = atol per unit of the promised global tolerance. The global error is the sum of the local
 #: errors along the run (hundreds of internal steps, each error-controlled) plus event location; measured
-#: on the hard scenes of issue 22 (config/hard/, docs/auto_accuracy.md) at 1e-3·1e-6 rad: 3e-10 to 1.7e-7
+#: on the hard scenes (config/hard/, docs/auto_accuracy.md) at 1e-3·1e-6 rad: 3e-10 to 1.7e-7
 #: rad against a tight reference, so 1e-3 keeps 5× margin on the worst (elastic stops at 50 rad/s).
 ERROR_CONTROL_PER_TOLERANCE = 1e-3
 #: |s|·h at which DOP853's error control settles on a mode s it cannot follow (its stability boundary on the
@@ -320,7 +320,7 @@ def radau_amplification(z: complex) -> float:
 def warn_unresolved_contact(scene: Scene, method: type) -> str:
     """Warn (and return the warning, "" if none) when a hand-chosen implicit `method` does not resolve the
     scene's contact mode ω_c at dt (ω_c·dt > IMPLICIT_CONTACT_MODE_DT): its stable step damps the
-    unresolved oscillation instead, an energy loss the physics does not have (issue 22: radau at 1 ms on
+    unresolved oscillation instead, an energy loss the physics does not have (radau at 1 ms on
     an elastic impact loses 1.3 % of the energy and ends 0.19 rad off)."""
     system = scene.build_system()
     q0, _ = scene.initial_state()

@@ -1,4 +1,4 @@
-"""Geometry that cannot lie (issue 22): a contact deeper than the phalanx's radius stops the run.
+"""Geometry that cannot lie: a contact deeper than the phalanx's radius stops the run.
 
 Spec §7's contact law holds while the phalanx's axis stays outside the object: its normal runs
 from the object to the closest point p of the axis. Once the axis itself enters the object

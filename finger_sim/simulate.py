@@ -106,7 +106,7 @@ class Simulator:
         #: the drive (spec §8) whose mesh modes this Simulator steps, or None (an ideal torque source)
         self._drive = getattr(self.system, "drive", None)
         self._method_cls, self._integrator_cls, self.kernel = setup.method_cls, setup.integrator_cls, setup.kernel
-        #: stops the run when a phalanx's axis enters an object (issue 22); empty without objects
+        #: stops the run when a phalanx's axis enters an object; empty without objects
         self._depth_guard = setup.depth_guard
         self._gaps, self._kinks, self._gap_elements = setup.gaps, setup.kinks, setup.gap_elements
         #: elements whose gaps move with time too (contact with a moving object): asked at (t, q)

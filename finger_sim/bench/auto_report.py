@@ -1,4 +1,4 @@
-"""`method: auto` on the hard scenes of issue 22 and every shipped scene: its error, its estimate, its cost.
+"""`method: auto` on the hard scenes (config/hard/) and every shipped scene: its error, its estimate, its cost.
 
 For each scene: the method auto picks, max |θ − θ_ref| on the 1 ms grid against the independent
 reference of the test suite (test/hybrid_reference.py: the spec's equations written again, scipy

@@ -290,7 +290,7 @@ LIMITS = (
     "Goal: at 1 kHz with `auto`, a contact scene's step costs at most 2× the free-space step. Where it is not met, "
     "what limits it (profile of grasp_cylinder, 500 steps, CPython, `python -m cProfile`):",
     "",
-    "- **Substeps: the main cost** (before issue 22; `auto` now steps contact with the error-controlled dop853, "
+    "- **Substeps: the main cost** (before the accuracy promise; `auto` now steps contact with the error-controlled dop853, "
     "docs/auto_accuracy.md). In contact `auto` took the method it picks for the stops kind (rk4 at 1 kHz) "
     "in *m* substeps (`finger_sim.auto.contact_substeps`: m = 4 at k_c = 1e5, 18 at 1e7), so that the contact "
     "mode at the design force is resolved. The free-space step is one rk6 step, 7 evaluations of the "

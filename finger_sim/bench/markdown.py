@@ -289,7 +289,7 @@ def render_hard_cases(tables: Tables) -> list[str]:
         "",
         "On the contact scenes (grasp_impact, grasp_rigid) `auto` itself is run: it steps them with the "
         "error-controlled dop853 (`finger_sim.auto.ERROR_CONTROLLED`), so its verdict is its own run's, shown in its cell. "
-        "Issue 22's hard scenes (config/hard/) and auto's error on every shipped scene: docs/auto_accuracy.md.",
+        "The hard scenes of config/hard/ and auto's error on every shipped scene: docs/auto_accuracy.md.",
     ]
     return out
 

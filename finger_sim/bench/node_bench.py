@@ -18,7 +18,7 @@ default 30 Hz), each in its own process started by this script, which is the cli
 Then the per-step costs (physics, messages, publishing) measured in this process, to say
 where the time goes.
 
-Targets (issue 3): real-time factor 1.00 ± 0.01 over 60 s, p99 late wake-up < 1 ms,
+Targets: real-time factor 1.00 ± 0.01 over 60 s, p99 late wake-up < 1 ms,
 command-to-state latency p99 < 3 ms, under half of one core; as fast as possible ≥ 20×.
 Both processes run with ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST on their own domain id.
 """

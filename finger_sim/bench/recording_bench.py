@@ -3,7 +3,7 @@
     python -m finger_sim.bench.recording_bench [--duration 20] [--repeats 3] [--domain-id 74]
                                                [--out docs/recording_performance.md]
 
-Targets (issue 4):
+Targets:
 
 1. Recording at 1 kHz physics and 1 kHz publishing costs under 20 % extra node CPU: the node
    (paper_flexion, torque from the topic, realtime_factor 1, joint_states + fingertip_pose +

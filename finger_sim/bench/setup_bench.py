@@ -6,7 +6,7 @@
   never seen (a new spring stiffness each time: method choice, fastest mode, stability check,
   compiled plan), per shipped scene; medians, µs of CPU.
 - `import finger_sim.simulate` in a fresh interpreter, and the same followed by
-  `import scipy.integrate` (what it imported before issue 17), medians of 5, ms of wall time.
+  `import scipy.integrate` (what it imported before), medians of 5, ms of wall time.
 """
 
 from __future__ import annotations

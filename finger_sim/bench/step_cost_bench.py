@@ -3,7 +3,7 @@
     python -m finger_sim.bench.step_cost_bench [--steps 5000] [--rounds 7] [--out docs/node_performance.md]
 
 Per step a node publishes joint_states, fingertip_pose and /clock and, when recording, logs the
-same three. The old path (before issue 15) refilled three rclpy messages (finger_sim.ros.conversions),
+same three. The old path (before the CDR writers) refilled three rclpy messages (finger_sim.ros.conversions),
 serialized each with rclpy, published and logged the bytes. The new path packs the three as CDR
 bytes with finger_sim.log.cdr_writer (no message objects), then publishes and logs those bytes.
 Both run here against the same publishers (nobody subscribed) and the same kind of recorder (an
@@ -132,7 +132,7 @@ def report(measured: dict, command: str, steps: int, rounds: int) -> str:
         rows.append(f"| {label} | {o:.1f} | {n:.1f} | {o / n:.2f}× | {gc0('old', recording):.0f} | {gc0('new', recording):.0f} |")
     return "\n".join([
         BEGIN,
-        "## The message path per step, old and new (issue 15)",
+        "## The message path per step, old and new",
         "",
         f"Command: `{command}` ({datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC, {machine().get('cpu', '?')}, "
         f"{os.cpu_count()} cores shared with other work). {rounds} rounds of {steps} steps, old and new alternating; "
