@@ -108,7 +108,8 @@ def test_bad_parameters_name_themselves():
     with pytest.raises(ParameterError, match="'closing_torque'.*max_torque"):
         GripSettings.from_values({"closing_torque": 0.2, "max_torque": 0.1})
     with pytest.raises(ParameterError, match="'kp'.*type float"):
-        GripSettings.from_values({"kp": 1})
+        GripSettings.from_values({"kp": "1"})
+    assert GripSettings.from_values({"kp": 1}).kp == 1.0  # an int is taken for a float, as ROS 2 users type it
 
 
 def test_closed_loop_on_the_cup_holds_the_setpoint():
