@@ -53,6 +53,20 @@ WAIT_TIMEOUT = 20.0
 SPIN_SLICE = 0.01
 
 
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addoption("--run-slow", action="store_true", help="also run the tests marked slow (the quick bench run)")
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Tests marked slow run only with --run-slow (docs/test_suite.md says when they last ran)."""
+    if config.getoption("--run-slow"):
+        return
+    skip = pytest.mark.skip(reason="slow: opt in with --run-slow")
+    for item in items:
+        if "slow" in item.keywords:
+            item.add_marker(skip)
+
+
 def allocate_domain_id() -> int:
     return TEST_DOMAINS[next(_counter) % len(TEST_DOMAINS)]
 

@@ -74,6 +74,7 @@ def bench(tmp_path_factory):
 BENCH_STDERR: list[str] = []
 
 
+@pytest.mark.slow
 def test_a_quick_run_keeps_the_committed_results_and_a_log_clean(bench):
     """issue 19, item 7: `bench --quick` writes to out/bench_quick/ unless told (docs/ holds the full
     grid's committed results), and draws no progress bar into a non-terminal stderr."""
@@ -89,6 +90,7 @@ def finite(run: Run) -> bool:
     return all(math.isfinite(getattr(run, key)) for key in FIGURES)
 
 
+@pytest.mark.slow
 def test_report_and_figures_are_written_with_the_command(bench):
     out, measured, tables = bench
     assert measured.info.command == f"finger-sim bench --quick --out {out}" and measured.info.quick
@@ -100,6 +102,7 @@ def test_report_and_figures_are_written_with_the_command(bench):
     assert not list(out.glob("*.json"))  # a quick run writes no recommendation data
 
 
+@pytest.mark.slow
 def test_every_run_is_in_its_scene_table_once_and_rendered_as_one_row(bench):
     _, measured, tables = bench
     assert set(tables.scenes) == set(ALL_SCENES)
@@ -113,6 +116,7 @@ def test_every_run_is_in_its_scene_table_once_and_rendered_as_one_row(bench):
 
 
 @pytest.mark.parametrize("scene", [s for s in ALL_SCENES if s not in CONTACT_SCENES])
+@pytest.mark.slow
 def test_every_project_method_has_rows_with_finite_numbers(bench, scene):
     rows = [r for r in bench[2].scenes[scene] if r.family == FAMILY_PROJECT]
     assert {r.method for r in rows} == set(project_methods()) == set(METHODS)
@@ -132,6 +136,7 @@ def test_every_project_method_has_rows_with_finite_numbers(bench, scene):
 
 
 @pytest.mark.parametrize("scene", WP_SCENES)
+@pytest.mark.slow
 def test_every_peer_has_rows(bench, scene):
     rows = bench[2].scenes[scene]
     scipy_rows = [r for r in rows if r.family == FAMILY_SCIPY]
@@ -162,6 +167,7 @@ MUJOCO_GRIP_RTOL = 3e-3
 
 
 @pytest.mark.parametrize("scene", CONTACT_SCENES)
+@pytest.mark.slow
 def test_contact_scenes_have_every_method_and_auto_itself(bench, scene):
     rows = [r for r in bench[2].scenes[scene] if r.family == FAMILY_PROJECT]
     assert {r.method for r in rows} == set(project_methods()) | {AUTO}
@@ -181,6 +187,7 @@ def test_contact_scenes_have_every_method_and_auto_itself(bench, scene):
 
 
 @pytest.mark.parametrize("scene", CONTACT_SCENES)
+@pytest.mark.slow
 def test_contact_reference_locates_events_and_agrees_with_its_check(bench, scene):
     ref = bench[1].refs[scene]
     assert ref.solution.method.startswith("adaptive") and ref.check.method in ("Radau", "LSODA")
@@ -191,6 +198,7 @@ def test_contact_reference_locates_events_and_agrees_with_its_check(bench, scene
 
 
 @pytest.mark.parametrize("scene", CONTACT_WP_SCENES)
+@pytest.mark.slow
 def test_mujoco_contact_rows_compare_grip_force_at_rest(bench, scene):
     _, measured, tables = bench
     sc, ref = measured.scenes[scene], measured.refs[scene]
@@ -212,6 +220,7 @@ def test_mujoco_contact_rows_compare_grip_force_at_rest(bench, scene):
             assert r.max_phi > 1e-3
 
 
+@pytest.mark.slow
 def test_numpy_rhs_variant_is_shown_on_the_paper_run(bench):
     rows = bench[2].scenes[NUMPY_RHS_SCENE]
     naive = [r for r in rows if r.method == f"scipy {NUMPY_RHS_METHOD} (numpy RHS)"]
@@ -230,6 +239,7 @@ def test_mujoco_rows_are_skipped_with_a_note_when_it_is_missing(monkeypatch):
     assert run.status == "skipped" and run.note == note and math.isnan(run.error)
 
 
+@pytest.mark.slow
 def test_hard_cases_table(bench):
     hard = {row.scene: row for row in bench[2].hard}
     assert list(hard) == list(HARD_SCENES)
@@ -247,6 +257,7 @@ def test_hard_cases_table(bench):
     assert hard["grasp_rigid"].results["rk4"].status == "refused"
 
 
+@pytest.mark.slow
 def test_recommendation_table(bench):
     tables = bench[2]
     rows = {(row.kind, row.rate): row for row in tables.recommendation}
@@ -265,6 +276,7 @@ def test_recommendation_table(bench):
     assert not tables.matches_shipped  # so its table cannot stand for the shipped one
 
 
+@pytest.mark.slow
 def test_goals(bench):
     tables = bench[2]
     goal = tables.realtime
@@ -278,6 +290,7 @@ def test_goals(bench):
         assert all(tables.mujoco[name] for name in KINDS["smooth"])
 
 
+@pytest.mark.slow
 def test_a_full_run_writes_the_table_auto_loads(bench, tmp_path):
     out, measured, tables = bench
     full = dataclasses.replace(measured, info=dataclasses.replace(measured.info, quick=False))
@@ -334,6 +347,7 @@ def test_contact_speed_table_times_auto_against_the_free_space_step():
     assert f"| grasp_impact | {contact.kernel} | {contact.method} | {contact.substeps} |" in text
 
 
+@pytest.mark.slow
 def test_contact_comparison_renders_every_run_against_the_reference(bench):
     from finger_sim.bench import contact_report as cr
 
