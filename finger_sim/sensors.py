@@ -125,24 +125,27 @@ class SensorBank:
         truth = tuple(n for n in self.sensors.models if n.startswith("fsr_"))
         return (*truth, *(f"{n}_measured" for n in self.sensors.models))
 
-    def measure(self, outputs: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """The next block's columns (`column_names`) from the run's true outputs over that block."""
+    def measure(self, outputs: Mapping[str, np.ndarray], elapsed: float | None = None) -> dict[str, np.ndarray]:
+        """The next block's columns (`column_names`) from the run's true outputs over that block, its
+        samples dt apart; elapsed: the time from the previous reading to the block's first sample, s
+        (default dt; the node reads at its publishing times, 0 for a repeated reading of a step)."""
         truths, readings = {}, {}
         for name, model in self.sensors.models.items():
             parts = [np.asarray(outputs[s], dtype=float) for s in SOURCES[name]]
             x = np.hypot(*parts) if len(parts) == 2 else parts[0]
             if name.startswith("fsr_"):
                 truths[name] = x
-            readings[f"{name}_measured"] = self._read(name, model, x)
+            readings[f"{name}_measured"] = self._read(name, model, x, self.dt if elapsed is None else elapsed)
         return {**truths, **readings}
 
-    def _read(self, name: str, model: SensorModel, x: np.ndarray) -> np.ndarray:
+    def _read(self, name: str, model: SensorModel, x: np.ndarray, elapsed: float) -> np.ndarray:
         y = x.copy()
         if model.time_constant > 0.0:
             a = -math.expm1(-self.dt / model.time_constant)  # 1 − e^(−dt/τ), exact for small dt/τ
+            first = -math.expm1(-elapsed / model.time_constant)  # over the gap before the block's first sample
             prev = self._lag.get(name, float(x[0]))  # the sensor starts settled on the first reading
             for k in range(len(x)):
-                prev += a * (x[k] - prev) if (k or name in self._lag) else 0.0
+                prev += (a if k else first if name in self._lag else 0.0) * (x[k] - prev)
                 y[k] = prev
             self._lag[name] = prev
         if model.noise > 0.0:
