@@ -27,6 +27,7 @@ Schema (every key optional; omitted = the spec's default):
     initial: {theta1: 0.0, theta1_dot: 0.0}             # rad, rad/s
     duration: 0.3                # s
     integrator: {method: auto, dt: 0.001}               # method: a name in METHODS, or auto
+    sensors: {seed: 0, motor_current: {noise: 0.002}}   # measured columns beside the truth, see finger_sim.sensors
 
 Files are YAML 1.2 (`1e-3` is a number) read by `finger_sim.scene_yaml`: no duplicate keys,
 anchors, aliases or tags. Values are bounded to what a finger can be (the MAX_* constants),
@@ -63,6 +64,7 @@ from finger_sim.effects.contact_geometry import (
 from finger_sim.inputs import BREAK_EPS, Constant, Profile, Ramp, profile_from_dict
 from finger_sim.integrators import METHODS
 from finger_sim.model import FingerParams
+from finger_sim.sensors import SensorSet, sensors_from_dict
 from finger_sim.scene_yaml import dump_scene, magnitude, mapping, number, pair, parse_scene_text, read_scene_file, text
 
 AUTO = "auto"
@@ -95,7 +97,7 @@ MAX_FRICTION = 10.0
 MIN_SLIP_VELOCITY = 1e-9  # m/s
 #: Largest object coordinate or radius, and phalanx radius, m (a finger is ~0.1 m).
 MAX_EXTENT = 10.0
-_TOP_KEYS = {"name", "description", "model", "input", "initial", "duration", "integrator", "objects"}
+_TOP_KEYS = {"name", "description", "model", "input", "initial", "duration", "integrator", "objects", "sensors"}
 _MODEL_KEYS = {
     "spring_stiffness", "damping", "gravity", "tip_force", "joint_limits", "restitution", "geometry", "phalanx_radius", "contact",
     "drive",
@@ -129,6 +131,8 @@ class Scene:
     dt: float = 0.001
     #: the global accuracy `method: auto` promises on θ, rad (finger_sim.auto)
     tolerance: float = DEFAULT_TOLERANCE
+    #: measurement models read from the outputs after the step (finger_sim.sensors), or None
+    sensors: SensorSet | None = None
 
     @property
     def step_count(self) -> int:
@@ -175,7 +179,7 @@ class Scene:
             "duration": self.duration,
             "integrator": {"method": self.method, "dt": self.dt, "tolerance": self.tolerance},
             "objects": [_object_dict(obj) for obj in self.objects],
-        }
+        } | ({} if self.sensors is None else {"sensors": self.sensors.to_dict()})
 
     def to_yaml(self) -> str:
         """The resolved scene as YAML 1.2 that `load_scene` and `scene_from_yaml` read back."""
@@ -273,6 +277,8 @@ def scene_from_dict(data: Any, *, default_name: str = "scene") -> Scene:
         dt=dt,
         tolerance=number(integ.get("tolerance", Scene.tolerance), "integrator.tolerance", minimum=MIN_TOLERANCE,
                          maximum=MAX_TOLERANCE),
+        sensors=(sensors_from_dict(data["sensors"], has_drive=drive is not None, has_objects=bool(data.get("objects")))
+                 if "sensors" in data else None),
     )
     q0, _ = scene.initial_state()  # refuses a θ1 outside the assemblable range, or at a toggle
     contact = build_contact(scene)

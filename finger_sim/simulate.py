@@ -20,6 +20,7 @@ from typing import NamedTuple
 import numpy as np
 
 from finger_sim.actuators import stepping as drive_stepping
+from finger_sim.sensors import SensorBank
 from finger_sim.auto import (ERROR_CONTROLLED, choose_method, contact_substeps, fixed_step_method, integrator_options,
                              warn_unresolved_contact)
 from finger_sim.depth_guard import DepthGuard
@@ -627,6 +628,9 @@ def simulate(scene: Scene, *, kernel: str = "auto") -> Trajectory:
     t = np.arange(n + 1) * sim.dt  # k·dt, as Simulator.time
     energy, residual, values = state_columns(sim.system, t, x)
     names = output_names(sim.system.elements, sim.q)
+    outputs = {**{name: values[:, i] for i, name in enumerate(names)}, **drive_outputs}
+    if scene.sensors is not None:  # read from the outputs after the run: the dynamics never see them
+        outputs.update(SensorBank(scene.sensors, sim.dt).measure(outputs))
     return Trajectory(
         t=t,
         q=np.ascontiguousarray(x[:, :3]),
@@ -636,7 +640,7 @@ def simulate(scene: Scene, *, kernel: str = "auto") -> Trajectory:
         method=sim.method,
         method_reason=sim.method_reason,
         wall_time=wall,
-        outputs={**{name: values[:, i] for i, name in enumerate(names)}, **drive_outputs},
+        outputs=outputs,
         error_estimate=sim.error_estimate,
         energy_report=report,
     )

@@ -23,6 +23,7 @@ from finger_sim.kernel import offline_kernel
 from finger_sim.kernel.runner import advance
 from finger_sim.kinematics import Vec3
 from finger_sim.scene import Scene
+from finger_sim.sensors import SensorBank
 from finger_sim.simulate import Simulator, Trajectory, output_names, state_columns, summary_line
 
 #: One CSV value, as `Trajectory.write_csv` (np.savetxt, fmt "%.17g") writes it: %.17g round-trips float64.
@@ -65,18 +66,22 @@ def stream_csv(scene: Scene, path: str | Path, *, kernel: str = "auto") -> Strea
         from finger_sim.actuators import record
 
         names = (*names, *sim.system.output_names())
+    bank = None
+    if scene.sensors is not None:  # finger_sim.sensors: read from the outputs, block by block in time order
+        bank = SensorBank(scene.sensors, sim.dt)
+        names = (*names, *bank.column_names())
     row_format = ",".join([VALUE_FORMAT] * (9 + len(names))) + "\n"
     wall, done = 0.0, 0
     with open(path, "w") as file:
         file.write(Trajectory.csv_header(names) + "\n")
         first_energy, energy, max_residual = _write_block(file, sim, row_format, 0, np.array([[*sim.q, *sim.v]]),
-                                                          np.array([record.outputs_now(sim)]) if drive else None)
+                                                          np.array([record.outputs_now(sim)]) if drive else None, bank)
         while done < steps:
             n = min(BLOCK_STEPS, steps - done)
             start = time.perf_counter()
             x, extra = record.steps(sim, n) if drive else (advance(sim, n), None)
             wall += time.perf_counter() - start
-            _, energy, residual = _write_block(file, sim, row_format, done + 1, x, extra)
+            _, energy, residual = _write_block(file, sim, row_format, done + 1, x, extra, bank)
             max_residual = max(max_residual, residual)
             done += n
     return StreamedRun(
@@ -87,12 +92,18 @@ def stream_csv(scene: Scene, path: str | Path, *, kernel: str = "auto") -> Strea
 
 
 def _write_block(file: TextIO, sim: Simulator, row_format: str, k0: int, x: np.ndarray,
-                 extra: np.ndarray | None = None) -> tuple[float, float, float]:
+                 extra: np.ndarray | None = None, bank: SensorBank | None = None) -> tuple[float, float, float]:
     """Write the states x (n × 6) of steps k0, k0 + 1, … as CSV rows (then `extra` columns: a drive's
     outputs); (first energy, last energy, max |Φ|) of the block. Its rows live only here, so memory
     holds one block at a time."""
     t = np.arange(k0, k0 + len(x)) * sim.dt  # k·dt, as Simulator.time
     energy, residual, values = state_columns(sim.system, t, x)
-    rows = np.column_stack([t, x, energy, residual, values, *(() if extra is None else (extra,))]).tolist()
+    columns = [t, x, energy, residual, values, *(() if extra is None else (extra,))]
+    if bank is not None:  # the sensors read the block's outputs (elements', then the drive's) by name
+        block = np.column_stack(columns[4:])
+        names = (*output_names(sim.system.elements, sim.q),
+                 *(sim.system.output_names() if extra is not None else ()))  # type: ignore[attr-defined]
+        columns += list(bank.measure({n: block[:, i] for i, n in enumerate(names)}).values())
+    rows = np.column_stack(columns).tolist()
     file.writelines(map(row_format.__mod__, map(tuple, rows)))
     return float(energy[0]), float(energy[-1]), float(residual.max())

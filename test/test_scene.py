@@ -131,7 +131,7 @@ def refusal(data) -> str:
     ("data", "message"),
     [
         # unknown keys, top level and nested
-        ({"modle": {}}, "scene: expected only the keys ['description', 'duration', 'initial', 'input', 'integrator', 'model', 'name', 'objects'], got 'modle'"),
+        ({"modle": {}}, "scene: expected only the keys ['description', 'duration', 'initial', 'input', 'integrator', 'model', 'name', 'objects', 'sensors'], got 'modle'"),
         ({"model": {"stiffness": 1.0}}, "model: expected only the keys ['contact', 'damping', 'drive', 'geometry', 'gravity', 'joint_limits', 'phalanx_radius', 'restitution', 'spring_stiffness', 'tip_force'], got 'stiffness'"),
         ({"model": {"geometry": {"r5": 0.01}}}, "model.geometry: expected only the keys ['L3', 'm1', 'm2', 'm3', 'r1', 'r2', 'r3', 'r4', 'theta4'], got 'r5'"),
         ({"model": {"joint_limits": {"pip": [0, 1]}}}, "model.joint_limits: expected only the keys ['mcp'], got 'pip'"),

@@ -42,6 +42,11 @@ class Finger:
         self.driven = self.scene.drive is not None
         if self.driven:
             self.reported = (*self.reported, *self.sim.system.output_names())
+        #: the scene's motor current sensor (finger_sim.sensors), published beside the true current, or None
+        self.current_sensor = (motor.CurrentSensor(self.scene, self.sim.dt) if motor.CurrentSensor.wanted(self.scene)
+                               else None)
+        if self.current_sensor is not None:
+            self.reported = (*self.reported, "motor_current_measured")
         self.contact = conversions.ContactReport.of(self.frames, self.sim.system.elements)  # None: no contact
         self.mcp_joint = spec.frame_prefix + joints.JOINT_NAMES[0]
         scene_driven = settings.torque_source is TorqueSource.SCENE
@@ -94,6 +99,8 @@ class Finger:
     def reset(self) -> CommandEvent:
         """Back to the scene's initial state; the 'reset' event."""
         self.sim.reset()
+        if self.current_sensor is not None:
+            self.current_sensor.reset()
         self.inbox.clear()
         self.applied = self.initial_torque()
         return self.commands.reset("~/reset")
@@ -108,6 +115,8 @@ class Finger:
                 effort = state["mesh_torque"]
                 for key, msg in motor.messages(state):
                     publish(self.outputs[key], msg)
+                if self.current_sensor is not None:
+                    publish(self.outputs["motor/current_measured"], self.current_sensor.message(self.sim.step_index, state))
             self.joint_values = conversions.joint_values(self.frames, q, self.sim.v, effort)
             publish(self.joints_out, self._joints_cdr(stamp, *self.joint_values))
             publish(self.pose_out, self._pose_cdr(stamp, *conversions.fingertip_values(self.frames, q)))

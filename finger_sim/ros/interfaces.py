@@ -128,6 +128,8 @@ OUTPUTS: dict[str, OutputSpec] = {
     "motor/angle": OutputSpec("motor/angle", Float64, STATE_QOS, acked=True, reported_by="motor_current"),
     "motor/encoder": OutputSpec("motor/encoder", Int64, STATE_QOS, acked=True, reported_by="encoder"),
     "motor/mesh_mode": OutputSpec("motor/mesh_mode", String, STATE_QOS, acked=True, reported_by="motor_current"),
+    "motor/current_measured": OutputSpec("motor/current_measured", Float64, STATE_QOS, acked=True,
+                                         reported_by="motor_current_measured"),  # scene sensors: the reading
 }
 #: Every command topic (the motor torque, N·m): plain; the message ros2_control's forward command
 #: controller receives on <controller>/commands; what ros2_control's topic-based hardware interface

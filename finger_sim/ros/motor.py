@@ -2,7 +2,9 @@
 
 Topics (per finger, published at the state rate and logged): `motor/current` (A), `motor/voltage`
 (terminal voltage, V), `motor/angle` (rad at the motor), `motor/encoder` (counts, std_msgs/Int64;
-only with encoder_counts > 0) and `motor/mesh_mode` (`drive`, `back`, `stuck`).
+only with encoder_counts > 0) and `motor/mesh_mode` (`drive`, `back`, `stuck`); with a
+`sensors.motor_current` in the scene also `motor/current_measured` (A, finger_sim.sensors: the
+reading a controller gets, seeded, so a resim publishes the same).
 """
 
 from __future__ import annotations
@@ -10,9 +12,12 @@ from __future__ import annotations
 from collections.abc import Iterator
 from typing import Any
 
+import numpy as np
 from std_msgs.msg import Float64, Int64, String
 
 from finger_sim.actuators.drive import MESH_MODES, DrivenSystem
+from finger_sim.scene import Scene
+from finger_sim.sensors import SensorBank, SensorSet
 from finger_sim.simulate import Simulator
 
 #: OUTPUTS key → the drive output it carries.
@@ -32,3 +37,29 @@ def messages(state: dict[str, float]) -> Iterator[tuple[str, Any]]:
     if "encoder" in state:
         yield "motor/encoder", Int64(data=int(state["encoder"]))
     yield "motor/mesh_mode", String(data=MESH_MODES[int(state["mesh_mode"])])
+
+
+class CurrentSensor:
+    """The scene's `sensors.motor_current` read at the node's publishing times (its noise stream is the
+    offline run's: the same seed and sensor); `reset` starts it over with the episode."""
+
+    def __init__(self, scene: Scene, dt: float) -> None:
+        sensors: SensorSet = scene.sensors  # type: ignore[assignment]
+        self._set = SensorSet(seed=sensors.seed, pairs=(("motor_current", sensors.models["motor_current"]),))
+        self._dt = dt
+        self.reset()
+
+    @staticmethod
+    def wanted(scene: Scene) -> bool:
+        return scene.drive is not None and scene.sensors is not None and "motor_current" in scene.sensors.models
+
+    def reset(self) -> None:
+        self._bank = SensorBank(self._set, self._dt)
+        self._last: int | None = None
+
+    def message(self, step: int, state: dict[str, float]) -> Float64:
+        """The reading at the simulator's step (its step_index) of the drive's state (`motor_state`)."""
+        elapsed = 0.0 if self._last is None else (step - self._last) * self._dt  # one step: dt exactly, as offline
+        self._last = step
+        reading = self._bank.measure({"motor_current": np.array([state["motor_current"]])}, elapsed=elapsed)
+        return Float64(data=float(reading["motor_current_measured"][0]))

@@ -20,6 +20,7 @@ grip force commanding voltage, then 0 V once settled: the self-locking gear hold
 from __future__ import annotations
 
 import importlib
+import math
 from collections.abc import Callable, Mapping
 from typing import Any, Protocol
 
@@ -89,13 +90,20 @@ GRIP_VOLTAGE = {"closing_voltage": 2.0, "kp": 1.0, "ki": 20.0, "max_voltage": 6.
                 "lock_after": 0.05, "contact_threshold": 0.01, "opening_voltage": 2.0, "opening_time": 0.2}
 
 
-def grip_voltage(sample_period: float, **params: float) -> Controller:
+def grip_voltage(sample_period: float, feedback: str = "grip_force", force_per_unit: float = 1.0,
+                 **params: float) -> Controller:
     """A grip controller for a self-locking drive, commanding the motor voltage (V): with a setpoint
-    F* > 0 it applies `closing_voltage` until contact (grip_force > contact_threshold), then
-    u = closing_voltage + kp·e + ki·∫e dt on e = F* − grip_force, |u| ≤ max_voltage; once |e| has
+    F* > 0 it applies `closing_voltage` until contact (F > contact_threshold), then
+    u = closing_voltage + kp·e + ki·∫e dt on e = F* − F, |u| ≤ max_voltage; once |e| has
     stayed within lock_band·F* for lock_after s it switches the voltage off (0 V, for good until
     the setpoint changes): the self-locking gear holds the grip without power. A setpoint of 0
-    opens: −opening_voltage for opening_time s, then 0 V. params: GRIP_VOLTAGE overrides."""
+    opens: −opening_voltage for opening_time s, then 0 V. params: GRIP_VOLTAGE overrides.
+    The force F it closes its loop on is force_per_unit × the measured signal `feedback`: grip_force
+    (N, the ideal force sensor), or a scene sensor's reading (finger_sim.sensors) such as
+    fsr_distal_measured (N) or motor_current_measured (A; force_per_unit then the grip per ampere, N/A)."""
+    if not force_per_unit > 0.0 or not math.isfinite(force_per_unit):
+        raise ConfigError("controller parameter force_per_unit", "a finite number > 0 (N per unit of feedback)",
+                          force_per_unit)
     unknown = set(params) - set(GRIP_VOLTAGE)
     if unknown:
         raise ConfigError("controller parameter", f"one of {sorted(GRIP_VOLTAGE)}", sorted(unknown))
@@ -105,7 +113,9 @@ def grip_voltage(sample_period: float, **params: float) -> Controller:
     def control(t: float, setpoint: float, measured: Mapping[str, float]) -> float:
         if setpoint != state["setpoint"]:
             state.update(setpoint=setpoint, integral=0.0, in_band=0.0, locked=False, since=t)
-        force = measured["grip_force"]
+        if feedback not in measured:
+            raise ConfigError("controller parameter feedback", f"one of the measured signals {sorted(measured)}", feedback)
+        force = force_per_unit * measured[feedback]
         if setpoint == 0.0:
             return -p["opening_voltage"] if t - state["since"] < p["opening_time"] and t > 0.0 else 0.0
         if state["locked"]:

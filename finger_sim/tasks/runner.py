@@ -25,6 +25,7 @@ import numpy as np
 from finger_sim.errors import FingerSimError
 from finger_sim.grasp_objects import Crush, carry_over, crushed, with_tip_force, without_objects
 from finger_sim.inputs import BREAK_EPS
+from finger_sim.sensors import SOURCES, SensorBank
 from finger_sim.simulate import Simulator, output_names, output_values
 from finger_sim.tasks.controllers import MEASURED, Factory
 from finger_sim.tasks.metrics import Scores, judge, task_scores
@@ -82,6 +83,9 @@ def run_task(task: Task, factory: Factory, *, label: str = "", params: Mapping[s
     pending: deque[tuple[int, float]] = deque()
     command, setpoint, crushes = 0.0, 0.0, []
     si = 0
+    # the scene's sensors (finger_sim.sensors), read at the samples: their readings are measured too
+    sensors = SensorBank(scene.sensors, dt) if scene.sensors is not None else None
+    sensed_at: int | None = None
     start = time.perf_counter()
 
     def record(k: int, outputs: Mapping[str, float]) -> None:
@@ -100,6 +104,11 @@ def run_task(task: Task, factory: Factory, *, label: str = "", params: Mapping[s
             measured = {name: sensed[name] for name in MEASURED}
             measured.update({k_: v for k_, v in outputs.items()
                              if not k_.startswith(UNMEASURED_PREFIX) and k_ not in UNMEASURED})
+            if sensors is not None:  # an FSR reads 0 N once its object is gone (crushed)
+                truth = {src: np.array([outputs.get(src, 0.0)]) for name in sensors.sensors.models for src in SOURCES[name]}
+                readings = sensors.measure(truth, elapsed=0.0 if sensed_at is None else (k - sensed_at) * dt)
+                measured.update({name: float(r[0]) for name, r in readings.items() if name.endswith("_measured")})
+                sensed_at = k
             answer = controller(k * dt, setpoint, measured)
             if isinstance(answer, bool) or not (isinstance(answer, numbers.Real) and math.isfinite(answer)):
                 raise FingerSimError(f"controller '{label}' returned {answer!r} at t = {k * dt:g} s in task "
