@@ -13,6 +13,7 @@ is exceeded at the end of a step is crushed and taken out.
 
 from __future__ import annotations
 
+import logging
 import math
 import numbers
 import time
@@ -22,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from finger_sim.errors import FingerSimError
+from finger_sim.errors import FingerSimError, SimulationDiverged
 from finger_sim.grasp_objects import Crush, carry_over, crushed, with_tip_force, without_objects
 from finger_sim.inputs import BREAK_EPS
 from finger_sim.sensors import SOURCES, SensorBank
@@ -30,6 +31,8 @@ from finger_sim.simulate import Simulator, output_names, output_values
 from finger_sim.tasks.controllers import MEASURED, Factory
 from finger_sim.tasks.metrics import Scores, judge, task_scores
 from finger_sim.tasks.schema import Task
+
+LOG = logging.getLogger(__name__)
 
 #: The columns a task run records at every sample, in this order (N, rad, rad/s, N·m, N).
 COLUMNS = ("t", "grip_force", "setpoint", "theta1", "theta1_dot", "command", "tip_force_x", "tip_force_y", "crushed")
@@ -117,20 +120,31 @@ def run_task(task: Task, factory: Factory, *, label: str = "", params: Mapping[s
         while pending and pending[0][0] <= k:
             command = pending.popleft()[1]
         record(k, outputs)
-        sim.step(command)
+        try:
+            sim.step(command)
+        except SimulationDiverged as exc:  # e.g. pressed through an object (depth_guard): the task fails
+            LOG.warning("task '%s', controller '%s': %s", task.name, label, exc)
+            n, rows = k, rows[: k + 1]
+            stopped = True
+            break
         outputs = _outputs(sim, command)
         broken = crushed(sim)
         if broken:  # the sample at the crush keeps the force that broke it (recorded and measured)
             crushes += broken
             sim = carry_over(sim, without_objects(sim.scene, (c.object for c in broken)))
-    record(n, outputs)
+    else:
+        stopped = False
+        record(n, outputs)
     wall = time.perf_counter() - start
     samples = {name: np.ascontiguousarray(rows[:, i]) for i, name in enumerate(COLUMNS + drive_columns)}
     grid = tuple((k * dt, v) for k, v in set_steps)
     torque = (samples["command"], samples["theta1"]) if task.input == "torque" else None
     scores = task_scores(samples["t"], samples["grip_force"], grid, task.hold_after, bool(crushes),
                          outputs={c: samples[c] for c in drive_columns}, torque=torque)
-    return TaskRun(task.name, label, samples, crushes, scores, judge(scores, task.limits), grid, dict(task.limits), wall)
+    passed = judge(scores, task.limits)
+    if stopped:  # a run the simulation had to stop fails its task
+        passed["completed"] = False
+    return TaskRun(task.name, label, samples, crushes, scores, passed, grid, dict(task.limits), wall)
 
 
 def _outputs(sim: Simulator, voltage: float = 0.0) -> dict[str, float]:
