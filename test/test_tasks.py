@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -281,3 +282,17 @@ def test_tasks_command_writes_report_and_json_and_exits_by_the_result(tmp_path, 
     assert main(["tasks", str(TASKS / "fragile.yaml"), "--controller", "x=no_such_module:f"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--controller" in err
+
+
+def test_a_run_pressed_through_its_object_fails_as_not_completed(caplog):
+    """The aggressive PI drives the distal phalanx into the foam cup (k_c = 1e3) past its radius ρ3:
+    the run stops at that step and the task fails as `completed`; the shipped PI completes."""
+    task = load_task(TASKS / "hold_soft.yaml")
+    run = run_task(task, grip_pi_aggressive, label="aggressive")
+    assert run.passed["completed"] is False and not all(run.passed.values())
+    t_end = run.samples["t"][-1]
+    assert t_end < task.scene.duration - task.scene.dt  # it stopped early, at the step that went too deep
+    depth_mm = float(re.search(r"went ([0-9.]+) mm into object 'foam_cup'", caplog.text).group(1))
+    assert depth_mm > 1e3 * task.scene.phalanx_radius[1]
+    assert f"t = {t_end + task.scene.dt:.6f} s" in caplog.text
+    assert "completed" not in run_task(task, grip_pi, label="pi").passed
