@@ -54,7 +54,7 @@ SPIN_SLICE = 0.01
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
-    parser.addoption("--run-slow", action="store_true", help="also run the tests marked slow (the quick bench run)")
+    parser.addoption("--run-slow", action="store_true", help="also run the tests marked slow (the quick bench run, long energy runs)")
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:

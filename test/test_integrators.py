@@ -187,6 +187,7 @@ def long_energy_error(method: str) -> np.ndarray:
     return (out - e0) / e0
 
 
+@pytest.mark.slow  # 2e4 steps of the Python rattle: about 30 s
 def test_rattle_energy_error_is_bounded_and_does_not_drift():
     """Measured at dt = 5 ms over 2e4 steps (the same picture over 1e5): max |ΔE/E| 2.686e-4 in every tenth of the run
     (equal to 4 digits), a linear fit's drift over the whole run −6e-7 (0.2% of the bound
