@@ -19,6 +19,7 @@ from finger_sim.integrators import METHODS
 from finger_sim.kernel import KERNELS
 from finger_sim.model import FingerParams
 from finger_sim.node_command_args import add_parser as add_node_parser
+from finger_sim.node_command_args import positive_int as _positive_int
 from finger_sim.output_paths import check_output_dir, check_output_file, check_plot_file
 from finger_sim.scene import AUTO, Scene, load_scene
 
@@ -386,16 +387,6 @@ class _Parser(argparse.ArgumentParser):
 
     def error(self, message: str) -> NoReturn:
         self.exit(EXIT_ERROR, f"{self.prog}: error: {_one_line(message)}\n")
-
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer > 0, got {text!r}") from None
-    if value <= 0:
-        raise argparse.ArgumentTypeError(f"expected an integer > 0, got {value}")
-    return value
 
 
 def _csv_options(parser: argparse.ArgumentParser) -> None:

@@ -33,7 +33,7 @@ def add_parser(sub: Any, handler: Callable[[argparse.Namespace], int]) -> None:
     actions.add_parser("pause", help="pause stepping (~/pause true)")
     actions.add_parser("resume", help="resume stepping (~/pause false)")
     step = actions.add_parser("step", help="advance a paused node: ~/step N times (default 1)")
-    step.add_argument("n", type=_positive_int, nargs="?", default=1)
+    step.add_argument("n", type=positive_int, nargs="?", default=1)
     actions.add_parser("reset", help="back to the scene's initial state (~/reset)")
     get = actions.add_parser("get", help="print a parameter's value")
     get.add_argument("param")
@@ -42,11 +42,12 @@ def add_parser(sub: Any, handler: Callable[[argparse.Namespace], int]) -> None:
     put.add_argument("value")
     echo = actions.add_parser("echo", help="print a topic's messages as YAML documents")
     echo.add_argument("topic")
-    echo.add_argument("-n", "--count", type=_positive_int, metavar="N", help="stop after N messages (default: Ctrl-C)")
+    echo.add_argument("-n", "--count", type=positive_int, metavar="N", help="stop after N messages (default: Ctrl-C)")
     node.set_defaults(func=handler)
 
 
-def _positive_int(text: str) -> int:
+def positive_int(text: str) -> int:
+    """argparse type: an integer > 0, else a one-line usage error naming what came."""
     try:
         value = int(text)
     except ValueError:
