@@ -231,11 +231,12 @@ class SteppingNode(Node):
     def _subscribe(self, finger: Finger, spec: InputSpec, qos: QoSProfile) -> Endpoint:
         endpoint: list[Endpoint] = []
         inbox, read, joint, stamped = finger.inbox, spec.read, finger.mcp_joint, spec.stamped
+        refused = input_refusal(spec.topic, finger.driven)  # a torque topic of a driven finger, or the reverse
 
         def on_command(msg: Any) -> None:  # executor thread: hand over, never touch the simulator
             self._record(endpoint[0], msg)
             values, refusal = read(msg, joint)
-            answers = inbox.put(endpoint[0].topic, values, refusal or input_refusal(spec.topic, finger.driven),
+            answers = inbox.put(endpoint[0].topic, values, refusal or refused,
                                 conversions.from_time(msg.header.stamp) if stamped else None)
             if answers or self.state is not RunState.RUNNING:  # an idle loop answers refusals without waiting
                 self._wake.set()
