@@ -69,50 +69,15 @@ class FingerSystem:
 
         q in rad, v in rad/s, τ in N·m; q'' in rad/s², λ in N (per unit constraint, m).
         """
-        t1, t2, t3 = q
-        w1, w2, w3 = v
-        r1, r2, r3 = self._r
-        s1, c1 = math.sin(t1), math.cos(t1)
-        s2, c2 = math.sin(t2), math.cos(t2)
-        s3, c3 = math.sin(t3), math.cos(t3)
-        u = t1 - t3 - self.alpha
-        su, cu = math.sin(u), math.cos(u)
-        cc = self._c
-        # f = Q − h
         f1, f2, f3 = tau, 0.0, 0.0
         for force in self._forces:
             e1, e2, e3 = force(t, q, v)
             f1 += e1
             f2 += e2
             f3 += e3
-        f1 -= cc * su * w3 * w3
-        f3 += cc * su * w1 * w1
-        # M⁻¹: the (1,3) block is 2×2, θ2 is decoupled.
-        b = cc * cu
-        det = self._m11 * self._m33 - b * b
-        i11, i13, i33 = self._m33 / det, -b / det, self._m11 / det
-        i22 = 1.0 / self._m22
-        x1, x2, x3 = i11 * f1 + i13 * f3, i22 * f2, i13 * f1 + i33 * f3
-        # rows of Φ_q and y_i = M⁻¹ g_i
-        g11, g12, g13 = -r1 * s1, r2 * s2, r3 * s3
-        g21, g22, g23 = r1 * c1, -r2 * c2, -r3 * c3
-        y11, y12, y13 = i11 * g11 + i13 * g13, i22 * g12, i13 * g11 + i33 * g13
-        y21, y22, y23 = i11 * g21 + i13 * g23, i22 * g22, i13 * g21 + i33 * g23
-        # W = Φ_q M⁻¹ Φ_qᵀ, rhs = γ − Φ_q x
-        a11 = g11 * y11 + g12 * y12 + g13 * y13
-        a12 = g11 * y21 + g12 * y22 + g13 * y23
-        a22 = g21 * y21 + g22 * y22 + g23 * y23
-        gam1 = r1 * c1 * w1 * w1 - r2 * c2 * w2 * w2 - r3 * c3 * w3 * w3
-        gam2 = r1 * s1 * w1 * w1 - r2 * s2 * w2 * w2 - r3 * s3 * w3 * w3
-        b1 = gam1 - (g11 * x1 + g12 * x2 + g13 * x3)
-        b2 = gam2 - (g21 * x1 + g22 * x2 + g23 * x3)
-        dw = a11 * a22 - a12 * a12
-        lam1 = (a22 * b1 - a12 * b2) / dw
-        lam2 = (a11 * b2 - a12 * b1) / dw
-        return (
-            (x1 + lam1 * y11 + lam2 * y21, x2 + lam1 * y12 + lam2 * y22, x3 + lam1 * y13 + lam2 * y23),
-            (lam1, lam2),
-        )
+        a1, a2, a3, lam1, lam2 = schur_solve(self._m11, self._m22, self._m33, self._c, *self._r, self.alpha, *q, *v,
+                                             f1, f2, f3)
+        return (a1, a2, a3), (lam1, lam2)
 
     def mass_solve(self, q: Vec3, p: Vec3) -> Vec3:
         """M(q)⁻¹ p in closed form (θ2 decouples, the (1,3) block is 2×2): velocities from momenta."""
@@ -145,3 +110,46 @@ class FingerSystem:
     def energy(self, q: Vec3, v: Vec3) -> float:
         """T + V, J: conserved when τ = 0 and no damping acts."""
         return self.kinetic_energy(q, v) + self.potential_energy(q)
+
+
+def schur_solve(m11: float, m22: float, m33: float, cc: float, r1: float, r2: float, r3: float, alpha: float,
+                t1: float, t2: float, t3: float, w1: float, w2: float, w3: float,
+                f1: float, f2: float, f3: float) -> tuple[float, float, float, float, float]:
+    """(θ1'', θ2'', θ3'', λ1, λ2) of [M −Φ_qᵀ; Φ_q 0][q''; λ] = [Q − h; γ] (spec §4), by a Schur complement.
+
+    The one definition of the solve: `FingerSystem.accelerations` calls it plainly, and the compiled
+    kernel compiles it (`finger_sim.kernel.numerics.accelerations`). M's constant entries m11, m22,
+    m33 (kg·m²) and M13's amplitude cc (kg·m², M13 = cc cos(θ1 − θ3 − α)); link lengths r (m);
+    α (rad); q (rad), q' (rad/s); Q = (f1, f2, f3), N·m. q'' in rad/s², λ in N.
+    """
+    s1, c1 = math.sin(t1), math.cos(t1)
+    s2, c2 = math.sin(t2), math.cos(t2)
+    s3, c3 = math.sin(t3), math.cos(t3)
+    u = t1 - t3 - alpha
+    su, cu = math.sin(u), math.cos(u)
+    # f = Q − h
+    f1 -= cc * su * w3 * w3
+    f3 += cc * su * w1 * w1
+    # M⁻¹: the (1,3) block is 2×2, θ2 is decoupled.
+    b = cc * cu
+    det = m11 * m33 - b * b
+    i11, i13, i33 = m33 / det, -b / det, m11 / det
+    i22 = 1.0 / m22
+    x1, x2, x3 = i11 * f1 + i13 * f3, i22 * f2, i13 * f1 + i33 * f3
+    # rows of Φ_q and y_i = M⁻¹ g_i
+    g11, g12, g13 = -r1 * s1, r2 * s2, r3 * s3
+    g21, g22, g23 = r1 * c1, -r2 * c2, -r3 * c3
+    y11, y12, y13 = i11 * g11 + i13 * g13, i22 * g12, i13 * g11 + i33 * g13
+    y21, y22, y23 = i11 * g21 + i13 * g23, i22 * g22, i13 * g21 + i33 * g23
+    # W = Φ_q M⁻¹ Φ_qᵀ, rhs = γ − Φ_q x
+    a11 = g11 * y11 + g12 * y12 + g13 * y13
+    a12 = g11 * y21 + g12 * y22 + g13 * y23
+    a22 = g21 * y21 + g22 * y22 + g23 * y23
+    gam1 = r1 * c1 * w1 * w1 - r2 * c2 * w2 * w2 - r3 * c3 * w3 * w3
+    gam2 = r1 * s1 * w1 * w1 - r2 * s2 * w2 * w2 - r3 * s3 * w3 * w3
+    b1 = gam1 - (g11 * x1 + g12 * x2 + g13 * x3)
+    b2 = gam2 - (g21 * x1 + g22 * x2 + g23 * x3)
+    dw = a11 * a22 - a12 * a12
+    lam1 = (a22 * b1 - a12 * b2) / dw
+    lam2 = (a11 * b2 - a12 * b1) / dw
+    return x1 + lam1 * y11 + lam2 * y21, x2 + lam1 * y12 + lam2 * y22, x3 + lam1 * y13 + lam2 * y23, lam1, lam2

@@ -24,6 +24,7 @@ except ImportError:  # no numba: the same functions run as plain Python (slow, s
         return lambda function: function
 
 
+from finger_sim import dynamics
 from finger_sim.effects.contact import MIN_DISTANCE
 from finger_sim.inputs import BREAK_EPS, CONSTANT, RAMP, SINE, SQUARE, STEP
 from finger_sim.kernel.layout import (BREAKPOINT, CONTACT, DAMPING, GRAVITY, HEADER, NON_FINITE, NOT_CONVERGED, OK,
@@ -40,6 +41,9 @@ ERROR_EXPONENT = -1.0 / 8.0  # −1/(order of the error estimator + 1)
 MIN_STEP_ULPS = 10.0
 
 JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
+
+#: The laws compiled from their one definition (the plain functions the Python path calls).
+schur_solve = njit(**JIT)(dynamics.schur_solve)
 
 
 @njit(**JIT)
@@ -175,36 +179,10 @@ def generalized_force(m, t, q0, q1, q2, v0, v1, v2, tau):
 
 @njit(**JIT)
 def accelerations(m, t, q0, q1, q2, v0, v1, v2, tau):
-    """q'' (rad/s²) of the index-1 system: `FingerSystem.accelerations`, same Schur complement."""
-    m11, m22, m33, cc, r1, r2, r3, alpha = m[0], m[1], m[2], m[3], m[4], m[5], m[6], m[7]
-    s1, c1 = math.sin(q0), math.cos(q0)
-    s2, c2 = math.sin(q1), math.cos(q1)
-    s3, c3 = math.sin(q2), math.cos(q2)
-    u = q0 - q2 - alpha
-    su, cu = math.sin(u), math.cos(u)
+    """q'' (rad/s²) of the index-1 system: `FingerSystem.accelerations`, the same `schur_solve`."""
     f1, f2, f3 = generalized_force(m, t, q0, q1, q2, v0, v1, v2, tau)
-    f1 -= cc * su * v2 * v2
-    f3 += cc * su * v0 * v0
-    b = cc * cu
-    det = m11 * m33 - b * b
-    i11, i13, i33 = m33 / det, -b / det, m11 / det
-    i22 = 1.0 / m22
-    x1, x2, x3 = i11 * f1 + i13 * f3, i22 * f2, i13 * f1 + i33 * f3
-    g11, g12, g13 = -r1 * s1, r2 * s2, r3 * s3
-    g21, g22, g23 = r1 * c1, -r2 * c2, -r3 * c3
-    y11, y12, y13 = i11 * g11 + i13 * g13, i22 * g12, i13 * g11 + i33 * g13
-    y21, y22, y23 = i11 * g21 + i13 * g23, i22 * g22, i13 * g21 + i33 * g23
-    a11 = g11 * y11 + g12 * y12 + g13 * y13
-    a12 = g11 * y21 + g12 * y22 + g13 * y23
-    a22 = g21 * y21 + g22 * y22 + g23 * y23
-    gam1 = r1 * c1 * v0 * v0 - r2 * c2 * v1 * v1 - r3 * c3 * v2 * v2
-    gam2 = r1 * s1 * v0 * v0 - r2 * s2 * v1 * v1 - r3 * s3 * v2 * v2
-    b1 = gam1 - (g11 * x1 + g12 * x2 + g13 * x3)
-    b2 = gam2 - (g21 * x1 + g22 * x2 + g23 * x3)
-    dw = a11 * a22 - a12 * a12
-    lam1 = (a22 * b1 - a12 * b2) / dw
-    lam2 = (a11 * b2 - a12 * b1) / dw
-    return x1 + lam1 * y11 + lam2 * y21, x2 + lam1 * y12 + lam2 * y22, x3 + lam1 * y13 + lam2 * y23
+    a0, a1, a2, _, _ = schur_solve(m[0], m[1], m[2], m[3], m[4], m[5], m[6], m[7], q0, q1, q2, v0, v1, v2, f1, f2, f3)
+    return a0, a1, a2
 
 
 @njit(**JIT)
