@@ -19,6 +19,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from finger_sim.projection import NON_FINITE, NOT_CONVERGED, OK
+
 if TYPE_CHECKING:
     from finger_sim.dynamics import FingerSystem
 
@@ -34,9 +36,7 @@ CODES = (NO_FORCE, SPRING, DAMPING, GRAVITY, TIP_FORCE, CONTACT)
 HEADER = 10
 
 #: Status codes of the kernel's calls (`finger_sim.kernel.numerics`).
-OK = 0
-NON_FINITE = 1  # the projection met a non-finite state
-NOT_CONVERGED = 2  # the projection did not reach POSITION_TOLERANCE
+#: OK, NON_FINITE, NOT_CONVERGED (0, 1, 2): the projection's own (`finger_sim.projection.project_state`).
 STEP_TOO_SMALL = 3  # DOP853's step fell below its floor
 BREAKPOINT = 4  # a torque switch lies inside the step: the caller splits it (state unchanged)
 STATE_NON_FINITE = 5  # the step ended in a non-finite state (the Simulator's own check)
