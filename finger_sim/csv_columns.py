@@ -29,6 +29,7 @@ import numpy as np
 from finger_sim import kinematics
 from finger_sim.actuators import record
 from finger_sim.dynamics import FingerSystem
+from finger_sim.effects.spring import spring_force
 from finger_sim.joints import joint_positions, joint_velocities, pip_stiffness
 from finger_sim.kernel import offline_kernel
 from finger_sim.kinematics import Vec3
@@ -65,7 +66,8 @@ class RosRow:
         pos = joint_positions(q, self._q_ext, self._alpha)
         tip = kinematics.fingertip(self._params, q, self._alpha)
         half = 0.5 * tip.psi
-        return (t, *pos, *joint_velocities(v), torque, 0.0, -self._k * pos[2], torque,
+        pip_effort = spring_force(self._k, self._alpha, q[0], q[2])[2]  # −kβ
+        return (t, *pos, *joint_velocities(v), torque, 0.0, pip_effort, torque,
                 tip.x, 0.0, -tip.y, 0.0, math.sin(half), 0.0, math.cos(half), tip.psi)
 
 

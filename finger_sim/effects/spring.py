@@ -27,8 +27,7 @@ class PipSpring(Smooth):
         return (self.stiffness, self.alpha)
 
     def force(self, t: float, q: Vec3, v: Vec3) -> Vec3:
-        kb = self.stiffness * (q[2] + self.alpha - q[0])
-        return (kb, 0.0, -kb)
+        return spring_force(self.stiffness, self.alpha, q[0], q[2])
 
     def potential(self, q: Vec3) -> float:
         beta = q[2] + self.alpha - q[0]
@@ -37,6 +36,13 @@ class PipSpring(Smooth):
     def modal(self, q: Vec3, n: Vec3) -> tuple[float, float]:
         """(k (n3 − n1)², 0): the spring's stiffness along n, N·m; no damping."""
         return (self.stiffness * (n[2] - n[0]) ** 2, 0.0)
+
+
+def spring_force(stiffness: float, alpha: float, t1: float, t3: float) -> Vec3:
+    """Q = (kβ, 0, −kβ), N·m, β = θ3 + α − θ1 (rad): the spring's one law, which the compiled kernel
+    compiles and the node's pip_joint effort (−kβ) reads. k in N·m/rad, angles in rad."""
+    kb = stiffness * (t3 + alpha - t1)
+    return (kb, 0.0, -kb)
 
 
 @effect("spring_stiffness", "torsional PIP spring, N·m/rad (spec §3)")

@@ -36,6 +36,7 @@ from finger_sim import joints, kinematics
 from finger_sim.dynamics import FingerSystem
 from finger_sim.effects import ForceElement
 from finger_sim.effects.contact_geometry import Circle, SceneObject
+from finger_sim.effects.spring import spring_force
 from finger_sim.kinematics import Vec3
 from finger_sim.model import FingerParams
 
@@ -148,7 +149,8 @@ def joint_values(frames: FingerFrames, q: Vec3, v: Vec3, torque: float) -> tuple
     torque: the motor torque applied over the step that ended in this state, N·m.
     """
     pos = joints.joint_positions(q, frames.q_ext, frames.alpha)
-    return pos, joints.joint_velocities(v), (float(torque), 0.0, -frames.stiffness * pos[2])
+    pip_effort = spring_force(frames.stiffness, frames.alpha, q[0], q[2])[2]  # −kβ
+    return pos, joints.joint_velocities(v), (float(torque), 0.0, pip_effort)
 
 
 def joint_state(frames: FingerFrames, q: Vec3, v: Vec3, torque: float, stamp_ns: int,
