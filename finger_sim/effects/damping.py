@@ -25,9 +25,7 @@ class JointDamping(Smooth):
         return (self.coefficient,)
 
     def force(self, t: float, q: Vec3, v: Vec3) -> Vec3:
-        c = self.coefficient
-        beta_dot = v[2] - v[0]
-        return (-c * v[0] + c * beta_dot, -c * v[1], -c * beta_dot)
+        return damping_force(self.coefficient, v[0], v[1], v[2])
 
     def potential(self, q: Vec3) -> float:
         return 0.0
@@ -35,6 +33,13 @@ class JointDamping(Smooth):
     def modal(self, q: Vec3, n: Vec3) -> tuple[float, float]:
         """(0, c (n1² + n2² + (n3 − n1)²)): the damping along n, N·m·s; no stiffness."""
         return (0.0, self.coefficient * (n[0] ** 2 + n[1] ** 2 + (n[2] - n[0]) ** 2))
+
+
+def damping_force(c: float, w1: float, w2: float, w3: float) -> Vec3:
+    """Q = −∂R/∂q', N·m, of R = ½ c (θ1'² + θ2'² + β'²), β' = θ3' − θ1' (c in N·m·s/rad, rates in rad/s):
+    the damping's one law, which the compiled kernel compiles."""
+    beta_dot = w3 - w1
+    return (-c * w1 + c * beta_dot, -c * w2, -c * beta_dot)
 
 
 @effect("damping", "viscous damping at each joint, N·m·s/rad")
