@@ -28,22 +28,12 @@ class Gravity(Smooth):
     kernel_code: ClassVar[int] = GRAVITY
 
     def kernel_params(self) -> tuple[float, ...]:
-        """(gX, gY, w1, w2, w3, α): the weights w as `force` computes them."""
+        """(gX, gY, w1, w2, w3, α): `gravity_force`'s parameters."""
         p = self.params
         return (self.gx, self.gy, p.m1 * p.r1 / 2.0 + p.m3 * p.r1, p.m2 * p.r2 / 2.0, p.m3 * p.L3 / 2.0, self.alpha)
 
     def force(self, t: float, q: Vec3, v: Vec3) -> Vec3:
-        p = self.params
-        psi = q[2] + self.alpha
-        # Q_i = Σ m_j (∂r_Gj/∂q_i)·g with ∂e(a)/∂a = (−sin a, cos a).
-        w1 = p.m1 * p.r1 / 2.0 + p.m3 * p.r1
-        w2 = p.m2 * p.r2 / 2.0
-        w3 = p.m3 * p.L3 / 2.0
-        return (
-            w1 * (-math.sin(q[0]) * self.gx + math.cos(q[0]) * self.gy),
-            w2 * (-math.sin(q[1]) * self.gx + math.cos(q[1]) * self.gy),
-            w3 * (-math.sin(psi) * self.gx + math.cos(psi) * self.gy),
-        )
+        return gravity_force(*self.kernel_params(), q[0], q[1], q[2])
 
     def potential(self, q: Vec3) -> float:
         p = self.params
@@ -61,6 +51,18 @@ class Gravity(Smooth):
         """(0, 0): gravity's stiffness, m g r ≈ 1e-4 N·m at 9.81 m/s², is a pendulum mode far
         slower than any step; the stability check leaves it out."""
         return (0.0, 0.0)
+
+
+def gravity_force(gx: float, gy: float, w1: float, w2: float, w3: float, alpha: float,
+                  t1: float, t2: float, t3: float) -> Vec3:
+    """Q_i = Σ m_j (∂r_Gj/∂q_i)·g, N·m, with ∂e(a)/∂a = (−sin a, cos a): gravity's one law, which the
+    compiled kernel compiles. g in m/s²; weights w (kg·m): m1 r1/2 + m3 r1, m2 r2/2, m3 L3/2; rad."""
+    psi = t3 + alpha
+    return (
+        w1 * (-math.sin(t1) * gx + math.cos(t1) * gy),
+        w2 * (-math.sin(t2) * gx + math.cos(t2) * gy),
+        w3 * (-math.sin(psi) * gx + math.cos(psi) * gy),
+    )
 
 
 @effect("gravity", "uniform gravity in the model plane, (gX, gY) m/s²")
