@@ -31,13 +31,7 @@ class TipForce(Smooth):
         return (self.fx, self.fy, self.params.r1, self.params.L3, self.alpha)
 
     def force(self, t: float, q: Vec3, v: Vec3) -> Vec3:
-        p = self.params
-        psi = q[2] + self.alpha
-        return (
-            p.r1 * (-math.sin(q[0]) * self.fx + math.cos(q[0]) * self.fy),
-            0.0,
-            p.L3 * (-math.sin(psi) * self.fx + math.cos(psi) * self.fy),
-        )
+        return tip_force(self.fx, self.fy, self.params.r1, self.params.L3, self.alpha, q[0], q[2])
 
     def potential(self, q: Vec3) -> float:
         p = self.params
@@ -50,6 +44,13 @@ class TipForce(Smooth):
         """(0, 0): a constant tip force's geometric stiffness (|F| r1 ≲ 1e-2 N·m for a few N) is
         left out of the stability check, as gravity's is."""
         return (0.0, 0.0)
+
+
+def tip_force(fx: float, fy: float, r1: float, l3: float, alpha: float, t1: float, t3: float) -> Vec3:
+    """Q = J_tipᵀ F, N·m, of a force F = (FX, FY) (N) at the tip r1 e(θ1) + L3 e(θ3 + α) (m, rad):
+    the tip force's one law, which the compiled kernel compiles."""
+    psi = t3 + alpha
+    return (r1 * (-math.sin(t1) * fx + math.cos(t1) * fy), 0.0, l3 * (-math.sin(psi) * fx + math.cos(psi) * fy))
 
 
 @effect("tip_force", "constant force at the fingertip, (FX, FY) N")
