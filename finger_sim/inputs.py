@@ -6,14 +6,16 @@ exactly there and integrate each smooth piece on its own: a switch inside a step
 would otherwise cost a first-order error.
 
 Each profile also describes itself as data for the compiled kernel (`kernel_code`,
-`kernel_params()`, packed by `profile_array`), as the force elements do: the kernel then
-evaluates τ at the stage times itself, with the same arithmetic as `__call__`.
+`kernel_params()`, packed by `profile_array`: the one flat encoding [code, params...]), as the
+force elements do. Each law is written once, as the plain functions below (`ramp_torque` ...
+`square_switch`, and `torque_at` / `switches_inside` over the flat encoding): the profiles call
+them, and the compiled kernel compiles them.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import MISSING, asdict, dataclass, fields
 from typing import Any, ClassVar
 
@@ -100,7 +102,7 @@ class Ramp(Profile):
     slope: float
 
     def __call__(self, t: float) -> float:
-        return self.offset + self.slope * t
+        return ramp_torque(self.offset, self.slope, t)
 
 
 @dataclass(frozen=True)
@@ -114,7 +116,7 @@ class Sine(Profile):
     offset: float = 0.0
 
     def __call__(self, t: float) -> float:
-        return self.offset + self.amplitude * math.sin(2.0 * math.pi * self.frequency * t)
+        return sine_torque(self.amplitude, self.frequency, self.offset, t)
 
     def shortest_interval(self) -> float:
         return 0.5 / self.frequency
@@ -140,7 +142,7 @@ class Step(_PiecewiseConstant):
     at: float
 
     def __call__(self, t: float) -> float:
-        return self.before if t < self.at else self.after
+        return step_torque(self.before, self.after, self.at, t)
 
     def breakpoints(self, t0: float, t1: float) -> list[float]:
         return [self.at] if t0 < self.at < t1 else []
@@ -157,20 +159,79 @@ class Square(_PiecewiseConstant):
     offset: float = 0.0
 
     def __call__(self, t: float) -> float:
-        phase = (t * self.frequency) % 1.0
-        return self.offset + (self.amplitude if phase < 0.5 else -self.amplitude)
+        return square_torque(self.amplitude, self.frequency, self.offset, t)
 
     def shortest_interval(self) -> float:
         return 0.5 / self.frequency
 
     def breakpoints(self, t0: float, t1: float) -> list[float]:
-        half = 0.5 / self.frequency
-        k = math.floor(t0 / half) + 1
-        out = []
-        while k * half < t1:
-            out.append(k * half)
-            k += 1
+        out: list[float] = []
+        while (at := square_switch(self.frequency, t0, len(out))) < t1:
+            out.append(at)
         return out
+
+
+# -- the laws, once: plain float functions (τ in N·m, t in s), compiled by the kernel as they are --------
+def ramp_torque(offset: float, slope: float, t: float) -> float:
+    """τ = offset + slope·t."""
+    return offset + slope * t
+
+
+def sine_torque(amplitude: float, frequency: float, offset: float, t: float) -> float:
+    """τ = offset + amplitude·sin(2π·frequency·t), frequency in Hz."""
+    return offset + amplitude * math.sin(2.0 * math.pi * frequency * t)
+
+
+def step_torque(before: float, after: float, at: float, t: float) -> float:
+    """τ = before for t < at, after from t = at on."""
+    return before if t < at else after
+
+
+def square_torque(amplitude: float, frequency: float, offset: float, t: float) -> float:
+    """τ = offset ± amplitude: + over the first half of each period, − over the second."""
+    phase = (t * frequency) % 1.0
+    return offset + (amplitude if phase < 0.5 else -amplitude)
+
+
+def square_switch(frequency: float, t0: float, n: int) -> float:
+    """The switch n = 0, 1, … of a square wave after t0 (s): the (n + 1)-th multiple of the half period
+    strictly beyond the half period that holds t0."""
+    half = 0.5 / frequency
+    return (math.floor(t0 / half) + 1 + n) * half
+
+
+def torque_at(prof: Sequence[float], held: float, t: float) -> float:
+    """τ(t) of a profile in its flat encoding [code, params...] (`profile_array`); HELD returns `held`."""
+    code = int(prof[0])
+    if code == RAMP:
+        return ramp_torque(prof[1], prof[2], t)
+    if code == SINE:
+        return sine_torque(prof[1], prof[2], prof[3], t)
+    if code == STEP:
+        return step_torque(prof[1], prof[2], prof[3], t)
+    if code == SQUARE:
+        return square_torque(prof[1], prof[2], prof[3], t)
+    if code == CONSTANT:
+        return prof[1]
+    return held
+
+
+def switches_inside(prof: Sequence[float], t0: float, t1: float, eps: float) -> bool:
+    """Whether a switch of a profile in its flat encoding lies in (t0 + eps, t1 − eps): the test the
+    Simulator makes on `Profile.breakpoints(t0, t1)` before it splits a step (eps in s)."""
+    code = int(prof[0])
+    if code == STEP:
+        at = prof[3]
+        return t0 < at < t1 and t0 + eps < at < t1 - eps
+    if code == SQUARE:
+        n = 0
+        at = square_switch(prof[2], t0, n)
+        while at < t1:
+            if t0 + eps < at < t1 - eps:
+                return True
+            n += 1
+            at = square_switch(prof[2], t0, n)
+    return False
 
 
 def profile_array(profile: Profile) -> np.ndarray | None:

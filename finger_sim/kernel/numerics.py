@@ -1,8 +1,12 @@
 """The compiled numerics: the acceleration solve, the force elements, projection, RK stages, DOP853.
 
-Each function is the same arithmetic, in the same order, as its Python reference
-(`FingerSystem.accelerations`, the effects' `force`, `projection.project`,
-`ExplicitRungeKutta.step`), so both paths agree to round-off (the tests ask 1e-13 rad).
+The laws are not written here: the acceleration solve (`dynamics.schur_solve`), the projection
+(`projection.project_state`), the smooth force elements (`spring_force`, `damping_force`,
+`gravity_force`, `tip_force`) and the torque profiles (`inputs.torque_at`, `inputs.switches_inside`)
+are the plain functions the Python path calls, compiled here as they are. What remains is the
+flat model's dispatch, the contact law (being reworked beside this), and the steppers: the same
+arithmetic, in the same order, as their Python references (`ExplicitRungeKutta.step`, scipy's
+DOP853), so both paths agree to round-off (the tests ask 1e-13 rad).
 Compiled by numba on first use and cached on disk (`cache=True`; see `finger_sim.kernel`).
 Errors are status codes, raised as exceptions by the Python callers.
 """
@@ -10,6 +14,8 @@ Errors are status codes, raised as exceptions by the Python callers.
 from __future__ import annotations
 
 import math
+import types
+from collections.abc import Callable
 
 import numpy as np
 
@@ -24,12 +30,13 @@ except ImportError:  # no numba: the same functions run as plain Python (slow, s
         return lambda function: function
 
 
-from finger_sim import dynamics
+from finger_sim import dynamics, inputs, projection
+from finger_sim.effects import damping, gravity, spring
+from finger_sim.effects import tip_force as tip_force_effect
 from finger_sim.effects.contact import MIN_DISTANCE
-from finger_sim.inputs import BREAK_EPS, CONSTANT, RAMP, SINE, SQUARE, STEP
+from finger_sim.inputs import BREAK_EPS, SQUARE, STEP
 from finger_sim.kernel.layout import (BREAKPOINT, CONTACT, DAMPING, GRAVITY, HEADER, NON_FINITE, NOT_CONVERGED, OK,
                                      SPRING, STATE_NON_FINITE, TIP_FORCE)
-from finger_sim.projection import ACCEPTED_RESIDUAL_FACTOR, MAX_ITERATIONS, POSITION_TOLERANCE
 
 
 # DOP853's step-size control: scipy's constants (scipy/integrate/_ivp/rk.py).
@@ -42,8 +49,26 @@ MIN_STEP_ULPS = 10.0
 
 JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
 
+
+def compiled(law: Callable, **callees: Callable) -> Callable:
+    """`law` (a plain function) compiled, with the plain functions it calls by name (`callees`) bound
+    to their compiled forms: the same code object under other globals, so nothing is copied."""
+    function = types.FunctionType(law.__code__, {**law.__globals__, **callees}, law.__name__, law.__defaults__)
+    function.__qualname__, function.__doc__, function.__module__ = law.__qualname__, law.__doc__, law.__module__
+    return njit(**JIT)(function)
+
+
 #: The laws compiled from their one definition (the plain functions the Python path calls).
 schur_solve = njit(**JIT)(dynamics.schur_solve)
+project_state = njit(**JIT)(projection.project_state)
+spring_force = njit(**JIT)(spring.spring_force)
+damping_force = njit(**JIT)(damping.damping_force)
+gravity_force = njit(**JIT)(gravity.gravity_force)
+tip_force = njit(**JIT)(tip_force_effect.tip_force)
+_PROFILE_LAWS = {name: njit(**JIT)(getattr(inputs, name))
+                 for name in ("ramp_torque", "sine_torque", "step_torque", "square_torque", "square_switch")}
+torque_at = compiled(inputs.torque_at, **_PROFILE_LAWS)
+switches_inside = compiled(inputs.switches_inside, **_PROFILE_LAWS)
 
 
 @njit(**JIT)
@@ -151,23 +176,13 @@ def generalized_force(m, t, q0, q1, q2, v0, v1, v2, tau):
         o += 2
         e1 = e2 = e3 = 0.0
         if code == SPRING:
-            kb = m[o] * (q2 + m[o + 1] - q0)
-            e1, e3 = kb, -kb
+            e1, e2, e3 = spring_force(m[o], m[o + 1], q0, q2)
         elif code == DAMPING:
-            c = m[o]
-            beta_dot = v2 - v0
-            e1, e2, e3 = -c * v0 + c * beta_dot, -c * v1, -c * beta_dot
+            e1, e2, e3 = damping_force(m[o], v0, v1, v2)
         elif code == GRAVITY:
-            gx, gy, w1, w2, w3, alpha = m[o], m[o + 1], m[o + 2], m[o + 3], m[o + 4], m[o + 5]
-            psi = q2 + alpha
-            e1 = w1 * (-math.sin(q0) * gx + math.cos(q0) * gy)
-            e2 = w2 * (-math.sin(q1) * gx + math.cos(q1) * gy)
-            e3 = w3 * (-math.sin(psi) * gx + math.cos(psi) * gy)
+            e1, e2, e3 = gravity_force(m[o], m[o + 1], m[o + 2], m[o + 3], m[o + 4], m[o + 5], q0, q1, q2)
         elif code == TIP_FORCE:
-            fx, fy, r1, l3, alpha = m[o], m[o + 1], m[o + 2], m[o + 3], m[o + 4]
-            psi = q2 + alpha
-            e1 = r1 * (-math.sin(q0) * fx + math.cos(q0) * fy)
-            e3 = l3 * (-math.sin(psi) * fx + math.cos(psi) * fy)
+            e1, e2, e3 = tip_force(m[o], m[o + 1], m[o + 2], m[o + 3], m[o + 4], q0, q2)
         elif code == CONTACT:
             e1, e3 = _contact(m, o, q0, q2, v0, v2)
         f1 += e1
@@ -187,47 +202,11 @@ def accelerations(m, t, q0, q1, q2, v0, v1, v2, tau):
 
 @njit(**JIT)
 def project(m, x):
-    """Project x = (q, q') (6 floats, in place) onto Φ = 0, Φ_q q' = 0: `projection.project`. Status."""
-    r1, r2, r3, k1, k2 = m[4], m[5], m[6], m[8], m[9]
-    t1, t2, t3 = x[0], x[1], x[2]
-    converged = False
-    f1 = f2 = g11 = g12 = g13 = g21 = g22 = g23 = 0.0
-    for _ in range(MAX_ITERATIONS):
-        s1, c1, s2, c2, s3, c3 = math.sin(t1), math.cos(t1), math.sin(t2), math.cos(t2), math.sin(t3), math.cos(t3)
-        f1 = r1 * c1 + k1 - r2 * c2 - r3 * c3
-        f2 = r1 * s1 + k2 - r2 * s2 - r3 * s3
-        g11, g12, g13 = -r1 * s1, r2 * s2, r3 * s3
-        g21, g22, g23 = r1 * c1, -r2 * c2, -r3 * c3
-        if abs(f1) + abs(f2) <= POSITION_TOLERANCE:
-            converged = True
-            break
-        a11 = g11 * g11 + g12 * g12 + g13 * g13
-        a12 = g11 * g21 + g12 * g22 + g13 * g23
-        a22 = g21 * g21 + g22 * g22 + g23 * g23
-        det = a11 * a22 - a12 * a12
-        l1 = (a22 * f1 - a12 * f2) / det
-        l2 = (a11 * f2 - a12 * f1) / det
-        t1 -= g11 * l1 + g21 * l2
-        t2 -= g12 * l1 + g22 * l2
-        t3 -= g13 * l1 + g23 * l2
-    if not converged:
-        if not (math.isfinite(t1) and math.isfinite(t2) and math.isfinite(t3)):
-            return NON_FINITE
-        bound = ACCEPTED_RESIDUAL_FACTOR * POSITION_TOLERANCE * (1.0 + max(abs(t1), abs(t2), abs(t3)))
-        if math.hypot(f1, f2) > bound:
-            return NOT_CONVERGED
-    a11 = g11 * g11 + g12 * g12 + g13 * g13
-    a12 = g11 * g21 + g12 * g22 + g13 * g23
-    a22 = g21 * g21 + g22 * g22 + g23 * g23
-    det = a11 * a22 - a12 * a12
-    w1, w2, w3 = x[3], x[4], x[5]
-    e1 = g11 * w1 + g12 * w2 + g13 * w3
-    e2 = g21 * w1 + g22 * w2 + g23 * w3
-    l1 = (a22 * e1 - a12 * e2) / det
-    l2 = (a11 * e2 - a12 * e1) / det
-    x[0], x[1], x[2] = t1, t2, t3
-    x[3], x[4], x[5] = w1 - g11 * l1 - g21 * l2, w2 - g12 * l1 - g22 * l2, w3 - g13 * l1 - g23 * l2
-    return OK
+    """Project x = (q, q') (6 floats, in place) onto Φ = 0, Φ_q q' = 0: `projection.project_state`. Status."""
+    status, _, t1, t2, t3, w1, w2, w3 = project_state(m[4], m[5], m[6], m[8], m[9], x[0], x[1], x[2], x[3], x[4], x[5])
+    if status == OK:
+        x[0], x[1], x[2], x[3], x[4], x[5] = t1, t2, t3, w1, w2, w3
+    return status
 
 
 @njit(**JIT)
@@ -398,43 +377,6 @@ def dop853_outputs(m, t_old, h, y_old, dense, targets, out):
 
 
 # -- compiled torque profiles and the Simulator's step (`finger_sim.inputs`, `Simulator.step`) --------
-@njit(**JIT)
-def torque_at(prof, held, t):
-    """τ(t), N·m, of a compiled profile [code, params...] (`inputs.profile_array`): the same
-    arithmetic as the profile's `__call__`; HELD returns `held`."""
-    code = int(prof[0])
-    if code == RAMP:
-        return prof[1] + prof[2] * t
-    if code == SINE:
-        return prof[3] + prof[1] * math.sin(2.0 * math.pi * prof[2] * t)
-    if code == STEP:
-        return prof[1] if t < prof[3] else prof[2]
-    if code == SQUARE:
-        phase = (t * prof[2]) % 1.0
-        return prof[3] + (prof[1] if phase < 0.5 else -prof[1])
-    if code == CONSTANT:
-        return prof[1]
-    return held
-
-
-@njit(**JIT)
-def switches_inside(prof, t0, t1, eps):
-    """Whether a switch of a step or square profile lies in (t0 + eps, t1 − eps): the
-    Simulator's breakpoint test on `Profile.breakpoints(t0, t1)`, same arithmetic."""
-    code = int(prof[0])
-    if code == STEP:
-        at = prof[3]
-        return t0 < at < t1 and t0 + eps < at < t1 - eps
-    if code == SQUARE:
-        half = 0.5 / prof[2]
-        k = math.floor(t0 / half) + 1
-        while k * half < t1:
-            if t0 + eps < k * half < t1 - eps:
-                return True
-            k += 1
-    return False
-
-
 @njit(**JIT)
 def plan_parts(plan):
     """(dt, model, tableau) of a step plan: [dt, len(model), tableau rows, tableau columns,
