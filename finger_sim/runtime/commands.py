@@ -7,7 +7,7 @@ when the scene's scripted profile drives the finger (`accepting=False`) every co
 refused. A sensor_msgs/JointState command (`joint_command`, ros2_control's topic-based hardware
 interface and Isaac Sim) is read by `joint_effort`: only the effort of the actuated joint
 (`<prefix>mcp_joint`) is a command; other joints, positions and velocities are refused. Each change of the applied torque (accepted, timeout) and each refusal is a
-run_log.CommandEvent, so re-applying the events reproduces the run bit for bit.
+run_records.CommandEvent, so re-applying the events reproduces the run bit for bit.
 
 Threads: `Inbox.put` is called by the executor thread, everything else by the stepping loop.
 """
@@ -19,7 +19,7 @@ import math
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
-from finger_sim.run_log import CommandEvent
+from finger_sim.run_records import CommandEvent
 from finger_sim.runtime.timeline import Timeline
 
 #: Slack of the float comparison on the step grid, in steps.

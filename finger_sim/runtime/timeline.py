@@ -1,13 +1,13 @@
 """Sim time of a node run across episodes: which stamp a step of the current episode gets.
 
-The state after step n of an episode is stamped offset + round(n·dt·1e9) ns (run_log.stamp_ns,
+The state after step n of an episode is stamped offset + round(n·dt·1e9) ns (run_records.stamp_ns,
 the rule resim uses too). A reset restarts the scene's own clock, not /clock: the new episode's
 offset is the last stamp + dt, so sim time on /clock never goes back.
 """
 
 from __future__ import annotations
 
-from finger_sim.run_log import stamp_ns
+from finger_sim.run_records import stamp_ns
 
 
 class Timeline:
