@@ -29,11 +29,9 @@ from finger_sim.effects import EFFECTS, Effect, ForceElement
 from finger_sim.errors import SimulationDiverged, StabilityError
 from finger_sim.inputs import BREAK_EPS, HELD_ARRAY, Profile
 from finger_sim.integrators import METHODS, Integrator, TorqueFn
-from finger_sim.kernel import offline_kernel
-from finger_sim.kernel import select as select_kernel
-from finger_sim.kernel.layout import BREAKPOINT, model_array
-from finger_sim.kernel.layout import OK as FAST_OK
-from finger_sim.kernel.runner import advance
+from finger_sim import stepper_slot
+from finger_sim.projection import OK as FAST_OK
+from finger_sim.stepper_slot import BREAKPOINT
 from finger_sim.kinematics import Vec3
 from finger_sim.scene import AUTO, Scene
 from finger_sim.stability import CONTACT_RESOLUTION, fastest_mode, has_contact, largest_stable_dt, mcp_range, stable_at
@@ -430,7 +428,8 @@ def _setup(scene: Scene, kernel: str, effects: tuple[Effect, ...]) -> _Setup:
     options: dict[str, float] = {}
     if method == AUTO:
         method, reason = choose_method(scene)
-        if method == ERROR_CONTROLLED and getattr(system, "drive", None) is None and model_array(system) is None:
+        if (method == ERROR_CONTROLLED and getattr(system, "drive", None) is None
+                and stepper_slot.kernel().model_array(system) is None):
             method, reason = fixed_step_method(scene)
     if getattr(system, "drive", None) is not None:
         method, reason = drive_stepping.drive_method(method, reason, scene.method == AUTO,
@@ -444,7 +443,7 @@ def _setup(scene: Scene, kernel: str, effects: tuple[Effect, ...]) -> _Setup:
     depth_guard = DepthGuard(system.elements, scene.phalanx_radius)
     if depth_guard and scene.method != AUTO and method_cls.implicit:
         warn_unresolved_contact(scene, method_cls)
-    integrator_cls, kernel_name = select_kernel(method_cls, system, kernel)
+    integrator_cls, kernel_name = stepper_slot.kernel().select(method_cls, system, kernel)
     q0, _ = scene.initial_state()
     # every gap of every non-smooth element; empty on a smooth scene, which then pays nothing
     gaps = tuple(_Gap(e, i, e.impact(i)) for e in system.elements if not e.smooth for i in range(len(e.gaps(q0))))
@@ -454,9 +453,7 @@ def _setup(scene: Scene, kernel: str, effects: tuple[Effect, ...]) -> _Setup:
                          for e in dict.fromkeys(g.element for g in gaps))
     fast_stepper = None
     if hasattr(integrator_cls, "step_plan") and not gaps and getattr(system, "drive", None) is None:
-        from finger_sim.kernel.integrators import FastStepper  # numba is loaded by now
-
-        fast_stepper = FastStepper(integrator_cls(system), scene.dt, scene.torque)  # type: ignore[arg-type]
+        fast_stepper = stepper_slot.kernel().fast_stepper(integrator_cls(system), scene.dt, scene.torque)
     return _Setup(system, method, reason, substeps, options, method_cls, integrator_cls, kernel_name, gaps, kinks,
                   gap_elements, depth_guard, fast_stepper)
 
@@ -612,7 +609,7 @@ def simulate(scene: Scene, *, kernel: str = "auto") -> Trajectory:
     "auto" runs a short scene in Python (`kernel.offline_kernel`: loading numba costs more).
     """
     n = scene.step_count
-    sim = Simulator(scene, kernel=offline_kernel(kernel, n))
+    sim = Simulator(scene, kernel=stepper_slot.kernel().offline_kernel(kernel, n))
     x0 = (*sim.q, *sim.v)
     start = time.perf_counter()
     drive_outputs: dict[str, np.ndarray] = {}
@@ -622,7 +619,7 @@ def simulate(scene: Scene, *, kernel: str = "auto") -> Trajectory:
 
         xs, drive_outputs, report = record.run(sim, n)
     else:
-        xs = advance(sim, n)  # in the kernel where it can, else step by step
+        xs = stepper_slot.kernel().advance(sim, n)  # in the kernel where it can, else step by step
     wall = time.perf_counter() - start
     x = np.vstack([x0, xs])
     t = np.arange(n + 1) * sim.dt  # k·dt, as Simulator.time

@@ -12,7 +12,7 @@ import cmath
 import math
 from typing import TYPE_CHECKING
 
-from finger_sim import kinematics
+from finger_sim import kinematics, stepper_slot
 from finger_sim.dynamics import FingerSystem
 from finger_sim.integrators.base import Integrator
 from finger_sim.kinematics import Vec3
@@ -66,9 +66,7 @@ _MODES: dict[tuple, complex] = {}
 def _mode_key(system: FingerSystem, theta1_range: tuple[float, float]) -> tuple | None:
     """The system as numbers (parameters and the compiled kernel's flat model of its elements,
     which is all its dynamics), and the range; None when an element has no flat form."""
-    from finger_sim.kernel.layout import model_array
-
-    model = model_array(system)
+    model = stepper_slot.kernel().model_array(system)
     return None if model is None else (system.params, model.tobytes(), tuple(theta1_range))
 
 

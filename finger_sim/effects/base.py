@@ -21,6 +21,16 @@ if TYPE_CHECKING:
 
 Vec3 = tuple[float, float, float]
 
+#: The compiled force laws an element may name as its `kernel_code` (the kernel's `numerics.generalized_force`
+#: computes each from the element's `kernel_params()`). NO_FORCE: an element whose Q is zero (the stops).
+NO_FORCE = 0
+SPRING = 1
+DAMPING = 2
+GRAVITY = 3
+TIP_FORCE = 4
+CONTACT = 5
+CODES = (NO_FORCE, SPRING, DAMPING, GRAVITY, TIP_FORCE, CONTACT)
+
 
 class ForceElement(Protocol):
     """One effect acting on the finger: generalized forces on q = (θ1, θ2, θ3), N·m."""
@@ -70,9 +80,11 @@ class ForceElement(Protocol):
         stays while its free acceleration a pushes into it (∇gap·a < 0)."""
         ...
 
+    # Optional: `check_clearance(q)`, which refuses a scene whose start q the element forbids (contact: an
+    # object overlapping a phalanx), called by the scene loader with a one-line ConfigError.
     # Optional: the compiled form (finger_sim.kernel). An element without these two members
     # makes the Simulator step its scene in Python.
-    #: which compiled force law (a code of finger_sim.kernel.layout) computes `force`
+    #: which compiled force law (one of CODES above) computes `force`
     kernel_code: ClassVar[int]
 
     def kernel_params(self) -> tuple[float, ...]:

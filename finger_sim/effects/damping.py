@@ -5,8 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
-from finger_sim.effects.base import Smooth, Vec3, effect
-from finger_sim.kernel.layout import DAMPING
+from finger_sim.effects.base import DAMPING, Smooth, Vec3, effect
 
 if TYPE_CHECKING:
     from finger_sim.scene import Scene

@@ -5,8 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
-from finger_sim.effects.base import Smooth, Vec3, effect
-from finger_sim.kernel.layout import SPRING
+from finger_sim.effects.base import SPRING, Smooth, Vec3, effect
 from finger_sim.kinematics import distal_offset
 
 if TYPE_CHECKING:

@@ -11,8 +11,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
-from finger_sim.effects.base import NO_OUTPUTS, Vec3, effect
-from finger_sim.kernel.layout import NO_FORCE
+from finger_sim.effects.base import NO_FORCE, NO_OUTPUTS, Vec3, effect
 
 if TYPE_CHECKING:
     from finger_sim.scene import Scene

@@ -6,8 +6,7 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
-from finger_sim.effects.base import Smooth, Vec3, effect
-from finger_sim.kernel.layout import TIP_FORCE
+from finger_sim.effects.base import TIP_FORCE, Smooth, Vec3, effect
 from finger_sim.kinematics import distal_offset
 from finger_sim.model import FingerParams
 

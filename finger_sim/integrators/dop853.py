@@ -24,6 +24,7 @@ from types import ModuleType
 
 import numpy as np
 
+from finger_sim import stepper_slot
 from finger_sim.dynamics import FingerSystem
 from finger_sim.errors import ConfigError, SimulationDiverged
 from finger_sim.integrators.base import Integrator, TorqueFn
@@ -87,15 +88,13 @@ class DormandPrince853(Integrator):
     keeps_constraints = True
 
     def __init__(self, system: FingerSystem, *, rtol: float = DEFAULT_RTOL, atol: float = DEFAULT_ATOL) -> None:
-        from finger_sim.kernel import numerics
-        from finger_sim.kernel.layout import model_array
-
+        compiled = stepper_slot.kernel()
         super().__init__(system)
-        model = model_array(system)
+        model = compiled.model_array(system)
         if model is None:
             raise ConfigError("integrator.method", "a method other than dop853 for a force element without a compiled "
                               "form (kernel_code)", self.name)
-        self._numerics, self._model = numerics, model
+        self._numerics, self._model = compiled.compiled_numerics(), model
         self.rtol, self.atol = rtol, atol
         self._torque: TorqueFn | None = None
         self._last: tuple[float, Vec3, Vec3] | None = None  # the last output (t, q, q')

@@ -5,6 +5,9 @@ the compiled kernel whenever numba imports and every force element has a compile
 "compiled" insists on it, "python" runs the readable reference. `Simulator.kernel` names the
 path that ran ("numba-<version>" or "python"), for a log's metadata and for resim.
 
+The kernel serves the core through `finger_sim.stepper_slot` (the core never imports it): this
+module is the `CompiledKernel` there, installed when it is imported.
+
 Compilation is cached on disk (numba's `cache=True`), so the node and the CLI pay it once
 per machine. numba writes the cache into `__pycache__` next to the modules; where that is
 read-only (a colcon or system install) `use_writable_cache()` points NUMBA_CACHE_DIR at
@@ -22,11 +25,19 @@ import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from finger_sim import stepper_slot
 from finger_sim.errors import ConfigError
 
 if TYPE_CHECKING:
+    from types import ModuleType
+
+    import numpy as np
+
     from finger_sim.dynamics import FingerSystem
+    from finger_sim.inputs import Profile
     from finger_sim.integrators.base import Integrator
+    from finger_sim.kernel.integrators import CompiledRungeKutta, FastStepper
+    from finger_sim.simulate import Simulator
 
 PYTHON = "python"
 #: The values of `Simulator(kernel=...)`.
@@ -115,3 +126,35 @@ def _why_not_compiled(method: type["Integrator"], system: "FingerSystem", name: 
     if model_array(system) is None:
         return "a force element has no compiled form"
     return None
+
+
+# -- the rest of `stepper_slot.CompiledKernel`: each loads its module on first use (numba with it) ----------
+def model_array(system: "FingerSystem") -> "np.ndarray | None":
+    """`layout.model_array`: the system as the kernel's flat model, or None."""
+    from finger_sim.kernel.layout import model_array as flat_model
+
+    return flat_model(system)
+
+
+def fast_stepper(integrator: "CompiledRungeKutta", dt: float, profile: "Profile") -> "FastStepper":
+    """`integrators.FastStepper`: one compiled call per step of a smooth scene."""
+    from finger_sim.kernel.integrators import FastStepper
+
+    return FastStepper(integrator, dt, profile)
+
+
+def advance(sim: "Simulator", n: int) -> "np.ndarray":
+    """`runner.advance`: n steps of `sim` in one kernel loop where it can."""
+    from finger_sim.kernel.runner import advance as run
+
+    return run(sim, n)
+
+
+def compiled_numerics() -> "ModuleType":
+    """The compiled numerics module."""
+    from finger_sim.kernel import numerics as compiled
+
+    return compiled
+
+
+stepper_slot.install(sys.modules[__name__])  # type: ignore[arg-type]

@@ -19,27 +19,20 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from finger_sim.effects.base import CODES, CONTACT, DAMPING, GRAVITY, NO_FORCE, SPRING, TIP_FORCE
 from finger_sim.projection import NON_FINITE, NOT_CONVERGED, OK
+from finger_sim.stepper_slot import BREAKPOINT, STATE_NON_FINITE, STEP_TOO_SMALL
 
 if TYPE_CHECKING:
     from finger_sim.dynamics import FingerSystem
 
-#: Codes of the compiled force elements. NO_FORCE: an element whose Q is zero (the stops).
-NO_FORCE = 0
-SPRING = 1
-DAMPING = 2
-GRAVITY = 3
-TIP_FORCE = 4
-CONTACT = 5
-CODES = (NO_FORCE, SPRING, DAMPING, GRAVITY, TIP_FORCE, CONTACT)
+#: Codes of the compiled force elements: the core's (`finger_sim.effects.base`), which the elements declare.
 #: Length of the system header before the element count.
 HEADER = 10
 
 #: Status codes of the kernel's calls (`finger_sim.kernel.numerics`).
-#: OK, NON_FINITE, NOT_CONVERGED (0, 1, 2): the projection's own (`finger_sim.projection.project_state`).
-STEP_TOO_SMALL = 3  # DOP853's step fell below its floor
-BREAKPOINT = 4  # a torque switch lies inside the step: the caller splits it (state unchanged)
-STATE_NON_FINITE = 5  # the step ended in a non-finite state (the Simulator's own check)
+#: OK, NON_FINITE, NOT_CONVERGED (0, 1, 2): the projection's own (`finger_sim.projection.project_state`);
+#: STEP_TOO_SMALL, BREAKPOINT, STATE_NON_FINITE (3, 4, 5): the core's (`finger_sim.stepper_slot`).
 
 
 def model_array(system: "FingerSystem") -> np.ndarray | None:

@@ -1,0 +1,69 @@
+"""The slot through which the core receives its compiled stepper: the core never imports the kernel.
+
+The kernel (`finger_sim.kernel`) sits above the core: it compiles the core's laws. The Simulator,
+the stability check and DOP853 still need what it builds (a compiled integrator class, the flat
+model, a whole-run loop), so the kernel hands them in here: importing `finger_sim.kernel` installs
+it (`install`), and importing the package does that (`finger_sim/__init__.py`, the one place where
+the rooms are wired). Dependency inversion, as a plug-in registry: data flows core → kernel only.
+"""
+
+from __future__ import annotations
+
+from types import ModuleType
+from typing import TYPE_CHECKING, Any, Protocol
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from finger_sim.dynamics import FingerSystem
+    from finger_sim.inputs import Profile
+    from finger_sim.integrators.base import Integrator
+
+#: Status codes of a compiled call beyond the projection's OK, NON_FINITE, NOT_CONVERGED (0, 1, 2).
+STEP_TOO_SMALL = 3  # DOP853's step fell below its floor
+BREAKPOINT = 4  # a torque switch lies inside the step: the caller splits it (state unchanged)
+STATE_NON_FINITE = 5  # the step ended in a non-finite state (the Simulator's own check)
+
+
+class CompiledKernel(Protocol):
+    """What the core asks of the compiled kernel (`finger_sim.kernel` implements it)."""
+
+    def select(self, method: type[Integrator], system: FingerSystem, kernel: str) -> tuple[type[Integrator], str]:
+        """The integrator class that steps `system` with `method` on the requested kernel, and the kernel's name."""
+        ...
+
+    def offline_kernel(self, kernel: str, steps: int) -> str:
+        """The kernel for an offline run of `steps` steps ("auto" may become "python" for a short one)."""
+        ...
+
+    def model_array(self, system: FingerSystem) -> np.ndarray | None:
+        """The system as the kernel's flat model; None when an element has no compiled form."""
+        ...
+
+    def fast_stepper(self, integrator: Integrator, dt: float, profile: Profile) -> Any:
+        """A one-call-per-step stepper of a smooth scene (`kernel.integrators.FastStepper`), or None
+        when `integrator` has no step plan."""
+        ...
+
+    def advance(self, sim: Any, n: int) -> np.ndarray:
+        """Step a Simulator n times under its scene's profile; the (n, 6) states after each step."""
+        ...
+
+    def compiled_numerics(self) -> ModuleType:
+        """The compiled numerics (DOP853's attempt, dense output and right-hand side)."""
+        ...
+
+
+_installed: list[CompiledKernel] = []
+
+
+def install(kernel: CompiledKernel) -> None:
+    """Put the compiled kernel in the slot (the kernel does this when imported)."""
+    _installed[:] = [kernel]
+
+
+def kernel() -> CompiledKernel:
+    """The installed compiled kernel."""
+    if not _installed:
+        raise RuntimeError("no compiled kernel installed: import finger_sim (it installs finger_sim.kernel)")
+    return _installed[0]
