@@ -50,7 +50,6 @@ from finger_sim.actuators.drive import Drive, DriveParams, DrivenSystem, drive_f
 from finger_sim.dynamics import FingerSystem
 from finger_sim.errors import ConfigError
 from finger_sim.effects import ForceElement, build_elements
-from finger_sim.effects.contact import build_contact
 from finger_sim.effects.contact_geometry import (
     PHALANX_RADII,
     Circle,
@@ -281,9 +280,10 @@ def scene_from_dict(data: Any, *, default_name: str = "scene") -> Scene:
                  if "sensors" in data else None),
     )
     q0, _ = scene.initial_state()  # refuses a θ1 outside the assemblable range, or at a toggle
-    contact = build_contact(scene)
-    if contact is not None:
-        contact.check_clearance(q0)  # an object overlapping a phalanx at the start: objects[i]
+    for element in build_elements(scene):  # through the registry: an element that must start clear checks it
+        check_clearance = getattr(element, "check_clearance", None)
+        if check_clearance is not None:
+            check_clearance(q0)  # contact: an object overlapping a phalanx at the start names objects[i]
     if mcp is not None and not (mcp[0] <= scene.theta1 <= mcp[1]):
         raise ConfigError("initial.theta1", f"an angle within model.joint_limits.mcp {list(mcp)} rad", scene.theta1)
     if scene.dt > scene.duration:
