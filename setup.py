@@ -24,7 +24,7 @@ setup(
     package_data={PACKAGE: ["py.typed", "data/*.json", "view/*.html", "view/*.js", "view/*.css", "view/vendor/*"]},
     python_requires=">=3.10",
     install_requires=["numpy", "scipy", "pyyaml", "matplotlib", "tqdm", "mcap>=1.5", "mcap-ros2-support>=0.6", "rosbags>=0.10", "numba",
-                      "plotly>=7,<8", "SALib"],
+                      "plotly>=7,<8", "SALib", "pydantic>=2"],
     extras_require={
         # ROS 2 Jazzy's Python stack from PyPI, for machines without a ROS install.
         "ros": [
@@ -39,7 +39,7 @@ setup(
         ],
         "test": ["pytest", "pytest-timeout", "hypothesis", "rosbags", "yourdfpy", "colcon-common-extensions",
                  "playwright", "pillow",  # playwright drives the system Chromium (make test installs it)
-                 "distributed", "pyarrow"],
+                 "distributed", "pyarrow", "jsonschema"],
         # `finger-sim sweep --dask ADDRESS` and Parquet output
         "cluster": ["distributed", "pyarrow"],
         "bench": ["mujoco"],

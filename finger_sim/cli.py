@@ -332,6 +332,21 @@ def _urdf(args: argparse.Namespace) -> int:
     return 0
 
 
+def _schema(args: argparse.Namespace) -> int:
+    """The JSON Schema of scene files, on stdout or to -o (for an editor's YAML language server)."""
+    from finger_sim.scene_schema import schema_text
+
+    text = schema_text()
+    if args.out is None:
+        sys.stdout.write(text)
+        return 0
+    out = check_output_file(args.out, argument="-o/--out")
+    with atomic_path(out) as part:
+        part.write_text(text, encoding="utf-8")
+    print(f"wrote {out}")
+    return 0
+
+
 def _sweep(args: argparse.Namespace) -> int:
     """Paths are checked before the first run; refusals name the key or option."""
     from finger_sim.sweep import DEFAULT_MAX_SWEEP_STEPS, sweep
@@ -480,6 +495,11 @@ def build_parser() -> argparse.ArgumentParser:
     urdf.add_argument("-o", "--out", type=Path, help="write the URDF to this file (default: stdout)")
     urdf.add_argument("--prefix", default="", help="prepended to every link and joint name (finger_node's frame_prefix)")
     urdf.set_defaults(func=_urdf)
+
+    schema = sub.add_parser("schema", help="the JSON Schema of scene files, which editors complete and check "
+                                           "scenes with (README: YAML language server)")
+    schema.add_argument("-o", "--out", type=Path, help="write the schema to this file (default: stdout)")
+    schema.set_defaults(func=_schema)
 
     sweep = sub.add_parser("sweep", help="a scene over the Cartesian product of varied keys, run as one "
                                          "compiled batch; one CSV row per run")

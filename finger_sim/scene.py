@@ -49,7 +49,7 @@ from finger_sim import kinematics
 from finger_sim.actuators.drive import Drive, DriveParams, DrivenSystem, drive_from_dict
 from finger_sim.dynamics import FingerSystem
 from finger_sim.errors import ConfigError
-from finger_sim.effects import ForceElement, build_elements
+from finger_sim.effects import ForceElement, build_elements, declared_parameters
 from finger_sim.effects.contact_geometry import (
     PHALANX_RADII,
     Circle,
@@ -76,12 +76,8 @@ NAME_PATTERN = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*")
 NAME_LENGTH = 64
 #: Longest description, characters (it is stored in every log's metadata).
 DESCRIPTION_LENGTH = 4096
-#: Bounds of the model's values: far beyond any finger (the paper's spring is 1e-3 N·m/rad,
-#: the stiff scene's 1e3), and small enough that the modal arithmetic (C², K·I) stays finite.
-MAX_SPRING_STIFFNESS = 1e6  # N·m/rad
-MAX_DAMPING = 1e3  # N·m·s/rad
-MAX_GRAVITY = 1e4  # m/s², each component (~1000 g)
-MAX_TIP_FORCE = 1e4  # N, each component
+#: Bounds of the model's values: far beyond any finger. The effects declare their own
+#: (`finger_sim.effects.parameters`, read by `_effect_value`).
 MAX_RATE = 1e4  # rad/s, the initial θ1'
 MAX_DT = 1.0  # s
 #: Most steps a scene may ask for: 1e12 steps of float64 states are ~100 TB, and
@@ -110,12 +106,12 @@ class Scene:
     name: str = "scene"
     description: str = ""
     params: FingerParams = field(default_factory=FingerParams)
-    spring_stiffness: float = 0.001
-    damping: float = 0.0
-    gravity: tuple[float, float] = (0.0, 0.0)
-    tip_force: tuple[float, float] = (0.0, 0.0)
+    spring_stiffness: float = declared_parameters()["spring_stiffness"].default  # the effects' declared defaults
+    damping: float = declared_parameters()["damping"].default
+    gravity: tuple[float, float] = declared_parameters()["gravity"].default
+    tip_force: tuple[float, float] = declared_parameters()["tip_force"].default
     mcp_limits: tuple[float, float] | None = None
-    restitution: float = 0.0
+    restitution: float = declared_parameters()["restitution"].default
     phalanx_radius: Vec2 = PHALANX_RADII
     contact: ContactParams = field(default_factory=ContactParams)
     objects: tuple[SceneObject, ...] = ()
@@ -257,12 +253,12 @@ def scene_from_dict(data: Any, *, default_name: str = "scene") -> Scene:
         name=name,
         description=text(data.get("description", ""), "description", DESCRIPTION_LENGTH),
         params=params,
-        spring_stiffness=number(model.get("spring_stiffness", Scene.spring_stiffness), "model.spring_stiffness", minimum=0.0, maximum=MAX_SPRING_STIFFNESS),
-        damping=number(model.get("damping", Scene.damping), "model.damping", minimum=0.0, maximum=MAX_DAMPING),
-        gravity=pair(model.get("gravity", [0.0, 0.0]), "model.gravity", MAX_GRAVITY),
-        tip_force=pair(model.get("tip_force", [0.0, 0.0]), "model.tip_force", MAX_TIP_FORCE),
+        spring_stiffness=_effect_value(model, "spring_stiffness"),
+        damping=_effect_value(model, "damping"),
+        gravity=_effect_value(model, "gravity"),
+        tip_force=_effect_value(model, "tip_force"),
         mcp_limits=mcp,
-        restitution=number(model.get("restitution", Scene.restitution), "model.restitution", minimum=0.0, maximum=1.0),
+        restitution=_effect_value(model, "restitution"),
         phalanx_radius=_phalanx_radius(model.get("phalanx_radius")),
         contact=_contact(model.get("contact")),
         objects=_objects(data.get("objects")),
@@ -315,6 +311,12 @@ def _phalanx_radius(value: Any) -> Vec2:
     for i, r in enumerate(radii):
         number(r, f"model.phalanx_radius[{i}]", maximum=MAX_EXTENT)
     return radii
+
+
+def _effect_value(model: dict[str, Any], key: str) -> Any:
+    """`model.<key>` read through the declaration of the effect that owns it (its default when absent)."""
+    parameter = declared_parameters()[key]
+    return parameter.read(model.get(key, parameter.default), f"model.{key}")
 
 
 def _contact(value: Any) -> ContactParams:

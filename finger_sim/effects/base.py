@@ -13,10 +13,11 @@ decorated with `@effect("scene_key", ...)`) and its schema entry (the keys it re
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
 if TYPE_CHECKING:
+    from finger_sim.effects.parameters import Parameter
     from finger_sim.scene import Scene
 
 Vec3 = tuple[float, float, float]
@@ -103,22 +104,31 @@ class Effect:
     key: str
     build: Builder
     description: str
+    #: the scene keys it reads (under `model:`), declared once (`effects.parameters`)
+    parameters: Mapping[str, Parameter] = field(default_factory=dict, hash=False, compare=False)
 
 
 #: scene key → effect, in registration order (the order elements are summed in).
 EFFECTS: dict[str, Effect] = {}
 
 
-def effect(key: str, description: str) -> Callable[[Builder], Builder]:
-    """Register the builder of the effect switched on by `model.<key>` in a scene."""
+def effect(key: str, description: str,
+           parameters: Mapping[str, Parameter] | None = None) -> Callable[[Builder], Builder]:
+    """Register the builder of the effect switched on by `model.<key>` in a scene, with the scene
+    keys it reads (`parameters`: key → declaration)."""
 
     def register(build: Builder) -> Builder:
         if key in EFFECTS:
             raise ValueError(f"effect '{key}' registered twice")
-        EFFECTS[key] = Effect(key, build, description)
+        EFFECTS[key] = Effect(key, build, description, dict(parameters or {}))
         return build
 
     return register
+
+
+def declared_parameters() -> dict[str, Parameter]:
+    """Every registered effect's scene keys (under `model:`) → their declarations."""
+    return {key: p for eff in EFFECTS.values() for key, p in eff.parameters.items()}
 
 
 def build_elements(scene: "Scene") -> list[ForceElement]:

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
 from finger_sim.effects.base import DAMPING, Smooth, Vec3, effect
+from finger_sim.effects.parameters import scalar
 
 if TYPE_CHECKING:
     from finger_sim.scene import Scene
@@ -41,6 +42,12 @@ def damping_force(c: float, w1: float, w2: float, w3: float) -> Vec3:
     return (-c * w1 + c * beta_dot, -c * w2, -c * beta_dot)
 
 
-@effect("damping", "viscous damping at each joint, N·m·s/rad")
+#: Largest coefficient, N·m·s/rad: keeps the modal arithmetic (C²) finite.
+MAX_DAMPING = 1e3
+PARAMETERS = {"damping": scalar(0.0, "N·m·s/rad", "viscous damping c at the MCP, coupler and PIP joints; 0 removes it",
+                                minimum=0.0, maximum=MAX_DAMPING)}
+
+
+@effect("damping", "viscous damping at each joint, N·m·s/rad", PARAMETERS)
 def build(scene: Scene) -> JointDamping | None:
     return JointDamping(scene.damping) if scene.damping else None

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
 from finger_sim.effects.base import GRAVITY, Smooth, Vec3, effect
+from finger_sim.effects.parameters import vector
 from finger_sim.kinematics import distal_offset
 from finger_sim.model import FingerParams
 
@@ -64,7 +65,13 @@ def gravity_force(gx: float, gy: float, w1: float, w2: float, w3: float, alpha: 
     )
 
 
-@effect("gravity", "uniform gravity in the model plane, (gX, gY) m/s²")
+#: Largest component, m/s² (~1000 g).
+MAX_GRAVITY = 1e4
+PARAMETERS = {"gravity": vector((0.0, 0.0), "m/s²", "uniform gravity (gX, gY) in the model plane; zero removes it",
+                                bound=MAX_GRAVITY)}
+
+
+@effect("gravity", "uniform gravity in the model plane, (gX, gY) m/s²", PARAMETERS)
 def build(scene: Scene) -> Gravity | None:
     if not any(scene.gravity):
         return None

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
 from finger_sim.effects.base import SPRING, Smooth, Vec3, effect
+from finger_sim.effects.parameters import scalar
 from finger_sim.kinematics import distal_offset
 
 if TYPE_CHECKING:
@@ -44,7 +45,14 @@ def spring_force(stiffness: float, alpha: float, t1: float, t3: float) -> Vec3:
     return (kb, 0.0, -kb)
 
 
-@effect("spring_stiffness", "torsional PIP spring, N·m/rad (spec §3)")
+#: Largest stiffness, N·m/rad: far beyond any finger (the paper's spring is 1e-3, the stiff scene's
+#: 1e3), and small enough that the modal arithmetic (K·I) stays finite.
+MAX_SPRING_STIFFNESS = 1e6
+PARAMETERS = {"spring_stiffness": scalar(0.001, "N·m/rad", "stiffness k of the torsional PIP spring (spec §3); 0 removes it",
+                                         minimum=0.0, maximum=MAX_SPRING_STIFFNESS)}
+
+
+@effect("spring_stiffness", "torsional PIP spring, N·m/rad (spec §3)", PARAMETERS)
 def build(scene: Scene) -> PipSpring | None:
     if not scene.spring_stiffness:
         return None

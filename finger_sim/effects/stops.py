@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
 from finger_sim.effects.base import NO_FORCE, NO_OUTPUTS, Vec3, effect
+from finger_sim.effects.parameters import scalar
 
 if TYPE_CHECKING:
     from finger_sim.scene import Scene
@@ -64,7 +65,12 @@ class JointStops:
         return (self.lower, self.upper)
 
 
-@effect("joint_limits", "hard MCP stops, [lower, upper] rad, with `restitution`")
+#: `restitution` (the `joint_limits` mapping is read by the scene, which checks it against the linkage's range).
+PARAMETERS = {"restitution": scalar(0.0, "1", "restitution coefficient e of the MCP stops: q' → −e q' at impact",
+                                    minimum=0.0, maximum=1.0)}
+
+
+@effect("joint_limits", "hard MCP stops, [lower, upper] rad, with `restitution`", PARAMETERS)
 def build(scene: Scene) -> JointStops | None:
     if scene.mcp_limits is None:
         return None

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
 from finger_sim.effects.base import TIP_FORCE, Smooth, Vec3, effect
+from finger_sim.effects.parameters import vector
 from finger_sim.kinematics import distal_offset
 from finger_sim.model import FingerParams
 
@@ -52,7 +53,13 @@ def tip_force(fx: float, fy: float, r1: float, l3: float, alpha: float, t1: floa
     return (r1 * (-math.sin(t1) * fx + math.cos(t1) * fy), 0.0, l3 * (-math.sin(psi) * fx + math.cos(psi) * fy))
 
 
-@effect("tip_force", "constant force at the fingertip, (FX, FY) N")
+#: Largest component, N.
+MAX_TIP_FORCE = 1e4
+PARAMETERS = {"tip_force": vector((0.0, 0.0), "N", "constant force (FX, FY) at the fingertip; zero removes it",
+                                  bound=MAX_TIP_FORCE)}
+
+
+@effect("tip_force", "constant force at the fingertip, (FX, FY) N", PARAMETERS)
 def build(scene: Scene) -> TipForce | None:
     if not any(scene.tip_force):
         return None
