@@ -48,6 +48,8 @@ ERROR_EXPONENT = -1.0 / 8.0  # −1/(order of the error estimator + 1)
 MIN_STEP_ULPS = 10.0
 
 JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
+#: The laws compiled into their callers' own code (numba IR inlining), as the hand-written copies were.
+LAW = {**JIT, "inline": "always"}
 
 
 def compiled(law: Callable, **callees: Callable) -> Callable:
@@ -55,17 +57,17 @@ def compiled(law: Callable, **callees: Callable) -> Callable:
     to their compiled forms: the same code object under other globals, so nothing is copied."""
     function = types.FunctionType(law.__code__, {**law.__globals__, **callees}, law.__name__, law.__defaults__)
     function.__qualname__, function.__doc__, function.__module__ = law.__qualname__, law.__doc__, law.__module__
-    return njit(**JIT)(function)
+    return njit(**LAW)(function)
 
 
 #: The laws compiled from their one definition (the plain functions the Python path calls).
-schur_solve = njit(**JIT)(dynamics.schur_solve)
-project_state = njit(**JIT)(projection.project_state)
-spring_force = njit(**JIT)(spring.spring_force)
-damping_force = njit(**JIT)(damping.damping_force)
-gravity_force = njit(**JIT)(gravity.gravity_force)
-tip_force = njit(**JIT)(tip_force_effect.tip_force)
-_PROFILE_LAWS = {name: njit(**JIT)(getattr(inputs, name))
+schur_solve = njit(**LAW)(dynamics.schur_solve)
+project_state = njit(**LAW)(projection.project_state)
+spring_force = njit(**LAW)(spring.spring_force)
+damping_force = njit(**LAW)(damping.damping_force)
+gravity_force = njit(**LAW)(gravity.gravity_force)
+tip_force = njit(**LAW)(tip_force_effect.tip_force)
+_PROFILE_LAWS = {name: njit(**LAW)(getattr(inputs, name))
                  for name in ("ramp_torque", "sine_torque", "step_torque", "square_torque", "square_switch")}
 torque_at = compiled(inputs.torque_at, **_PROFILE_LAWS)
 switches_inside = compiled(inputs.switches_inside, **_PROFILE_LAWS)
