@@ -333,10 +333,11 @@ def _urdf(args: argparse.Namespace) -> int:
 
 
 def _schema(args: argparse.Namespace) -> int:
-    """The JSON Schema of scene files, on stdout or to -o (for an editor's YAML language server)."""
-    from finger_sim.scene_schema import schema_text
+    """The JSON Schema of scene (or hand) files, on stdout or to -o (for an editor's YAML language server)."""
+    from finger_sim.runtime.hand_schema import hand_schema
+    from finger_sim.scene_schema import scene_schema, schema_text
 
-    text = schema_text()
+    text = schema_text(hand_schema() if args.hand else scene_schema())
     if args.out is None:
         sys.stdout.write(text)
         return 0
@@ -499,6 +500,7 @@ def build_parser() -> argparse.ArgumentParser:
     schema = sub.add_parser("schema", help="the JSON Schema of scene files, which editors complete and check "
                                            "scenes with (README: YAML language server)")
     schema.add_argument("-o", "--out", type=Path, help="write the schema to this file (default: stdout)")
+    schema.add_argument("--hand", action="store_true", help="the schema of finger_hand's hand files (config/hands/)")
     schema.set_defaults(func=_schema)
 
     sweep = sub.add_parser("sweep", help="a scene over the Cartesian product of varied keys, run as one "

@@ -97,5 +97,6 @@ def scene_schema() -> dict[str, Any]:
     return {"$schema": DIALECT, **schema, "title": "finger_sim scene"}
 
 
-def schema_text() -> str:
-    return json.dumps(scene_schema(), indent=2, ensure_ascii=False) + "\n"
+def schema_text(schema: dict[str, Any]) -> str:
+    """A schema as the JSON file editors read."""
+    return json.dumps(schema, indent=2, ensure_ascii=False) + "\n"

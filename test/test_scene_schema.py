@@ -109,3 +109,47 @@ def test_the_schema_and_the_loader_agree_on_every_scalar(validator: jsonschema.D
     schema_accepts = not list(validator.iter_errors(data))
     assert schema_accepts == (loader_refuses(data) is None)
     assert schema_accepts == (where not in ("below", "above"))
+
+
+HANDS = sorted((CONFIG / "hands").glob("*.yaml"))
+
+
+@pytest.fixture(scope="module")
+def hand_validator(tmp_path_factory: pytest.TempPathFactory) -> jsonschema.Draft202012Validator:
+    """The validator of the schema file `finger-sim schema --hand -o` writes."""
+    out = tmp_path_factory.mktemp("schema") / "hand.schema.json"
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert main(["schema", "--hand", "-o", str(out)]) == 0
+    schema = json.loads(out.read_text(encoding="utf-8"))
+    jsonschema.Draft202012Validator.check_schema(schema)
+    return jsonschema.Draft202012Validator(schema)
+
+
+@pytest.mark.parametrize("path", HANDS, ids=lambda p: p.stem)
+def test_every_shipped_hand_validates(hand_validator: jsonschema.Draft202012Validator, path: Path) -> None:
+    from finger_sim.runtime.hand_config import load_hand
+
+    data = parse_scene_text(path.read_text(encoding="utf-8"), str(path))
+    assert [e.message for e in hand_validator.iter_errors(data)] == []
+    assert len(load_hand(path)) == len(data["fingers"])
+
+
+@pytest.mark.parametrize("change, key", [
+    (lambda f: f.__setitem__("pose", [0.0, 0.0, 0.0, 0.0, 10.5, 0.0]), "pose[4]"),
+    (lambda f: f.__setitem__("pose", [2.0, 0.0, 0.0, 0.0, 0.0, 0.0]), "pose[0]"),
+    (lambda f: f.__setitem__("name", "1st"), "name"),
+    (lambda f: f.__setitem__("frame_prefix", "a b"), "frame_prefix"),
+    (lambda f: f.__setitem__("colour", "red"), "colour"),
+])
+def test_a_wrong_hand_value_is_refused_by_both(hand_validator: jsonschema.Draft202012Validator, tmp_path: Path,
+                                                change, key: str) -> None:
+    from finger_sim.runtime.hand_config import load_hand
+
+    data = {"fingers": [{"name": "index", "scene": "finger_default"}]}
+    change(data["fingers"][0])
+    assert list(hand_validator.iter_errors(data)) != []
+    path = tmp_path / "hand.yaml"
+    path.write_text(json.dumps(data), encoding="utf-8")  # JSON is YAML 1.2
+    with pytest.raises(ConfigError) as refusal:
+        load_hand(path)
+    assert key in str(refusal.value) and "\n" not in str(refusal.value)

@@ -26,8 +26,9 @@ HANDS_DIR = "hands"
 #: A finger's name: one ROS name token (it becomes a namespace).
 NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]*")
 MAX_FINGERS = 10
-#: Largest base-pose offset, m (a hand is ~0.2 m).
+#: Largest base-pose offset, m (a hand is ~0.2 m), and angle, rad (a few turns either way).
 MAX_OFFSET = 1.0
+MAX_ANGLE = 10.0
 _KEYS = {"name", "scene", "pose", "frame_prefix"}
 
 Pose = tuple[float, float, float, float, float, float]
@@ -100,8 +101,8 @@ def _finger(entry: object, i: int, folder: Path) -> FingerSpec:
     pose = m.get("pose", [0.0] * 6)
     if not isinstance(pose, list) or len(pose) != 6:
         raise ConfigError(f"{key}.pose", "[x, y, z, roll, pitch, yaw] (m, rad)", pose)
-    values = tuple(number(v, f"{key}.pose[{j}]", minimum=-MAX_OFFSET if j < 3 else -10.0,
-                          maximum=MAX_OFFSET if j < 3 else 10.0) for j, v in enumerate(pose))
+    values = tuple(number(v, f"{key}.pose[{j}]", minimum=-MAX_OFFSET if j < 3 else -MAX_ANGLE,
+                          maximum=MAX_OFFSET if j < 3 else MAX_ANGLE) for j, v in enumerate(pose))
     prefix = m.get("frame_prefix", f"{name}_")
     if not isinstance(prefix, str) or any(c.isspace() for c in prefix):
         raise ConfigError(f"{key}.frame_prefix", "a prefix without white space", prefix)
