@@ -6,11 +6,12 @@ differ in anything (geometry, spring, damping, torque profile and its parameters
 duration, dt): each finger's model is data for the kernel (`kernel.layout.model_array`).
 
 What runs where:
-- compiled (`finger_sim.batch.loop`, numba `prange` over the fingers): every fixed-step
-  explicit method (euler, rk4, rk6, dop8) on a scene whose force elements all have a compiled
-  form, with a constant, ramp, step, square or sine torque. Torque switches are cut inside the
-  loop as `Simulator.step` cuts them. A step in which a stop closes, a contact gap opens or
-  closes, or the kernel fails is handed to that finger's own `Simulator` (compiled kernel), which
+- compiled (`finger_sim.kernel.rollout_loop.run_rows`, numba `prange` over the fingers): every
+  fixed-step explicit method (euler, rk4, rk6, dop8) on a scene whose force elements all have a
+  compiled form, with a constant, ramp, step, square or sine torque, each step the Simulator's own
+  compiled step (`numerics._profile_step`, as `simulate` and `rollout` step). A step in which a
+  stop closes, a contact gap opens or closes, a torque switch falls, or the kernel fails is
+  handed to that finger's own `Simulator` (compiled kernel), which splits it at the switch,
   locates the event, applies the impact and keeps the finger while it rests on a stop; the
   finger then goes back to the loop.
 - a per-finger `Simulator` loop (`simulate`) for the rest: implicit and adaptive methods
@@ -34,7 +35,7 @@ from finger_sim import kinematics
 from finger_sim.auto import choose_method, contact_substeps
 from finger_sim.dynamics import FingerSystem
 from finger_sim.errors import ConfigError, StabilityError
-from finger_sim.inputs import PROFILES, Profile
+from finger_sim.inputs import profile_array
 from finger_sim.integrators import METHODS
 from finger_sim.kernel import KERNELS, PYTHON, use_writable_cache
 from finger_sim.scene import AUTO, Scene
@@ -43,17 +44,6 @@ from finger_sim.stability import fastest_mode, largest_stable_dt, mcp_range, sta
 
 #: The output a contact element reports as the grip force (N): a column of contact sweeps.
 GRIP_FORCE = "grip_force"
-#: Torque profile kinds the compiled loop evaluates itself (`loop.PROFILE_*`), and the order
-#: of their parameters there.
-COMPILED_PROFILES = {
-    "constant": ("value",),
-    "ramp": ("offset", "slope"),
-    "step": ("before", "after", "at"),
-    "square": ("amplitude", "frequency", "offset"),
-    "sine": ("amplitude", "frequency", "offset"),
-}
-_PROFILE_CODES = {kind: i for i, kind in enumerate(COMPILED_PROFILES)}  # loop.PROFILE_CONSTANT ... PROFILE_SINE
-
 
 @dataclass(frozen=True)
 class BatchResult:
@@ -80,7 +70,7 @@ class _Plan:
     system: FingerSystem
     method: str
     model: np.ndarray | None  # None: not compiled
-    profile: tuple[int, tuple[float, ...]] | None
+    profile: np.ndarray | None  # `inputs.profile_array`; None: no compiled form
     stops: bool  # the scene's impact gaps are its MCP stops
 
 
@@ -183,7 +173,7 @@ class _Planner:
                 if auto_key is not None:
                     self._auto[auto_key] = method
         cls = METHODS[method]
-        profile = _profile(scene.torque)
+        profile = profile_array(scene.torque)
         known, stops = _events(scene, system)
         # auto splits a contact scene's steps near contact into substeps (Simulator._step): its Simulator runs it
         substeps = contact_substeps(scene) if scene.method == AUTO and scene.objects and not cls.implicit else 1
@@ -203,14 +193,6 @@ class _Planner:
             raise StabilityError(cls.name, scene.name, scene.dt, root, largest_stable_dt(cls, root, scene.dt),
                                  f"batch run {index}")
         return _Plan(scene, system, method, model, profile, stops)
-
-
-def _profile(profile: Profile) -> tuple[int, tuple[float, ...]] | None:
-    """(code, parameters) of a profile the compiled loop evaluates, else None."""
-    names = COMPILED_PROFILES.get(profile.kind)
-    if names is None or type(profile) is not PROFILES.get(profile.kind):
-        return None
-    return _PROFILE_CODES[profile.kind], tuple(float(getattr(profile, k)) for k in names)
 
 
 def _events(scene: Scene, system: FingerSystem) -> tuple[bool, bool]:
@@ -256,29 +238,25 @@ def _run_compiled(method: str, plans: list[_Plan], members: list[int], q: np.nda
                   max_res: np.ndarray, handed: np.ndarray, trajs: list[np.ndarray] | None,
                   progress: Callable[[int], None] | None) -> None:
     """Run the fingers of one method in the compiled loop, handing event steps to Simulators."""
-    from finger_sim.batch import loop
     from finger_sim.integrators.explicit import ExplicitRungeKutta
-    from finger_sim.kernel.layout import distinct_nodes, tableau_array
+    from finger_sim.kernel import rollout_loop
+    from finger_sim.kernel.layout import tableau_array
 
     ref = METHODS[method]
-    if issubclass(ref, ExplicitRungeKutta):
-        tab, nodes = tableau_array(ref.A, ref.B, ref.C), np.array(distinct_nodes(ref.C))
-    else:  # the paper's Euler: an empty tableau, one node at 0
-        tab, nodes = np.zeros((3, 0)), np.zeros(1)
+    # the method's tableau (`CompiledRungeKutta`): the paper's Euler has none
+    tab = tableau_array(ref.A, ref.B, ref.C) if issubclass(ref, ExplicitRungeKutta) else np.zeros((3, 0))
     n = len(plans)
-    width = max(len(p.model) for p in plans)  # type: ignore[arg-type]
-    models = np.zeros((n, width))
-    codes = np.empty(n, dtype=np.int64)
-    params = np.zeros((n, 3))
-    dts, lasts = np.empty(n), np.empty(n, dtype=np.int64)
+    steps_plans = [_step_plan(p.scene.dt, p.model, tab) for p in plans]  # type: ignore[arg-type]
+    plan_rows = np.zeros((n, max(len(x) for x in steps_plans)))
+    profiles = np.zeros((n, max(len(p.profile) for p in plans)))  # type: ignore[arg-type]
+    lasts = np.empty(n, dtype=np.int64)
     stops, limits = np.zeros(n, dtype=np.bool_), np.zeros((n, 2))
     gaps = np.empty(n, dtype=np.int64)
     states = np.empty((n, 6))
     for j, p in enumerate(plans):
-        models[j, : len(p.model)] = p.model  # type: ignore[arg-type]
-        code, values = p.profile  # type: ignore[misc]
-        codes[j], params[j, : len(values)] = code, values
-        dts[j], lasts[j] = p.scene.dt, p.scene.step_count
+        plan_rows[j, : len(steps_plans[j])] = steps_plans[j]
+        profiles[j, : len(p.profile)] = p.profile  # type: ignore[arg-type]
+        lasts[j] = p.scene.step_count
         if p.stops:
             stops[j], limits[j] = True, p.scene.mcp_limits
         gaps[j] = _contact_candidates(p.model)  # type: ignore[arg-type]
@@ -298,13 +276,13 @@ def _run_compiled(method: str, plans: list[_Plan], members: list[int], q: np.nda
     while len(active):
         sub_states, sub_steps, sub_res = states[active], steps[active], max_res_local[active]
         sub_paths = paths[active] if record else paths[np.zeros(len(active), dtype=np.int64)]
-        status = loop.run(models[active], tab, nodes, codes[active], params[active], dts[active], stops[active],
-                          limits[active], gaps[active], sub_states, sub_steps, lasts[active], sub_res, sub_paths, record)
+        status = rollout_loop.run_rows(plan_rows[active], profiles[active], stops[active], limits[active],
+                                       gaps[active], sub_states, sub_steps, lasts[active], sub_res, sub_paths, record)
         states[active], steps[active], max_res_local[active] = sub_states, sub_steps, sub_res
         if record:
             paths[active] = sub_paths
         again = []
-        for j in active[status == loop.EVENT].tolist():
+        for j in active[status == rollout_loop.EVENT].tolist():
             sim = sims.get(j) or sims.setdefault(j, Simulator(plans[j].scene, kernel="compiled"))
             sim.step_index, sim.q, sim.v = int(steps[j]), tuple(states[j, :3].tolist()), tuple(states[j, 3:].tolist())
             while True:
@@ -326,3 +304,8 @@ def _run_compiled(method: str, plans: list[_Plan], members: list[int], q: np.nda
         q[i], v[i], max_res[i] = states[j, :3], states[j, 3:], max_res_local[j]
         if trajs is not None:
             trajs[i] = paths[j, : lasts[j] + 1].copy()
+
+
+def _step_plan(dt: float, model: np.ndarray, tab: np.ndarray) -> np.ndarray:
+    """The step plan `CompiledRungeKutta.step_plan` builds: [dt, len(model), tableau shape, model, tableau]."""
+    return np.concatenate(([dt, len(model), *tab.shape], model, tab.ravel()))

@@ -6,6 +6,11 @@ fingers (numba `prange`: every thread) and their steps. A finger stops at a step
 is not OK (a torque switch inside the step, BREAKPOINT, which the Python side hands to the
 finger's Simulator; or a failure, which it raises) and reports where.
 
+`run_rows` is `run` for a batch of whole scenes (`finger_sim.batch.run_batch`): each row its own
+step count, and each step checked for an event (a stop, a contact gap: `kernel.event_checks`);
+a step that holds one, or a switch, or fails, is taken back and the row stops before it, EVENT,
+for the row's Simulator to take.
+
 `run_lockstep` is the same step in lock-step across a tile of fingers, structure of arrays
 (one contiguous array per state component, the finger index innermost): every stage, force
 law, the closed-form Schur solve and the projection's Newton iterations are loops over the
@@ -26,11 +31,16 @@ from finger_sim.kernel import use_writable_cache
 use_writable_cache()  # before numba reads NUMBA_CACHE_DIR
 from numba import njit, prange  # noqa: E402  (after the cache folder is set)
 
+from finger_sim.kernel.event_checks import kink, residual, stop_closed  # noqa: E402
 from finger_sim.kernel.layout import DAMPING, GRAVITY, HEADER, NO_FORCE, SPRING, TIP_FORCE  # noqa: E402
 from finger_sim.kernel.numerics import (NON_FINITE, NOT_CONVERGED, OK, STATE_NON_FINITE, _profile_step,  # noqa: E402
                                         plan_parts, torque_at)
 from finger_sim.projection import ACCEPTED_RESIDUAL_FACTOR, MAX_ITERATIONS, POSITION_TOLERANCE  # noqa: E402
 
+#: A row's status after `run_rows`: reached its last step, or stopped before a step that its
+#: Simulator must take (an event, a switch inside the step, or a kernel status other than OK).
+DONE = 0
+EVENT = 1
 PARALLEL = {"cache": True, "nogil": True, "error_model": "numpy", "parallel": True}
 SERIAL = {"cache": True, "nogil": True, "error_model": "numpy"}
 #: Fingers stepped together by `run_lockstep`: a tile's state, stages and work arrays
@@ -70,6 +80,47 @@ def run(plans, profiles, which, control, q, v, status, reached):
             q[i, k, 0], q[i, k, 1], q[i, k, 2] = x[0], x[1], x[2]
             v[i, k, 0], v[i, k, 1], v[i, k, 2] = x[3], x[4], x[5]
         status[i], reached[i] = code, k
+
+
+@njit(**PARALLEL)
+def run_rows(plans, profiles, stops, limits, gaps, states, steps, lasts, max_res, trajs, record):
+    """Advance every row i from step steps[i] to lasts[i] under its own profile (in place: states
+    (N × 6, q then q'), steps, max_res, the largest |Φ| so far; trajs[i, k] = q after step k when
+    record). Returns each row's status, DONE or EVENT.
+
+    plans, profiles: each row's step plan and compiled profile (zero-padded rows); stops[i],
+    limits[i]: whether row i has MCP stops, and (lower, upper) rad; gaps[i]: its contact candidates.
+    """
+    n = states.shape[0]
+    status = np.empty(n, dtype=np.int64)
+    for i in prange(n):
+        status[i], steps[i], max_res[i] = _row(plans[i], profiles[i], stops[i], limits[i], gaps[i], states[i],
+                                               steps[i], lasts[i], max_res[i], trajs[i], record)
+    return status
+
+
+@njit(**SERIAL)
+def _row(plan, prof, stop, limits, gaps, x, step, last, max_res, traj, record):
+    """One row of `run_rows`: (status, step reached, max |Φ|)."""
+    dt, m, tab = plan_parts(plan)
+    s = tab.shape[1]
+    work, taus = np.empty((max(s, 1), 6)), np.empty(max(s, 1))
+    start = np.empty(6)
+    before, after, shifted = np.empty(gaps), np.empty(gaps), np.empty(gaps)
+    while step < last:
+        start[:] = x
+        code, _ = _profile_step(m, tab, prof, 0.0, step, dt, x, work, taus)
+        if code != OK or (stop and stop_closed(x, limits)) or \
+                (gaps > 0 and kink(m, start, x, (step + 1) * dt - step * dt, before, after, shifted)):
+            x[:] = start
+            return EVENT, step, max_res
+        step += 1
+        r = residual(m, x)
+        if r > max_res:
+            max_res = r
+        if record:
+            traj[step, 0], traj[step, 1], traj[step, 2] = x[0], x[1], x[2]
+    return DONE, step, max_res
 
 
 @njit(**PARALLEL)
