@@ -37,8 +37,8 @@ import numpy as np
 
 from finger_sim.effects.contact import build_contact
 from finger_sim.errors import ConfigError, SimulationDiverged
-from finger_sim.inputs import CONSTANT, HELD, HELD_ARRAY, RAMP, SINE
-from finger_sim.kernel.layout import BREAKPOINT, HEADER, OK
+from finger_sim.inputs import HELD_ARRAY
+from finger_sim.kernel.layout import BREAKPOINT, OK
 from finger_sim.kernel.runner import advance
 from finger_sim.scene import Scene, load_scene, scene_from_dict
 from finger_sim.simulate import Simulator, output_names, state_columns
@@ -49,8 +49,6 @@ if TYPE_CHECKING:
 
 #: Most bytes of q and v that `rollout` allocates itself (pass q= and v= to go beyond on purpose).
 MAX_ALLOCATED_BYTES = 8e9
-#: Input kinds with no switch inside a step: rows under them can step in lock-step.
-SMOOTH_INPUTS = (HELD, CONSTANT, RAMP, SINE)
 #: Bytes per finger-step of q and v (six float64).
 BYTES_PER_STEP = 48
 
@@ -306,28 +304,15 @@ def _input_array(fast: FastStepper, held: bool) -> np.ndarray:
 
 
 def _lockstep_key(sim: Simulator, held: bool) -> tuple | None:
-    """What rows stepped together by `rollout_loop.run_lockstep` share (the tableau, the force
-    elements' codes and sizes, the input's kind), or None when the row needs `rollout_loop.run`:
-    Euler, a contact or drive block, or an input with switches inside steps."""
-    from finger_sim.kernel.rollout_loop import LOCKSTEP_CODES
+    """What rows stepped together by `rollout_loop.run_lockstep` share (`rollout_loop.lockstep_layout`),
+    or None when the row needs `rollout_loop.run`."""
+    from finger_sim.kernel.rollout_loop import lockstep_layout
 
     fast = sim.fast_stepper
     if fast is None or (not held and fast.profile is None):
         return None
     _, model, tab = _plan_parts(fast.plan)
-    prof = _input_array(fast, held)
-    if tab.shape[1] == 0 or int(prof[0]) not in SMOOTH_INPUTS:
-        return None
-    layout, o = [], HEADER + 1
-    for _ in range(int(model[HEADER])):
-        code, size = int(model[o]), int(model[o + 1])
-        if code not in LOCKSTEP_CODES:
-            return None
-        layout.append((code, size))
-        o += 2 + size
-    if o != len(model):  # a drive block follows the elements
-        return None
-    return tab.tobytes(), tuple(layout), len(prof)
+    return lockstep_layout(model, tab, _input_array(fast, held))
 
 
 def _padded(arrays: list[np.ndarray]) -> np.ndarray:

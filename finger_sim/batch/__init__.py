@@ -38,12 +38,19 @@ from finger_sim.errors import ConfigError, StabilityError
 from finger_sim.inputs import profile_array
 from finger_sim.integrators import METHODS
 from finger_sim.kernel import KERNELS, PYTHON, use_writable_cache
+from finger_sim.kernel.layout import OK
 from finger_sim.scene import AUTO, Scene
 from finger_sim.simulate import Simulator, simulate
 from finger_sim.stability import fastest_mode, largest_stable_dt, mcp_range, stable_at
 
 #: The output a contact element reports as the grip force (N): a column of contact sweeps.
 GRIP_FORCE = "grip_force"
+
+#: Most bytes of paths that the lock-step loop keeps at once (a group runs in blocks of rows).
+LOCKSTEP_BYTES = 64 * 2**20
+#: Bytes per finger-step of those paths: q and q', six float64.
+BYTES_PER_STEP = 48
+
 
 @dataclass(frozen=True)
 class BatchResult:
@@ -271,8 +278,11 @@ def _run_compiled(method: str, plans: list[_Plan], members: list[int], q: np.nda
         paths[:, 0] = states[:, :3]
     else:
         paths = np.zeros((n, 1, 3))
+    finished = _run_lockstep(plans, tab, states, steps, lasts, stops, gaps, max_res_local, paths, record)
+    if progress is not None and finished.any():
+        progress(int(finished.sum()))
     sims: dict[int, Simulator] = {}
-    active = np.arange(n)
+    active = np.flatnonzero(~finished)
     while len(active):
         sub_states, sub_steps, sub_res = states[active], steps[active], max_res_local[active]
         sub_paths = paths[active] if record else paths[np.zeros(len(active), dtype=np.int64)]
@@ -309,3 +319,39 @@ def _run_compiled(method: str, plans: list[_Plan], members: list[int], q: np.nda
 def _step_plan(dt: float, model: np.ndarray, tab: np.ndarray) -> np.ndarray:
     """The step plan `CompiledRungeKutta.step_plan` builds: [dt, len(model), tableau shape, model, tableau]."""
     return np.concatenate(([dt, len(model), *tab.shape], model, tab.ravel()))
+
+
+def _run_lockstep(plans: list[_Plan], tab: np.ndarray, states: np.ndarray, steps: np.ndarray, lasts: np.ndarray,
+                  stops: np.ndarray, gaps: np.ndarray, max_res: np.ndarray, paths: np.ndarray,
+                  record: bool) -> np.ndarray:
+    """Step the fingers without events under a smooth torque in lock-step (`rollout_loop.run_lockstep`),
+    groups of one layout, dt and length, LOCKSTEP_BYTES of paths at a time. Updates states, steps,
+    max_res (and paths) in place; returns which fingers reached their end (the others go on in `run_rows`)."""
+    from finger_sim.kernel import rollout_loop
+
+    finished = np.zeros(len(plans), dtype=bool)
+    groups: dict[tuple, list[int]] = defaultdict(list)
+    for j, p in enumerate(plans):
+        layout = None if stops[j] or gaps[j] else rollout_loop.lockstep_layout(p.model, tab, p.profile)  # type: ignore[arg-type]
+        if layout is not None:
+            groups[(layout, p.scene.dt, int(lasts[j]))].append(j)
+    for (_, dt, nstep), members in groups.items():
+        size = max(rollout_loop.TILE, LOCKSTEP_BYTES // (BYTES_PER_STEP * (nstep + 1)))
+        for lo in range(0, len(members), size):
+            rows = np.array(members[lo: lo + size])
+            q, v = np.empty((len(rows), nstep + 1, 3)), np.empty((len(rows), nstep + 1, 3))
+            q[:, 0], v[:, 0] = states[rows, :3], states[rows, 3:]
+            models = np.column_stack([plans[j].model for j in rows.tolist()])
+            inputs = np.column_stack([plans[j].profile for j in rows.tolist()])
+            status, reached = np.empty(len(rows), dtype=np.int64), np.empty(len(rows), dtype=np.int64)
+            rollout_loop.run_lockstep(dt, tab, models, inputs, np.zeros((len(rows), 0)), q, v, status, reached)
+            res = max_res[rows]
+            rollout_loop.max_residuals(models, q, reached, res)
+            max_res[rows] = res
+            at = np.arange(len(rows))
+            states[rows, :3], states[rows, 3:] = q[at, reached], v[at, reached]
+            steps[rows] = reached
+            finished[rows] = status == OK
+            if record:
+                paths[rows, : nstep + 1] = q
+    return finished

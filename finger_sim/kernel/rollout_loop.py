@@ -31,6 +31,7 @@ from finger_sim.kernel import use_writable_cache
 use_writable_cache()  # before numba reads NUMBA_CACHE_DIR
 from numba import njit, prange  # noqa: E402  (after the cache folder is set)
 
+from finger_sim.inputs import CONSTANT, HELD, RAMP, SINE  # noqa: E402
 from finger_sim.kernel.event_checks import kink, residual, stop_closed  # noqa: E402
 from finger_sim.kernel.layout import DAMPING, GRAVITY, HEADER, NO_FORCE, SPRING, TIP_FORCE  # noqa: E402
 from finger_sim.kernel.numerics import (NON_FINITE, NOT_CONVERGED, OK, STATE_NON_FINITE, _profile_step,  # noqa: E402
@@ -48,6 +49,26 @@ SERIAL = {"cache": True, "nogil": True, "error_model": "numpy"}
 TILE = 64
 #: Force element codes `run_lockstep` evaluates (contact's branches per candidate stay in `run`).
 LOCKSTEP_CODES = (NO_FORCE, SPRING, DAMPING, GRAVITY, TIP_FORCE)
+#: Input kinds with no switch inside a step: rows under them can step in lock-step.
+SMOOTH_INPUTS = (HELD, CONSTANT, RAMP, SINE)
+
+
+def lockstep_layout(model: np.ndarray, tab: np.ndarray, prof: np.ndarray) -> tuple | None:
+    """What rows stepped together by `run_lockstep` must share (the tableau, the force elements'
+    codes and sizes, the input's length), or None when a row needs `run` (Euler, a contact or
+    drive block, an input with switches inside steps). model, tab, prof: as `run_lockstep` reads them."""
+    if tab.shape[1] == 0 or int(prof[0]) not in SMOOTH_INPUTS:
+        return None
+    layout, o = [], HEADER + 1
+    for _ in range(int(model[HEADER])):
+        code, size = int(model[o]), int(model[o + 1])
+        if code not in LOCKSTEP_CODES:
+            return None
+        layout.append((code, size))
+        o += 2 + size
+    if o != len(model):  # a drive block follows the elements
+        return None
+    return tab.tobytes(), tuple(layout), len(prof)
 
 
 @njit(**PARALLEL)
@@ -339,3 +360,19 @@ def _project(m, x, grad, resid, done, code, n):
         l1 = (a22 * e1 - a12 * e2) / det
         l2 = (a11 * e2 - a12 * e1) / det
         x[3, f], x[4, f], x[5, f] = w1 - g11 * l1 - g21 * l2, w2 - g12 * l1 - g22 * l2, w3 - g13 * l1 - g23 * l2
+
+
+@njit(**PARALLEL)
+def max_residuals(models, q, counts, out):
+    """out[i] = max(out[i], |Φ(q[i, k])| for k = 1 … counts[i]) (`event_checks.residual`), m:
+    a batch's max_constraint_residual after `run_lockstep`; models: as `run_lockstep` reads them."""
+    for i in prange(q.shape[0]):
+        m = models[:, i].copy()
+        x = np.empty(3)
+        worst = out[i]
+        for k in range(1, counts[i] + 1):
+            x[0], x[1], x[2] = q[i, k, 0], q[i, k, 1], q[i, k, 2]
+            r = residual(m, x)
+            if r > worst:
+                worst = r
+        out[i] = worst
