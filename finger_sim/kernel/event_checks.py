@@ -81,12 +81,12 @@ def contact_gaps(m, o, q0, q2, gap):
 
 
 @njit(**SERIAL)
-def kink(m, xa, xb, h, ga, gb, shifted):
+def kink(m, xa, xb, h, ga, gb, shifted, rates_a):
     """Whether a step of length h (s) from state xa to xb may hold a contact event that the
     Simulator would split it at: a contact gap of model m is closed at one end and open at the
     other, or `simulate._predicted_crossing` (the Simulator's own test, from the gaps and their
-    rates at both ends) predicts a crossing inside it. ga, gb, shifted: scratch arrays (one per
-    candidate). The rates are forward differences along q' over RATE_STEP·h."""
+    rates at both ends) predicts a crossing inside it. ga, gb, shifted, rates_a: scratch arrays
+    (one per candidate). The rates are forward differences along q' over RATE_STEP·h."""
     o = HEADER + 1
     eps = RATE_STEP * h
     for _ in range(int(m[HEADER])):
@@ -100,8 +100,7 @@ def kink(m, xa, xb, h, ga, gb, shifted):
                     return True
             contact_gaps(m, o, xa[0] + eps * xa[3], xa[2] + eps * xa[5], shifted)
             for c in range(count):
-                shifted[c] = (shifted[c] - ga[c]) / eps  # the start's rate
-            rates_a = shifted.copy()
+                rates_a[c] = (shifted[c] - ga[c]) / eps  # the start's rate
             contact_gaps(m, o, xb[0] + eps * xb[3], xb[2] + eps * xb[5], shifted)
             for c in range(count):
                 rate_b = (shifted[c] - gb[c]) / eps

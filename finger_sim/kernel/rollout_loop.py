@@ -127,12 +127,12 @@ def _row(plan, prof, stop, limits, gaps, x, step, last, max_res, traj, record):
     s = tab.shape[1]
     work, taus = np.empty((max(s, 1), 6)), np.empty(max(s, 1))
     start = np.empty(6)
-    before, after, shifted = np.empty(gaps), np.empty(gaps), np.empty(gaps)
+    before, after, shifted, rates = np.empty(gaps), np.empty(gaps), np.empty(gaps), np.empty(gaps)
     while step < last:
         start[:] = x
         code, _ = _profile_step(m, tab, prof, 0.0, step, dt, x, work, taus)
         if code != OK or (stop and stop_closed(x, limits)) or \
-                (gaps > 0 and kink(m, start, x, (step + 1) * dt - step * dt, before, after, shifted)):
+                (gaps > 0 and kink(m, start, x, (step + 1) * dt - step * dt, before, after, shifted, rates)):
             x[:] = start
             return EVENT, step, max_res
         step += 1
