@@ -17,9 +17,8 @@ Runge-Kutta method, force-element layout and smooth input (ramp, sine, constant,
 by `kernel.rollout_loop.run_lockstep`, the Simulator's step in lock-step across tiles of rows
 (structure of arrays; the same operations, so the same bits); the others (Euler, contact, a
 switch inside a step) by `kernel.rollout_loop.run`, which loops the Simulator's own compiled
-step row by row. Both use every thread. Other rows
-(events: stops, contact; implicit or adaptive methods; no numba) are stepped by that scene's
-`Simulator`, as `simulate` steps them. Scenes are built and checked once per distinct
+step row by row. Both use every thread. Other rows (events: stops, contact; implicit or
+adaptive methods; no numba) are stepped by that scene's `Simulator`, as `simulate` steps them. Scenes are built and checked once per distinct
 parameter set, not per row.
 
 The module is `rollouts` so that `finger_sim.rollout` stays the function (`finger_sim.__getattr__`).
@@ -240,7 +239,8 @@ def _run_compiled(sims: list[Simulator], rows_scene: np.ndarray, control: np.nda
             part = rows[members]
             every = len(part) == q.shape[0]
             qs, vs = (q, v) if every else (np.ascontiguousarray(q[part]), np.ascontiguousarray(v[part]))
-            ctl = np.zeros((len(part), 0)) if control is None else (control if every else np.ascontiguousarray(control[part]))
+            ctl = np.zeros((len(part), 0)) if control is None else \
+                (control if every else np.ascontiguousarray(control[part]))
             st, re = np.empty(len(part), dtype=np.int64), np.empty(len(part), dtype=np.int64)
             scene_rows = which[members]
             if key is None:  # a row's own compiled step, row by row

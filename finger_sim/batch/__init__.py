@@ -332,7 +332,8 @@ def _run_lockstep(plans: list[_Plan], tab: np.ndarray, states: np.ndarray, steps
     finished = np.zeros(len(plans), dtype=bool)
     groups: dict[tuple, list[int]] = defaultdict(list)
     for j, p in enumerate(plans):
-        layout = None if stops[j] or gaps[j] else rollout_loop.lockstep_layout(p.model, tab, p.profile)  # type: ignore[arg-type]
+        events = stops[j] or gaps[j]
+        layout = None if events else rollout_loop.lockstep_layout(p.model, tab, p.profile)  # type: ignore[arg-type]
         if layout is not None:
             groups[(layout, p.scene.dt, int(lasts[j]))].append(j)
     for (_, dt, nstep), members in groups.items():
