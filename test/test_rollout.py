@@ -145,3 +145,19 @@ def test_lockstep_tiles_equal_simulate_bit_for_bit():
                                                           "initial.theta1_dot": start[i, 1], "duration": 0.2}))
         np.testing.assert_array_equal(res.q[i], ref.q, err_msg=f"row {i}")
         np.testing.assert_array_equal(res.v[i], ref.v, err_msg=f"row {i}")
+
+
+def test_a_row_diverging_in_a_lockstep_tile_raises_what_the_simulator_raises():
+    # row 65 (the second tile) is driven to divergence from step 20: the rollout names the row
+    # and reports the Simulator's own failure (the same state and time)
+    from finger_sim.errors import SimulationDiverged
+
+    control = np.full((70, 50), 0.002)
+    control[65, 20:] = 1e6
+    sim = Simulator(load_scene(CONFIG / "paper_flexion.yaml"))
+    with pytest.raises(SimulationDiverged) as ref:
+        for value in control[65]:
+            sim.step(float(value))
+    with pytest.raises(SimulationDiverged, match="row 65: ") as got:
+        rollout(CONFIG / "paper_flexion.yaml", control=control)
+    assert got.value.reason == f"row 65: {ref.value.reason}" and got.value.t == ref.value.t
