@@ -12,10 +12,13 @@ takes: the motor torque, N·m, today) in place of its scripted profile. Each row
 `simulate` (or `Simulator.step(control[i, n])` step by step) of that row's scene.
 
 Where it runs: rows whose scene has the Simulator's lean compiled path (a fixed-step explicit
-method on a smooth scene) are stepped by `kernel.rollout_loop.run`, which loops the Simulator's
-own compiled step over rows and steps on every thread: nothing per step in Python. Other rows
-(events: stops, contact; implicit or adaptive methods; no numba) are stepped by that scene's
-`Simulator`, as `simulate` steps them. Scenes are built and checked once per distinct
+method on a smooth scene) are stepped in the kernel, nothing per step in Python: rows sharing a
+Runge-Kutta method, force-element layout and smooth input (ramp, sine, constant, held control)
+by `kernel.rollout_loop.run_lockstep`, the Simulator's step in lock-step across tiles of rows
+(structure of arrays; the same operations, so the same bits); the others (Euler, contact, a
+switch inside a step) by `kernel.rollout_loop.run`, which loops the Simulator's own compiled
+step row by row. Both use every thread. Other rows (events: stops, contact; implicit or
+adaptive methods; no numba) are stepped by that scene's `Simulator`, as `simulate` steps them. Scenes are built and checked once per distinct
 parameter set, not per row.
 
 The module is `rollouts` so that `finger_sim.rollout` stays the function (`finger_sim.__getattr__`).
@@ -27,7 +30,7 @@ import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -39,6 +42,9 @@ from finger_sim.kernel.runner import advance
 from finger_sim.scene import Scene, load_scene, scene_from_dict
 from finger_sim.simulate import Simulator, output_names, state_columns
 from finger_sim.sweep import set_key
+
+if TYPE_CHECKING:
+    from finger_sim.kernel.integrators import FastStepper
 
 #: Most bytes of q and v that `rollout` allocates itself (pass q= and v= to go beyond on purpose).
 MAX_ALLOCATED_BYTES = 8e9
@@ -216,25 +222,49 @@ def _run_compiled(sims: list[Simulator], rows_scene: np.ndarray, control: np.nda
     from finger_sim.kernel import rollout_loop
 
     held = control is not None
-    plans = _padded([s.fast_stepper.plan if s.fast_stepper is not None else np.zeros(1) for s in sims])
-    profiles = _padded([HELD_ARRAY if held or s.fast_stepper is None else s.fast_stepper.profile for s in sims])
-    every = bool(compiled.all())
     rows = np.flatnonzero(compiled)
-    qs, vs = (q, v) if every else (np.ascontiguousarray(q[rows]), np.ascontiguousarray(v[rows]))
     which = np.ascontiguousarray(rows_scene[rows])
-    ctl = np.zeros((len(rows), 0)) if control is None else (control if every else np.ascontiguousarray(control[rows]))
     status, reached = np.empty(len(rows), dtype=np.int64), np.empty(len(rows), dtype=np.int64)
+    groups: dict[object, list[int]] = {}
+    keys = [_lockstep_key(s, held) for s in sims]
+    for j, scene_row in enumerate(which.tolist()):
+        groups.setdefault(keys[scene_row], []).append(j)
     threads = numba.get_num_threads()
     if nthread is not None:
         if not isinstance(nthread, int) or not 1 <= nthread <= numba.config.NUMBA_NUM_THREADS:
             raise ConfigError("nthread", f"an integer in 1..{numba.config.NUMBA_NUM_THREADS}", nthread)
         numba.set_num_threads(nthread)
     try:
-        rollout_loop.run(plans, profiles, which, ctl, qs, vs, status, reached)
+        for key, members in groups.items():
+            part = rows[members]
+            every = len(part) == q.shape[0]
+            qs, vs = (q, v) if every else (np.ascontiguousarray(q[part]), np.ascontiguousarray(v[part]))
+            ctl = np.zeros((len(part), 0)) if control is None else \
+                (control if every else np.ascontiguousarray(control[part]))
+            st, re = np.empty(len(part), dtype=np.int64), np.empty(len(part), dtype=np.int64)
+            scene_rows = which[members]
+            if key is None:  # a row's own compiled step, row by row
+                plans = _padded([s.fast_stepper.plan if s.fast_stepper is not None else np.zeros(1) for s in sims])
+                profiles = _padded([HELD_ARRAY if held or s.fast_stepper is None else s.fast_stepper.profile
+                                    for s in sims])
+                rollout_loop.run(plans, profiles, np.ascontiguousarray(scene_rows), ctl, qs, vs, st, re)
+            else:  # the same step in lock-step, the rows' models and inputs as columns
+                first = sims[scene_rows[0]].fast_stepper
+                dt, model, tab = _plan_parts(first.plan)  # type: ignore[union-attr]
+                distinct = np.unique(scene_rows)
+                models = np.empty((len(model), len(distinct)))
+                inputs = np.empty((len(_input_array(first, held)), len(distinct)))  # type: ignore[arg-type]
+                for c, j in enumerate(distinct.tolist()):
+                    models[:, c] = _plan_parts(sims[j].fast_stepper.plan)[1]  # type: ignore[union-attr]
+                    inputs[:, c] = _input_array(sims[j].fast_stepper, held)  # type: ignore[arg-type]
+                column = np.searchsorted(distinct, scene_rows)
+                rollout_loop.run_lockstep(dt, tab, np.ascontiguousarray(models[:, column]),
+                                          np.ascontiguousarray(inputs[:, column]), ctl, qs, vs, st, re)
+            if not every:
+                q[part], v[part] = qs, vs
+            status[members], reached[members] = st, re
     finally:
         numba.set_num_threads(threads)
-    if not every:
-        q[rows], v[rows] = qs, vs
     for j in np.flatnonzero(status != OK).tolist():
         i, k, sim = int(rows[j]), int(reached[j]), sims[which[j]]
         if status[j] != BREAKPOINT:
@@ -261,6 +291,28 @@ def _run_stepped(sim: Simulator, q: np.ndarray, v: np.ndarray, row: int, k: int,
                 q[row, n + 1], v[row, n + 1] = state.q, state.v
     except SimulationDiverged as exc:
         raise SimulationDiverged(f"row {row}: {exc.reason}", method=exc.method, t=exc.t, dt=exc.dt) from None
+
+
+def _plan_parts(plan: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """(dt, model, tableau) of a step plan (`numerics.plan_parts` in Python)."""
+    nm, rows, cols = int(plan[1]), int(plan[2]), int(plan[3])
+    return float(plan[0]), plan[4: 4 + nm], plan[4 + nm: 4 + nm + rows * cols].reshape(rows, cols)
+
+
+def _input_array(fast: FastStepper, held: bool) -> np.ndarray:
+    return HELD_ARRAY if held else fast.profile  # type: ignore[return-value]
+
+
+def _lockstep_key(sim: Simulator, held: bool) -> tuple | None:
+    """What rows stepped together by `rollout_loop.run_lockstep` share (`rollout_loop.lockstep_layout`),
+    or None when the row needs `rollout_loop.run`."""
+    from finger_sim.kernel.rollout_loop import lockstep_layout
+
+    fast = sim.fast_stepper
+    if fast is None or (not held and fast.profile is None):
+        return None
+    _, model, tab = _plan_parts(fast.plan)
+    return lockstep_layout(model, tab, _input_array(fast, held))
 
 
 def _padded(arrays: list[np.ndarray]) -> np.ndarray:

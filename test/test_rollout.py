@@ -124,3 +124,40 @@ def test_bad_arguments_name_the_argument_expected_and_got(kwargs, message):
     with pytest.raises(ConfigError) as err:
         rollout(CONFIG / "paper_flexion.yaml", **kwargs)
     assert message in str(err.value)
+
+
+def test_lockstep_tiles_equal_simulate_bit_for_bit():
+    # more rows than two lock-step tiles, every compiled law (spring, damping, gravity, tip force),
+    # a sine input, and two element layouts (damping 0 drops the damper): each row is its
+    # scene's `simulate`, to the last bit
+    from finger_sim.kernel.rollout_loop import TILE
+
+    base = {"model.gravity": [0.0, -9.81], "model.tip_force": [0.2, -0.1],
+            "input.torque": {"type": "sine", "amplitude": 0.004, "frequency": 3.0, "offset": 0.001}}
+    nbatch = 2 * TILE + 7
+    damping = np.where(np.arange(nbatch) % 3 == 0, 0.0, 0.0005 + 1e-5 * np.arange(nbatch))
+    start = np.column_stack([np.linspace(0.0, 0.8, nbatch), np.linspace(-1.0, 2.0, nbatch)])
+    res = rollout(_scene("paper_flexion", **base), params={"model.damping": damping}, initial_state=start, nstep=200)
+    assert res.compiled.all() and res.methods[0] == "rk6"
+    for i in (0, 1, TILE - 1, TILE, 2 * TILE, nbatch - 1):
+        ref = simulate(_scene("paper_flexion", **base, **{"model.damping": float(damping[i]),
+                                                          "initial.theta1": start[i, 0],
+                                                          "initial.theta1_dot": start[i, 1], "duration": 0.2}))
+        np.testing.assert_array_equal(res.q[i], ref.q, err_msg=f"row {i}")
+        np.testing.assert_array_equal(res.v[i], ref.v, err_msg=f"row {i}")
+
+
+def test_a_row_diverging_in_a_lockstep_tile_raises_what_the_simulator_raises():
+    # row 65 (the second tile) is driven to divergence from step 20: the rollout names the row
+    # and reports the Simulator's own failure (the same state and time)
+    from finger_sim.errors import SimulationDiverged
+
+    control = np.full((70, 50), 0.002)
+    control[65, 20:] = 1e6
+    sim = Simulator(load_scene(CONFIG / "paper_flexion.yaml"))
+    with pytest.raises(SimulationDiverged) as ref:
+        for value in control[65]:
+            sim.step(float(value))
+    with pytest.raises(SimulationDiverged, match="row 65: ") as got:
+        rollout(CONFIG / "paper_flexion.yaml", control=control)
+    assert got.value.reason == f"row 65: {ref.value.reason}" and got.value.t == ref.value.t

@@ -6,11 +6,12 @@ differ in anything (geometry, spring, damping, torque profile and its parameters
 duration, dt): each finger's model is data for the kernel (`kernel.layout.model_array`).
 
 What runs where:
-- compiled (`finger_sim.batch.loop`, numba `prange` over the fingers): every fixed-step
-  explicit method (euler, rk4, rk6, dop8) on a scene whose force elements all have a compiled
-  form, with a constant, ramp, step, square or sine torque. Torque switches are cut inside the
-  loop as `Simulator.step` cuts them. A step in which a stop closes, a contact gap opens or
-  closes, or the kernel fails is handed to that finger's own `Simulator` (compiled kernel), which
+- compiled (`finger_sim.kernel.rollout_loop.run_rows`, numba `prange` over the fingers): every
+  fixed-step explicit method (euler, rk4, rk6, dop8) on a scene whose force elements all have a
+  compiled form, with a constant, ramp, step, square or sine torque, each step the Simulator's own
+  compiled step (`numerics._profile_step`, as `simulate` and `rollout` step). A step in which a
+  stop closes, a contact gap opens or closes, a torque switch falls, or the kernel fails is
+  handed to that finger's own `Simulator` (compiled kernel), which splits it at the switch,
   locates the event, applies the impact and keeps the finger while it rests on a stop; the
   finger then goes back to the loop.
 - a per-finger `Simulator` loop (`simulate`) for the rest: implicit and adaptive methods
@@ -34,25 +35,21 @@ from finger_sim import kinematics
 from finger_sim.auto import choose_method, contact_substeps
 from finger_sim.dynamics import FingerSystem
 from finger_sim.errors import ConfigError, StabilityError
-from finger_sim.inputs import PROFILES, Profile
+from finger_sim.inputs import profile_array
 from finger_sim.integrators import METHODS
 from finger_sim.kernel import KERNELS, PYTHON, use_writable_cache
+from finger_sim.kernel.layout import OK
 from finger_sim.scene import AUTO, Scene
 from finger_sim.simulate import Simulator, simulate
 from finger_sim.stability import fastest_mode, largest_stable_dt, mcp_range, stable_at
 
 #: The output a contact element reports as the grip force (N): a column of contact sweeps.
 GRIP_FORCE = "grip_force"
-#: Torque profile kinds the compiled loop evaluates itself (`loop.PROFILE_*`), and the order
-#: of their parameters there.
-COMPILED_PROFILES = {
-    "constant": ("value",),
-    "ramp": ("offset", "slope"),
-    "step": ("before", "after", "at"),
-    "square": ("amplitude", "frequency", "offset"),
-    "sine": ("amplitude", "frequency", "offset"),
-}
-_PROFILE_CODES = {kind: i for i, kind in enumerate(COMPILED_PROFILES)}  # loop.PROFILE_CONSTANT ... PROFILE_SINE
+
+#: Most bytes of paths that the lock-step loop keeps at once (a group runs in blocks of rows).
+LOCKSTEP_BYTES = 64 * 2**20
+#: Bytes per finger-step of those paths: q and q', six float64.
+BYTES_PER_STEP = 48
 
 
 @dataclass(frozen=True)
@@ -80,7 +77,7 @@ class _Plan:
     system: FingerSystem
     method: str
     model: np.ndarray | None  # None: not compiled
-    profile: tuple[int, tuple[float, ...]] | None
+    profile: np.ndarray | None  # `inputs.profile_array`; None: no compiled form
     stops: bool  # the scene's impact gaps are its MCP stops
 
 
@@ -183,7 +180,7 @@ class _Planner:
                 if auto_key is not None:
                     self._auto[auto_key] = method
         cls = METHODS[method]
-        profile = _profile(scene.torque)
+        profile = profile_array(scene.torque)
         known, stops = _events(scene, system)
         # auto splits a contact scene's steps near contact into substeps (Simulator._step): its Simulator runs it
         substeps = contact_substeps(scene) if scene.method == AUTO and scene.objects and not cls.implicit else 1
@@ -203,14 +200,6 @@ class _Planner:
             raise StabilityError(cls.name, scene.name, scene.dt, root, largest_stable_dt(cls, root, scene.dt),
                                  f"batch run {index}")
         return _Plan(scene, system, method, model, profile, stops)
-
-
-def _profile(profile: Profile) -> tuple[int, tuple[float, ...]] | None:
-    """(code, parameters) of a profile the compiled loop evaluates, else None."""
-    names = COMPILED_PROFILES.get(profile.kind)
-    if names is None or type(profile) is not PROFILES.get(profile.kind):
-        return None
-    return _PROFILE_CODES[profile.kind], tuple(float(getattr(profile, k)) for k in names)
 
 
 def _events(scene: Scene, system: FingerSystem) -> tuple[bool, bool]:
@@ -256,29 +245,25 @@ def _run_compiled(method: str, plans: list[_Plan], members: list[int], q: np.nda
                   max_res: np.ndarray, handed: np.ndarray, trajs: list[np.ndarray] | None,
                   progress: Callable[[int], None] | None) -> None:
     """Run the fingers of one method in the compiled loop, handing event steps to Simulators."""
-    from finger_sim.batch import loop
     from finger_sim.integrators.explicit import ExplicitRungeKutta
-    from finger_sim.kernel.layout import distinct_nodes, tableau_array
+    from finger_sim.kernel import rollout_loop
+    from finger_sim.kernel.layout import tableau_array
 
     ref = METHODS[method]
-    if issubclass(ref, ExplicitRungeKutta):
-        tab, nodes = tableau_array(ref.A, ref.B, ref.C), np.array(distinct_nodes(ref.C))
-    else:  # the paper's Euler: an empty tableau, one node at 0
-        tab, nodes = np.zeros((3, 0)), np.zeros(1)
+    # the method's tableau (`CompiledRungeKutta`): the paper's Euler has none
+    tab = tableau_array(ref.A, ref.B, ref.C) if issubclass(ref, ExplicitRungeKutta) else np.zeros((3, 0))
     n = len(plans)
-    width = max(len(p.model) for p in plans)  # type: ignore[arg-type]
-    models = np.zeros((n, width))
-    codes = np.empty(n, dtype=np.int64)
-    params = np.zeros((n, 3))
-    dts, lasts = np.empty(n), np.empty(n, dtype=np.int64)
+    steps_plans = [_step_plan(p.scene.dt, p.model, tab) for p in plans]  # type: ignore[arg-type]
+    plan_rows = np.zeros((n, max(len(x) for x in steps_plans)))
+    profiles = np.zeros((n, max(len(p.profile) for p in plans)))  # type: ignore[arg-type]
+    lasts = np.empty(n, dtype=np.int64)
     stops, limits = np.zeros(n, dtype=np.bool_), np.zeros((n, 2))
     gaps = np.empty(n, dtype=np.int64)
     states = np.empty((n, 6))
     for j, p in enumerate(plans):
-        models[j, : len(p.model)] = p.model  # type: ignore[arg-type]
-        code, values = p.profile  # type: ignore[misc]
-        codes[j], params[j, : len(values)] = code, values
-        dts[j], lasts[j] = p.scene.dt, p.scene.step_count
+        plan_rows[j, : len(steps_plans[j])] = steps_plans[j]
+        profiles[j, : len(p.profile)] = p.profile  # type: ignore[arg-type]
+        lasts[j] = p.scene.step_count
         if p.stops:
             stops[j], limits[j] = True, p.scene.mcp_limits
         gaps[j] = _contact_candidates(p.model)  # type: ignore[arg-type]
@@ -293,18 +278,21 @@ def _run_compiled(method: str, plans: list[_Plan], members: list[int], q: np.nda
         paths[:, 0] = states[:, :3]
     else:
         paths = np.zeros((n, 1, 3))
+    finished = _run_lockstep(plans, tab, states, steps, lasts, stops, gaps, max_res_local, paths, record)
+    if progress is not None and finished.any():
+        progress(int(finished.sum()))
     sims: dict[int, Simulator] = {}
-    active = np.arange(n)
+    active = np.flatnonzero(~finished)
     while len(active):
         sub_states, sub_steps, sub_res = states[active], steps[active], max_res_local[active]
         sub_paths = paths[active] if record else paths[np.zeros(len(active), dtype=np.int64)]
-        status = loop.run(models[active], tab, nodes, codes[active], params[active], dts[active], stops[active],
-                          limits[active], gaps[active], sub_states, sub_steps, lasts[active], sub_res, sub_paths, record)
+        status = rollout_loop.run_rows(plan_rows[active], profiles[active], stops[active], limits[active],
+                                       gaps[active], sub_states, sub_steps, lasts[active], sub_res, sub_paths, record)
         states[active], steps[active], max_res_local[active] = sub_states, sub_steps, sub_res
         if record:
             paths[active] = sub_paths
         again = []
-        for j in active[status == loop.EVENT].tolist():
+        for j in active[status == rollout_loop.EVENT].tolist():
             sim = sims.get(j) or sims.setdefault(j, Simulator(plans[j].scene, kernel="compiled"))
             sim.step_index, sim.q, sim.v = int(steps[j]), tuple(states[j, :3].tolist()), tuple(states[j, 3:].tolist())
             while True:
@@ -326,3 +314,45 @@ def _run_compiled(method: str, plans: list[_Plan], members: list[int], q: np.nda
         q[i], v[i], max_res[i] = states[j, :3], states[j, 3:], max_res_local[j]
         if trajs is not None:
             trajs[i] = paths[j, : lasts[j] + 1].copy()
+
+
+def _step_plan(dt: float, model: np.ndarray, tab: np.ndarray) -> np.ndarray:
+    """The step plan `CompiledRungeKutta.step_plan` builds: [dt, len(model), tableau shape, model, tableau]."""
+    return np.concatenate(([dt, len(model), *tab.shape], model, tab.ravel()))
+
+
+def _run_lockstep(plans: list[_Plan], tab: np.ndarray, states: np.ndarray, steps: np.ndarray, lasts: np.ndarray,
+                  stops: np.ndarray, gaps: np.ndarray, max_res: np.ndarray, paths: np.ndarray,
+                  record: bool) -> np.ndarray:
+    """Step the fingers without events under a smooth torque in lock-step (`rollout_loop.run_lockstep`),
+    groups of one layout, dt and length, LOCKSTEP_BYTES of paths at a time. Updates states, steps,
+    max_res (and paths) in place; returns which fingers reached their end (the others go on in `run_rows`)."""
+    from finger_sim.kernel import rollout_loop
+
+    finished = np.zeros(len(plans), dtype=bool)
+    groups: dict[tuple, list[int]] = defaultdict(list)
+    for j, p in enumerate(plans):
+        events = stops[j] or gaps[j]
+        layout = None if events else rollout_loop.lockstep_layout(p.model, tab, p.profile)  # type: ignore[arg-type]
+        if layout is not None:
+            groups[(layout, p.scene.dt, int(lasts[j]))].append(j)
+    for (_, dt, nstep), members in groups.items():
+        size = max(rollout_loop.TILE, LOCKSTEP_BYTES // (BYTES_PER_STEP * (nstep + 1)))
+        for lo in range(0, len(members), size):
+            rows = np.array(members[lo: lo + size])
+            q, v = np.empty((len(rows), nstep + 1, 3)), np.empty((len(rows), nstep + 1, 3))
+            q[:, 0], v[:, 0] = states[rows, :3], states[rows, 3:]
+            models = np.column_stack([plans[j].model for j in rows.tolist()])
+            inputs = np.column_stack([plans[j].profile for j in rows.tolist()])
+            status, reached = np.empty(len(rows), dtype=np.int64), np.empty(len(rows), dtype=np.int64)
+            rollout_loop.run_lockstep(dt, tab, models, inputs, np.zeros((len(rows), 0)), q, v, status, reached)
+            res = max_res[rows]
+            rollout_loop.max_residuals(models, q, reached, res)
+            max_res[rows] = res
+            at = np.arange(len(rows))
+            states[rows, :3], states[rows, 3:] = q[at, reached], v[at, reached]
+            steps[rows] = reached
+            finished[rows] = status == OK
+            if record:
+                paths[rows, : nstep + 1] = q
+    return finished

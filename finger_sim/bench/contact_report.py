@@ -308,6 +308,10 @@ LIMITS = (
     "- What might meet it (not measured here): fewer evaluations per contact step, e.g. a higher-order method "
     "in fewer substeps, or substeps only while the contact is fast (onset, bounce) and not at rest; both are "
     "`auto`'s choice (`finger_sim.auto`), not the bench's.",
+    '',
+    "### In the batch's compiled loop (2026-11-25)",
+    '',
+    "`run_batch` and `sweep` step contact scenes with a named explicit method in the compiled loop (`kernel/rollout_loop.py`, `run_rows`): the contact force is compiled (`numerics._contact`), every step's gaps and their rates are checked there (`kernel/event_checks.py`), and only a step that may hold an onset or a release goes to the finger's Simulator (one per grasp_cylinder run). Side by side in one process (`python -m finger_sim.bench.batch_contact_bench --method M [--duration D]`, CPU per finger-step of the whole call, medians of 5, load average ~15 from other sessions): rk4, 200 runs × 0.5 s: contact 1.84 µs, free 0.73 µs (2.5×); rk6: 2.19 against 0.80 µs (2.7×); rk4, 100 runs × 2 s (mostly held against the cup): 1.42 against 0.48 µs (3.0×). **Goal ≤ 2×: not met in the batch either.** The free run steps in lock-step (`run_lockstep`, ~0.4-0.5 µs), the contact run row by row (the scalar step, ~0.8 µs, plus the contact law in every stage and four gap evaluations per step for the event check) and pays each run's Simulator set-up (~0.2 ms) for its onset step. Left: contact in the lock-step tiles (its branches per candidate as masks), the end-of-step gaps reused as the next step's start (half the checks), and `rollout` using `run_rows` too (its rows with stops or contact, and so `sample`'s, still run whole in their Simulators).",
 )
 
 

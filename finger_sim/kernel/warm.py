@@ -50,6 +50,7 @@ def warm() -> list[str]:
         run_batch([short])
         done.append(name)
     paper = load_scene(CONFIG / "paper_flexion.yaml").with_overrides(duration=STEPS * 0.001)
+    run_batch([paper.with_overrides(method="euler")])  # a row of the batch's event-checked loop (run_rows)
     rollout(paper, nstep=STEPS)
     rollout(paper, control=np.zeros((2, STEPS)))
     return [*done, "batch", "rollout"]

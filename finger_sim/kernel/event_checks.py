@@ -1,0 +1,118 @@
+"""The compiled loops' event checks: whether a step may hold an event the Simulator must locate.
+
+A finger stepped in the kernel (`kernel.rollout_loop.run_rows`) has its step checked after it
+is taken: a stop closed, a contact gap opened or closed, or the Simulator predicts a crossing
+inside the step (`simulate._predicted_crossing`, compiled here: the same function). Such a step
+is taken back and handed to the finger's `Simulator`, which locates the event exactly as it
+always does. |Φ| is tracked here too (`residual`), for a batch's max_constraint_residual.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from finger_sim.kernel import use_writable_cache
+
+use_writable_cache()  # before numba reads NUMBA_CACHE_DIR
+from numba import njit  # noqa: E402  (after the cache folder is set)
+
+from finger_sim import simulate  # noqa: E402
+from finger_sim.kernel.layout import CONTACT, HEADER  # noqa: E402
+
+#: `simulate.EVENT_TOLERANCE`: a gap counts as closed below −EVENT_TOLERANCE.
+EVENT_TOLERANCE = simulate.EVENT_TOLERANCE
+#: A gap's rate is the forward difference of the gap along q' over this fraction of the step.
+RATE_STEP = 1e-4
+
+SERIAL = {"cache": True, "nogil": True, "error_model": "numpy"}
+
+#: The Simulator's prediction of a crossing inside a step, compiled (the same function).
+predicted_crossing = njit(**SERIAL)(simulate._predicted_crossing)
+
+
+@njit(**SERIAL)
+def stop_closed(x, limits):
+    """Whether θ1 = x[0] lies beyond an MCP stop (lower, upper) by more than EVENT_TOLERANCE."""
+    return x[0] - limits[0] < -EVENT_TOLERANCE or limits[1] - x[0] < -EVENT_TOLERANCE
+
+
+@njit(**SERIAL)
+def contact_gaps(m, o, q0, q2, gap):
+    """Each contact candidate's gap −δ (m) into `gap`: `Contact.gaps`, in its order and with its
+    arithmetic (`Contact._hits`, every candidate); returns their count."""
+    r1, l3, alpha = m[o], m[o + 1], m[o + 2]
+    n_prox, n_dist, n_ends, n_tips = int(m[o + 8]), int(m[o + 9]), int(m[o + 10]), int(m[o + 11])
+    j = o + 12
+    c1, s1 = math.cos(q0), math.sin(q0)
+    bx, by = r1 * c1, r1 * s1
+    i = 0
+    for _ in range(n_prox):
+        cx, cy, rad = m[j], m[j + 1], m[j + 2]
+        j += 3
+        s = (cx * bx + cy * by) / (r1 * r1)
+        s = 0.0 if s < 0.0 else (1.0 if s > 1.0 else s)
+        gap[i] = -(rad - math.hypot(s * bx - cx, s * by - cy))
+        i += 1
+    psi = q2 + alpha
+    ux, uy = math.cos(psi), math.sin(psi)
+    for _ in range(n_dist):
+        cx, cy, rad = m[j], m[j + 1], m[j + 2]
+        j += 4
+        dx, dy = cx - bx, cy - by
+        ell = dx * ux + dy * uy
+        ell = 0.0 if ell < 0.0 else (l3 if ell > l3 else ell)
+        px, py = bx + ell * ux, by + ell * uy
+        gap[i] = -(rad - math.hypot(px - cx, py - cy))
+        i += 1
+    for _ in range(n_ends):
+        ox, oy, nx, ny, rho = m[j], m[j + 1], m[j + 2], m[j + 3], m[j + 4]
+        j += 5
+        gap[i] = -(rho - (nx * (bx - ox) + ny * (by - oy)))
+        i += 1
+    for _ in range(n_tips):
+        ox, oy, nx, ny, rho = m[j], m[j + 1], m[j + 2], m[j + 3], m[j + 4]
+        j += 6
+        px, py = bx + l3 * ux, by + l3 * uy
+        gap[i] = -(rho - (nx * (px - ox) + ny * (py - oy)))
+        i += 1
+    return i
+
+
+@njit(**SERIAL)
+def kink(m, xa, xb, h, ga, gb, shifted, rates_a):
+    """Whether a step of length h (s) from state xa to xb may hold a contact event that the
+    Simulator would split it at: a contact gap of model m is closed at one end and open at the
+    other, or `simulate._predicted_crossing` (the Simulator's own test, from the gaps and their
+    rates at both ends) predicts a crossing inside it. ga, gb, shifted, rates_a: scratch arrays
+    (one per candidate). The rates are forward differences along q' over RATE_STEP·h."""
+    o = HEADER + 1
+    eps = RATE_STEP * h
+    for _ in range(int(m[HEADER])):
+        code, n = int(m[o]), int(m[o + 1])
+        o += 2
+        if code == CONTACT:
+            count = contact_gaps(m, o, xa[0], xa[2], ga)
+            contact_gaps(m, o, xb[0], xb[2], gb)
+            for c in range(count):
+                if (ga[c] < -EVENT_TOLERANCE) != (gb[c] < -EVENT_TOLERANCE):
+                    return True
+            contact_gaps(m, o, xa[0] + eps * xa[3], xa[2] + eps * xa[5], shifted)
+            for c in range(count):
+                rates_a[c] = (shifted[c] - ga[c]) / eps  # the start's rate
+            contact_gaps(m, o, xb[0] + eps * xb[3], xb[2] + eps * xb[5], shifted)
+            for c in range(count):
+                rate_b = (shifted[c] - gb[c]) / eps
+                if predicted_crossing(ga[c], rates_a[c], gb[c], rate_b, h, ga[c] < -EVENT_TOLERANCE) is not None:
+                    return True
+        o += n
+    return False
+
+
+@njit(**SERIAL)
+def residual(m, x):
+    """|Φ(q)|, m: `kinematics.constraint_norm` from the model's r1, r2, r3 and r4 e(θ4)."""
+    f1 = m[4] * math.cos(x[0]) + m[8] - m[5] * math.cos(x[1]) - m[6] * math.cos(x[2])
+    f2 = m[4] * math.sin(x[0]) + m[9] - m[5] * math.sin(x[1]) - m[6] * math.sin(x[2])
+    return math.hypot(f1, f2)
