@@ -76,6 +76,7 @@ def start(sim: Simulator) -> None:
     friction.holds.clear()
     if sim.v[0] == 0.0:
         sim.v = _turn(sim, friction, 0.0, sim.q, sim.scene.torque)
+        friction.remember(0.0, sim.q)
     else:
         friction.mode, friction.direction = SLIDING, math.copysign(1.0, sim.v[0])
 
@@ -89,7 +90,8 @@ def advance(sim: Simulator, t0: float, t1: float, torque: TorqueFn) -> None:
         if sim._resting is not None:  # on a stop: it holds the load; leaving it is a turning point
             release = sim._release_time(sim._resting, t, t1, q, torque)
             if release is None:
-                friction.remember(t1, q, 0.0)
+                friction.mode, friction.hold = LOCKED, 0.0  # the stop holds the load
+                friction.remember(t1, q)
                 sim.q, sim.v = q, ZERO
                 return
             sim._resting = None
@@ -97,7 +99,8 @@ def advance(sim: Simulator, t0: float, t1: float, torque: TorqueFn) -> None:
         if friction.mode == LOCKED:
             release = _release_time(sim, friction, t, t1, q, torque)
             if release is None:
-                friction.remember(t1, q, holding_torque(sim.system, friction, t1, q, torque(t1)))
+                friction.hold = holding_torque(sim.system, friction, t1, q, torque(t1))
+                friction.remember(t1, q)
                 sim.q, sim.v = q, ZERO
                 return
             t, v = release, ZERO
@@ -114,7 +117,7 @@ def advance(sim: Simulator, t0: float, t1: float, torque: TorqueFn) -> None:
             if crossing.gap.restitution is not None:
                 v = sim._impact(crossing, torque)
                 if sim._resting is not None:
-                    friction.mode, v = LOCKED, ZERO  # idle while the stop holds
+                    friction.mode, friction.hold, v = LOCKED, 0.0, ZERO  # idle while the stop holds the load
                 elif v[0] == 0.0:
                     v = _turn(sim, friction, t, q, torque)
                 else:
@@ -125,8 +128,10 @@ def advance(sim: Simulator, t0: float, t1: float, torque: TorqueFn) -> None:
             sim.q, sim.v = q1, v1
             return
         if t >= t1:
-            if friction.mode == LOCKED and sim._resting is None:
-                friction.remember(t1, q, holding_torque(sim.system, friction, t1, q, torque(t1)))
+            if v[0] == 0.0:  # at rest: the mode is not a function of the state
+                if friction.mode == LOCKED and sim._resting is None:
+                    friction.hold = holding_torque(sim.system, friction, t1, q, torque(t1))
+                friction.remember(t1, q)
             sim.q, sim.v = q, v
             return
     raise SimulationDiverged(f"more than {MAX_EVENTS_PER_STEP} events (friction lock and breakaway, stops, contact) "
@@ -137,8 +142,7 @@ def _turn(sim: Simulator, friction: StickSlipContact, t: float, q: Vec3, torque:
     """At θ1' = 0: lock if the friction cones hold τ_h, else slide towards −sgn τ_h. Returns q' (zero)."""
     tau_h = holding_torque(sim.system, friction, t, q, torque(t))
     if friction.capacity(q) - abs(tau_h) >= 0.0:
-        friction.mode, friction.direction = LOCKED, 0.0
-        friction.remember(t, q, tau_h)
+        friction.mode, friction.direction, friction.hold = LOCKED, 0.0, tau_h
     else:
         friction.mode, friction.direction = SLIDING, -math.copysign(1.0, tau_h)
     return ZERO

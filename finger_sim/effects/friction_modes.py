@@ -116,8 +116,10 @@ class StickSlipContact(Contact):
         # the regularized law's viscous slope μ F_n / v_s is not in this law: `modal` sees none
         self._mu, self._friction_design = 0.0, 0.0
         self.mode, self.direction = LOCKED, 0.0
-        #: t → (q, τ_h) of the recent locked states the stepper saw (`remember`): `outputs` reports τ_h there
-        self.holds: dict[float, tuple[Vec3, float]] = {}
+        #: the holding torque τ_h of the locked state, N·m (set by the stepper)
+        self.hold = 0.0
+        #: t → (q, mode, direction, friction torque) of the recent states at rest (`remember`), for `outputs`
+        self.holds: dict[float, tuple[Vec3, int, float, float]] = {}
         #: how many of them it keeps (`simulate` raises it to a run's rows, which it reads after the run)
         self.memory = HOLD_MEMORY
         self._at: Vec3 = (0.0, 0.0, 0.0)  # the pose of the last `_hits`: its hits' j_k are taken there
@@ -179,30 +181,40 @@ class StickSlipContact(Contact):
             power += ft * (-ny * (j1x * v[0] + j3x * v[2]) + nx * (j1y * v[0] + j3y * v[2]))
         return torque, power
 
-    def remember(self, t: float, q: Vec3, tau_h: float) -> None:
-        """Keep the holding torque τ_h (N·m) of the locked state (t s, q) for `outputs` (`memory` states)."""
+    def remember(self, t: float, q: Vec3) -> None:
+        """Keep the mode, direction and friction torque of the state (t s, q) at rest (θ1' = 0, so not a
+        function of the state) for `outputs`: the holding torque τ_h (N·m, `hold`) while locked, the
+        sliding law's torque at a turn. The last `memory` such states are kept."""
         holds = self.holds
-        holds[t] = (q, tau_h)
+        torque = self.hold if self.mode == LOCKED else self.friction_torque(t, q, (0.0, 0.0, 0.0))[0]
+        holds[t] = (q, self.mode, self.direction, torque)
         if len(holds) > self.memory:
             del holds[next(iter(holds))]
 
     def outputs(self, t: float, q: Vec3, v: Vec3) -> Mapping[str, float]:
         """The contact's outputs, then friction_mode (1 locked, 0 sliding), friction_torque (N·m on θ1:
-        the holding torque τ_h while locked, Σ j_k F_t,k while sliding; NaN for a locked state the
-        stepper did not see or no longer remembers, `remember`) and friction_power (W, ≤ 0: the friction's loss).
+        the holding torque τ_h while locked, Σ j_k F_t,k while sliding) and friction_power (W, ≤ 0:
+        the friction's loss).
 
-        A function of the state, so rows can be computed after the run: locked iff θ1' = 0 exactly
-        (the locked mode holds q' = 0; a sliding state never lands on θ1' = 0.0), sliding towards
-        sgn θ1'. Locked, the contact forces are the normal forces (which split of τ_h among the
-        contacts is not observable, spec §7)."""
+        A function of the state, so that rows can be computed after the run, except at rest
+        (θ1' = 0.0 exactly: the locked mode holds q' = 0, a sliding state lands on it only at a
+        turn): there the stepper's record of that state (`remember`) tells; mode and torque are NaN
+        for a state at rest it did not see or no longer remembers. Sliding is towards sgn θ1'. Locked,
+        the contact forces are the normal forces (which split of τ_h among the contacts is not
+        observable, spec §7)."""
         mode, direction = self.mode, self.direction
-        self.mode, self.direction = (LOCKED, 0.0) if v[0] == 0.0 else (SLIDING, math.copysign(1.0, v[0]))
+        known = self.holds.get(t) if v[0] == 0.0 else None
+        if v[0] != 0.0:
+            self.mode, self.direction = SLIDING, math.copysign(1.0, v[0])
+        elif known is not None and known[0] == q:
+            self.mode, self.direction = known[1], known[2]
+        else:
+            self.mode, self.direction, known = LOCKED, 0.0, None  # unknown: normal forces only, NaN below
         try:
             out = dict(super().outputs(t, q, v))
-            if self.mode == LOCKED:
-                hold = self.holds.get(t)
-                out["friction_mode"] = float(LOCKED)
-                out["friction_torque"] = hold[1] if hold is not None and hold[0] == q else math.nan
+            if v[0] == 0.0:
+                out["friction_mode"] = math.nan if known is None else float(known[1])
+                out["friction_torque"] = math.nan if known is None else known[3]
                 out["friction_power"] = 0.0
             else:
                 out["friction_mode"] = float(SLIDING)
