@@ -447,6 +447,8 @@ def _setup(scene: Scene, kernel: str, effects: tuple[Effect, ...]) -> _Setup:
         options = integrator_options(scene, method)
         if method != ERROR_CONTROLLED:  # its error control resolves the contact mode itself
             substeps = contact_substeps(scene, METHODS[method].implicit)
+        if stick_slip.in_scene(scene):  # no compiled form: error control in Python instead
+            method, reason, options, substeps = stick_slip.auto_method(scene)
     method_cls = METHODS[method]
     _check_stability(scene, system, method_cls, substeps)
     depth_guard = DepthGuard(system.elements, scene.phalanx_radius)

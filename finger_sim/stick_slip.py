@@ -41,6 +41,8 @@ MAX_LOCATE_ITERATIONS = 100
 #: Events (turns, breakaways, impacts, contact changes) allowed within one step before it is
 #: declared chattering.
 MAX_EVENTS_PER_STEP = 16
+#: auto's method on a stick–slip scene (`auto_method`): scipy's error-controlled DOP853.
+AUTO_METHOD = "adaptive"
 #: The torque step (N·m) by which `holding_torque` probes the affine map τ ↦ θ1''.
 PROBE_TORQUE = 1.0
 
@@ -50,6 +52,21 @@ def in_scene(scene: Scene) -> bool:
     system: the friction mode is state of the element)."""
     law = getattr(scene, "friction_law", None)
     return bool(scene.objects) and law is not None and law.model == STICK_SLIP
+
+
+def auto_method(scene: Scene) -> tuple[str, str, dict[str, float], int]:
+    """(method, reason, options, substeps) of `method: auto` on a stick–slip scene. The friction has no
+    compiled form, so the compiled error-controlled dop853 cannot run it; scipy's DOP853 (`adaptive`)
+    can, at auto's tolerances for scene.tolerance, restarted at every step and every event. Its global
+    error is not estimated, and it is far from real time: the reason says both."""
+    from finger_sim.auto import ERROR_CONTROLLED, error_control
+
+    rtol, atol = error_control(scene.tolerance)
+    reason = (f"contact scene with {STICK_SLIP} friction, which has no compiled form (so not {ERROR_CONTROLLED}); "
+              f"scipy's error-controlled DOP853 in Python at rtol = atol = {rtol:.0e} for {scene.tolerance:g} rad on θ, "
+              "turns, breakaways and contact changes located inside the step; the global error is not estimated, "
+              "and the steps cost milliseconds: not for real time")
+    return AUTO_METHOD, reason, {"rtol": rtol, "atol": atol}, 1
 
 
 def element(system: FingerSystem) -> StickSlipContact | None:

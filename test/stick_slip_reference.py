@@ -3,7 +3,8 @@
 Nothing here imports finger_sim. The dynamics are test/reference.py's (rigid-body mass matrix,
 dense 5×5 KKT solve), the contact candidates and Jacobians hybrid_reference.py's; the friction law
 is spec §7 written again:
-- sliding towards s = ±1: F_t,k = −μ_k F_n,k sgn(j_k s), j_k = t_k·J_k n (n = ∂q/∂θ1 on Φ = 0), each
+- sliding towards s = ±1: F_t,k = −μ F_n,k sgn(j_k s), μ = μ_k or with a Stribeck velocity
+  μ_k + (μ_s − μ_k) exp(−(j_k θ1'/v_st)²), j_k = t_k·J_k n (n = ∂q/∂θ1 on Φ = 0), each
   smooth piece integrated by scipy's DOP853 at rtol 1e-11, stopped at θ1' = 0 (a terminal event) and
   at every contact onset or release and torque switch;
 - locked: statics. The holding torque τ_h is what keeps θ1'' = 0 at q' = 0 (two KKT solves: θ1'' is
@@ -36,6 +37,7 @@ class Law:
     d: float = 1.5  # s/m
     mu_k: float = 0.0
     mu_s: float = 0.0
+    v_st: float | None = None  # m/s, the Stribeck velocity (None: none)
     rho: tuple[float, float] = (0.008, 0.007)  # m
 
 
@@ -53,10 +55,11 @@ def contacts(q, v, objects, law: Law):
 
 
 def sliding_force(q, v, s: float, objects, law: Law) -> np.ndarray:
-    """Q_c = Σ J_kᵀ (F_n n − μ_k F_n sgn(j_k s) t), N·m."""
+    """Q_c = Σ J_kᵀ (F_n n − μ F_n sgn(j_k s) t), N·m: μ = μ_k, or μ_k + (μ_s − μ_k) exp(−(j_k θ1'/v_st)²)."""
     out = np.zeros(3)
     for fn, n, t, j, jk in contacts(q, v, objects, law):
-        out += j.T @ (fn * n - law.mu_k * fn * np.sign(jk * s) * t)
+        mu = law.mu_k if law.v_st is None else law.mu_k + (law.mu_s - law.mu_k) * math.exp(-(jk * v[0] / law.v_st) ** 2)
+        out += j.T @ (fn * n - mu * fn * np.sign(jk * s) * t)
     return out
 
 
@@ -95,7 +98,7 @@ def solve(data: dict) -> StickSlipReference:
     c = model.get("contact", {})
     mu_k = c.get("friction", 0.0)
     law = Law(c.get("stiffness", 1e5), c.get("exponent", 1.5), c.get("damping", 1.5), mu_k,
-              c.get("static_friction", mu_k), tuple(model.get("phalanx_radius", (0.008, 0.007))))
+              c.get("static_friction", mu_k), c.get("stribeck_velocity"), tuple(model.get("phalanx_radius", (0.008, 0.007))))
     objects = data.get("objects", [])
     on, switches = ref.torque_from_dict(data["input"]["torque"])
     t_end = data["duration"]
