@@ -436,19 +436,19 @@ def _setup(scene: Scene, kernel: str, effects: tuple[Effect, ...]) -> _Setup:
     method = scene.method
     substeps = 1
     options: dict[str, float] = {}
-    if method == AUTO:
+    if method == AUTO and not stick_slip.in_scene(scene):  # stick–slip: see below
         method, reason = choose_method(scene)
         if method == ERROR_CONTROLLED and getattr(system, "drive", None) is None and model_array(system) is None:
             method, reason = fixed_step_method(scene)
     if getattr(system, "drive", None) is not None:
         method, reason = drive_stepping.drive_method(method, reason, scene.method == AUTO,
                                                      lambda name: _stable_under_auto(scene, system, name))
-    if scene.method == AUTO:
+    if scene.method == AUTO and stick_slip.in_scene(scene):  # no compiled form: error control in Python instead
+        method, reason, options, substeps = stick_slip.auto_method(scene)
+    elif scene.method == AUTO:
         options = integrator_options(scene, method)
         if method != ERROR_CONTROLLED:  # its error control resolves the contact mode itself
             substeps = contact_substeps(scene, METHODS[method].implicit)
-        if stick_slip.in_scene(scene):  # no compiled form: error control in Python instead
-            method, reason, options, substeps = stick_slip.auto_method(scene)
     method_cls = METHODS[method]
     _check_stability(scene, system, method_cls, substeps)
     depth_guard = DepthGuard(system.elements, scene.phalanx_radius)

@@ -17,6 +17,7 @@ are refused by the scene (`finger_sim.scene`): neither is in this law yet.
 
 from __future__ import annotations
 
+import logging
 import math
 from typing import TYPE_CHECKING
 
@@ -32,6 +33,7 @@ if TYPE_CHECKING:
     from finger_sim.scene import Scene
     from finger_sim.simulate import Simulator
 
+LOG = logging.getLogger(__name__)
 ZERO: Vec3 = (0.0, 0.0, 0.0)
 #: The turn guard direction·θ1' counts as crossed below −GUARD_TOLERANCE, rad/s.
 GUARD_TOLERANCE = 1e-12
@@ -66,6 +68,7 @@ def auto_method(scene: Scene) -> tuple[str, str, dict[str, float], int]:
               f"scipy's error-controlled DOP853 in Python at rtol = atol = {rtol:.0e} for {scene.tolerance:g} rad on θ, "
               "turns, breakaways and contact changes located inside the step; the global error is not estimated, "
               "and the steps cost milliseconds: not for real time")
+    LOG.info("method auto → %s: %s", AUTO_METHOD, reason)
     return AUTO_METHOD, reason, {"rtol": rtol, "atol": atol}, 1
 
 
