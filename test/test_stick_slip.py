@@ -257,3 +257,20 @@ def test_a_stick_slip_scene_round_trips_and_auto_says_what_it_runs():
         Simulator(scene_from_dict(d))
     traj = simulate(scene)
     assert {"friction_mode", "friction_torque", "friction_power"} <= set(traj.outputs)
+
+
+@pytest.mark.parametrize("restitution", [0.0, 0.5])
+def test_sliding_into_a_stop_never_adds_energy_and_rests_on_it(restitution):
+    """The tip slides along the table into the MCP stop at 0.2875 rad: the impact (−e θ1') reverses the sliding
+    direction, the stop then holds the load. H = T + V + V_c − τθ1 (constant τ) never rises; the finger ends
+    at rest exactly on the stop."""
+    stop = 0.2875
+    d = data({"friction": 0.3, "static_friction": 0.5, "damping": 0.0}, {"type": "constant", "value": 0.02}, 0.5,
+             damping=0.0, initial={"theta1": 0.25, "theta1_dot": 3.0})
+    d["model"] |= {"restitution": restitution, "joint_limits": {"mcp": [-0.1, stop]}}
+    traj = simulate(scene_from_dict(d))
+    h = traj.energy - 0.02 * traj.q[:, 0]
+    assert np.diff(h).max() <= 1e-15 and h[-1] < h[0] - 1e-3
+    assert traj.q[:, 0].max() <= stop + 1e-12
+    assert traj.q[-1, 0] == pytest.approx(stop, abs=1e-12) and (traj.v[-1] == 0.0).all()
+    assert traj.outputs["friction_torque"][-1] == 0.0  # the stop holds the load, the friction is idle
