@@ -131,7 +131,7 @@ def test_a_locked_finger_slips_at_the_tangential_load_the_statics_predict():
     expected = [statics(q_lock, 0.05 + slope * traj.t[k], d)[0] for k in rows[::50]]
     np.testing.assert_allclose(traj.outputs["friction_torque"][rows[::50]], expected, rtol=1e-9)
     # the reference (KKT statics, brentq in time) breaks free where these statics say at its own locked pose
-    reference = ssr.solve(d)
+    reference = ssr.solve(d | {"duration": 0.25})  # past the breakaway (0.21 s)
     (t_lock_ref, _), (t_break_ref, kind) = reference.changes[:2]
     assert kind == "break"
     q_ref = reference.states(np.array([t_lock_ref]))[:3, 0]
@@ -147,11 +147,12 @@ def test_stick_slip_under_a_slowly_rising_pull_has_the_sawtooth_the_reference_pr
     Stribeck velocity of 2 mm/s too, where the friction falls from μ_s to μ_k with the speed). Every
     lock and breakaway falls in the step the reference puts it in, and θ1 follows it to THETA_TOLERANCE."""
     contact = {"friction": 0.5, "static_friction": 1.0} | ({} if stribeck is None else {"stribeck_velocity": stribeck})
-    d = data(contact, {"type": "ramp", "offset": 0.02, "slope": 0.1}, 1.0, damping=0.0)
+    duration = 0.9 if stribeck is None else 0.6  # two teeth; one with Stribeck, whose reference is slow (stiff)
+    d = data(contact, {"type": "ramp", "offset": 0.02, "slope": 0.1}, duration, damping=0.0)
     traj = simulate(scene_from_dict(d))
     reference = ssr.solve(d)
     kinds = [kind for _, kind in reference.changes]
-    assert kinds[:5] == ["lock", "break", "lock", "break", "lock"]
+    assert kinds == ["lock", "break", "lock", "break", "lock"][:len(kinds)] and len(kinds) >= (5 if stribeck is None else 3)
     assert mode_changes(traj) == [(row_after(t), 1.0 if kind == "lock" else 0.0) for t, kind in reference.changes]
     x = reference.states(traj.t)
     assert np.abs(x[0] - traj.q[:, 0]).max() < THETA_TOLERANCE
