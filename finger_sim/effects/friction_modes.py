@@ -151,7 +151,7 @@ class StickSlipContact(Contact):
         if fn <= 0.0:
             return (0.0, 0.0, 0.0)
         fx, fy = fn * nx, fn * ny
-        if self.mode == SLIDING and self.kinetic:
+        if self.mode == SLIDING and self.static:  # μ_s ≥ μ_k: zero only without friction
             j = self._tangent_gain(hit)
             if j != 0.0:
                 mu = self.kinetic
