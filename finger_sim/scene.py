@@ -14,6 +14,8 @@ Schema (every key optional; omitted = the spec's default):
       geometry: {r1: 0.046, ...} # FingerParams overrides (m, kg, rad)
       phalanx_radius: [0.008, 0.007]   # m: proximal, distal capsule radii (spec §7)
       contact: {stiffness: 1.0e5, exponent: 1.5, damping: 1.5, friction: 0.0, slip_velocity: 1.0e-3}
+      # contact may add friction_model: stick_slip (exact stick and slip, μ_k = friction), static_friction
+      # (μ_s ≥ μ_k, default μ_k) and stribeck_velocity (m/s, optional): finger_sim.effects.friction_modes
       drive: {}                  # a DC motor and gear train (spec §8; {} = its defaults), see finger_sim.actuators
     objects:                     # omitted or empty = no contact element, no cost (spec §7)
       - {name: cup, type: circle, center: [0.065, 0.040], radius: 0.012}       # m, model plane
@@ -50,6 +52,7 @@ from finger_sim.actuators.drive import Drive, DriveParams, DrivenSystem, drive_f
 from finger_sim.dynamics import FingerSystem
 from finger_sim.errors import ConfigError
 from finger_sim.effects import ForceElement, build_elements, declared_parameters
+from finger_sim.effects.friction_modes import STICK_SLIP, FrictionLaw, friction_law_from_dict, split_friction_keys
 from finger_sim.effects.contact_geometry import (
     PHALANX_RADII,
     Circle,
@@ -114,6 +117,8 @@ class Scene:
     restitution: float = declared_parameters()["restitution"].default
     phalanx_radius: Vec2 = PHALANX_RADII
     contact: ContactParams = field(default_factory=ContactParams)
+    #: the contacts' friction law (spec §7): regularized (default) or stick_slip
+    friction_law: FrictionLaw = field(default_factory=FrictionLaw)
     objects: tuple[SceneObject, ...] = ()
     #: the drive (spec §8), or None: an ideal torque source
     drive: DriveParams | None = None
@@ -159,7 +164,7 @@ class Scene:
             "restitution": self.restitution,
             "geometry": asdict(self.params),
             "phalanx_radius": list(self.phalanx_radius),
-            "contact": asdict(self.contact),
+            "contact": asdict(self.contact) | self.friction_law.to_dict(),
         }
         if self.mcp_limits is not None:
             model["joint_limits"] = {"mcp": list(self.mcp_limits)}
@@ -261,6 +266,7 @@ def scene_from_dict(data: Any, *, default_name: str = "scene") -> Scene:
         restitution=_effect_value(model, "restitution"),
         phalanx_radius=_phalanx_radius(model.get("phalanx_radius")),
         contact=_contact(model.get("contact")),
+        friction_law=_friction_law(model.get("contact"), drive, data.get("objects")),
         objects=_objects(data.get("objects")),
         drive=drive,
         torque=(profile_from_dict(inp[input_key], f"input.{input_key}") if input_key in inp
@@ -321,7 +327,7 @@ def _effect_value(model: dict[str, Any], key: str) -> Any:
 
 def _contact(value: Any) -> ContactParams:
     """`model.contact` (spec §7 defaults), bounded by the MAX_CONTACT_* constants."""
-    params = contact_params_from_dict(value)
+    params = contact_params_from_dict(split_friction_keys(value)[0])
     key = "model.contact."
     number(params.stiffness, key + "stiffness", maximum=MAX_CONTACT_STIFFNESS)
     number(params.exponent, key + "exponent", maximum=MAX_CONTACT_EXPONENT)
@@ -329,6 +335,18 @@ def _contact(value: Any) -> ContactParams:
     number(params.friction, key + "friction", maximum=MAX_FRICTION)
     number(params.slip_velocity, key + "slip_velocity", minimum=MIN_SLIP_VELOCITY)
     return params
+
+
+def _friction_law(value: Any, drive: Any, objects: Any) -> FrictionLaw:
+    """The friction law's keys of `model.contact` (`effects.friction_modes`); stick_slip is refused with a
+    drive or a moving object, which its modes do not cover yet."""
+    law = friction_law_from_dict(split_friction_keys(value)[1], _contact(value).friction)
+    if law.model == STICK_SLIP:
+        moving = isinstance(objects, list) and any(isinstance(o, dict) and "motion" in o for o in objects)
+        if drive is not None or moving:
+            raise ConfigError("model.contact.friction_model", f"regularized with {'model.drive' if drive is not None else 'a moving object'}"
+                              f" ({STICK_SLIP} covers fixed objects and a torque input only)", STICK_SLIP)
+    return law
 
 
 def _objects(value: Any) -> tuple[SceneObject, ...]:

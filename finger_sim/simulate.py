@@ -19,6 +19,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from finger_sim import stick_slip
 from finger_sim.actuators import stepping as drive_stepping
 from finger_sim.sensors import SensorBank
 from finger_sim.auto import (ERROR_CONTROLLED, choose_method, contact_substeps, fixed_step_method, integrator_options,
@@ -95,7 +96,7 @@ class Simulator:
         # the registered effects are part of the key: a plug-in registered later builds another system
         effects = tuple(EFFECTS.values())
         # a drive holds its mesh mode: each Simulator of a drive scene builds its own system
-        cached = _hashable(scene) and scene.drive is None
+        cached = _hashable(scene) and scene.drive is None and not stick_slip.in_scene(scene)  # nor a friction mode
         setup = _setup(scene, kernel, effects) if cached else _setup.__wrapped__(scene, kernel, effects)
         self.system, self.dt, self.method, self.method_reason = setup.system, scene.dt, setup.method, setup.reason
         #: steps in contact (or closing a contact within the step) are split in this many (auto only)
@@ -104,6 +105,8 @@ class Simulator:
         self._options = setup.options
         #: the drive (spec §8) whose mesh modes this Simulator steps, or None (an ideal torque source)
         self._drive = getattr(self.system, "drive", None)
+        #: the stick–slip contact (spec §7) whose friction modes this Simulator steps, or None
+        self._friction = stick_slip.element(self.system)
         self._method_cls, self._integrator_cls, self.kernel = setup.method_cls, setup.integrator_cls, setup.kernel
         #: stops the run when a phalanx's axis enters an object; empty without objects
         self._depth_guard = setup.depth_guard
@@ -128,6 +131,8 @@ class Simulator:
         self.torque = self.scene.torque(0.0)
         if self._drive is not None:
             drive_stepping.start(self)
+        if self._friction is not None:
+            stick_slip.start(self)
         self.impacts = 0
         self._held: tuple[float, TorqueFn] | None = None  # the held torque (N·m) and its function
 
@@ -191,6 +196,9 @@ class Simulator:
         """Integrate [t0, t1] under a smooth torque, splitting it at every event on the way."""
         if self._drive is not None:
             drive_stepping.advance(self, t0, t1, torque)
+            return
+        if self._friction is not None:
+            stick_slip.advance(self, t0, t1, torque)
             return
         if not self._gaps:
             self.q, self.v = self.integrator.step(t0, self.q, self.v, t1 - t0, torque)
@@ -426,7 +434,7 @@ def _setup(scene: Scene, kernel: str, effects: tuple[Effect, ...]) -> _Setup:
     method = scene.method
     substeps = 1
     options: dict[str, float] = {}
-    if method == AUTO:
+    if method == AUTO and not stick_slip.in_scene(scene):  # stick–slip: see below
         method, reason = choose_method(scene)
         if (method == ERROR_CONTROLLED and getattr(system, "drive", None) is None
                 and stepper_slot.kernel().model_array(system) is None):
@@ -434,7 +442,9 @@ def _setup(scene: Scene, kernel: str, effects: tuple[Effect, ...]) -> _Setup:
     if getattr(system, "drive", None) is not None:
         method, reason = drive_stepping.drive_method(method, reason, scene.method == AUTO,
                                                      lambda name: _stable_under_auto(scene, system, name))
-    if scene.method == AUTO:
+    if scene.method == AUTO and stick_slip.in_scene(scene):  # no compiled form: error control in Python instead
+        method, reason, options, substeps = stick_slip.auto_method(scene)
+    elif scene.method == AUTO:
         options = integrator_options(scene, method)
         if method != ERROR_CONTROLLED:  # its error control resolves the contact mode itself
             substeps = contact_substeps(scene, METHODS[method].implicit)
@@ -619,6 +629,8 @@ def simulate(scene: Scene, *, kernel: str = "auto") -> Trajectory:
 
         xs, drive_outputs, report = record.run(sim, n)
     else:
+        if sim._friction is not None:  # its holding torques are read back after the run: keep every row's
+            sim._friction.memory = n + 1
         xs = stepper_slot.kernel().advance(sim, n)  # in the kernel where it can, else step by step
     wall = time.perf_counter() - start
     x = np.vstack([x0, xs])

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from finger_sim import kinematics
+from finger_sim import kinematics, stick_slip
 from finger_sim.auto import choose_method, contact_substeps
 from finger_sim.dynamics import FingerSystem
 from finger_sim.errors import ConfigError, StabilityError
@@ -170,6 +170,8 @@ class _Planner:
         model = self._model_array(system) if self.compile else None
         key = None if model is None else (scene.params, model.tobytes(), mcp_range(scene))
         method = scene.method
+        if method == AUTO and stick_slip.in_scene(scene):  # no compiled form: its Simulator's choice
+            method = stick_slip.AUTO_METHOD
         if method == AUTO:
             # choose_method reads the model, the MCP range, dt, and the torque's switches and kind
             switches = len(scene.torque.breakpoints(0.0, scene.duration))

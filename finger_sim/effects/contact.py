@@ -408,10 +408,11 @@ def build_contact(scene: "Scene") -> Contact | None:
     objects = tuple(getattr(scene, "objects", ()) or ())
     if not objects:
         return None
-    return Contact(
-        scene.params,
-        distal_offset(scene.params),
-        getattr(scene, "phalanx_radius", PHALANX_RADII),
-        getattr(scene, "contact", ContactParams()),
-        objects,
-    )
+    args = (scene.params, distal_offset(scene.params), getattr(scene, "phalanx_radius", PHALANX_RADII),
+            getattr(scene, "contact", ContactParams()), objects)
+    law = getattr(scene, "friction_law", None)
+    if law is not None and law.model == "stick_slip":  # spec §7's exact stick and slip
+        from finger_sim.effects.friction_modes import StickSlipContact
+
+        return StickSlipContact(*args, law=law)
+    return Contact(*args)

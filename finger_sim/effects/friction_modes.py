@@ -1,0 +1,224 @@
+"""Exact stick–slip friction at the contacts (spec §7, `model.contact.friction_model: stick_slip`).
+
+The linkage has one degree of freedom, so stick is a state of the linkage, not of each contact:
+
+- `locked` (θ1' = 0): the contacts' friction supplies one holding torque τ_h on θ1, the torque that
+  keeps θ1'' = 0 (spec §4 with the friction left out). It holds while |τ_h| ≤ Σ μ_s F_n,k |j_k|,
+  j_k = t_k·∂p_k/∂θ1 along the linkage (m/rad), t_k = n_c turned by +90°;
+- `sliding` (θ1' ≠ 0, its sign `direction`): F_t,k = −μ F_n,k sgn(j_k θ1'), μ = μ_k, or with a
+  Stribeck velocity v_st, μ = μ_k + (μ_s − μ_k) exp(−(v_t/v_st)²), v_t = j_k θ1'.
+
+This module holds the law (`FrictionLaw`, the scene keys) and the force element
+(`StickSlipContact`, the §7 contact with this friction); `finger_sim.stick_slip` steps the modes
+(breakaway and lock located inside the step). The regularized law (`Contact`) is the default and
+is untouched by this one.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+from finger_sim.effects.contact import Contact, _Hit
+from finger_sim.errors import ConfigError
+from finger_sim.kinematics import Vec3, dependent_rates
+
+REGULARIZED, STICK_SLIP = "regularized", "stick_slip"
+FRICTION_MODELS = (REGULARIZED, STICK_SLIP)
+#: The keys of `model.contact` that belong to the friction law (besides `friction`, μ_k).
+FRICTION_KEYS = ("friction_model", "static_friction", "stribeck_velocity")
+#: Largest friction coefficient a scene may set (as `scene.MAX_FRICTION` for μ_k).
+MAX_STATIC_FRICTION = 10.0
+#: Bounds of the Stribeck velocity v_st, m/s.
+MIN_STRIBECK_VELOCITY, MAX_STRIBECK_VELOCITY = 1e-9, 10.0
+#: The friction modes as the `friction_mode` output reports them.
+SLIDING, LOCKED = 0, 1
+#: Locked step ends whose holding torque an element remembers for `outputs` (the oldest go first):
+#: more than a streamed block's rows (`streaming.BLOCK_STEPS`), whose outputs are taken after the block.
+HOLD_MEMORY = 4096
+
+
+@dataclass(frozen=True)
+class FrictionLaw:
+    """Which friction law the contacts use (spec §7): `model` is "regularized" (the tanh law, the
+    default) or "stick_slip"; `static_friction` μ_s (None: μ_k); `stribeck_velocity` v_st, m/s (None: no
+    Stribeck term, the kinetic coefficient at every sliding speed)."""
+
+    model: str = REGULARIZED
+    static_friction: float | None = None
+    stribeck_velocity: float | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        """The law's keys of `model.contact`; none for the default law, so old scenes dump as before."""
+        if self.model == REGULARIZED:
+            return {}
+        out: dict[str, Any] = {"friction_model": self.model}
+        if self.static_friction is not None:
+            out["static_friction"] = self.static_friction
+        if self.stribeck_velocity is not None:
+            out["stribeck_velocity"] = self.stribeck_velocity
+        return out
+
+
+def split_friction_keys(value: Any) -> tuple[Any, dict[str, Any]]:
+    """(`model.contact` without the friction law's keys, those keys): the contact law and the friction
+    law are validated apart. A value that is not a mapping is passed on for the contact law to refuse."""
+    if not isinstance(value, dict):
+        return value, {}
+    return ({k: v for k, v in value.items() if k not in FRICTION_KEYS},
+            {k: v for k, v in value.items() if k in FRICTION_KEYS})
+
+
+def friction_law_from_dict(keys: Mapping[str, Any], kinetic: float) -> FrictionLaw:
+    """Validate the friction law's keys of `model.contact` (`split_friction_keys`) given μ_k = `kinetic`.
+    ConfigError names the key and the range: μ_s in [μ_k, MAX_STATIC_FRICTION], v_st in
+    [MIN_STRIBECK_VELOCITY, MAX_STRIBECK_VELOCITY] m/s, both only with `friction_model: stick_slip`."""
+    key = "model.contact."
+    model = keys.get("friction_model", REGULARIZED)
+    if model not in FRICTION_MODELS:
+        raise ConfigError(key + "friction_model", f"one of {list(FRICTION_MODELS)}", model)
+    if model == REGULARIZED:
+        extra = [k for k in ("static_friction", "stribeck_velocity") if k in keys]
+        if extra:
+            raise ConfigError(key + extra[0], f"no value with friction_model: {REGULARIZED} (it belongs to {STICK_SLIP})",
+                              keys[extra[0]])
+        return FrictionLaw()
+    static = keys.get("static_friction")
+    if static is not None and not (_is_number(static) and kinetic <= static <= MAX_STATIC_FRICTION):
+        raise ConfigError(key + "static_friction", f"a number in [friction = {kinetic:g}, {MAX_STATIC_FRICTION:g}] (μ_s ≥ μ_k)",
+                          static)
+    stribeck = keys.get("stribeck_velocity")
+    if stribeck is not None and not (_is_number(stribeck) and MIN_STRIBECK_VELOCITY <= stribeck <= MAX_STRIBECK_VELOCITY):
+        raise ConfigError(key + "stribeck_velocity", f"a speed in [{MIN_STRIBECK_VELOCITY:g}, {MAX_STRIBECK_VELOCITY:g}] m/s",
+                          stribeck)
+    return FrictionLaw(STICK_SLIP, None if static is None else float(static), None if stribeck is None else float(stribeck))
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+class StickSlipContact(Contact):
+    """The §7 contact (Hunt–Crossley normal force, the same candidates and gaps) with stick–slip
+    friction in place of the regularized law. It holds the linkage's friction mode (`mode`, LOCKED or
+    SLIDING, and the sliding `direction` ±1), which `finger_sim.stick_slip` switches; each Simulator
+    of such a scene builds its own element. No compiled form: it steps in Python."""
+
+    kernel_code: ClassVar[None] = None  # type: ignore[assignment]
+
+    def __init__(self, *args: Any, law: FrictionLaw, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.kinetic = self._mu
+        self.static = self._mu if law.static_friction is None else law.static_friction
+        self.stribeck = law.stribeck_velocity
+        # the regularized law's viscous slope μ F_n / v_s is not in this law: `modal` sees none
+        self._mu, self._friction_design = 0.0, 0.0
+        self.mode, self.direction = LOCKED, 0.0
+        #: the holding torque τ_h of the locked state, N·m (set by the stepper)
+        self.hold = 0.0
+        #: t → (q, mode, direction, friction torque) of the recent states at rest (`remember`), for `outputs`
+        self.holds: dict[float, tuple[Vec3, int, float, float]] = {}
+        #: how many of them it keeps (`simulate` raises it to a run's rows, which it reads after the run)
+        self.memory = HOLD_MEMORY
+        self._at: Vec3 = (0.0, 0.0, 0.0)  # the pose of the last `_hits`: its hits' j_k are taken there
+        self._slope: tuple[Vec3 | None, float] = (None, 0.0)  # (q, dθ3/dθ1 at q), see `_tangent_gain`
+
+    # -- the law -------------------------------------------------------------------------
+    def _hits(self, q: Vec3, all_candidates: bool, t: float = 0.0) -> list[_Hit]:
+        """The base class's candidates; also keeps their pose q, where `_tangent_gain` (called on these
+        hits right after) takes dθ3/dθ1 for each contact's j_k."""
+        self._at = q
+        return super()._hits(q, all_candidates, t)
+
+    def _tangent_gain(self, hit: _Hit) -> float:
+        """j_k = t_c·∂p/∂θ1 along the linkage, m/rad (the tangential speed per unit θ1')."""
+        _, _, _, _, _, nx, ny, j1x, j1y, j3x, j3y = hit
+        q = self._at
+        if self._slope[0] != q:
+            self._slope = (q, dependent_rates(self.params, q, 1.0)[2])
+        n3 = self._slope[1]
+        return -ny * (j1x + n3 * j3x) + nx * (j1y + n3 * j3y)
+
+    def _forces(self, hit: _Hit, v: Vec3, t: float = 0.0) -> tuple[float, float, float]:
+        """(F_n, Fx, Fy), N: the Hunt–Crossley normal force, and while sliding the kinetic friction
+        −μ F_n sgn(j_k θ1') (sign from the mode's `direction`, so a step's stages past θ1' = 0 keep the
+        mode's law until the event). Locked: the normal force alone (the holding friction is τ_h)."""
+        _, i, d, _, _, nx, ny, j1x, j1y, j3x, j3y = hit
+        vx, vy = j1x * v[0] + j3x * v[2], j1y * v[0] + j3y * v[2]
+        fn = self._obj_k[i] * d**self._e * (1.0 - self._obj_d[i] * (nx * vx + ny * vy))  # δ' = −n_c·ṗ
+        if fn <= 0.0:
+            return (0.0, 0.0, 0.0)
+        fx, fy = fn * nx, fn * ny
+        if self.mode == SLIDING and self.static:  # μ_s ≥ μ_k: zero only without friction
+            j = self._tangent_gain(hit)
+            if j != 0.0:
+                mu = self.kinetic
+                if self.stribeck is not None:
+                    mu += (self.static - self.kinetic) * math.exp(-((j * v[0]) / self.stribeck) ** 2)
+                ft = -mu * fn * math.copysign(1.0, j * self.direction)
+                fx -= ft * ny  # along t_c = (−ny, nx)
+                fy += ft * nx
+        return (fn, fx, fy)
+
+    def capacity(self, q: Vec3) -> float:
+        """Σ μ_s F_n,k |j_k| at rest at q, N·m: the largest holding torque the friction cones supply."""
+        total = 0.0
+        for hit in self._hits(q, False):
+            total += self.static * self._forces(hit, (0.0, 0.0, 0.0))[0] * abs(self._tangent_gain(hit))
+        return total
+
+    def friction_torque(self, t: float, q: Vec3, v: Vec3) -> tuple[float, float]:
+        """(Σ j_k F_t,k N·m, Σ F_t,k v_t,k W) of the sliding law at a state: the friction's torque on θ1
+        along the linkage and its power (≤ 0)."""
+        torque = power = 0.0
+        for hit in self._hits(q, False, t):
+            _, fx, fy = self._forces(hit, v, t)
+            nx, ny, j1x, j1y, j3x, j3y = hit[5:]
+            ft = -ny * fx + nx * fy  # t_c·F
+            torque += self._tangent_gain(hit) * ft
+            power += ft * (-ny * (j1x * v[0] + j3x * v[2]) + nx * (j1y * v[0] + j3y * v[2]))
+        return torque, power
+
+    def remember(self, t: float, q: Vec3) -> None:
+        """Keep the mode, direction and friction torque of the state (t s, q) at rest (θ1' = 0, so not a
+        function of the state) for `outputs`: the holding torque τ_h (N·m, `hold`) while locked, the
+        sliding law's torque at a turn. The last `memory` such states are kept."""
+        holds = self.holds
+        torque = self.hold if self.mode == LOCKED else self.friction_torque(t, q, (0.0, 0.0, 0.0))[0]
+        holds[t] = (q, self.mode, self.direction, torque)
+        if len(holds) > self.memory:
+            del holds[next(iter(holds))]
+
+    def outputs(self, t: float, q: Vec3, v: Vec3) -> Mapping[str, float]:
+        """The contact's outputs, then friction_mode (1 locked, 0 sliding), friction_torque (N·m on θ1:
+        the holding torque τ_h while locked, Σ j_k F_t,k while sliding) and friction_power (W, ≤ 0:
+        the friction's loss).
+
+        A function of the state, so that rows can be computed after the run, except at rest
+        (θ1' = 0.0 exactly: the locked mode holds q' = 0, a sliding state lands on it only at a
+        turn): there the stepper's record of that state (`remember`) tells; mode and torque are NaN
+        for a state at rest it did not see or no longer remembers. Sliding is towards sgn θ1'. Locked,
+        the contact forces are the normal forces (which split of τ_h among the contacts is not
+        observable, spec §7)."""
+        mode, direction = self.mode, self.direction
+        known = self.holds.get(t) if v[0] == 0.0 else None
+        if v[0] != 0.0:
+            self.mode, self.direction = SLIDING, math.copysign(1.0, v[0])
+        elif known is not None and known[0] == q:
+            self.mode, self.direction = known[1], known[2]
+        else:
+            self.mode, self.direction, known = LOCKED, 0.0, None  # unknown: normal forces only, NaN below
+        try:
+            out = dict(super().outputs(t, q, v))
+            if v[0] == 0.0:
+                out["friction_mode"] = math.nan if known is None else float(known[1])
+                out["friction_torque"] = math.nan if known is None else known[3]
+                out["friction_power"] = 0.0
+            else:
+                out["friction_mode"] = float(SLIDING)
+                out["friction_torque"], out["friction_power"] = self.friction_torque(t, q, v)
+        finally:
+            self.mode, self.direction = mode, direction
+        return out
