@@ -289,7 +289,7 @@ def measure_window(params: dict, duration: float, domain_id: int, workdir: Path,
         (path,) = record_dir.glob("*.mcap")
         log = LogReader(path)
         topic = "/f0/joint_states" if hand else "/joint_states"
-        stamps = [m.log_time_ns for _, _, m in log.raw_messages([topic], log_time_order=False)]
+        stamps = [m.log_time for _, _, m in log.raw_messages([topic], log_time_order=False)]
         out.log_dropped, out.states_logged = log.dropped, len(stamps)
         out.states_expected = round((max(stamps) - min(stamps)) * params["physics_rate_hz"] / 1e9) + 1 if stamps else 0
     return out
