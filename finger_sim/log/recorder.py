@@ -20,12 +20,12 @@ Crash safety: a chunk is closed (by the writer process) — written and flushed 
 message that would stretch its log-time span to `chunk_interval_s`, once its uncompressed
 payload reaches `chunk_size`, after `idle_flush_s` wall seconds without messages, and once it
 has been open for `chunk_wall_s` wall seconds whatever arrives: a paused sim whose log time stands
-still while diagnostics and commands keep coming loses at most that much wall time to a kill -9
-of the whole process group. Closing uses `mcap.writer.Writer.flush()` (mcap >= 1.5); the
+still while diagnostics and commands keep coming loses at most that much wall time to a kill -9. Closing uses `mcap.writer.Writer.flush()` (mcap >= 1.5); the
 Writer's own size trigger is set out of reach so that every chunk boundary goes through it. A
-`kill -9` of the caller alone loses what it had not handed over yet (at most handover_s) and the
-summary: the writer process sees its input end and writes the open chunk. Either way the prefix
-stays readable by linear readers (mcap's StreamReader, finger_sim.log.reader).
+`kill -9` of the caller loses what it had not handed over yet (at most handover_s) and the
+summary: the writer process (in its own session, so a signal to the caller's process group does
+not reach it) sees its input end, writes the open chunk and exits. The prefix stays readable by
+linear readers (mcap's StreamReader, finger_sim.log.reader).
 
 Serialization happens in the caller, so a message object may be reused as soon as write()
 returns. CDR bytes are written as given. Messages are encoded by mcap_ros2 from the channel's
@@ -96,7 +96,7 @@ from .definitions import message_definition, normalize_type_name, type_name_of
 from .errors import LogArgumentError, RecorderStateError
 from . import writer_process
 from .qos import OFFERED_QOS_PROFILES, offered_qos_profiles
-from .writer_process import CONTROL, HEADER, MAX_CHANNELS, Close, Metadata, Register, Start, control_record
+from .writer_process import HEADER, MAX_CHANNELS, Close, Metadata, Register, Start, control_record
 
 DEFAULT_CHUNK_INTERVAL_S = 0.5  # log-time span of one chunk: what a kill -9 may lose
 DEFAULT_CHUNK_SIZE = 1 << 20  # uncompressed bytes; bounds memory if an interval holds many messages
@@ -483,8 +483,11 @@ class McapRecorder:
     def _start_process(self) -> None:
         """Start the writer process (finger_sim.log.writer_process) and the two threads that talk to it."""
         self._process = subprocess.Popen(
-            [sys.executable, "-c", f"import sys; from {writer_process.__name__} import main; sys.exit(main())"], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-            env={**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)})
+            [sys.executable, "-c", f"import sys; from {writer_process.__name__} import main; sys.exit(main())"],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, env={**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)},
+            # its own session: a signal to the caller's process group (a terminal's Ctrl-C, a supervisor's
+            # SIGTERM) must not end the writer before the caller has handed over the rest and Close
+            start_new_session=True)
         # Daemons: a process that dies without close() must still exit; the writer then sees the
         # end of its input, keeps what it was handed and leaves the file reading as a crash.
         self._sender = threading.Thread(target=self._send, name=f"mcap {self._path.name} sender", daemon=True)

@@ -21,8 +21,8 @@ before its log-time span would reach the interval, once its payload reaches chun
 idle_flush_s wall seconds without messages and once it has been open chunk_wall_s wall
 seconds. End of input without `Close` (the caller was killed) closes the open chunk and exits
 without a summary: the file reads as a crash, and keeps everything that was handed over.
-SIGINT and SIGTERM are ignored (a terminal's Ctrl-C reaches the whole process group): the
-caller decides when the file ends, by `Close` or by dying.
+The process runs in its own session, and ignores SIGINT and SIGTERM once started: the caller
+decides when the file ends, by `Close` or by dying.
 """
 
 from __future__ import annotations
