@@ -141,21 +141,29 @@ class ChunkedFile:
         self._writer.add_metadata(item.name, item.data)
         self._file.flush()  # the record is outside chunks: push it out without cutting the chunk
 
-    def add_message(self, index: int, sequence: int, log_ns: int, publish_ns: int, data: bytes) -> int:
-        """Add one message; returns the messages newly committed to the file (a chunk closed)."""
-        span = max(self._last_ns, log_ns) - min(self._first_ns, log_ns)
-        committed = self.close_chunk() if self.pending and span >= self._interval_ns else 0
-        self._writer.add_message(channel_id=self._channel_ids[index], log_time=log_ns, data=data,
-                                 publish_time=publish_ns, sequence=sequence)
-        if self.pending == 0:
-            self._first_ns = self._last_ns = log_ns
-            self.opened_at = time.monotonic()
-        else:
-            self._first_ns, self._last_ns = min(self._first_ns, log_ns), max(self._last_ns, log_ns)
-        self.pending += 1
-        self._pending_bytes += len(data)
-        if self._pending_bytes >= self._chunk_size:
-            committed += self.close_chunk()
+    def add_messages(self, batch: list[tuple[int, int, int, int, bytes]]) -> int:
+        """Add (channel index, sequence, log ns, publish ns, data) messages in order; returns the
+        messages newly committed to the file (chunks closed). One loop with local names: this is
+        the writer's per-message path."""
+        committed = 0
+        add, channel_ids, interval, size_limit = self._writer.add_message, self._channel_ids, self._interval_ns, self._chunk_size
+        for index, sequence, log_ns, publish_ns, data in batch:
+            if self.pending:
+                first, last = self._first_ns, self._last_ns
+                if (last if last > log_ns else log_ns) - (first if first < log_ns else log_ns) >= interval:
+                    committed += self.close_chunk()
+            add(channel_ids[index], log_ns, data, publish_ns, sequence)
+            if self.pending == 0:
+                self._first_ns = self._last_ns = log_ns
+                self.opened_at = time.monotonic()
+            elif log_ns < self._first_ns:
+                self._first_ns = log_ns
+            elif log_ns > self._last_ns:
+                self._last_ns = log_ns
+            self.pending += 1
+            self._pending_bytes += len(data)
+            if self._pending_bytes >= size_limit:
+                committed += self.close_chunk()
         return committed
 
     def close_chunk(self) -> int:
@@ -211,14 +219,14 @@ class _Writer:
         except Exception as exc:  # OSError, or mcap's UnsupportedCompressionError
             self._fail(exc)
 
-    def message(self, index: int, sequence: int, log_ns: int, publish_ns: int, data: bytes) -> None:
-        self.taken += 1
-        self.taken_bytes += len(data)
+    def messages(self, batch: list[tuple[int, int, int, int, bytes]]) -> None:
+        self.taken += len(batch)
+        self.taken_bytes += sum(len(m[4]) for m in batch)
         if self.file is None:
-            self.lost += 1
+            self.lost += len(batch)
             return
-        self.handed += 1
-        self._do(lambda file: file.add_message(index, sequence, log_ns, publish_ns, data))
+        self.handed += len(batch)
+        self._do(lambda file: file.add_messages(batch))
 
     def control(self, item: object) -> bool:
         """Apply a control item; True at Close (the file is finished)."""
@@ -289,6 +297,7 @@ def main() -> int:
         if chunk:
             pending += chunk
             at, end = 0, len(pending)
+            batch: list[tuple[int, int, int, int, bytes]] = []
             while end - at >= header_size:
                 index, sequence, log_ns, publish_ns, size = unpack_from(pending, at)
                 stop = at + header_size + size
@@ -297,10 +306,12 @@ def main() -> int:
                 data = bytes(pending[at + header_size:stop])
                 at = stop
                 if index != CONTROL:
-                    assert writer is not None
-                    writer.message(index, sequence, log_ns, publish_ns, data)
-                    got = True
+                    batch.append((index, sequence, log_ns, publish_ns, data))
                     continue
+                if batch:  # the messages before a control go first
+                    assert writer is not None
+                    writer.messages(batch)
+                    got, batch = True, []
                 item = pickle.loads(data)
                 if isinstance(item, Start):
                     writer = _Writer(item, status)
@@ -308,6 +319,10 @@ def main() -> int:
                     writer.report()
                     writer._line("D")
                     return 0
+            if batch:
+                assert writer is not None
+                writer.messages(batch)
+                got = True
             del pending[:at]
         if writer is not None:
             writer.tick(got)
