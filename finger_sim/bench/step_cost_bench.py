@@ -41,6 +41,7 @@ from finger_sim.bench.processes import ROOT, cpu_seconds, isolate_dds, machine
 
 DEFAULT_DOMAIN_ID = 32
 WRITER_START_S = 1.5  # wall s granted to a new recorder's writer process to start (imports) before timing
+SPLIT_HANDOVER_S = 1000.0  # a handover period longer than any loop: the writer stays idle until close
 BEGIN = "<!-- STEP_COST begin: written by finger_sim/bench/step_cost_bench.py -->"
 END = "<!-- STEP_COST end -->"
 
@@ -132,6 +133,34 @@ def _paths(domain_id: int, folder: Path, steps: int, rounds: int, old_recorder: 
         return us, collected, cpu_us, child_us
 
     child_base = [os.times().children_user + os.times().children_system]
+
+    def split(recorder: type, tag: str) -> tuple[float, float, float]:
+        """CPU µs per step of the recording alone, split: the caller's write() (a loop while the
+        writer is idle: handover far away), the writer's work in this process (at close), and
+        the writer process's (the new recorder's)."""
+        rec = recorder(folder / f"{tag}.mcap", queue_size=10 * steps, handover_s=SPLIT_HANDOVER_S).open()
+        for topic, kind in (("/clock", Clock), ("/joint_states", JointState), ("/fingertip_pose", PoseStamped)):
+            rec.register_channel(topic, kind)
+        process = getattr(rec, "_process", None)
+        if process is not None:
+            time.sleep(WRITER_START_S)
+        child0 = cpu_seconds(process.pid) if process is not None else 0.0
+        items = [("/clock", clock_cdr(0)), ("/joint_states", joints_cdr(0, *conversions.joint_values(frames, q, v, 0.001))),
+                 ("/fingertip_pose", pose_cdr(0, *conversions.fingertip_values(frames, q)))]
+        c0 = time.process_time()
+        for i in range(steps):
+            for topic, data in items:
+                rec.write(topic, data, i * 1_000_000)
+        c1 = time.process_time()
+        rec.close()
+        assert rec.dropped == 0
+        c2 = time.process_time()
+        child = 0.0
+        if process is not None:
+            child = os.times().children_user + os.times().children_system - child_base[0] - child0
+            child_base[0] = os.times().children_user + os.times().children_system
+        return tuple(x / steps * 1e6 for x in (c1 - c0, c2 - c1, child))  # type: ignore[return-value]
+
     try:
         t = time.perf_counter()
         for _ in range(steps):
@@ -145,6 +174,7 @@ def _paths(domain_id: int, folder: Path, steps: int, rounds: int, old_recorder: 
                     results.setdefault((name, recording), []).append(timed(path, recording, f"{name}{r}"))
             for name, recorder in recorders.items():
                 results.setdefault((name, True), []).append(timed(new, True, f"{name[:3]}rec{r}", recorder))
+                results.setdefault((name, "split"), []).append(split(recorder, f"{name[:3]}split{r}"))
     finally:
         node.destroy_node()
         rclpy.try_shutdown(context=context)
@@ -184,6 +214,15 @@ def report(measured: dict, command: str, steps: int, rounds: int) -> str:
             "its CPU µs over publishing alone | writer process CPU µs |",
             "|---|---|---|---|---|---|",
             *recorder_rows,
+            "",
+            "The same recording alone (no publishing), its CPU split: the caller's `write()` calls, timed while the "
+            "writer is idle (its handover period set beyond the loop); the writer's work in the stepping process "
+            "(timed at close: the old writer thread's whole share); the writer process's.",
+            "",
+            "| record only, CPU µs per step | caller's write() | writer in the stepping process | writer process |",
+            "|---|---|---|---|",
+            *(f"| {name} | " + " | ".join(f"{statistics.median(r[k] for r in results[(name, 'split')]):.1f}" for k in range(3)) + " |"
+              for name in ("old recorder", "new recorder")),
         ]
     return "\n".join([
         BEGIN,
