@@ -21,6 +21,16 @@ where the time goes.
 Targets: real-time factor 1.00 ± 0.01 over 60 s, p99 late wake-up < 1 ms,
 command-to-state latency p99 < 3 ms, under half of one core; as fast as possible ≥ 20×.
 Both processes run with ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST on their own domain id.
+
+    python -m finger_sim.bench.node_bench --targets --old /work/main [--target-duration 10] [--rounds 2]
+
+measures the four cost targets of the ROS layer instead, each run of the new code (this
+checkout) followed by the same run of the old (`--old`: a checkout put first on PYTHONPATH),
+A B A B, medians over the rounds, and writes them between the TARGETS markers of --out: CPU
+(node and its log writer process) at 1 kHz with recording off and on; as fast as possible with
+every-step publishing and recording, and every joint state in the log; 5 kHz physics publishing
+at 1 kHz in real time; a 10-finger finger_hand at 1 kHz. No subscriber but the benchmark's
+/diagnostics client; the figures come from the node's own 1 s diagnostics windows and /proc.
 """
 
 from __future__ import annotations
@@ -30,18 +40,27 @@ import os
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from finger_sim.bench.processes import ROOT, START_TIMEOUT_S, cpu_seconds, isolate_dds, machine, ros_env, start_node, stop
+from finger_sim.bench.processes import (ROOT, START_TIMEOUT_S, cpu_seconds, isolate_dds, machine, ros_env, start_node, stop,
+                                        tree_cpu_seconds)
 
 DEFAULT_DOMAIN_ID = 31
 WARMUP_S = 3.0
 COMMAND_HZ = 100.0
 COMMAND_TORQUE = 2e-4  # N·m: small alternating torques keep the finger near extension
 TARGETS = dict(rtf=(0.99, 1.01), late_p99_ms=1.0, latency_p99_ms=3.0, cpu_cores=0.5, fast_rtf=20.0)
+#: The ROS layer's cost targets: CPU added by recording at 1 kHz (fraction), sim s per wall s as
+#: fast as possible with every-step publishing and recording, a 5 kHz run's real-time factor,
+#: a 10-finger hand's cores at 1 kHz.
+COST_TARGETS = dict(record_cpu=0.20, fast_rtf=30.0, rtf_5k=0.99, hand_cores=0.35)
+HAND_FINGERS = 10
+TARGETS_BEGIN = "<!-- TARGETS begin: written by finger_sim/bench/node_bench.py --targets -->"
+TARGETS_END = "<!-- TARGETS end -->"
 
 
 @dataclass
@@ -193,6 +212,203 @@ def breakdown(domain_id: int, n: int = 5000) -> dict[str, float]:
     return {"method": sim.method, "physics": physics, "messages": messages, "publish": publish}
 
 
+@dataclass
+class Window:
+    """One measured node run: its CPU and its diagnostics windows (the first finger's)."""
+
+    cores: float = 0.0
+    cpu_per_sim_s: float = 0.0  # CPU s per sim s: the cores real time takes, whatever the load allowed
+    rtf: list[float] = field(default_factory=list)  # sim s per wall s of each 1 s window
+    dropped_steps: int = 0
+    log_dropped: int = -1  # the log's status record; -1: not recording
+    states_logged: int = 0  # joint_states in the log
+    states_expected: int = 0  # steps + 1 by the last logged stamp (every-step publishing)
+
+
+def _hand_file(folder: Path) -> Path:
+    """A hand of HAND_FINGERS copies of finger_default, side by side."""
+    import yaml
+
+    path = folder / "ten_fingers.yaml"
+    fingers = [dict(name=f"f{i}", scene="finger_default", pose=[0.0, 0.02 * i, 0.0, 0.0, 0.0, 0.0]) for i in range(HAND_FINGERS)]
+    path.write_text(yaml.safe_dump({"fingers": fingers}))
+    return path
+
+
+def measure_window(params: dict, duration: float, domain_id: int, workdir: Path, env: dict[str, str], tag: str, *,
+                   hand: bool = False) -> Window:
+    """Start a stepping node, wait for its first /diagnostics, measure `duration` s after WARMUP_S,
+    stop it (SIGINT: the log is closed) and count its log."""
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import QoSProfile
+
+    from finger_sim.log import LogReader
+
+    record_dir = workdir / tag
+    params = dict(params, record_dir=str(record_dir))
+    proc = start_node(params, workdir, env, module="finger_sim.ros.hand" if hand else "finger_sim.ros.node", tag=tag)
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain_id)
+    node = rclpy.create_node("node_bench_targets", context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    windows: list[dict[str, str]] = []
+    cpu_at: list[float] = []  # the node's CPU s when each window arrived
+
+    def on_diagnostics(msg: DiagnosticArray) -> None:
+        first = [s for s in msg.status if s.name.endswith("simulation")][:1]
+        windows.extend({kv.key: kv.value for kv in s.values} for s in first)
+        cpu_at.extend(tree_cpu_seconds(proc.pid) for _ in first)
+
+    node.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, QoSProfile(depth=100))
+    out = Window()
+    try:
+        deadline = time.monotonic() + 2 * START_TIMEOUT_S
+        while not windows:
+            if time.monotonic() > deadline or proc.poll() is not None:
+                raise RuntimeError(f"the node did not come up; see {workdir}/node_{tag}.log")
+            executor.spin_once(timeout_sec=0.05)
+        end_warmup = time.monotonic() + WARMUP_S
+        while time.monotonic() < end_warmup:
+            executor.spin_once(timeout_sec=0.05)
+        first = len(windows)
+        cpu0, wall0 = tree_cpu_seconds(proc.pid), time.perf_counter()
+        end = time.monotonic() + duration
+        while time.monotonic() < end:
+            executor.spin_once(timeout_sec=0.05)
+        out.cores = (tree_cpu_seconds(proc.pid) - cpu0) / (time.perf_counter() - wall0)
+        measured = windows[first:]
+        out.rtf = [float(w["realtime_factor"]) for w in measured]
+        sim_s = float(windows[-1]["clock"]) - float(windows[first - 1]["clock"])
+        out.cpu_per_sim_s = (cpu_at[-1] - cpu_at[first - 1]) / sim_s if sim_s > 0 else float("nan")
+        if measured:
+            out.dropped_steps = int(measured[-1]["dropped_steps"]) - int(windows[first - 1]["dropped_steps"])
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+        stop(proc)
+    if params.get("record", True):
+        (path,) = record_dir.glob("*.mcap")
+        log = LogReader(path)
+        topic = "/f0/joint_states" if hand else "/joint_states"
+        stamps = [m.log_time for _, _, m in log.raw_messages([topic], log_time_order=False)]
+        out.log_dropped, out.states_logged = log.dropped, len(stamps)
+        out.states_expected = round((max(stamps) - min(stamps)) * params["physics_rate_hz"] / 1e9) + 1 if stamps else 0
+    return out
+
+
+def targets(old: Path, duration: float, rounds: int, domain_id: int, workdir: Path) -> dict[tuple[str, str], list[Window]]:
+    """Every target's runs, new then old, `rounds` times: (config, 'new' | 'old') → runs."""
+    base = dict(scene="paper_flexion", torque_source="topic", physics_rate_hz=1000.0, publish_rate_hz=0.0,
+                realtime_factor=1.0, command_timeout=0.5)
+    hand = str(_hand_file(workdir))
+    configs = {
+        "1k_off": (dict(base, record=False), False),
+        "1k_rec": (base, False),
+        "fast_rec": (dict(base, realtime_factor=0.0), False),
+        "5k_rec": (dict(base, physics_rate_hz=5000.0, publish_rate_hz=1000.0), False),
+        "hand10_rec": ({k: v for k, v in base.items() if k != "scene"} | dict(hand=hand), True),
+    }
+    envs = {"new": ros_env(domain_id), "old": dict(ros_env(domain_id), PYTHONPATH=str(old))}
+    runs: dict[tuple[str, str], list[Window]] = {}
+    for r in range(rounds):
+        for name, (params, is_hand) in configs.items():
+            for side in ("new", "old"):
+                tag = f"{name}_{side}_{r}"
+                print(f"targets: {tag}", file=sys.stderr, flush=True)
+                runs.setdefault((name, side), []).append(
+                    measure_window(params, duration, domain_id, workdir, envs[side], tag, hand=is_hand))
+    return runs
+
+
+def targets_report(runs: dict[tuple[str, str], list[Window]], command: str, old: Path, duration: float, rounds: int,
+                   load: tuple[tuple, tuple]) -> str:
+    import statistics
+    from datetime import datetime, timezone
+
+    def med(name: str, side: str, value: Callable[[Window], float]) -> float:
+        return statistics.median(value(w) for w in runs[(name, side)])
+
+    def per_sim(name: str, side: str) -> float:
+        return med(name, side, lambda w: w.cpu_per_sim_s)
+
+    def added(side: str) -> float:
+        return per_sim("1k_rec", side) / per_sim("1k_off", side) - 1.0
+
+    def rtf(name: str, side: str) -> float:
+        return med(name, side, lambda w: statistics.median(w.rtf) if w.rtf else float("nan"))
+
+    def worst(name: str, side: str) -> float:
+        return min(min(w.rtf, default=float("nan")) for w in runs[(name, side)])
+
+    def logged(side: str) -> str:
+        return "; ".join(f"{w.states_logged}/{w.states_expected} (dropped {w.log_dropped})" for w in runs[("fast_rec", side)])
+
+    def complete(side: str) -> bool:
+        return all(w.states_logged == w.states_expected and w.log_dropped == 0 for w in runs[("fast_rec", side)])
+
+    def ok(flag: bool) -> str:
+        return "yes" if flag else "**no**"
+
+    t = COST_TARGETS
+    both = ("new", "old")
+    rows = [
+        ("1 kHz, recording off: CPU s per sim s (cores at real time)", *(f"{per_sim('1k_off', x):.3f}" for x in both), "", ""),
+        ("1 kHz, recording on: CPU s per sim s", *(f"{per_sim('1k_rec', x):.3f}" for x in both), "", ""),
+        ("CPU added by recording at 1 kHz", *(f"{100 * added(x):+.0f} %" for x in both),
+         f"≤ {100 * t['record_cpu']:.0f} %", ok(added("new") <= t["record_cpu"])),
+        ("  real-time factor off / on (median window)", *(f"{rtf('1k_off', x):.3f} / {rtf('1k_rec', x):.3f}" for x in both), "", ""),
+        ("as fast as possible, publishing and recording every step: sim s per wall s (median window)",
+         *(f"{rtf('fast_rec', x):.1f}×" for x in both), f"≥ {t['fast_rtf']:g}×", ok(rtf("fast_rec", "new") >= t["fast_rtf"])),
+        ("  the same, from its CPU s per sim s (sim s per CPU s: one free core)", *(f"{1 / per_sim('fast_rec', x):.1f}×" for x in both),
+         "", ""),
+        ("  joint_states in the log / steps (each run)", logged("new"), logged("old"), "all", ok(complete("new"))),
+        ("5 kHz physics, 1 kHz publishing, recording: real-time factor (median window)",
+         *(f"{rtf('5k_rec', x):.3f}" for x in both), f"≥ {t['rtf_5k']:g}", ok(rtf("5k_rec", "new") >= t["rtf_5k"])),
+        ("  worst window; dropped steps; CPU s per sim s", *(f"{worst('5k_rec', x):.3f}; {sum(w.dropped_steps for w in runs[('5k_rec', x)])}; "
+                                                           f"{per_sim('5k_rec', x):.3f}" for x in both), "", ""),
+        (f"{HAND_FINGERS}-finger finger_hand at 1 kHz, recording: CPU s per sim s (cores at real time)",
+         *(f"{per_sim('hand10_rec', x):.3f}" for x in both), f"≤ {t['hand_cores']:g}",
+         ok(per_sim("hand10_rec", "new") <= t["hand_cores"])),
+        (f"  {HAND_FINGERS}-finger hand: real-time factor (median window); cores over wall time",
+         *(f"{rtf('hand10_rec', x):.3f}; {med('hand10_rec', x, lambda w: w.cores):.3f}" for x in both), "", ""),
+    ]
+    return "\n".join([
+        TARGETS_BEGIN,
+        "## The ROS layer's cost targets, old and new",
+        "",
+        f"Command: `{command}` ({datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC). New = this checkout, old = `{old}` "
+        f"first on PYTHONPATH (the same venv). Each configuration ran new then old, {rounds} rounds (A B A B), "
+        f"{duration:g} s measured after {WARMUP_S:g} s of warm-up; medians over the rounds. Node: paper_flexion, torque "
+        "from `motor_torque` (nobody sends: the finger rests), publishing every step unless said, markers at 30 Hz, "
+        "nobody subscribed but the benchmark's /diagnostics client. CPU: utime + stime of the node process and its "
+        "child processes (the new log writer), read when each /diagnostics window arrives, divided by the sim time "
+        "the node advanced meanwhile (the /diagnostics `clock`): the cores the run takes at real time, a figure "
+        "that a loaded machine distorts less than cores over wall time when the node cannot keep real time. "
+        f"Real-time factor: the node's own 1 s /diagnostics windows. Load average at start {load[0][0]:.1f}, at end {load[1][0]:.1f} on 2 cores: a busy, "
+        "shared machine, so the side-by-side ratios say more than the absolute figures.",
+        "",
+        "| measure | new | old | target | new meets it |",
+        "|---|---|---|---|---|",
+        *(f"| {a} | {b} | {c} | {d} | {e} |" for a, b, c, d, e in rows),
+        TARGETS_END,
+    ])
+
+
+def write_section(path: Path, section: str, begin: str, end: str) -> None:
+    """Replace the section between `begin` and `end` in `path` (or append it)."""
+    text = path.read_text() if path.exists() else ""
+    if begin in text and end in text:
+        head, rest = text.split(begin, 1)
+        text = head + section + rest.split(end, 1)[1]
+    else:
+        text = text.rstrip("\n") + "\n\n" + section + "\n"
+    path.write_text(text)
+
+
 def _p(values: list[float], q: float) -> float:
     return float(np.percentile(values, q)) if values else float("nan")
 
@@ -292,10 +508,21 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--fast-duration", type=float, default=10.0, help="measured as-fast-as-possible run, s")
     parser.add_argument("--domain-id", type=int, default=DEFAULT_DOMAIN_ID)
     parser.add_argument("--out", type=Path, default=ROOT / "docs" / "node_performance.md")
+    parser.add_argument("--targets", action="store_true", help="measure the ROS layer's cost targets, new against --old")
+    parser.add_argument("--old", type=Path, default=Path("/work/main"), help="with --targets: the old checkout")
+    parser.add_argument("--target-duration", type=float, default=10.0, help="with --targets: measured s per run")
+    parser.add_argument("--rounds", type=int, default=2, help="with --targets: A B rounds")
     args = parser.parse_args(argv)
     isolate_dds(args.domain_id)
     command = "python -m finger_sim.bench.node_bench " + " ".join(argv if argv is not None else sys.argv[1:])
     load0 = os.getloadavg()
+    if args.targets:
+        with tempfile.TemporaryDirectory(prefix="node_targets_") as tmp:
+            runs = targets(args.old, args.target_duration, args.rounds, args.domain_id, Path(tmp))
+        section = targets_report(runs, command.strip(), args.old, args.target_duration, args.rounds, (load0, os.getloadavg()))
+        write_section(args.out, section, TARGETS_BEGIN, TARGETS_END)
+        print(section)
+        return 0
     with tempfile.TemporaryDirectory(prefix="node_bench_") as tmp:
         rt = measure(1.0, args.duration, args.domain_id, Path(tmp), commands=True)
         fast = measure(0.0, args.fast_duration, args.domain_id, Path(tmp), commands=False)

@@ -51,6 +51,19 @@ def cpu_seconds(pid: int) -> float:
     return _stat_cpu(Path(f"/proc/{pid}/stat").read_text())
 
 
+def tree_cpu_seconds(pid: int) -> float:
+    """CPU s used so far by process `pid` and its living child processes (a node's log writer)."""
+    total = cpu_seconds(pid)
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            text = stat.read_text()
+        except OSError:  # the process ended
+            continue
+        if int(text.rsplit(")", 1)[1].split()[1]) == pid:  # ppid, the field after the state
+            total += _stat_cpu(text)
+    return total
+
+
 def thread_cpu(pid: int) -> dict[int, tuple[str, float]]:
     """CPU seconds of every thread of `pid`: tid → (name, utime + stime)."""
     out = {}
@@ -63,13 +76,15 @@ def thread_cpu(pid: int) -> dict[int, tuple[str, float]]:
     return out
 
 
-def start_node(params: dict, workdir: Path, env: dict[str, str]) -> subprocess.Popen:
-    """finger_node with `params` in its own session; its output goes to workdir/node_rtf<r>_pub<p>.log."""
-    tag = f"rtf{params['realtime_factor']:g}_pub{params['publish_rate_hz']:g}"
+def start_node(params: dict, workdir: Path, env: dict[str, str], *, module: str = "finger_sim.ros.node",
+               tag: str | None = None) -> subprocess.Popen:
+    """finger_node (or another stepping node's `module`) with `params` in its own session; its
+    output goes to workdir/node_<tag>.log (default tag rtf<r>_pub<p>)."""
+    tag = tag or f"rtf{params['realtime_factor']:g}_pub{params['publish_rate_hz']:g}"
     path = workdir / f"node_{tag}.yaml"
     path.write_text(yaml.safe_dump({"/**": {"ros__parameters": params}}))
     log = open(workdir / f"node_{tag}.log", "wb")
-    return subprocess.Popen([sys.executable, "-m", "finger_sim.ros.node", "--ros-args", "--params-file", str(path)],
+    return subprocess.Popen([sys.executable, "-m", module, "--ros-args", "--params-file", str(path)],
                             env=env, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True)
 
 

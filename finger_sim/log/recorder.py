@@ -16,14 +16,16 @@ as rosbag2 Jazzy writes it (finger_sim.log.qos); one registered without has no s
 rosbag2 reads as "no recorded offers" (replay with its default QoS). The file has no 'rosbag2'
 metadata record, so rosbag2 parses the QoS text with its current bag-metadata version.
 
-Crash safety: a chunk is closed — written and flushed to the operating system — before a
+Crash safety: a chunk is closed (by the writer process) — written and flushed to the operating system — before a
 message that would stretch its log-time span to `chunk_interval_s`, once its uncompressed
 payload reaches `chunk_size`, after `idle_flush_s` wall seconds without messages, and once it
 has been open for `chunk_wall_s` wall seconds whatever arrives: a paused sim whose log time stands
-still while diagnostics and commands keep coming loses at most that much wall time to a kill -9. Closing uses `mcap.writer.Writer.flush()` (mcap >= 1.5); the Writer's own size trigger
-is set out of reach so that every chunk boundary goes through it. A `kill -9` loses the open
-chunk and the summary; the prefix stays readable by linear readers (mcap's StreamReader,
-finger_sim.log.reader).
+still while diagnostics and commands keep coming loses at most that much wall time to a kill -9. Closing uses `mcap.writer.Writer.flush()` (mcap >= 1.5); the
+Writer's own size trigger is set out of reach so that every chunk boundary goes through it. A
+`kill -9` of the caller loses what it had not handed over yet (at most handover_s) and the
+summary: the writer process (in its own session, so a signal to the caller's process group does
+not reach it) sees its input end, writes the open chunk and exits. The prefix stays readable by
+linear readers (mcap's StreamReader, finger_sim.log.reader).
 
 Serialization happens in the caller, so a message object may be reused as soon as write()
 returns. CDR bytes are written as given. Messages are encoded by mcap_ros2 from the channel's
@@ -36,19 +38,23 @@ written as they are: rmw sizes that buffer by an estimate and leaves uninitialis
 and trailing bytes, so files would differ run to run and strict readers (rosbags) reject
 the trailing bytes.
 
-Threading: all file I/O runs on one writer thread. The caller only checks, serializes and
-appends to a buffer (a deque: no semaphore, no wake-up per message); the writer thread takes
-everything buffered once every `handover_s` wall seconds (earlier when half of `queue_size`
-is waiting, or at close), so a 1 kHz node hands over a batch of steps at a time. More than
-`queue_size` pending messages, an unwritable path or a full disk never raise and never block
-the caller: each kind of trouble is reported once through `on_problem` (default: logger
-'finger_sim.log'; may be called from the writer thread), the first I/O failure is kept in
-`error`, and the lost messages are counted in `dropped`. After an I/O error the recorder
-writes nothing more. After close(), written + dropped == the number of write() calls that
-did not raise.
+Processes: all file I/O and all of mcap's writing run in a writer process
+(finger_sim.log.writer_process), so that building chunks and compressing them never holds the
+caller's GIL. The caller only checks, serializes and appends each message's bytes to one
+buffer (a bytearray: no object per message, no wake-up); a sender thread hands the buffer over
+through a pipe every `handover_s` wall seconds (earlier when half of `queue_size` is waiting, or
+at close), so a 1 kHz node hands over a batch of steps at a time, and a status thread takes the
+writer process's counts. A message waits until the writer process has read it; more than
+`queue_size` waiting messages, an unwritable path or a full disk never raise and never block the
+caller: each kind of trouble is reported once through `on_problem` (default: logger
+'finger_sim.log'; called from the status thread for I/O trouble), the first I/O failure is kept
+in `error`, and the lost messages are counted in `dropped`. After an I/O error the recorder
+writes nothing more. After close(), written + dropped == the number of write() calls that did
+not raise. The writer process ends with the caller: at close(), or when its input ends because
+the caller died (it then keeps what it was handed, without a summary).
 
 Back-pressure: with `back_pressure` True (settable while open; a node running as fast as
-possible sets it) a full queue blocks write() until the writer thread has taken the buffer,
+possible sets it) a full queue blocks write() until the writer process has read some of it,
 instead of dropping: when there is no deadline to meet, losing data is never the right trade.
 
 Loss in the file: with `status_record` set, close() adds a metadata record of that name (before
@@ -69,10 +75,10 @@ import math
 import operator
 import os
 import re
-import stat
+import subprocess
+import sys
 import threading
 import time
-from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from enum import Enum, auto
@@ -81,14 +87,16 @@ from types import TracebackType
 from typing import Any
 
 from mcap.records import Schema
-from mcap.well_known import MessageEncoding, Profile, SchemaEncoding
-from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
+from mcap.well_known import MessageEncoding, SchemaEncoding
+from mcap.writer import CompressionType
 from mcap_ros2._dynamic import serialize_dynamic
 from mcap_ros2.decoder import DecoderFactory
 
 from .definitions import message_definition, normalize_type_name, type_name_of
 from .errors import LogArgumentError, RecorderStateError
+from . import writer_process
 from .qos import OFFERED_QOS_PROFILES, offered_qos_profiles
+from .writer_process import HEADER, MAX_CHANNELS, Close, Metadata, Register, Start, control_record
 
 DEFAULT_CHUNK_INTERVAL_S = 0.5  # log-time span of one chunk: what a kill -9 may lose
 DEFAULT_CHUNK_SIZE = 1 << 20  # uncompressed bytes; bounds memory if an interval holds many messages
@@ -98,7 +106,6 @@ DEFAULT_IDLE_FLUSH_S = 1.0  # wall seconds without messages after which the open
 DEFAULT_CHUNK_WALL_S = 1.0  # wall seconds after which an open chunk is closed, whatever its log-time span
 DEFAULT_HANDOVER_S = 0.05  # wall seconds between the writer thread's takes of the buffer
 MAX_METADATA_BYTES = 1 << 16  # UTF-8 bytes of one metadata record's keys and values
-_NO_SIZE_TRIGGER = 1 << 62  # chunk_size given to mcap's Writer so only this module closes chunks
 _MAX_TIME_NS = 1 << 64  # MCAP timestamps are uint64
 _SEQUENCE_MODULUS = 1 << 32  # MCAP sequence numbers are uint32: they wrap
 #: The usual name of the status record (finger_sim's nodes write it; LogReader.dropped reads it).
@@ -108,9 +115,9 @@ MESSAGES_RECORDED, MESSAGES_DROPPED, DROPPED_BY_TOPIC = "messages_recorded", "me
 #: Longest a blocked write() waits before it checks the recorder's state again, wall s.
 _BACK_PRESSURE_POLL_S = 0.1
 _TOPIC = re.compile(r"^(/[A-Za-z_][A-Za-z0-9_]*)+$")  # absolute, fully expanded ROS 2 topic name
-LIBRARY = f"finger_sim.log; {LIBRARY_IDENTIFIER}"
 
 _logger = logging.getLogger("finger_sim.log")
+_pack_header = HEADER.pack
 
 
 class _State(Enum):
@@ -129,32 +136,6 @@ class _Problem(Enum):
 
 
 @dataclass(frozen=True, slots=True)
-class _Register:
-    topic: str
-    type_name: str
-    definition: str
-    metadata: dict[str, str]
-
-
-@dataclass(frozen=True, slots=True)
-class _Metadata:
-    name: str
-    data: dict[str, str]
-
-
-@dataclass(slots=True)  # not frozen: built once per message on the caller's thread, kept cheap
-class _Message:
-    topic: str
-    data: bytes
-    log_time_ns: int
-    publish_time_ns: int
-    sequence: int
-
-
-_CLOSE = object()  # buffer sentinel: finish the file and end the writer thread
-
-
-@dataclass(frozen=True, slots=True)
 class _Codec:
     """CDR encoder and decoder of one type, both built from the definition stored in the file."""
 
@@ -165,6 +146,7 @@ class _Codec:
 
 @dataclass(slots=True)
 class _Channel:
+    index: int  # in the writer process's records (writer_process.HEADER)
     type_name: str
     codec: _Codec
     last_sequence: int = 0
@@ -177,10 +159,10 @@ class McapRecorder:
     chunk_interval_s: longest log-time span of a chunk (s of the caller's clock, e.g. sim time).
     chunk_size: uncompressed bytes after which a chunk is closed whatever its span.
     compression: chunk compression (mcap.writer.CompressionType).
-    queue_size: messages that may wait for the writer thread before new ones are dropped.
+    queue_size: messages that may wait for the writer process before new ones are dropped.
     idle_flush_s: wall seconds without messages after which the open chunk is closed.
     chunk_wall_s: wall seconds after its first message after which a chunk is closed.
-    handover_s: wall seconds between the writer thread's takes of what the caller buffered.
+    handover_s: wall seconds between two handovers of what the caller buffered to the writer process.
     time_offset_ns: added to every message's log and publish time (e.g. a wall-clock start
         for a caller whose clock starts at 0).
     on_problem: called once per kind of trouble with a one-line description.
@@ -230,42 +212,46 @@ class McapRecorder:
         self._chunk_wall_s = chunk_wall_s
         self._on_problem = on_problem if on_problem is not None else _logger.warning
         self._handover_s = handover_s
-        # Items for the writer thread; deque.append and popleft are atomic, so neither side locks.
-        self._buffer: deque[object] = deque()
+        # Records for the writer process (writer_process.HEADER + payload), taken under _lock
+        self._buffer = bytearray()
         self._wake = threading.Event()  # set at close or when half of queue_size waits
-        self._room = threading.Event()  # set by the writer thread after each take of the buffer
+        self._room = threading.Event()  # set by the status thread after each report of the writer process
         self.back_pressure = back_pressure
         self._status_record = status_record
         self._dropped_by_topic: dict[str, int] = {}  # caller side, under _lock
         self._queued = 0  # messages appended to the buffer (caller side, under _lock)
-        self._taken = 0  # messages taken from it (writer thread only)
+        self._taken = 0  # messages the writer process has read (status thread only)
         self._queued_bytes = self._taken_bytes = 0  # their payload bytes, counted on the same sides
-        # Guards state, sequences, dropped. Reentrant: a signal handler that calls close()
-        # while the interrupted main thread is inside write() must not deadlock. The writer
-        # thread never takes it.
+        # Guards state, sequences, dropped, the buffer. Reentrant: a signal handler that calls
+        # close() while the interrupted main thread is inside write() must not deadlock.
         self._lock = threading.RLock()
         self._report_lock = threading.Lock()
         self._state = _State.NEW
-        self._thread: threading.Thread | None = None
+        self._process: subprocess.Popen[bytes] | None = None
+        self._sender: threading.Thread | None = None
+        self._listener: threading.Thread | None = None
+        self._broken = False  # the writer process is gone (or its pipe failed)
+        self._finished = False  # the writer process reported the file finished
+        self._start = Start(str(self._path), self._interval_ns, chunk_size, compression.value, idle_flush_s,
+                            chunk_wall_s, handover_s)
         self._channels: dict[str, _Channel] = {}
         self._codecs: dict[str, _Codec] = {}
         self._reported: set[_Problem] = set()
-        self._written = 0  # changed by the writer thread only
+        self._written = 0  # reported by the writer process (status thread only)
         self._dropped = 0  # caller side, under _lock
-        self._lost = 0  # writer side: handed over, then hit by an I/O error
+        self._lost = 0  # writer process: handed over, then hit by an I/O error
         self._error: str | None = None
 
     # -- life cycle -------------------------------------------------------------------------
 
     def open(self) -> McapRecorder:
-        """Start the writer thread, which creates the file. Raises RecorderStateError if reopened."""
+        """Start the writer process, which creates the file. Raises RecorderStateError if reopened."""
         with self._lock:
             if self._state is not _State.NEW:
                 raise RecorderStateError("open", self._state.value)
             self._state = _State.OPEN
-        # Daemon: a node that dies without close() must still exit; its file then reads as a crash.
-        self._thread = threading.Thread(target=self._run, name=f"mcap {self._path.name}", daemon=True)
-        self._thread.start()
+            self._buffer += control_record(self._start)
+        self._start_process()
         return self
 
     def close(self, timeout_s: float | None = None) -> None:
@@ -280,14 +266,22 @@ class McapRecorder:
             was_open, self._state = self._state is _State.OPEN, _State.CLOSED
             if was_open:
                 if self._status_record is not None:
-                    self._buffer.append(_Metadata(self._status_record, self._status()))
-                self._buffer.append(_CLOSE)
+                    self._buffer += control_record(Metadata(self._status_record, self._status()))
+                self._buffer += control_record(Close())
                 self._wake.set()
-        if was_open and self._thread is not None:
-            self._thread.join(timeout_s)
-            if self._thread.is_alive():
-                self._report(_Problem.STUCK, f"MCAP recorder {self._path}: writer still busy after "
-                             f"{timeout_s} s; the file may lack its summary")
+        if not was_open or self._process is None:
+            return
+        assert self._sender is not None and self._listener is not None
+        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        for thread in (self._sender, self._listener):  # the listener ends when the writer process does
+            thread.join(None if deadline is None else max(0.0, deadline - time.monotonic()))
+        if self._listener.is_alive():
+            self._report(_Problem.STUCK, f"MCAP recorder {self._path}: writer still busy after "
+                         f"{timeout_s} s; the file may lack its summary")
+            return
+        self._process.wait()
+        if not self._finished:  # the writer process died: what it did not report written is lost
+            self._lost = self._queued - self._written
 
     def __enter__(self) -> McapRecorder:
         return self.open()
@@ -330,8 +324,10 @@ class McapRecorder:
         with self._lock:
             self._require_open("register a channel")
             self._codecs[type_name] = codec
-            self._channels[topic] = _Channel(type_name, codec)
-            self._buffer.append(_Register(topic, type_name, codec.definition, metadata))
+            if len(self._channels) >= MAX_CHANNELS:
+                raise LogArgumentError("topic", f"one of at most {MAX_CHANNELS} channels", topic)
+            channel = self._channels[topic] = _Channel(len(self._channels), type_name, codec)
+            self._buffer += control_record(Register(channel.index, topic, type_name, codec.definition, metadata))
 
     def add_metadata(self, name: str, data: Mapping[str, str]) -> None:
         """Queue a metadata record (e.g. scene YAML, parameters, version) of at most
@@ -345,7 +341,7 @@ class McapRecorder:
             raise LogArgumentError(f"metadata record {name!r}", f"at most {MAX_METADATA_BYTES} bytes", f"{size} bytes")
         with self._lock:
             self._require_open("add metadata")
-            self._buffer.append(_Metadata(name, dict(data)))
+            self._buffer += control_record(Metadata(name, dict(data)))
 
     # -- hot path -----------------------------------------------------------------------------
 
@@ -397,7 +393,9 @@ class McapRecorder:
                 )
             else:
                 channel.last_sequence = (channel.last_sequence + 1) % _SEQUENCE_MODULUS
-                self._buffer.append(_Message(topic, data, log_ns, publish_ns, channel.last_sequence))
+                buffer = self._buffer
+                buffer += _pack_header(channel.index, channel.last_sequence, log_ns, publish_ns, len(data))
+                buffer += data
                 self._queued += 1
                 self._queued_bytes += len(data)
                 if waiting == self._queue_size // 2:
@@ -433,7 +431,8 @@ class McapRecorder:
 
     def _wait_for_room(self) -> None:
         """Back-pressure: block while the queue is full and the writer can still take it."""
-        while self._queued - self._taken >= self._queue_size and self._state is _State.OPEN and self._error is None:
+        while (self._queued - self._taken >= self._queue_size and self._state is _State.OPEN and self._error is None
+               and not self._broken):
             self._wake.set()
             self._room.wait(_BACK_PRESSURE_POLL_S)
             self._room.clear()
@@ -481,175 +480,65 @@ class McapRecorder:
             self._reported.add(problem)
         self._on_problem(text)
 
-    def _run(self) -> None:
-        """Writer thread: every handover_s, write what was buffered; end at the close sentinel."""
-        file = self._create_file()
-        handed = 0  # messages given to the file; each one ends up written or lost
-        last_message = time.monotonic()
+    def _start_process(self) -> None:
+        """Start the writer process (finger_sim.log.writer_process) and the two threads that talk to it."""
+        self._process = subprocess.Popen(
+            [sys.executable, "-c", f"import sys; from {writer_process.__name__} import main; sys.exit(main())"],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, env={**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)},
+            # its own session: a signal to the caller's process group (a terminal's Ctrl-C, a supervisor's
+            # SIGTERM) must not end the writer before the caller has handed over the rest and Close
+            start_new_session=True)
+        # Daemons: a process that dies without close() must still exit; the writer then sees the
+        # end of its input, keeps what it was handed and leaves the file reading as a crash.
+        self._sender = threading.Thread(target=self._send, name=f"mcap {self._path.name} sender", daemon=True)
+        self._listener = threading.Thread(target=self._listen, name=f"mcap {self._path.name} status", daemon=True)
+        self._sender.start()
+        self._listener.start()
+
+    def _send(self) -> None:
+        """Sender thread: every handover_s (earlier when woken), hand what was buffered to the
+        writer process in one write; the GIL is released while the pipe takes it."""
+        assert self._process is not None and self._process.stdin is not None
+        pipe = self._process.stdin
         while True:
             self._wake.wait(self._handover_s)
             self._wake.clear()
-            got_messages = False
-            while self._buffer:
-                item = self._buffer.popleft()
-                if isinstance(item, _Message):
-                    self._taken += 1
-                    self._taken_bytes += len(item.data)
-                    got_messages = True
-                    if file is None:
-                        self._lost += 1
-                        continue
-                    handed += 1
-                elif item is _CLOSE:
-                    if file is not None:
-                        file = self._apply(file, _CLOSE, handed)
-                    return
-                if file is not None:
-                    file = self._apply(file, item, handed)
-            self._room.set()
-            now = time.monotonic()
-            if got_messages:
-                last_message = now
-            elif file is not None and file.pending and now - last_message >= self._idle_flush_s:
-                file = self._apply(file, None, handed)  # idle (a paused sim): close the open chunk
-            if file is not None and file.pending and now - file.opened_at >= self._chunk_wall_s:
-                file = self._apply(file, None, handed)  # open too long in wall time (sim time stands still)
-
-    def _apply(self, file: _ChunkedFile, item: object, handed: int) -> _ChunkedFile | None:
-        """Hand one item (None: idle, _CLOSE: finish) to the file; None after an I/O failure."""
-        try:
-            self._written += file.finish() if item is _CLOSE else file.handle(item)
-            return file
-        except Exception as exc:  # OSError (disk full, I/O error) or a failure inside mcap
-            self._fail(exc)
-            self._lost += handed - self._written
-            file.abandon()
-            return None
-
-    def _create_file(self) -> _ChunkedFile | None:
-        try:
-            return _ChunkedFile(self._path, interval_ns=self._interval_ns, chunk_size=self._chunk_size,
-                                compression=self._compression)
-        except Exception as exc:  # OSError, or mcap's UnsupportedCompressionError
-            self._fail(exc)
-            return None
-
-    def _fail(self, exc: Exception) -> None:
-        if self._error is None:
-            self._error = f"cannot write {self._path}: {exc}"
-        self._report(_Problem.IO, f"MCAP recorder cannot write {self._path}: {exc}; "
-                     "dropping every further message")
-
-
-class _ChunkedFile:
-    """The writer thread's file: one mcap Writer whose chunks this class closes (see module doc)."""
-
-    def __init__(
-        self, path: Path, *, interval_ns: int, chunk_size: int, compression: CompressionType
-    ) -> None:
-        # A new or regular file is written under a temporary name until its header is out, so
-        # `path` never holds a partial header; a pipe or device is written in place.
-        temp = None if path.exists() and not path.is_file() else path.with_name(f".{path.name}.{os.urandom(4).hex()}.part")
-        # 0o666 less the umask, as open() would create `path`; closed by finish() or abandon().
-        self._file = open(path, "wb") if temp is None else os.fdopen(
-            os.open(temp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666), "wb")
-        try:
-            self._writer = Writer(self._file, chunk_size=_NO_SIZE_TRIGGER, compression=compression)
-            self._writer.start(profile=Profile.ROS2, library=LIBRARY)
-            self._writer.flush()  # the header reaches the operating system before the name
-            if temp is not None:
-                os.replace(temp, path)
-        except BaseException:
-            self.abandon()
-            if temp is not None:
+            with self._lock:
+                block, self._buffer = self._buffer, bytearray()
+                closing = self._state is _State.CLOSED
+            if block and not self._broken:
+                try:
+                    pipe.write(block)
+                    pipe.flush()
+                except OSError as exc:  # the writer process died (BrokenPipeError)
+                    self._broken = True
+                    self._fail(f"the writer process ended ({exc})")
+                    self._room.set()
+            if closing:
                 with contextlib.suppress(OSError):
-                    os.unlink(temp)
-            raise
-        if temp is not None:
-            _sync_folder(path.parent)  # the name survives a power cut too
-        self._interval_ns = interval_ns
-        self._chunk_size = chunk_size
-        self._schema_ids: dict[str, int] = {}
-        self._channel_ids: dict[str, int] = {}
-        self.pending = 0  # messages in the open chunk
-        self.opened_at = 0.0  # time.monotonic() at the open chunk's first message
-        self._pending_bytes = 0
-        self._first_ns = self._last_ns = 0  # log-time range of the open chunk
+                    pipe.close()  # the end of input: the writer finishes (or, without Close, stops)
+                return
 
-    def handle(self, item: object) -> int:
-        """Apply one queue item (None: idle); returns messages newly committed to the file."""
-        if isinstance(item, _Message):
-            return self._add_message(item)
-        if isinstance(item, _Register):
-            schema_id = self._schema_ids.get(item.type_name)
-            if schema_id is None:
-                schema_id = self._writer.register_schema(
-                    name=item.type_name, encoding=SchemaEncoding.ROS2, data=item.definition.encode()
-                )
-                self._schema_ids[item.type_name] = schema_id
-            self._channel_ids[item.topic] = self._writer.register_channel(
-                topic=item.topic, message_encoding=MessageEncoding.CDR, schema_id=schema_id, metadata=item.metadata
-            )
-            return 0
-        if isinstance(item, _Metadata):
-            self._writer.add_metadata(item.name, item.data)
-            self._file.flush()  # the record is outside chunks: push it out without cutting the chunk
-            return 0
-        return self._close_chunk()  # idle
+    def _listen(self) -> None:
+        """Status thread: take the writer process's counts and failures (writer_process's lines)."""
+        assert self._process is not None and self._process.stdout is not None
+        for line in self._process.stdout:
+            kind, _, rest = line.decode().rstrip("\n").partition(" ")
+            if kind == "S":
+                self._taken, self._taken_bytes, self._written, self._lost = map(int, rest.split())
+                self._room.set()
+            elif kind == "E":
+                self._fail(rest)
+            elif kind == "D":
+                self._finished = True
+        self._broken = True  # the writer process is gone: nothing more can be handed over
+        self._room.set()
 
-    def _add_message(self, message: _Message) -> int:
-        t = message.log_time_ns
-        span = max(self._last_ns, t) - min(self._first_ns, t)
-        committed = self._close_chunk() if self.pending and span >= self._interval_ns else 0
-        self._writer.add_message(
-            channel_id=self._channel_ids[message.topic],
-            log_time=t,
-            data=message.data,
-            publish_time=message.publish_time_ns,
-            sequence=message.sequence,
-        )
-        if self.pending == 0:
-            self._first_ns = self._last_ns = t
-            self.opened_at = time.monotonic()
-        else:
-            self._first_ns, self._last_ns = min(self._first_ns, t), max(self._last_ns, t)
-        self.pending += 1
-        self._pending_bytes += len(message.data)
-        if self._pending_bytes >= self._chunk_size:
-            committed += self._close_chunk()
-        return committed
-
-    def _close_chunk(self) -> int:
-        self._writer.flush()  # finalizes the open chunk (if it holds messages) and flushes the stream
-        committed, self.pending, self._pending_bytes = self.pending, 0, 0
-        return committed
-
-    def finish(self) -> int:
-        """Close the open chunk, write the summary and footer, fsync and close the file."""
-        try:
-            self._writer.finish()  # closes the open chunk too
-            self._file.flush()
-            if stat.S_ISREG(os.fstat(self._file.fileno()).st_mode):  # not a pipe or device
-                os.fsync(self._file.fileno())  # a finished log survives a power cut
-        finally:
-            self._file.close()
-        committed, self.pending = self.pending, 0
-        return committed
-
-    def abandon(self) -> None:
-        """Close the file after a failure, ignoring further errors; the file stays as it is."""
-        with contextlib.suppress(OSError):  # closing flushes the buffer: fails again on a full disk
-            self._file.close()
-
-
-def _sync_folder(folder: Path) -> None:
-    """fsync a folder so that a new name in it is on disk; skipped where folders cannot be opened."""
-    with contextlib.suppress(OSError):
-        fd = os.open(folder, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
+    def _fail(self, reason: str) -> None:
+        if self._error is None:
+            self._error = f"cannot write {self._path}: {reason}"
+        self._report(_Problem.IO, f"MCAP recorder cannot write {self._path}: {reason}; "
+                     "dropping every further message")
 
 
 def _codec(type_name: str, definition: str) -> _Codec:

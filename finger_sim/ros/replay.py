@@ -33,6 +33,7 @@ slow stretch does not accumulate delay. Messages come in log-time order (mcap's 
 reader); a truncated log is read in file order, which is recording order. A reader thread
 decompresses chunks ahead of the player (ReadAhead), so that reading a chunk does not delay
 the messages due meanwhile. docs/replay_performance.md has measured figures.
+The plan, the read-ahead and the statistics are ROS-free: finger_sim.log.playback.
 
 QoS: each topic is offered with the reliability and durability its publishers offered when
 recorded (the channel's `offered_qos_profiles`, finger_sim.log.qos), as `ros2 bag play` does:
@@ -61,21 +62,18 @@ import argparse
 import functools
 import importlib
 import math
-import queue
 import signal
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterable, Iterator, Sequence
-from dataclasses import dataclass
-from enum import Enum
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from types import FrameType
 from typing import Any
 
 import rclpy
 import yaml
-from mcap.records import Channel, Message, Schema
+from mcap.records import Channel, Schema
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.publisher import Publisher
@@ -87,27 +85,22 @@ from finger_sim.errors import FingerSimError
 from finger_sim.log import (
     LogArgumentError,
     LogError,
-    LogFileError,
     LogReader,
     MessageDefinitionNotFoundError,
     MissingTopicsError,
     read_log,
 )
 from finger_sim.log.definitions import message_definition, normalize_type_name
+from finger_sim.log.playback import (CLOCK_TOPIC, CLOCK_TYPE, DEFAULT_CLOCK_HZ, PROG, ClockSource, ReadAhead, ReplayPlan,
+                                     ReplayStats, plan_replay, raw_messages)
 from finger_sim.log.qos import OFFERED_QOS_PROFILES
 
-PROG = "finger_replay"
-CLOCK_TOPIC = "/clock"
-CLOCK_TYPE = "rosgraph_msgs/msg/Clock"
-DEFAULT_CLOCK_HZ = 100.0  # generated /clock rate, wall Hz: 10 ms steps, finer than a control loop's timers
 QOS_DEPTH = 1000  # keep-last depth of data publishers: 1 s of a 1 kHz topic, 0.1 s of it at --rate 10
 WAIT_SLICE_S = 0.1  # longest single sleep; a signal that lands on a DDS thread is seen after at most this
 MATCH_POLL_S = 0.01  # poll period while waiting for subscribers (rclpy has no blocking wait for matches)
 # After the last message the writers stay this long, so that subscribers take the tail out of shared
 # memory before the participant goes (else the last messages can be lost: ros2/rosbag2#571).
 LINGER_S = 0.25
-READ_AHEAD_BATCH = 256  # messages handed from the reader thread to the player at a time
-READ_AHEAD_BATCHES = 16  # batches the reader thread may hold ready (~4k messages, a few MB at most)
 # GIL hand-over interval while the reader thread runs: a player waking at a due time waits at most
 # this long for the reader to let go (Python's default, 5 ms, would show up as lateness).
 SWITCH_INTERVAL_S = 0.0002
@@ -136,81 +129,6 @@ class MessageTypeNotFoundError(FingerSimError, LookupError):
     def __init__(self, topic: str, type_name: str, reason: str) -> None:
         self.topic, self.type_name = topic, type_name
         super().__init__(f"{topic}: cannot publish {type_name}: {reason}")
-
-
-class ClockSource(Enum):
-    """Where the /clock published during a replay comes from."""
-
-    RECORDED = "the log's /clock topic"
-    GENERATED = "generated from the log time"
-    NONE = "not published"
-
-
-@dataclass(frozen=True)
-class ReplayPlan:
-    """What to replay, decided from the log's index and the options before any ROS call.
-
-    topics: recorded topics to republish, with their types ('pkg/msg/Type'); holds /clock
-    when clock is RECORDED. origin_ns: log time played at the start of a pass.
-    clock_hz: wall rate of the generated /clock (GENERATED only).
-    """
-
-    topics: dict[str, str]
-    clock: ClockSource
-    clock_hz: float | None
-    origin_ns: int
-    message_count: int  # recorded messages on `topics` (before --start-offset)
-
-
-def plan_replay(
-    reader: LogReader,
-    *,
-    topics: Iterable[str] | None = None,
-    start_offset_s: float = 0.0,
-    clock_hz: float | None = None,
-    no_clock: bool = False,
-) -> ReplayPlan:
-    """Decide topics, clock source and start time (see the module docstring for the clock rules).
-
-    Raises LogFileError for a log without messages, with a /clock that is not
-    rosgraph_msgs/msg/Clock or a selected topic that is not CDR; MissingTopicsError for unknown
-    `topics`; LogArgumentError for a start offset past the end or if nothing would be published.
-    """
-    if reader.start_ns is None or reader.end_ns is None or reader.message_count == 0:
-        raise LogFileError(reader.path, "no messages to replay")
-    recorded = reader.topics.get(CLOCK_TOPIC)
-    if recorded is not None and recorded.type != CLOCK_TYPE:
-        raise LogFileError(reader.path, f"{CLOCK_TOPIC} has type {recorded.type}, not {CLOCK_TYPE}")
-    if topics is None:
-        selected = set(reader.topics)
-    else:
-        selected = set(topics)
-        reader.require_topics(selected)
-    selected.discard(CLOCK_TOPIC)  # /clock follows the clock options
-    if no_clock:
-        clock = ClockSource.NONE
-    elif recorded is not None and clock_hz is None:
-        clock, selected = ClockSource.RECORDED, selected | {CLOCK_TOPIC}
-    else:
-        clock, clock_hz = ClockSource.GENERATED, DEFAULT_CLOCK_HZ if clock_hz is None else clock_hz
-    if not (math.isfinite(start_offset_s) and 0 <= start_offset_s <= reader.duration_s):
-        expected = f"seconds from 0 to the log's duration, {reader.duration_s:.6g}"
-        raise LogArgumentError("--start-offset", expected, start_offset_s)
-    for topic in sorted(selected):
-        if reader.topics[topic].encoding != "cdr":
-            problem = f"{topic} is encoded as {reader.topics[topic].encoding!r}, not ROS 2 CDR"
-            raise LogFileError(reader.path, problem)
-    count = sum(reader.topics[t].count for t in selected)
-    if count == 0:
-        expected = "topics with messages (the selected ones have none)"
-        raise LogArgumentError("--topics", expected, sorted(selected))
-    return ReplayPlan(
-        topics={t: reader.topics[t].type for t in sorted(selected)},
-        clock=clock,
-        clock_hz=clock_hz if clock is ClockSource.GENERATED else None,
-        origin_ns=reader.start_ns + round(start_offset_s * 1e9),
-        message_count=count,
-    )
 
 
 #: rmw's numbers for the policies, as Humble's rosbag2 writes them into offered_qos_profiles.
@@ -255,14 +173,6 @@ def _policy_name(value: Any, numbers: dict[int, str]) -> str:
     return numbers.get(value, "") if isinstance(value, int) else str(value)
 
 
-def raw_messages(
-    reader: LogReader, topics: Iterable[str], start_ns: int
-) -> Iterator[tuple[Schema | None, Channel, Message]]:
-    """The recorded (schema, channel, message) records of `topics` logged at or after `start_ns`:
-    `LogReader.raw_messages` (log-time order; file order up to the cut of a truncated log)."""
-    return reader.raw_messages(topics, start_ns=start_ns)
-
-
 @functools.cache
 def node_topic_types() -> dict[str, str]:
     """finger_node's topics by their relative name (`joint_states`, `contact_wrench/distal`) → type ('pkg/msg/Type')."""
@@ -284,133 +194,6 @@ def message_class(topic: str, type_name: str) -> type:
         hint = f"install its package (pip: ros-jazzy-{package.replace('_', '-')}) or source a ROS setup"
         reason = f"no Python class {package}.msg.{name}; {hint}"
         raise MessageTypeNotFoundError(topic, type_name, reason) from None
-
-
-class ReadAhead:
-    """Iterates `source` on a thread, up to READ_AHEAD_BATCHES batches ahead of the consumer.
-
-    mcap reads a whole chunk (~1500 messages of a 1 kHz log, 5 ms) at the first next() into it;
-    on the player's thread that stall would delay every message due meanwhile. The thread does
-    that work while the player sleeps, as rosbag2's player does with its read-ahead queue. An
-    exception in `source` is raised by the consumer's next(), after the items before it.
-    A context manager: leaving it stops the thread, also when the consumer stops early.
-    """
-
-    _END = object()
-
-    def __init__(self, source: Iterator[Any]) -> None:
-        self._source = source
-        self._queue: queue.Queue[Any] = queue.Queue(maxsize=READ_AHEAD_BATCHES)
-        self._cancelled = threading.Event()
-        self._thread = threading.Thread(target=self._read, name="finger_replay read-ahead", daemon=True)
-        self._thread.start()
-
-    def __enter__(self) -> ReadAhead:
-        return self
-
-    def __exit__(self, *exc_info: object) -> None:
-        self.close()
-
-    def __iter__(self) -> Iterator[Any]:
-        while True:
-            batch = self._queue.get()
-            if batch is self._END:
-                return
-            if isinstance(batch, BaseException):
-                raise batch
-            yield from batch
-
-    def close(self) -> None:
-        """Stop the thread (it may be blocked on a full queue) and wait for it."""
-        self._cancelled.set()
-        while self._thread.is_alive():
-            try:
-                self._queue.get(timeout=WAIT_SLICE_S)
-            except queue.Empty:
-                pass
-
-    def _read(self) -> None:
-        batch: list[Any] = []
-        try:
-            for item in self._source:
-                batch.append(item)
-                if len(batch) >= READ_AHEAD_BATCH:
-                    self._put(batch)
-                    batch = []
-                if self._cancelled.is_set():
-                    return
-            self._put(batch)
-            self._put(self._END)
-        except BaseException as exc:  # handed to the consumer, raised there; it must not wait forever
-            self._put(batch)
-            self._put(exc)
-        finally:
-            close = getattr(self._source, "close", None)
-            if close is not None:
-                close()  # a generator closes its file
-
-    def _put(self, item: Any) -> None:
-        while not self._cancelled.is_set():
-            try:
-                self._queue.put(item, timeout=WAIT_SLICE_S)
-                return
-            except queue.Full:
-                pass
-
-
-@dataclass
-class ReplayStats:
-    """What a replay did; times on time.monotonic(), s."""
-
-    published: int = 0
-    clock_ticks: int = 0  # generated /clock messages
-    passes: int = 0  # passes through the log that published a message (the last one may be cut short)
-    first_due: float | None = None
-    last_due: float | None = None
-    last_wall: float | None = None
-    total_late_s: float = 0.0
-    max_late_s: float = 0.0
-    stopped_by: str | None = None  # name of the signal that stopped the replay
-
-    def record(self, due: float, wall: float) -> None:
-        if self.first_due is None:
-            self.first_due = due
-        self.last_due, self.last_wall = due, wall
-        late = wall - due
-        self.total_late_s += late
-        self.max_late_s = max(self.max_late_s, late)
-        self.published += 1
-
-    @property
-    def wall_s(self) -> float:
-        """Wall time from the first message's due time to the last publication, s."""
-        return 0.0 if self.first_due is None else self.last_wall - self.first_due
-
-    def achieved_rate(self, rate: float) -> float | None:
-        """Log time played per wall second (at most the requested rate); None below 2 messages.
-
-        Counted from the first message's due time, so a late start or end lowers it.
-        """
-        if self.wall_s <= 0:
-            return None
-        return rate * (self.last_due - self.first_due) / self.wall_s
-
-    def summary(self, rate: float, topics: int) -> str:
-        achieved = self.achieved_rate(rate)
-        text = f"{PROG}: published {self.published} messages on {topics} topics in {self.wall_s:.3f} s"
-        if achieved is not None:
-            text += f" ({self.published / self.wall_s:.0f} msg/s): {achieved:.4g}x recorded time"
-        text += f" (requested {rate:g}x)"
-        if self.published:
-            text += (f", lateness mean {1e3 * self.total_late_s / self.published:.3f} ms"
-                     f" max {1e3 * self.max_late_s:.3f} ms")
-        if self.clock_ticks:
-            text += f", {self.clock_ticks} /clock ticks generated"
-        if self.passes > 1:
-            text += f", {self.passes} passes"
-        if self.stopped_by:
-            text += f", stopped by {self.stopped_by}"
-        return text
 
 
 class Player:
