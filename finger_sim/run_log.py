@@ -31,7 +31,7 @@ from finger_sim.log.cdr import JointStateDecoder, decode_diagnostic_status
 from finger_sim.log.definitions import DEFINITION_SEPARATOR
 from finger_sim.log.errors import LogArgumentError
 from finger_sim.log.reader import LogReader, TopicInfo
-from finger_sim.run_records import CommandEvent, RunLogError, stamp_ns
+from finger_sim.run_records import NS_PER_S, CommandEvent, RunLogError, stamp_ns
 from finger_sim.scene import Scene, scene_from_dict
 from finger_sim.scene_yaml import parse_scene_text
 from finger_sim.simulate import Simulator, Trajectory
@@ -40,7 +40,6 @@ from finger_sim.simulate import Simulator, Trajectory
 FINGER_SIM_METADATA = "finger_sim"
 #: Largest metadata record a run may store (UTF-8 bytes of its keys and values).
 MAX_METADATA_BYTES = 64 * 1024
-NS_PER_S = 1_000_000_000
 JOINT_STATE_TYPE = "sensor_msgs/msg/JointState"
 COMMAND_LOG_TYPE = "diagnostic_msgs/msg/DiagnosticStatus"
 #: Top-level fields (type, name) the tools need in each topic's schema.

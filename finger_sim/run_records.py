@@ -15,6 +15,8 @@ from pathlib import Path
 
 from finger_sim.errors import FingerSimError, shown
 
+NS_PER_S = 1_000_000_000
+
 
 class RunLogError(FingerSimError):
     """A log lacks or garbles what a finger_node run needs: names the file and the problem."""

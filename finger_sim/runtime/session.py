@@ -37,7 +37,7 @@ from enum import Enum
 from typing import Any
 
 from finger_sim.errors import SimulationDiverged
-from finger_sim.run_log import NS_PER_S, CommandEvent, stamp_ns
+from finger_sim.run_records import NS_PER_S, CommandEvent, stamp_ns
 from finger_sim.runtime.diagnostics import Level, LogStatus, Snapshot
 from finger_sim.runtime.pacing import Pacer
 from finger_sim.runtime.parameters import RunSettings, TorqueSource
