@@ -199,10 +199,13 @@ def _salvaged(reader, command: str) -> bool:  # type: ignore[no-untyped-def]
 
 @_log_command
 def _info(args: argparse.Namespace) -> int:
-    from finger_sim.run_log import FINGER_SIM_METADATA
+    from finger_sim.run_log import FINGER_SIM_METADATA, crush_lines
 
     reader = _open_log(args.log, salvage=True)
     print(reader.info(FINGER_SIM_METADATA))
+    crushes = crush_lines(reader)  # objects the run crushed (finger_sim.runtime.crushing)
+    if crushes is not None:
+        print("Crushed:  " + ("\n          ".join(crushes) if crushes else "none"))
     if args.no_verify:
         print("Chunks:   not verified (--no-verify)")
     else:

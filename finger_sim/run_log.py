@@ -19,7 +19,7 @@ from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from os import PathLike
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import yaml
@@ -34,6 +34,7 @@ from finger_sim.log.errors import LogArgumentError
 from finger_sim.log.reader import LogReader, TopicInfo
 from finger_sim.scene import Scene, scene_from_dict
 from finger_sim.scene_yaml import parse_scene_text
+from finger_sim.grasp_objects import breakable, crush_step
 from finger_sim.simulate import Simulator, Trajectory
 
 #: Name of the metadata record the node writes.
@@ -277,6 +278,23 @@ class CommandEvent:
 # -- reading a run ---------------------------------------------------------------------------------
 
 
+class LoggedCrush(NamedTuple):
+    """One `~/crush_log` record: `object` crushed at the end of the step to state `step` of
+    `episode`, under `force` N (its break_force exceeded; finger_sim.grasp_objects)."""
+
+    episode: int
+    step: int
+    object: str
+    force: float
+
+    @classmethod
+    def from_values(cls, values: Mapping[str, str], path: str | PathLike[str] = "log") -> LoggedCrush:
+        try:
+            return cls(int(values["episode"]), int(values["step"]), values["object"], float(values["force"]))
+        except (KeyError, ValueError) as exc:
+            raise RunLogError(path, f"crush log entry {shown(dict(values))}: {_first_line(exc)}") from None
+
+
 @dataclass
 class RecordedRun:
     """What a log says about one node run: its metadata, commands and recorded states."""
@@ -285,6 +303,8 @@ class RecordedRun:
     joint_states: list[tuple[int, Vec6]] = field(default_factory=list)  # (stamp ns, positions + velocities)
     torques: list[float] = field(default_factory=list)  # N·m, each state's mcp effort (NaN if none logged)
     events: list[CommandEvent] = field(default_factory=list)  # in recording order
+    #: the objects crushed (`~/crush_log`, finger_sim.runtime.crushing): (episode, step, object, force N)
+    crushes: list[LoggedCrush] = field(default_factory=list)
 
     @property
     def scene(self) -> Scene:
@@ -334,19 +354,24 @@ def load_run(reader: LogReader, *, events: bool = True, finger: str = "") -> Rec
     states = _states_topic(reader, finger)
     ending = f"/{finger}/command_log" if finger else "/command_log"
     log_topics = [t for t in reader.topics if t.endswith(ending)] if events else []
-    for topic in log_topics:
+    crush_ending = f"/{finger}/crush_log" if finger else "/crush_log"
+    crush_topics = [t for t in reader.topics if t.endswith(crush_ending)] if events else []
+    for topic in (*log_topics, *crush_topics):
         check_schema(reader, reader.topics[topic], COMMAND_LOG_TYPE)
     order: list[int] | None = None
     decode_state = JointStateDecoder()
     # One pass in file order over the chunks that hold these topics, through fixed-layout CDR
     # readers (a few µs a message, against 30-100 µs for a general deserializer; schemas checked above).
-    for _, channel, record in reader.raw_messages([states, *log_topics], log_time_order=False):
+    for _, channel, record in reader.raw_messages([states, *log_topics, *crush_topics], log_time_order=False):
         if channel.topic != states:
             try:
                 status = decode_diagnostic_status(record.data)
             except LogArgumentError as exc:
                 raise RunLogError(reader.path, f"{channel.topic} at {record.log_time} ns: {exc}") from None
-            run.events.append(CommandEvent.from_values(dict(status.values), reader.path))
+            if channel.topic in crush_topics:
+                run.crushes.append(LoggedCrush.from_values(dict(status.values), reader.path))
+            else:
+                run.events.append(CommandEvent.from_values(dict(status.values), reader.path))
             continue
         try:
             js = decode_state(record.data)
@@ -362,6 +387,22 @@ def load_run(reader: LogReader, *, events: bool = True, finger: str = "") -> Rec
         run.joint_states.append((js.stamp_ns, state))  # type: ignore[arg-type]
         run.torques.append(js.effort[order[0]] if len(js.effort) > order[0] else math.nan)
     return run
+
+
+def crush_lines(reader: LogReader) -> list[str] | None:
+    """`finger-sim info`'s lines on the objects a log's run crushed (every `~/crush_log` record);
+    None for a log without that topic (a scene without breakable objects)."""
+    topics = sorted(t for t in reader.topics if t.endswith("/crush_log"))
+    if not topics:
+        return None
+    lines = []
+    for topic in topics:
+        check_schema(reader, reader.topics[topic], COMMAND_LOG_TYPE)
+        for _, _, record in reader.raw_messages([topic]):
+            status = decode_diagnostic_status(record.data)
+            values = dict(status.values)
+            lines.append(f"{topic}: episode {values.get('episode', '?')}, step {values.get('step', '?')}: {status.message}")
+    return lines
 
 
 def _states_topic(reader: LogReader, finger: str = "") -> str:
@@ -489,17 +530,24 @@ class ResimResult:
     compared: int
     max_deviation: float  # over positions (rad) and velocities (rad/s)
     first_stamp_ns: int | None  # stamp of the first recorded state that differs, None if none
+    #: the objects the re-simulation crushed, and whether they equal the log's `~/crush_log` exactly
+    crushes: tuple[LoggedCrush, ...] = ()
+    crushes_match: bool = True
 
     @property
     def exact(self) -> bool:
-        return self.first_stamp_ns is None
+        return self.first_stamp_ns is None and self.crushes_match
 
     def summary(self) -> str:
-        if self.exact:
-            return f"resim: {self.compared} recorded states reproduced bit for bit (max deviation 0)"
+        crushed = "".join(f"; object '{c.object}' crushed at step {c.step} of episode {c.episode} ({c.force!r} N)"
+                          for c in self.crushes)
+        if not self.crushes_match:
+            crushed += "; the crushes differ from the log's ~/crush_log"
+        if self.first_stamp_ns is None:
+            return f"resim: {self.compared} recorded states reproduced bit for bit (max deviation 0){crushed}"
         return (
             f"resim: max deviation {self.max_deviation:.3e} over {self.compared} recorded states; "
-            f"first at t = {self.first_stamp_ns / NS_PER_S:.6f} s on /clock"
+            f"first at t = {self.first_stamp_ns / NS_PER_S:.6f} s on /clock{crushed}"
         )
 
 
@@ -541,7 +589,9 @@ def resimulate(run: RecordedRun, *, kernel: str | None = None, max_steps: int | 
         wanted.setdefault(episode, {})[round((stamp - offsets[episode]) / dt_ns)] = state
     _check_resim_budget(run, sum(max(recorded) + 1 for recorded in wanted.values()), max_steps)
     compared, worst, first = 0, 0.0, None
+    initial, crushes, watch = sim, [], breakable(run.scene)
     for episode in sorted(wanted):
+        sim = initial  # every object again (a crush took one out of the scene)
         sim.reset()
         torques = sorted(changes.get(episode, []))
         held, k = 0.0, 0
@@ -562,7 +612,12 @@ def resimulate(run: RecordedRun, *, kernel: str | None = None, max_steps: int | 
                 held = torques[k][1]
                 k += 1
             sim.step(None if run.torque_source == "scene" else held)
-    return ResimResult(compared, worst, first)
+            if watch:
+                sim, broken = crush_step(sim)  # the node's rule (finger_sim.runtime.crushing)
+                # the step after the last recorded state is taken too: what it crushed the log cannot hold
+                crushes += [LoggedCrush(episode, c.step, c.object, c.force) for c in broken if c.step <= max(recorded)]
+    logged = run.crushes
+    return ResimResult(compared, worst, first, tuple(crushes), crushes == logged)
 
 
 def _check_resim_budget(run: RecordedRun, steps: int, max_steps: int | None) -> None:

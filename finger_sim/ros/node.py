@@ -97,6 +97,7 @@ from finger_sim.runtime.pacing import Pacer
 from finger_sim.runtime.parameters import NODE_PARAMETERS, NodeSettings, Param, ParameterError, RunSettings, TorqueSource
 from finger_sim.runtime.timeline import Timeline
 from finger_sim.scene_paths import resolve_scene
+from finger_sim.simulate import Simulator
 from finger_sim.urdf import finger_urdf
 
 NODE_NAME = "finger_node"
@@ -155,7 +156,6 @@ class SteppingNode(Node):
         self.settings = s = settings_type.from_values(parameters.declare(self, table))
         self.timeline = Timeline(1.0 / s.physics_rate_hz)
         self.fingers = [Finger(spec, s, self.timeline) for spec in self._finger_specs()]
-        self.sim = self.fingers[0].sim  # the step index and time every finger shares
         self.dt = self.sim.dt
         self.done = Future()
 
@@ -206,6 +206,11 @@ class SteppingNode(Node):
         self.robot_description = self._description()
         self.recorder = self._open_recorder() if s.record else None
         self._log_start()
+
+    @property
+    def sim(self) -> Simulator:
+        """The first finger's simulator: the step index and time every finger shares."""
+        return self.fingers[0].sim
 
     # -- what a subclass provides --------------------------------------------------------------
     def _finger_specs(self) -> list[FingerSpec]:
@@ -449,6 +454,8 @@ class SteppingNode(Node):
             except SimulationDiverged as exc:
                 self._diverged(f, exc)
                 return False
+            for crush in f.crushed_now:  # runtime.crushing; its record goes out with the state
+                self.get_logger().warning(f"{f.spec.name + ': ' if f.spec.name else ''}{crush.log_line()}")
         self.steps_total += 1
         self._publish_state()
         if self._scene_steps is not None and n + 1 >= self._scene_steps:
@@ -692,7 +699,8 @@ class SteppingNode(Node):
                 episode=self.timeline.episode, realtime_factor_target=s.realtime_factor, steps_total=self.steps_total,
                 run_wall_s=run_wall, max_residual_m=f.max_residual, torque=f.applied,
                 commands_received=f.inbox.received, log=log, clock_publishers=clocks,
-                lockstep_timeouts=f.lockstep_timeouts if self._lockstep else None)
+                lockstep_timeouts=f.lockstep_timeouts if self._lockstep else None,
+                crushes=[c.log_line() for c in f.crushing.crushes] if f.crush_log_out is not None else None)
             last = i == len(self.fingers) - 1
             level, message, values = f.diagnostics.report(snap, f.commands, self.pacer, now, new_window=last)
             statuses.append(conversions.status(f.diag_name, f.hardware_id, bytes([level]), message, values))

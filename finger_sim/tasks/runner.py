@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from finger_sim.errors import FingerSimError, SimulationDiverged
-from finger_sim.grasp_objects import Crush, carry_over, crushed, with_tip_force, without_objects
+from finger_sim.grasp_objects import Crush, carry_over, crush_step, with_tip_force
 from finger_sim.inputs import BREAK_EPS
 from finger_sim.sensors import SOURCES, SensorBank
 from finger_sim.simulate import Simulator, output_names, output_values
@@ -128,10 +128,8 @@ def run_task(task: Task, factory: Factory, *, label: str = "", params: Mapping[s
             stopped = True
             break
         outputs = _outputs(sim, command)
-        broken = crushed(sim)
-        if broken:  # the sample at the crush keeps the force that broke it (recorded and measured)
-            crushes += broken
-            sim = carry_over(sim, without_objects(sim.scene, (c.object for c in broken)))
+        sim, broken = crush_step(sim)  # the sample at the crush keeps the force that broke it
+        crushes += broken
     else:
         stopped = False
         record(n, outputs)
