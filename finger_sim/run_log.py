@@ -34,8 +34,9 @@ from finger_sim.log.errors import LogArgumentError
 from finger_sim.log.reader import LogReader, TopicInfo
 from finger_sim.scene import Scene, scene_from_dict
 from finger_sim.scene_yaml import parse_scene_text
-from finger_sim.grasp_objects import breakable, crush_step
+from finger_sim.scene_changes import SceneChanges
 from finger_sim.simulate import Simulator, Trajectory
+from finger_sim.tip_force_profile import static_scene
 
 #: Name of the metadata record the node writes.
 FINGER_SIM_METADATA = "finger_sim"
@@ -558,7 +559,7 @@ def _recorded_method(scene: Scene, method: str) -> Scene:
     from finger_sim.integrators import METHODS
     from finger_sim.scene import AUTO
 
-    if scene.method != AUTO or method not in METHODS or method == Simulator(scene, kernel="python").method:
+    if scene.method != AUTO or method not in METHODS or method == Simulator(static_scene(scene), kernel="python").method:
         return scene
     return scene.with_overrides(method=method)
 
@@ -575,7 +576,9 @@ def resimulate(run: RecordedRun, *, kernel: str | None = None, max_steps: int | 
     max_steps: refuse (ResourceError, before the first step) a re-simulation of more steps in all;
     None: `simulate`'s default budget (finger_sim.budget.DEFAULT_MAX_STEPS).
     """
-    sim = Simulator(_recorded_method(run.scene, run.metadata.method), kernel=run.metadata.kernel if kernel is None else kernel)
+    # the scene's changes (a tip-force profile, crushing) as the node stepped them (finger_sim.scene_changes)
+    stepper = SceneChanges(_recorded_method(run.scene, run.metadata.method),
+                           kernel=run.metadata.kernel if kernel is None else kernel)
     dt_ns = run.dt * NS_PER_S
     q_ext, alpha = kinematics.extended_pose(run.scene.params), kinematics.distal_offset(run.scene.params)
     offsets = [0] + [e.stamp_ns for e in run.events if e.event == "reset"]
@@ -589,10 +592,9 @@ def resimulate(run: RecordedRun, *, kernel: str | None = None, max_steps: int | 
         wanted.setdefault(episode, {})[round((stamp - offsets[episode]) / dt_ns)] = state
     _check_resim_budget(run, sum(max(recorded) + 1 for recorded in wanted.values()), max_steps)
     compared, worst, first = 0, 0.0, None
-    initial, crushes, watch = sim, [], breakable(run.scene)
+    crushes = []
     for episode in sorted(wanted):
-        sim = initial  # every object again (a crush took one out of the scene)
-        sim.reset()
+        stepper.reset()  # every object again (a crush took one out of the scene)
         torques = sorted(changes.get(episode, []))
         held, k = 0.0, 0
         recorded = wanted[episode]
@@ -600,7 +602,7 @@ def resimulate(run: RecordedRun, *, kernel: str | None = None, max_steps: int | 
             theirs = recorded.get(n)
             if theirs is not None:
                 compared += 1
-                mine = joint_positions(sim.q, q_ext, alpha) + joint_velocities(sim.v)
+                mine = joint_positions(stepper.sim.q, q_ext, alpha) + joint_velocities(stepper.sim.v)
                 if mine != theirs:  # the deviation only where there is one (resim is read-bound)
                     dev = max(abs(a - b) for a, b in zip(mine, theirs))
                     if math.isnan(dev):  # a NaN on either side is a deviation, not "no larger than the max"
@@ -611,11 +613,9 @@ def resimulate(run: RecordedRun, *, kernel: str | None = None, max_steps: int | 
             while k < len(torques) and torques[k][0] <= n:
                 held = torques[k][1]
                 k += 1
-            sim.step(None if run.torque_source == "scene" else held)
-            if watch:
-                sim, broken = crush_step(sim)  # the node's rule (finger_sim.runtime.crushing)
-                # the step after the last recorded state is taken too: what it crushed the log cannot hold
-                crushes += [LoggedCrush(episode, c.step, c.object, c.force) for c in broken if c.step <= max(recorded)]
+            stepper.step(None if run.torque_source == "scene" else held)
+            # the step after the last recorded state is taken too: what it crushed the log cannot hold
+            crushes += [LoggedCrush(episode, c.step, c.object, c.force) for c in stepper.new() if c.step <= max(recorded)]
     logged = run.crushes
     return ResimResult(compared, worst, first, tuple(crushes), crushes == logged)
 

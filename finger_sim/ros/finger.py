@@ -19,7 +19,7 @@ from finger_sim.ros import conversions, motor
 from finger_sim.ros.interfaces import Endpoint
 from finger_sim.run_log import CommandEvent
 from finger_sim.runtime.commands import Inbox, TorqueCommands
-from finger_sim.runtime.crushing import CRUSH_OUTPUT, Crushing, crush_values
+from finger_sim.runtime.crushing import CRUSH_OUTPUT, crush_values
 from finger_sim.runtime.diagnostics import DiagnosticsWindow, Level
 from finger_sim.runtime.drive_commands import VoltageCommands
 from finger_sim.runtime.hand_config import FingerSpec
@@ -35,9 +35,9 @@ class Finger:
 
     def __init__(self, spec: FingerSpec, settings: RunSettings, timeline: Timeline) -> None:
         self.spec = spec
-        #: the simulator and the objects its steps crush (runtime.crushing); `sim` is its current one
-        self.crushing = Crushing(node_simulator(spec.scene_path, settings.physics_rate_hz))
-        self.scene: Scene = self.sim.scene
+        #: the simulator with the scene's changes (tip-force profile, crushing; finger_sim.scene_changes)
+        self.changes = node_simulator(spec.scene_path, settings.physics_rate_hz)
+        self.scene: Scene = self.changes.scene
         self.file_dt = load_scene(spec.scene_path).dt  # the scene file's own dt, for the record
         self.frames = conversions.FingerFrames.from_system(self.sim.system, spec.frame_prefix)
         self.reported = output_names(self.sim.system.elements, self.sim.q)  # e.g. grip_force: contact topics
@@ -55,7 +55,7 @@ class Finger:
         self.timeline = timeline
         self.crushed_now: list[Crush] = []  # the objects the last step crushed
         self._crush_records: list[Crush] = []  # crushes whose ~/crush_log record is not yet out
-        if self.crushing.watching:
+        if self.changes.watching:
             self.reported = (*self.reported, CRUSH_OUTPUT)
         self.mcp_joint = spec.frame_prefix + joints.JOINT_NAMES[0]
         scene_driven = settings.torque_source is TorqueSource.SCENE
@@ -81,7 +81,7 @@ class Finger:
     @property
     def sim(self) -> Simulator:
         """The simulator to step next (after a crush, that of the scene without the object)."""
-        return self.crushing.sim
+        return self.changes.sim
 
     def connect(self, node_name: str, outputs: dict[str, Endpoint], inputs: list[Endpoint]) -> None:
         """Give the finger its publishers and subscriptions, and the names of its statuses; a
@@ -105,11 +105,10 @@ class Finger:
 
     def step(self, torque: float | None) -> State:
         """One physics step with `torque` (None: the scene's profile); SimulationDiverged passes."""
-        state = self.sim.step(torque)
-        self.crushing.after_step()
-        self.crushed_now = self.crushing.new()  # the node logs them; publish_state sends their records
+        state = self.changes.step(torque)
+        self.crushed_now = self.changes.new()  # the node logs them; publish_state sends their records
         self._crush_records += self.crushed_now
-        if self.crushing.before is not None and self.contact is not None:
+        if self.changes.before is not None and self.contact is not None:
             # the crushing state reports with the objects the step ran with, the states after without the broken one
             self.contact, self._contact_after = (self._contact_after,
                                                  conversions.ContactReport(self.frames, self.sim.system.elements))
@@ -121,7 +120,7 @@ class Finger:
 
     def reset(self) -> CommandEvent:
         """Back to the scene's initial state; the 'reset' event."""
-        self.crushing.reset()
+        self.changes.reset()
         self.crushed_now, self._crush_records = [], []
         self.contact = self._contact_after = self._contact_initial
         if self.current_sensor is not None:
@@ -151,7 +150,7 @@ class Finger:
             publish(self.joints_out, self._joints_cdr(stamp, *self.joint_values))
             publish(self.pose_out, self._pose_cdr(stamp, *conversions.fingertip_values(self.frames, q)))
             if self.contact is not None:  # a crushing state reports the force that broke the object
-                contact = self.contact if self.crushing.before is not None else self._contact_after
+                contact = self.contact if self.changes.before is not None else self._contact_after
                 for key, msg in contact.messages(*self.sim.state, stamp):
                     publish(self.outputs[key], msg)
         if markers and self.markers_out is not None:

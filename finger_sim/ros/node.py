@@ -700,7 +700,7 @@ class SteppingNode(Node):
                 run_wall_s=run_wall, max_residual_m=f.max_residual, torque=f.applied,
                 commands_received=f.inbox.received, log=log, clock_publishers=clocks,
                 lockstep_timeouts=f.lockstep_timeouts if self._lockstep else None,
-                crushes=[c.log_line() for c in f.crushing.crushes] if f.crush_log_out is not None else None)
+                crushes=[c.log_line() for c in f.changes.crushes] if f.crush_log_out is not None else None)
             last = i == len(self.fingers) - 1
             level, message, values = f.diagnostics.report(snap, f.commands, self.pacer, now, new_window=last)
             statuses.append(conversions.status(f.diag_name, f.hardware_id, bytes([level]), message, values))
