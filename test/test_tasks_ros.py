@@ -21,6 +21,8 @@ import yaml
 pytest.importorskip("rclpy")
 
 from finger_sim.errors import ConfigError  # noqa: E402
+from finger_sim.log import read_log  # noqa: E402
+from finger_sim.run_log import load_run, resimulate  # noqa: E402
 from finger_sim.tasks.controllers import AGGRESSIVE, grip_pi, grip_pi_aggressive, grip_voltage  # noqa: E402
 from finger_sim.tasks.ros_runner import lockstep_task, run_ros_task  # noqa: E402
 from finger_sim.tasks.runner import run_task  # noqa: E402
@@ -97,6 +99,10 @@ def test_ros_path_runs_every_kind_of_task_and_scores_equal_the_offline_path(kind
     for name in offline.samples:
         assert np.array_equal(ros.samples[name], offline.samples[name]), name
     assert ros.scores == offline.scores and ros.crushes == offline.crushes
+    (log,) = (tmp_path / "ros" / "log").glob("*.mcap")  # the node's log re-simulates with its scene changes
+    resim = resimulate(load_run(read_log(log)))
+    assert resim.exact and [(c.step, c.object, c.force) for c in resim.crushes] == [
+        (c.step, c.object, c.force) for c in ros.crushes]
     if kind == "crush":
         assert ros.scores["crushed"] and not ros.ok  # the overshoot broke the egg: the task is failed
         (crush,) = ros.crushes
