@@ -15,7 +15,7 @@ from finger_sim.rollouts import rollout
 from finger_sim.scene import load_scene, scene_from_dict
 from finger_sim.scene_changes import SceneChanges
 from finger_sim.simulate import simulate
-from finger_sim.sweep import run_batch_scenes
+from finger_sim.batch import run_batch
 from finger_sim.tip_force_profile import static_scene, tip_force_switches
 
 CONFIG = Path(__file__).resolve().parents[1] / "config"
@@ -51,7 +51,7 @@ def test_profile_switches_at_the_first_step_at_or_after_each_end_and_round_trips
     ([{"start": 0.1, "end": 0.3, "force": [0, 1]}, {"start": 0.2, "end": 0.4, "force": [0, 1]}], "input.tip_force"),
     ([{"start": 0.1, "end": 0.05, "force": [0, 1]}], "input.tip_force[0].end"),
     ([{"start": 0.1, "force": [0, 1], "torque": 1}], "input.tip_force[0]"),
-    ([{"start": 0.1, "force": [0, 1e9]}], "input.tip_force[0].force"),
+    ([{"start": 0.1, "force": [0, 1e9]}], "input.tip_force[0].force[1]"),
     ({"start": 0.1}, "input.tip_force"),
 ])
 def test_bad_profiles_are_refused_naming_the_key(spans, key):
@@ -62,8 +62,8 @@ def test_bad_profiles_are_refused_naming_the_key(spans, key):
 
 def test_paths_that_run_one_fixed_system_refuse_a_profile_rather_than_ignore_it():
     scene = scene_from_dict(cup_with([{"start": 0.1, "end": 0.2, "force": [0.0, -0.2]}]))
-    for run in (lambda: simulate(scene), lambda: rollout([scene], nstep=10),
-                lambda: run_batch_scenes([scene])):
+    for run in (lambda: simulate(scene), lambda: rollout(scene, nstep=10),
+                lambda: run_batch([scene])):
         with pytest.raises(ConfigError, match="no tip-force profile") as err:
             run()
         assert err.value.key == "input.tip_force"
