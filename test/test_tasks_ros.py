@@ -121,3 +121,14 @@ def test_a_drive_scene_refuses_scene_changes_it_cannot_carry_over(tmp_path):
     with pytest.raises(ConfigError, match="mesh mode"):
         run_task(short_task(tmp_path, "hold_voltage_off", disturbances=[
             {"type": "tip_force", "start": 0.5, "end": 0.7, "force": [0.0, -0.2]}]), grip_voltage)
+
+
+@pytest.mark.parametrize("params, message", [
+    ({"controller": "no_such_module:law"}, "parameter 'controller': expected an importable module"),
+    ({"controller": "finger_sim.tasks.controllers:grip_pi", "kp": "high"}, "parameter 'kp': expected a number"),
+])
+def test_task_controller_node_refuses_a_bad_controller_in_one_line(params, message, launcher):
+    node = launcher.node("finger_sim.ros.task_controller", params)
+    assert node.wait(60.0) == 2
+    (line,) = [l for l in node.output().splitlines() if "cannot start" in l]
+    assert message in line

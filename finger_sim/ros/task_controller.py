@@ -21,7 +21,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from std_msgs.msg import Float64
 
-from finger_sim.errors import ConfigError
+from finger_sim.errors import ConfigError, shown
 from finger_sim.ros.controller_main import spin_controller
 from finger_sim.runtime.parameters import ParameterError
 from finger_sim.tasks.controllers import commanded_input, load_factory
@@ -45,13 +45,16 @@ class TaskControllerNode(Node):
             spec = values.get("controller")
             if not isinstance(spec, str):
                 raise ConfigError("parameter controller", "module:callable of a task controller factory", spec)
-            factory = load_factory(spec)
+            try:
+                factory = load_factory(spec)
+            except ConfigError as exc:  # load_factory names the command-line option
+                raise ConfigError("parameter controller", exc.allowed, exc.got) from None
             self.sample_period = _number(values.get("sample_period", 0.001), "sample_period")
             self.setpoint = _number(values.get("setpoint", 0.0), "setpoint")
             params = {k: _number(v, k) for k, v in values.items() if k not in OWN}
             self.control = factory(self.sample_period, **params)
         except ConfigError as exc:
-            raise ParameterError(exc.key.removeprefix("parameter "), f"expected {exc.allowed}, got {exc.got!r}") from None
+            raise ParameterError(exc.key.removeprefix("parameter "), f"expected {exc.allowed}, got {shown(exc.got)}") from None
         self.samples = 0
         topic = TOPICS[commanded_input(factory)]
         self._pub = self.create_publisher(Float64, topic, COMMAND_QOS)
