@@ -99,7 +99,7 @@ def test_ros_path_runs_every_kind_of_task_and_scores_equal_the_offline_path(kind
     for name in offline.samples:
         assert np.array_equal(ros.samples[name], offline.samples[name]), name
     assert ros.scores == offline.scores and ros.crushes == offline.crushes
-    (log,) = (tmp_path / "ros" / "log").glob("*.mcap")  # the node's log re-simulates with its scene changes
+    (log,) = (tmp_path / "ros").glob("log_*/*.mcap")  # the node's log re-simulates with its scene changes
     resim = resimulate(load_run(read_log(log)))
     assert resim.exact and [(c.step, c.object, c.force) for c in resim.crushes] == [
         (c.step, c.object, c.force) for c in ros.crushes]

@@ -2,7 +2,7 @@
 
 The runner starts, on the loopback interface and in the current ROS_DOMAIN_ID:
 - finger_node on the task's scene (written to `<workdir>/scene.yaml`) with `lockstep:=true`,
-  `command_qos:=reliable`, `realtime_factor:=0` and its log in `<workdir>/log/`;
+  `command_qos:=reliable`, `realtime_factor:=0` and its log in a new `<workdir>/log_*/`;
 - the controller executable (e.g. `finger_grip_controller`) with the task's first setpoint as its
   `setpoint` parameter, `sample_period` = the scene's dt, the given parameters, and two remaps:
   its `grip_force` comes from the runner (`RELAY_TOPIC`), its `/clock` from nowhere (it then
@@ -34,6 +34,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from collections.abc import Mapping
@@ -101,7 +102,7 @@ def run_ros_task(task: Task, executable: str, workdir: Path, *, label: str = "",
     scene_data = scene.to_dict()  # the input is the controller's: before its first command acts it is 0
     scene_data["input"]["torque" if scene.drive is None else "voltage"] = {"type": "constant", "value": 0.0}
     (workdir / "scene.yaml").write_text(dump_scene(scene_data), encoding="utf-8")
-    log_dir = workdir / "log"
+    log_dir = Path(tempfile.mkdtemp(prefix="log_", dir=workdir))  # a run of its own: an earlier run's log stays apart
     env = {**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "PYTHONUNBUFFERED": "1"}
     for key in ("ROS_LOCALHOST_ONLY", "ROS_STATIC_PEERS", "ROS_DISCOVERY_SERVER"):
         env.pop(key, None)
