@@ -55,6 +55,7 @@ setup(
             "finger_hand = finger_sim.ros.hand:main",
             "finger_pd_controller = finger_sim.ros.pd_controller:main",
             "finger_grip_controller = finger_sim.ros.grip_controller:main",
+            "finger_task_controller = finger_sim.ros.task_controller:main",
             "finger_replay = finger_sim.ros.replay:main",
         ],
     },

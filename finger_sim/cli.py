@@ -199,10 +199,13 @@ def _salvaged(reader, command: str) -> bool:  # type: ignore[no-untyped-def]
 
 @_log_command
 def _info(args: argparse.Namespace) -> int:
-    from finger_sim.run_log import FINGER_SIM_METADATA
+    from finger_sim.run_log import FINGER_SIM_METADATA, crush_lines
 
     reader = _open_log(args.log, salvage=True)
     print(reader.info(FINGER_SIM_METADATA))
+    crushes = crush_lines(reader)  # objects the run crushed (finger_sim.runtime.crushing)
+    if crushes is not None:
+        print("Crushed:  " + ("\n          ".join(crushes) if crushes else "none"))
     if args.no_verify:
         print("Chunks:   not verified (--no-verify)")
     else:
@@ -528,8 +531,8 @@ def build_parser() -> argparse.ArgumentParser:
     tasks.add_argument("--controller", action="append", default=[], metavar="LABEL=module:callable",
                        help="a controller factory (repeat; default: the shipped grip_pi and grip_pi_aggressive)")
     tasks.add_argument("--ros-controller", action="append", default=[], metavar="LABEL=EXECUTABLE",
-                       help="a ROS 2 controller node (e.g. finger_grip_controller) run through finger_node in lockstep "
-                            "on ROS_DOMAIN_ID, loopback only (repeatable)")
+                       help="a ROS 2 controller node (e.g. finger_grip_controller, or module:callable run as a node) "
+                            "run through finger_node in lockstep on ROS_DOMAIN_ID, loopback only (repeatable)")
     tasks.add_argument("--param", action="append", default=[], metavar="LABEL.key=value",
                        help="a keyword argument of a controller's factory, e.g. grip_pi.kp=0.01")
     tasks.add_argument("--vary", action="append", default=[], metavar="key=v1,v2,...",

@@ -58,6 +58,21 @@ def crushed(sim: Simulator) -> list[Crush]:
             if obj.properties.break_force is not None and f > obj.properties.break_force]
 
 
+def crush_step(sim: Simulator) -> tuple[Simulator, list[Crush]]:
+    """After a step of `sim`: the Simulator to go on with and the objects that step crushed
+    (taken out of its scene, the state carried over); `sim` itself and [] when none broke.
+    The one rule of crushing, shared by the task runner, finger_node and resim."""
+    broken = crushed(sim)
+    if not broken:
+        return sim, []
+    return carry_over(sim, without_objects(sim.scene, (c.object for c in broken))), broken
+
+
+def breakable(scene: Scene) -> bool:
+    """Whether any object of `scene` has a break_force."""
+    return any(o.properties.break_force is not None for o in scene.objects)
+
+
 def without_objects(scene: Scene, names: Iterable[str]) -> Scene:
     """`scene` with the named objects taken out."""
     gone = set(names)

@@ -18,7 +18,8 @@ import re
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from os import PathLike
-from typing import Any
+from pathlib import Path
+from typing import Any, NamedTuple
 
 import numpy as np
 import yaml
@@ -34,7 +35,9 @@ from finger_sim.log.reader import LogReader, TopicInfo
 from finger_sim.run_records import NS_PER_S, CommandEvent, RunLogError, stamp_ns
 from finger_sim.scene import Scene, scene_from_dict
 from finger_sim.scene_yaml import parse_scene_text
+from finger_sim.scene_changes import SceneChanges
 from finger_sim.simulate import Simulator, Trajectory
+from finger_sim.tip_force_profile import static_scene
 
 #: Name of the metadata record the node writes.
 FINGER_SIM_METADATA = "finger_sim"
@@ -201,6 +204,23 @@ def _short(value: Any) -> str:
 # -- reading a run ---------------------------------------------------------------------------------
 
 
+class LoggedCrush(NamedTuple):
+    """One `~/crush_log` record: `object` crushed at the end of the step to state `step` of
+    `episode`, under `force` N (its break_force exceeded; finger_sim.grasp_objects)."""
+
+    episode: int
+    step: int
+    object: str
+    force: float
+
+    @classmethod
+    def from_values(cls, values: Mapping[str, str], path: str | PathLike[str] = "log") -> LoggedCrush:
+        try:
+            return cls(int(values["episode"]), int(values["step"]), values["object"], float(values["force"]))
+        except (KeyError, ValueError) as exc:
+            raise RunLogError(path, f"crush log entry {shown(dict(values))}: {_first_line(exc)}") from None
+
+
 @dataclass
 class RecordedRun:
     """What a log says about one node run: its metadata, commands and recorded states."""
@@ -209,6 +229,8 @@ class RecordedRun:
     joint_states: list[tuple[int, Vec6]] = field(default_factory=list)  # (stamp ns, positions + velocities)
     torques: list[float] = field(default_factory=list)  # N·m, each state's mcp effort (NaN if none logged)
     events: list[CommandEvent] = field(default_factory=list)  # in recording order
+    #: the objects crushed (`~/crush_log`, finger_sim.runtime.crushing): (episode, step, object, force N)
+    crushes: list[LoggedCrush] = field(default_factory=list)
 
     @property
     def scene(self) -> Scene:
@@ -258,19 +280,24 @@ def load_run(reader: LogReader, *, events: bool = True, finger: str = "") -> Rec
     states = _states_topic(reader, finger)
     ending = f"/{finger}/command_log" if finger else "/command_log"
     log_topics = [t for t in reader.topics if t.endswith(ending)] if events else []
-    for topic in log_topics:
+    crush_ending = f"/{finger}/crush_log" if finger else "/crush_log"
+    crush_topics = [t for t in reader.topics if t.endswith(crush_ending)] if events else []
+    for topic in (*log_topics, *crush_topics):
         check_schema(reader, reader.topics[topic], COMMAND_LOG_TYPE)
     order: list[int] | None = None
     decode_state = JointStateDecoder()
     # One pass in file order over the chunks that hold these topics, through fixed-layout CDR
     # readers (a few µs a message, against 30-100 µs for a general deserializer; schemas checked above).
-    for _, channel, record in reader.raw_messages([states, *log_topics], log_time_order=False):
+    for _, channel, record in reader.raw_messages([states, *log_topics, *crush_topics], log_time_order=False):
         if channel.topic != states:
             try:
                 status = decode_diagnostic_status(record.data)
             except LogArgumentError as exc:
                 raise RunLogError(reader.path, f"{channel.topic} at {record.log_time} ns: {exc}") from None
-            run.events.append(CommandEvent.from_values(dict(status.values), reader.path))
+            if channel.topic in crush_topics:
+                run.crushes.append(LoggedCrush.from_values(dict(status.values), reader.path))
+            else:
+                run.events.append(CommandEvent.from_values(dict(status.values), reader.path))
             continue
         try:
             js = decode_state(record.data)
@@ -286,6 +313,22 @@ def load_run(reader: LogReader, *, events: bool = True, finger: str = "") -> Rec
         run.joint_states.append((js.stamp_ns, state))  # type: ignore[arg-type]
         run.torques.append(js.effort[order[0]] if len(js.effort) > order[0] else math.nan)
     return run
+
+
+def crush_lines(reader: LogReader) -> list[str] | None:
+    """`finger-sim info`'s lines on the objects a log's run crushed (every `~/crush_log` record);
+    None for a log without that topic (a scene without breakable objects)."""
+    topics = sorted(t for t in reader.topics if t.endswith("/crush_log"))
+    if not topics:
+        return None
+    lines = []
+    for topic in topics:
+        check_schema(reader, reader.topics[topic], COMMAND_LOG_TYPE)
+        for _, _, record in reader.raw_messages([topic]):
+            status = decode_diagnostic_status(record.data)
+            values = dict(status.values)
+            lines.append(f"{topic}: episode {values.get('episode', '?')}, step {values.get('step', '?')}: {status.message}")
+    return lines
 
 
 def _states_topic(reader: LogReader, finger: str = "") -> str:
@@ -413,17 +456,24 @@ class ResimResult:
     compared: int
     max_deviation: float  # over positions (rad) and velocities (rad/s)
     first_stamp_ns: int | None  # stamp of the first recorded state that differs, None if none
+    #: the objects the re-simulation crushed, and whether they equal the log's `~/crush_log` exactly
+    crushes: tuple[LoggedCrush, ...] = ()
+    crushes_match: bool = True
 
     @property
     def exact(self) -> bool:
-        return self.first_stamp_ns is None
+        return self.first_stamp_ns is None and self.crushes_match
 
     def summary(self) -> str:
-        if self.exact:
-            return f"resim: {self.compared} recorded states reproduced bit for bit (max deviation 0)"
+        crushed = "".join(f"; object '{c.object}' crushed at step {c.step} of episode {c.episode} ({c.force!r} N)"
+                          for c in self.crushes)
+        if not self.crushes_match:
+            crushed += "; the crushes differ from the log's ~/crush_log"
+        if self.first_stamp_ns is None:
+            return f"resim: {self.compared} recorded states reproduced bit for bit (max deviation 0){crushed}"
         return (
             f"resim: max deviation {self.max_deviation:.3e} over {self.compared} recorded states; "
-            f"first at t = {self.first_stamp_ns / NS_PER_S:.6f} s on /clock"
+            f"first at t = {self.first_stamp_ns / NS_PER_S:.6f} s on /clock{crushed}"
         )
 
 
@@ -434,7 +484,7 @@ def _recorded_method(scene: Scene, method: str) -> Scene:
     from finger_sim.integrators import METHODS
     from finger_sim.scene import AUTO
 
-    if scene.method != AUTO or method not in METHODS or method == Simulator(scene, kernel="python").method:
+    if scene.method != AUTO or method not in METHODS or method == Simulator(static_scene(scene), kernel="python").method:
         return scene
     return scene.with_overrides(method=method)
 
@@ -451,7 +501,9 @@ def resimulate(run: RecordedRun, *, kernel: str | None = None, max_steps: int | 
     max_steps: refuse (ResourceError, before the first step) a re-simulation of more steps in all;
     None: `simulate`'s default budget (finger_sim.budget.DEFAULT_MAX_STEPS).
     """
-    sim = Simulator(_recorded_method(run.scene, run.metadata.method), kernel=run.metadata.kernel if kernel is None else kernel)
+    # the scene's changes (a tip-force profile, crushing) as the node stepped them (finger_sim.scene_changes)
+    stepper = SceneChanges(_recorded_method(run.scene, run.metadata.method),
+                           kernel=run.metadata.kernel if kernel is None else kernel)
     dt_ns = run.dt * NS_PER_S
     q_ext, alpha = kinematics.extended_pose(run.scene.params), kinematics.distal_offset(run.scene.params)
     offsets = [0] + [e.stamp_ns for e in run.events if e.event == "reset"]
@@ -465,8 +517,9 @@ def resimulate(run: RecordedRun, *, kernel: str | None = None, max_steps: int | 
         wanted.setdefault(episode, {})[round((stamp - offsets[episode]) / dt_ns)] = state
     _check_resim_budget(run, sum(max(recorded) + 1 for recorded in wanted.values()), max_steps)
     compared, worst, first = 0, 0.0, None
+    crushes = []
     for episode in sorted(wanted):
-        sim.reset()
+        stepper.reset()  # every object again (a crush took one out of the scene)
         torques = sorted(changes.get(episode, []))
         held, k = 0.0, 0
         recorded = wanted[episode]
@@ -474,7 +527,7 @@ def resimulate(run: RecordedRun, *, kernel: str | None = None, max_steps: int | 
             theirs = recorded.get(n)
             if theirs is not None:
                 compared += 1
-                mine = joint_positions(sim.q, q_ext, alpha) + joint_velocities(sim.v)
+                mine = joint_positions(stepper.sim.q, q_ext, alpha) + joint_velocities(stepper.sim.v)
                 if mine != theirs:  # the deviation only where there is one (resim is read-bound)
                     dev = max(abs(a - b) for a, b in zip(mine, theirs))
                     if math.isnan(dev):  # a NaN on either side is a deviation, not "no larger than the max"
@@ -485,8 +538,11 @@ def resimulate(run: RecordedRun, *, kernel: str | None = None, max_steps: int | 
             while k < len(torques) and torques[k][0] <= n:
                 held = torques[k][1]
                 k += 1
-            sim.step(None if run.torque_source == "scene" else held)
-    return ResimResult(compared, worst, first)
+            stepper.step(None if run.torque_source == "scene" else held)
+            # the step after the last recorded state is taken too: what it crushed the log cannot hold
+            crushes += [LoggedCrush(episode, c.step, c.object, c.force) for c in stepper.new() if c.step <= max(recorded)]
+    logged = run.crushes
+    return ResimResult(compared, worst, first, tuple(crushes), crushes == logged)
 
 
 def _check_resim_budget(run: RecordedRun, steps: int, max_steps: int | None) -> None:

@@ -26,6 +26,9 @@ Schema (every key optional; omitted = the spec's default):
     input:
       torque: {type: ramp, offset: 0.001, slope: 0.01}   # N·m, see finger_sim.inputs
       # voltage: {type: constant, value: 6.0}            # V, instead of torque when model.drive is set
+      # tip_force: [{start: 0.8, end: 1.2, force: [0.0, -0.2]}]   # s, s, N: replaces model.tip_force over
+      #   each span, switched at step boundaries (finger_sim.tip_force_profile; stepped by finger_node,
+      #   resim and `finger-sim tasks`, refused by the paths that run one fixed system)
     initial: {theta1: 0.0, theta1_dot: 0.0}             # rad, rad/s
     duration: 0.3                # s
     integrator: {method: auto, dt: 0.001}               # method: a name in METHODS, or auto
@@ -64,6 +67,7 @@ from finger_sim.effects.contact_geometry import (
     phalanx_radii_from_value,
 )
 from finger_sim.inputs import BREAK_EPS, Constant, Profile, Ramp, profile_from_dict
+from finger_sim.tip_force_profile import TipForceSpan, spans_from_list
 from finger_sim.integrators import METHODS
 from finger_sim.model import FingerParams
 from finger_sim.sensors import SensorSet, sensors_from_dict
@@ -133,6 +137,8 @@ class Scene:
     tolerance: float = DEFAULT_TOLERANCE
     #: measurement models read from the outputs after the step (finger_sim.sensors), or None
     sensors: SensorSet | None = None
+    #: the tip-force profile (`input.tip_force`): spans over which a force replaces `tip_force`
+    tip_force_profile: tuple[TipForceSpan, ...] = ()
 
     @property
     def step_count(self) -> int:
@@ -174,7 +180,8 @@ class Scene:
             "name": self.name,
             "description": self.description,
             "model": model,
-            "input": {"torque" if self.drive is None else "voltage": self.torque.to_dict()},
+            "input": {"torque" if self.drive is None else "voltage": self.torque.to_dict()}
+            | ({"tip_force": [s.to_dict() for s in self.tip_force_profile]} if self.tip_force_profile else {}),
             "initial": {"theta1": self.theta1, "theta1_dot": self.theta1_dot},
             "duration": self.duration,
             "integrator": {"method": self.method, "dt": self.dt, "tolerance": self.tolerance},
@@ -231,7 +238,7 @@ def scene_from_dict(data: Any, *, default_name: str = "scene") -> Scene:
     model = mapping(data.get("model", {}), "model", _MODEL_KEYS)
     geometry = mapping(model.get("geometry", {}), "model.geometry", {f.name for f in fields(FingerParams)})
     params = FingerParams(**{k: number(v, f"model.geometry.{k}") for k, v in geometry.items()})
-    inp = mapping(data.get("input", {}), "input", {"torque", "voltage"})
+    inp = mapping(data.get("input", {}), "input", {"torque", "voltage", "tip_force"})
     drive = drive_from_dict(model["drive"]) if "drive" in model else None
     input_key = _input_key(inp, drive)
     initial = mapping(data.get("initial", {}), "initial", {"theta1", "theta1_dot"})
@@ -280,6 +287,7 @@ def scene_from_dict(data: Any, *, default_name: str = "scene") -> Scene:
                          maximum=MAX_TOLERANCE),
         sensors=(sensors_from_dict(data["sensors"], has_drive=drive is not None, has_objects=bool(data.get("objects")))
                  if "sensors" in data else None),
+        tip_force_profile=spans_from_list(inp["tip_force"], duration) if "tip_force" in inp else (),
     )
     q0, _ = scene.initial_state()  # refuses a θ1 outside the assemblable range, or at a toggle
     for element in build_elements(scene):  # through the registry: an element that must start clear checks it

@@ -35,6 +35,7 @@ from finger_sim.projection import OK as FAST_OK
 from finger_sim.stepper_slot import BREAKPOINT
 from finger_sim.kinematics import Vec3
 from finger_sim.scene import AUTO, Scene
+from finger_sim.tip_force_profile import refuse_profile
 from finger_sim.stability import CONTACT_RESOLUTION, fastest_mode, has_contact, largest_stable_dt, mcp_range, stable_at
 
 #: A gap crossing (a stop) is located to this tolerance on the gap (rad for the MCP stops);
@@ -92,6 +93,7 @@ class Simulator:
         """kernel: "auto" (compiled where numba and the scene allow), "compiled", "python", or a
         kernel name recorded by an earlier run; `self.kernel` names the one that runs. The set-up
         (system, method choice, stability check, compiled plan) is kept per scene (`_setup`)."""
+        refuse_profile(scene, "simulate or rollout")
         self.scene = scene
         # the registered effects are part of the key: a plug-in registered later builds another system
         effects = tuple(EFFECTS.values())

@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from finger_sim import kinematics, stick_slip
+from finger_sim.tip_force_profile import refuse_profile
 from finger_sim.auto import choose_method, contact_substeps
 from finger_sim.dynamics import FingerSystem
 from finger_sim.errors import ConfigError, StabilityError
@@ -166,6 +167,7 @@ class _Planner:
             self._twin, self._model_array = compiled_twin, model_array
 
     def plan(self, index: int, scene: Scene) -> _Plan:
+        refuse_profile(scene, "batch, sweep or sample")
         system = scene.build_system()
         model = self._model_array(system) if self.compile else None
         key = None if model is None else (scene.params, model.tobytes(), mcp_range(scene))

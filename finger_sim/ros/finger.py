@@ -12,20 +12,22 @@ from collections.abc import Callable
 from typing import Any
 
 from finger_sim import joints, kinematics
+from finger_sim.grasp_objects import Crush
 from finger_sim.kinematics import Vec3
 from finger_sim.log.cdr_writer import JointStateCdr, PoseStampedCdr
 from finger_sim.ros import conversions, motor
 from finger_sim.ros.interfaces import Endpoint
 from finger_sim.run_log import CommandEvent
 from finger_sim.runtime.commands import Inbox, TorqueCommands
-from finger_sim.runtime.diagnostics import DiagnosticsWindow
+from finger_sim.runtime.crushing import CRUSH_OUTPUT, crush_values
+from finger_sim.runtime.diagnostics import DiagnosticsWindow, Level
 from finger_sim.runtime.drive_commands import VoltageCommands
 from finger_sim.runtime.hand_config import FingerSpec
 from finger_sim.runtime.parameters import RunSettings, TorqueSource
 from finger_sim.runtime.simulator import node_simulator
 from finger_sim.runtime.timeline import Timeline
 from finger_sim.scene import Scene, load_scene
-from finger_sim.simulate import State, output_names
+from finger_sim.simulate import Simulator, State, output_names
 
 
 class Finger:
@@ -33,8 +35,9 @@ class Finger:
 
     def __init__(self, spec: FingerSpec, settings: RunSettings, timeline: Timeline) -> None:
         self.spec = spec
-        self.sim = node_simulator(spec.scene_path, settings.physics_rate_hz)
-        self.scene: Scene = self.sim.scene
+        #: the simulator with the scene's changes (tip-force profile, crushing; finger_sim.scene_changes)
+        self.changes = node_simulator(spec.scene_path, settings.physics_rate_hz)
+        self.scene: Scene = self.changes.scene
         self.file_dt = load_scene(spec.scene_path).dt  # the scene file's own dt, for the record
         self.frames = conversions.FingerFrames.from_system(self.sim.system, spec.frame_prefix)
         self.reported = output_names(self.sim.system.elements, self.sim.q)  # e.g. grip_force: contact topics
@@ -48,6 +51,12 @@ class Finger:
         if self.current_sensor is not None:
             self.reported = (*self.reported, "motor_current_measured")
         self.contact = conversions.ContactReport.of(self.frames, self.sim.system.elements)  # None: no contact
+        self._contact_initial = self._contact_after = self.contact
+        self.timeline = timeline
+        self.crushed_now: list[Crush] = []  # the objects the last step crushed
+        self._crush_records: list[Crush] = []  # crushes whose ~/crush_log record is not yet out
+        if self.changes.watching:
+            self.reported = (*self.reported, CRUSH_OUTPUT)
         self.mcp_joint = spec.frame_prefix + joints.JOINT_NAMES[0]
         scene_driven = settings.torque_source is TorqueSource.SCENE
         self.scene_steps = self.scene.step_count if scene_driven else None
@@ -67,7 +76,12 @@ class Finger:
         self.joint_values: tuple[Vec3, Vec3, Vec3] = ((0.0,) * 3,) * 3
         self.outputs: dict[str, Endpoint] = {}  # this finger's publishers by OUTPUTS key (`connect`)
         self.inputs: list[Endpoint] = []
-        self.diag_name = self.event_name = self.hardware_id = ""
+        self.diag_name = self.event_name = self.crush_name = self.hardware_id = ""
+
+    @property
+    def sim(self) -> Simulator:
+        """The simulator to step next (after a crush, that of the scene without the object)."""
+        return self.changes.sim
 
     def connect(self, node_name: str, outputs: dict[str, Endpoint], inputs: list[Endpoint]) -> None:
         """Give the finger its publishers and subscriptions, and the names of its statuses; a
@@ -75,8 +89,10 @@ class Finger:
         self.outputs, self.inputs = outputs, inputs
         self.joints_out, self.pose_out = outputs["joint_states"], outputs["fingertip_pose"]
         self.command_log_out, self.markers_out = outputs["command_log"], outputs.get("markers")
+        self.crush_log_out = outputs.get("crush_log")  # a scene with a breakable object
         who = f"{node_name}: {self.spec.name + ' ' if self.spec.name else ''}"
         self.diag_name, self.event_name = who + "simulation", who + "command"
+        self.crush_name = who + "crush"
         self.hardware_id = self.spec.frame_prefix + "finger"
 
     def has_controller(self) -> bool:
@@ -89,7 +105,13 @@ class Finger:
 
     def step(self, torque: float | None) -> State:
         """One physics step with `torque` (None: the scene's profile); SimulationDiverged passes."""
-        state = self.sim.step(torque)
+        state = self.changes.step(torque)
+        self.crushed_now = self.changes.new()  # the node logs them; publish_state sends their records
+        self._crush_records += self.crushed_now
+        if self.changes.before is not None and self.contact is not None:
+            # the crushing state reports with the objects the step ran with, the states after without the broken one
+            self.contact, self._contact_after = (self._contact_after,
+                                                 conversions.ContactReport(self.frames, self.sim.system.elements))
         self.applied = self.sim.torque
         residual = kinematics.constraint_norm(self.sim.system.params, state.q)
         if residual > self.max_residual:
@@ -98,7 +120,9 @@ class Finger:
 
     def reset(self) -> CommandEvent:
         """Back to the scene's initial state; the 'reset' event."""
-        self.sim.reset()
+        self.changes.reset()
+        self.crushed_now, self._crush_records = [], []
+        self.contact = self._contact_after = self._contact_initial
         if self.current_sensor is not None:
             self.current_sensor.reset()
         self.inbox.clear()
@@ -108,6 +132,11 @@ class Finger:
     def publish_state(self, publish: Callable[[Endpoint, Any], None], stamp: int, *, states: bool, markers: bool) -> None:
         """Publish this finger's joint states and fingertip pose (states) and markers, stamped `stamp` ns."""
         q = self.sim.q
+        if self.crush_log_out is not None:  # whether or not the state is published: every crush is recorded
+            for crush in self._crush_records:
+                publish(self.crush_log_out, conversions.status(self.crush_name, self.hardware_id, bytes([Level.WARN]),
+                                                               crush.log_line(), crush_values(crush, self.timeline.episode)))
+            self._crush_records = []
         if states:  # CDR bytes: no message objects, no rclpy serialization
             effort = self.applied
             if self.driven:  # the mcp effort is the mesh torque on link 1; the motor's state has its own topics
@@ -120,8 +149,9 @@ class Finger:
             self.joint_values = conversions.joint_values(self.frames, q, self.sim.v, effort)
             publish(self.joints_out, self._joints_cdr(stamp, *self.joint_values))
             publish(self.pose_out, self._pose_cdr(stamp, *conversions.fingertip_values(self.frames, q)))
-            if self.contact is not None:
-                for key, msg in self.contact.messages(*self.sim.state, stamp):
+            if self.contact is not None:  # a crushing state reports the force that broke the object
+                contact = self.contact if self.changes.before is not None else self._contact_after
+                for key, msg in contact.messages(*self.sim.state, stamp):
                     publish(self.outputs[key], msg)
         if markers and self.markers_out is not None:
             publish(self.markers_out, conversions.markers(self.frames, q, stamp))

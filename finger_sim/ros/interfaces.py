@@ -113,6 +113,8 @@ OUTPUTS: dict[str, OutputSpec] = {
     "diagnostics": OutputSpec("/diagnostics", DiagnosticArray, STATE_QOS, acked=True, per_finger=False),
     "robot_description": OutputSpec("robot_description", String, DESCRIPTION_QOS, per_finger=False),
     "command_log": OutputSpec("~/command_log", DiagnosticStatus, EVENT_QOS, acked=True),
+    # an object crushed (its break_force exceeded; finger_sim.runtime.crushing): one record per crush
+    "crush_log": OutputSpec("~/crush_log", DiagnosticStatus, EVENT_QOS, acked=True, reported_by="crush_log"),
     # contact (spec §7; conversions.ContactReport): Σ F_n (N) and each phalanx's wrench in finger_base
     "grip_force": OutputSpec("grip_force", Float64, STATE_QOS, acked=True, reported_by="grip_force"),
     # grip_force with the state's stamp (conversions.GRIP_FORCE_STAMPED: wrench.force.x = Σ F_n, N)

@@ -61,6 +61,7 @@ class Snapshot:
     log: LogStatus
     clock_publishers: int | None = None  # publishers of /clock seen, when this node publishes it
     lockstep_timeouts: int | None = None  # states whose command did not come within lockstep_timeout; None: no lockstep
+    crushes: list[str] | None = None  # this episode's crushed objects, one line each (runtime.crushing); None: none breakable
 
 
 class DiagnosticsWindow:
@@ -107,6 +108,8 @@ class DiagnosticsWindow:
             level = max(level, Level.WARN)
             problems.append(f"lockstep: {lockstep_new} states without a command within lockstep_timeout "
                             f"in the last {window:.1f} s (the held command went on)")
+        if snap.crushes:  # an event of the simulated world, not a fault of the node: the level stays
+            problems.append(f"{len(snap.crushes)} objects crushed this episode, the last: {snap.crushes[-1]}")
         message = "; ".join([snap.state, *problems])
         late_w = pacer.window if pacer is not None else Lateness()  # at realtime_factor 0: no wake-ups
         late = pacer.lateness if pacer is not None else late_w
@@ -148,6 +151,9 @@ class DiagnosticsWindow:
             "clock_publishers": snap.clock_publishers if snap.clock_publishers is not None else "not publishing",
             "lockstep_timeouts": snap.lockstep_timeouts if snap.lockstep_timeouts is not None else "no lockstep",
         }
+        if snap.crushes is not None:
+            values["objects_crushed"] = len(snap.crushes)
+            values["last_crush"] = snap.crushes[-1] if snap.crushes else "none"
         self._lockstep_timeouts = snap.lockstep_timeouts or 0
         self.wall, self._steps = now, snap.steps_total
         self._refused, self._dropped_steps = counts.refused, dropped_steps

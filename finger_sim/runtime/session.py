@@ -84,6 +84,12 @@ class SteppingSession:
 
     _shutdown_errors: tuple[type[BaseException], ...] = ()
 
+    @property
+    def sim(self) -> Any:
+        """The first finger's simulator (after a crush, that of the scene without the object): the step
+        index and time every finger shares."""
+        return self.fingers[0].sim
+
     def _start_session(self, name: str, settings: RunSettings, timeline: Timeline, fingers: list[Any],
                        done: Any | None = None) -> None:
         """The session's state: `fingers` stepped on `timeline` with `settings`; `done` a future
@@ -91,7 +97,6 @@ class SteppingSession:
         s = self.settings = settings
         self.timeline = timeline
         self.fingers = fingers
-        self.sim = fingers[0].sim  # the step index and time every finger shares
         self.dt = self.sim.dt
         self.done = done if done is not None else concurrent.futures.Future()
 
@@ -186,7 +191,8 @@ class SteppingSession:
                 episode=self.timeline.episode, realtime_factor_target=s.realtime_factor, steps_total=self.steps_total,
                 run_wall_s=run_wall, max_residual_m=f.max_residual, torque=f.applied,
                 commands_received=f.inbox.received, log=log, clock_publishers=clocks,
-                lockstep_timeouts=f.lockstep_timeouts if self._lockstep else None)
+                lockstep_timeouts=f.lockstep_timeouts if self._lockstep else None,
+                crushes=[c.log_line() for c in f.changes.crushes] if f.crush_log_out is not None else None)
             last = i == len(self.fingers) - 1
             statuses.append(f.diagnostics.report(snap, f.commands, self.pacer, now, new_window=last))
         return statuses
@@ -413,6 +419,8 @@ class SteppingSession:
             except SimulationDiverged as exc:
                 self._diverged(f, exc)
                 return False
+            for crush in f.crushed_now:  # runtime.crushing; its record goes out with the state
+                self.get_logger().warning(f"{f.spec.name + ': ' if f.spec.name else ''}{crush.log_line()}")
         self.steps_total += 1
         self._publish_state()
         if self._scene_steps is not None and n + 1 >= self._scene_steps:

@@ -2,7 +2,7 @@
 
 The runner starts, on the loopback interface and in the current ROS_DOMAIN_ID:
 - finger_node on the task's scene (written to `<workdir>/scene.yaml`) with `lockstep:=true`,
-  `command_qos:=reliable`, `realtime_factor:=0` and its log in `<workdir>/log/`;
+  `command_qos:=reliable`, `realtime_factor:=0` and its log in a new `<workdir>/log_*/`;
 - the controller executable (e.g. `finger_grip_controller`) with the task's first setpoint as its
   `setpoint` parameter, `sample_period` = the scene's dt, the given parameters, and two remaps:
   its `grip_force` comes from the runner (`RELAY_TOPIC`), its `/clock` from nowhere (it then
@@ -17,8 +17,12 @@ bit. Timing: the answer to state k acts over the step k → k+1 (sample_steps 1,
 whatever the task file says; `lockstep_task`). After the task's last step the runner stops both
 nodes (SIGINT, then SIGKILL; also on any failure) and scores the log with `task_scores`.
 
-Not covered yet (refused with a ConfigError): tip-force disturbances and breakable objects
-(finger_node has neither a tip-force command nor crushing).
+What finger_node steps itself, from the scene it is given: the task's tip-force disturbances (the
+scene's `input.tip_force` profile) and breakable objects (finger_sim.scene_changes, the offline
+runner's rule); a crush is read back from the log's `~/crush_log`. A drive task runs with a
+controller that commands `motor_voltage` (e.g. `finger_task_controller` around `grip_voltage`:
+`controller_command`); its electrical energy is scored from the logged `motor/voltage` and
+`motor/current`.
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from collections.abc import Mapping
@@ -40,8 +45,11 @@ import numpy as np
 from finger_sim.errors import ConfigError, FingerSimError
 from finger_sim.scene_yaml import dump_scene
 from finger_sim.tasks.metrics import judge, task_scores
-from finger_sim.tasks.runner import COLUMNS, TaskRun, first_step
+from finger_sim.grasp_objects import Crush
+from finger_sim.scene import Scene
+from finger_sim.tasks.runner import COLUMNS, DRIVE_COLUMNS, TaskRun
 from finger_sim.tasks.schema import Task
+from finger_sim.tip_force_profile import first_step, tip_force_switches
 
 #: The topic on which the runner hands grip_force samples to the controller.
 RELAY_TOPIC = "task_runner/grip_force"
@@ -68,17 +76,12 @@ def lockstep_task(task: Task) -> Task:
     return dataclasses.replace(task, sample_steps=1, delay_steps=0)
 
 
-def check_supported(task: Task) -> None:
-    """ConfigError when the task needs what finger_node cannot do yet."""
-    if task.disturbances:
-        raise ConfigError(f"task '{task.name}'", "no tip-force disturbances with --ros-controller "
-                          "(finger_node has no tip-force command)", f"{len(task.disturbances)} disturbances")
-    breakable = [o.name for o in task.scene.objects if o.properties.break_force is not None]
-    if breakable:
-        raise ConfigError(f"task '{task.name}'", "no object with a break_force with --ros-controller "
-                          "(finger_node does not crush objects)", breakable)
-    if task.input != "torque":
-        raise ConfigError(f"task '{task.name}'", "a torque input with --ros-controller", task.input)
+def controller_command(executable: str) -> list[str]:
+    """The controller node's command: an executable (name or path), or for `module:callable` a
+    Python task controller run as a node (finger_sim.ros.task_controller, this Python)."""
+    if ":" in executable:
+        return [sys.executable, "-m", "finger_sim.ros.task_controller"]
+    return [find_executable(executable)]
 
 
 def find_executable(name: str) -> str:
@@ -92,13 +95,14 @@ def find_executable(name: str) -> str:
 def run_ros_task(task: Task, executable: str, workdir: Path, *, label: str = "",
                  params: Mapping[str, float] | None = None) -> TaskRun:
     """Run `task` against the controller node `executable` (name or path) with `params`; score it."""
-    check_supported(task)
     task = lockstep_task(task)
     scene = task.scene
     dt, n = scene.dt, scene.step_count
     workdir.mkdir(parents=True, exist_ok=True)
-    (workdir / "scene.yaml").write_text(dump_scene(scene.to_dict()), encoding="utf-8")
-    log_dir = workdir / "log"
+    scene_data = scene.to_dict()  # the input is the controller's: before its first command acts it is 0
+    scene_data["input"]["torque" if scene.drive is None else "voltage"] = {"type": "constant", "value": 0.0}
+    (workdir / "scene.yaml").write_text(dump_scene(scene_data), encoding="utf-8")
+    log_dir = Path(tempfile.mkdtemp(prefix="log_", dir=workdir))  # a run of its own: an earlier run's log stays apart
     env = {**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "PYTHONUNBUFFERED": "1"}
     for key in ("ROS_LOCALHOST_ONLY", "ROS_STATIC_PEERS", "ROS_DISCOVERY_SERVER"):
         env.pop(key, None)
@@ -108,8 +112,9 @@ def run_ros_task(task: Task, executable: str, workdir: Path, *, label: str = "",
                          lockstep_timeout=LOCKSTEP_TIMEOUT, realtime_factor=0.0, marker_rate_hz=0.0,
                          physics_rate_hz=1.0 / dt, max_torque=NODE_MAX_TORQUE, command_timeout=0.0,
                          record_dir=str(log_dir))]
-    controller_cmd = [find_executable(executable), "--ros-args",
-                      *_params(**{"setpoint": task.setpoints[0][1], "sample_period": dt, **(params or {})}),
+    own = {"controller": executable} if ":" in executable else {}
+    controller_cmd = [*controller_command(executable), "--ros-args",
+                      *_params(**{**own, "setpoint": task.setpoints[0][1], "sample_period": dt, **(params or {})}),
                       "-r", f"grip_force:={RELAY_TOPIC}", "-r", f"/clock:={NO_CLOCK_TOPIC}"]
     changes = {first_step(t, dt): v for t, v in task.setpoints[1:]}
     start = time.perf_counter()
@@ -135,43 +140,64 @@ def run_ros_task(task: Task, executable: str, workdir: Path, *, label: str = "",
         for proc, _ in procs:
             _stop(proc)
     wall = time.perf_counter() - start
-    samples = read_samples(log_dir, n, task.setpoints, dt)
+    samples, crushes = read_samples(log_dir, n, task.setpoints, scene)
     grid = tuple((first_step(t, dt) * dt, v) for t, v in task.setpoints)
-    scores = task_scores(samples["t"], samples["grip_force"], grid, task.hold_after, False,
-                         torque=(samples["command"], samples["theta1"]))
-    return TaskRun(task.name, label, samples, [], scores, judge(scores, task.limits), grid, dict(task.limits), wall)
+    drive = {c: samples[c] for c in DRIVE_COLUMNS if c in samples}
+    scores = task_scores(samples["t"], samples["grip_force"], grid, task.hold_after, bool(crushes), outputs=drive,
+                         torque=(samples["command"], samples["theta1"]) if task.input == "torque" else None)
+    return TaskRun(task.name, label, samples, crushes, scores, judge(scores, task.limits), grid, dict(task.limits), wall)
 
 
-def read_samples(log_dir: Path, n: int, setpoints: tuple[tuple[float, float], ...], dt: float) -> dict[str, np.ndarray]:
-    """The COLUMNS of states 0..n from finger_node's log (rosbags): joint_states by stamp, grip_force
-    by log time (sim time); command k is the mcp effort of state k+1 (it acted over step k → k+1)."""
+def read_samples(log_dir: Path, n: int, setpoints: tuple[tuple[float, float], ...],
+                 scene: Scene) -> tuple[dict[str, np.ndarray], list[Crush]]:
+    """The COLUMNS of states 0..n from finger_node's log (rosbags), and with a drive its
+    DRIVE_COLUMNS, and the crushes of `~/crush_log`: joint_states by stamp, the other topics by
+    log time (sim time); command k is what acted over step k → k+1 (the mcp effort of state k+1,
+    with a drive the motor voltage of state k+1); the tip force is the scene's profile at step k."""
     from rosbags.highlevel import AnyReader
 
+    dt = scene.dt
     logs = sorted(log_dir.glob("*.mcap"))
     if len(logs) != 1:
         raise FingerSimError(f"expected one MCAP log in {log_dir}, found {len(logs)}")
     step_ns = round(dt * 1e9)
     states: dict[int, tuple[float, float, float]] = {}
-    force: dict[int, float] = {}
+    topics = {"/grip_force": "grip_force", "/motor/voltage": "motor_voltage", "/motor/current": "motor_current"}
+    series: dict[str, dict[int, float]] = {name: {} for name in topics.values()}
+    crushes: list[Crush] = []
     with AnyReader(logs) as reader:
-        wanted = [c for c in reader.connections if c.topic in ("/joint_states", "/grip_force")]
+        wanted = [c for c in reader.connections if c.topic in ("/joint_states", "/finger_node/crush_log", *topics)]
         for conn, log_time, raw in reader.messages(connections=wanted):
             msg = reader.deserialize(raw, conn.msgtype)
             if conn.topic == "/joint_states":
                 k = (msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec) // step_ns
                 states[k] = (msg.position[0], msg.velocity[0], msg.effort[0])
+            elif conn.topic == "/finger_node/crush_log":
+                v = {kv.key: kv.value for kv in msg.values}
+                step = int(v["step"])
+                crushes.append(Crush(v["object"], float(v["t"]), step, float(v["force"]), float(v["break_force"])))
             else:
-                force[log_time // step_ns] = msg.data
-    missing = [k for k in range(n + 1) if k not in states or k not in force]
+                series[topics[conn.topic]][log_time // step_ns] = msg.data
+    drive = scene.drive is not None
+    needed = [series["grip_force"], *((series["motor_voltage"], series["motor_current"]) if drive else ())]
+    missing = [k for k in range(n + 1) if k not in states or any(k not in s for s in needed)]
     if missing:
         raise FingerSimError(f"the log {logs[0]} lacks the states of {len(missing)} steps (first: {missing[0]})")
-    rows = np.zeros((n + 1, len(COLUMNS)))
+    columns = COLUMNS + (DRIVE_COLUMNS if drive else ())
+    rows = np.zeros((n + 1, len(columns)))
     set_steps = [(first_step(t, dt), v) for t, v in setpoints]
+    switches = sorted(tip_force_switches(scene).items())
     for k in range(n + 1):
         theta, rate, _ = states[k]
         setpoint = [v for s, v in set_steps if s <= k][-1]
-        rows[k, :6] = (k * dt, force[k], setpoint, theta, rate, states[min(k + 1, n)][2])
-    return {name: np.ascontiguousarray(rows[:, i]) for i, name in enumerate(COLUMNS)}
+        tip = next((f for s, f in reversed(switches) if s <= k), scene.tip_force)
+        after = min(k + 1, n)
+        command = series["motor_voltage"][after] if drive else states[after][2]
+        rows[k, :9] = (k * dt, series["grip_force"][k], setpoint, theta, rate, command, tip[0], tip[1],
+                       sum(c.step <= k for c in crushes))
+        if drive:
+            rows[k, 9:] = (series["motor_voltage"][k], series["motor_current"][k])
+    return {name: np.ascontiguousarray(rows[:, i]) for i, name in enumerate(columns)}, crushes
 
 
 class _Relay:

@@ -6,9 +6,10 @@ acts from step k + `delay_steps` on and is held (zero-order hold) until the next
 delay of 0 is an ideal controller answering within the sample; 1, a command that arrives one
 step late (finger_node's loop). Before the first command acts the input is 0.
 
-Scene changes happen at step boundaries (`finger_sim.grasp_objects`): a tip-force disturbance
-switches on and off at the first step at or after its start and end; an object whose break force
-is exceeded at the end of a step is crushed and taken out.
+Scene changes happen at step boundaries (`finger_sim.scene_changes`, as finger_node steps them):
+a tip-force disturbance (the task's, in its scene's `input.tip_force`) switches on and off at the
+first step at or after its start and end; an object whose break force is exceeded at the end of a
+step is crushed and taken out.
 """
 
 from __future__ import annotations
@@ -24,10 +25,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from finger_sim.errors import FingerSimError, SimulationDiverged
-from finger_sim.grasp_objects import Crush, carry_over, crushed, with_tip_force, without_objects
-from finger_sim.inputs import BREAK_EPS
+from finger_sim.grasp_objects import Crush
+from finger_sim.scene_changes import SceneChanges
 from finger_sim.sensors import SOURCES, SensorBank
 from finger_sim.simulate import Simulator, output_names, output_values
+from finger_sim.tip_force_profile import first_step
 from finger_sim.tasks.controllers import MEASURED, Factory
 from finger_sim.tasks.metrics import Scores, judge, task_scores
 from finger_sim.tasks.schema import Task
@@ -63,24 +65,15 @@ class TaskRun:
         return all(self.passed.values())
 
 
-def first_step(t: float, dt: float) -> int:
-    """The first step index k with k·dt ≥ t (a time within BREAK_EPS·dt of a step counts as on it)."""
-    return max(0, math.ceil(t / dt - BREAK_EPS))
-
-
 def run_task(task: Task, factory: Factory, *, label: str = "", params: Mapping[str, float] | None = None,
              kernel: str = "auto") -> TaskRun:
     """Run `task` against the controller `factory(sample_period, **params)`; score and judge it."""
     scene = task.scene
     dt, n = scene.dt, scene.step_count
-    sim = Simulator(scene, kernel=kernel)
+    changes = SceneChanges(scene, kernel=kernel)  # the tip-force profile and crushing, as finger_node steps them
+    sim = changes.sim
     controller = factory(task.sample_steps * dt, **(params or {}))
     set_steps = [(first_step(t, dt), v) for t, v in task.setpoints]
-    tip_switch: dict[int, tuple[float, float]] = {}
-    for d in task.disturbances:
-        tip_switch[first_step(d.end, dt)] = scene.tip_force
-    for d in task.disturbances:  # a span starting where another ends wins the step
-        tip_switch[first_step(d.start, dt)] = d.force
     drive_columns = DRIVE_COLUMNS if scene.drive is not None else ()
     rows = np.empty((n + 1, len(COLUMNS) + len(drive_columns)))
     pending: deque[tuple[int, float]] = deque()
@@ -100,8 +93,8 @@ def run_task(task: Task, factory: Factory, *, label: str = "", params: Mapping[s
         while si < len(set_steps) and set_steps[si][0] <= k:
             setpoint = set_steps[si][1]
             si += 1
-        if k in tip_switch:
-            sim = carry_over(sim, with_tip_force(sim.scene, tip_switch[k]))
+        changes.before_step()
+        sim = changes.sim
         if k % task.sample_steps == 0:
             sensed = {"grip_force": outputs.get("grip_force", 0.0), "theta1": sim.q[0], "theta1_dot": sim.v[0]}
             measured = {name: sensed[name] for name in MEASURED}
@@ -128,10 +121,8 @@ def run_task(task: Task, factory: Factory, *, label: str = "", params: Mapping[s
             stopped = True
             break
         outputs = _outputs(sim, command)
-        broken = crushed(sim)
-        if broken:  # the sample at the crush keeps the force that broke it (recorded and measured)
-            crushes += broken
-            sim = carry_over(sim, without_objects(sim.scene, (c.object for c in broken)))
+        crushes += changes.after_step()  # the sample at the crush keeps the force that broke it
+        sim = changes.sim
     else:
         stopped = False
         record(n, outputs)

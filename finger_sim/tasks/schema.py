@@ -21,6 +21,7 @@ the step grid (a change acts from the first step at or after its time).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,6 +31,7 @@ from finger_sim.errors import ConfigError
 from finger_sim.scene import NAME_LENGTH, Scene, load_scene, safe_name, scene_from_dict
 from finger_sim.scene_yaml import mapping, number, pair, read_scene_file, text
 from finger_sim.tasks.metrics import BOOLEAN_METRICS, METRICS
+from finger_sim.tip_force_profile import TipForceSpan, check_spans
 
 _KEYS = {"name", "description", "scene", "objects", "duration", "controller", "setpoints", "disturbances",
          "hold_after", "limits"}
@@ -106,6 +108,10 @@ def task_from_dict(data: Any, *, base: Path, default_name: str = "task") -> Task
         raise ConfigError("controller.input", f"one of {list(INPUTS)} (the scene input the controller commands)", inp)
     if inp != scene_input:
         raise ConfigError("controller.input", f"'{scene_input}', the input of the scene '{scene.name}'", inp)
+    disturbances = _disturbances(data.get("disturbances", []), scene.duration)
+    # the disturbances join the scene's own tip-force profile: the scene steps them (finger_sim.scene_changes)
+    spans = [*scene.tip_force_profile, *(TipForceSpan(d.start, d.end, d.force) for d in disturbances)]
+    scene = dataclasses.replace(scene, tip_force_profile=check_spans(spans, "disturbances"))
     return Task(
         name=name,
         description=text(data.get("description", ""), "description", 4096),
@@ -113,7 +119,7 @@ def task_from_dict(data: Any, *, base: Path, default_name: str = "task") -> Task
         sample_steps=sample_steps,
         delay_steps=delay_steps,
         setpoints=_setpoints(data.get("setpoints"), scene.duration),
-        disturbances=_disturbances(data.get("disturbances", []), scene.duration),
+        disturbances=disturbances,
         hold_after=number(data.get("hold_after", HOLD_AFTER), "hold_after", minimum=0.0, maximum=MAX_DURATION),
         limits=_limits(data.get("limits", {})),
         input=inp,

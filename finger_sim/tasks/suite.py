@@ -6,7 +6,8 @@
 Without TASK files the installed suite (`config/tasks/*.yaml`) runs; without --controller the
 shipped `grip_pi` and `grip_pi_aggressive`. `--ros-controller` adds a ROS 2 controller node run
 through finger_node in lockstep (`finger_sim.tasks.ros_runner`; its --param values become the
-node's parameters). `--vary` (repeatable) runs the first controller over
+node's parameters): an executable (a torque controller such as finger_grip_controller), or a
+`module:callable` run as a node by finger_task_controller (a voltage controller runs the drive tasks). `--vary` (repeatable) runs the first controller over
 the Cartesian product of the given parameter values (a gain sweep), each combination one more
 controller column, scored the same way. The exit status is 1 when any run fails a task.
 """
@@ -74,7 +75,8 @@ def parse_controllers(specs: Sequence[str], params: Sequence[str], vary: Sequenc
             label = target = spec
         if not target or any(c.label == label for c in out):
             raise ConfigError("--ros-controller", "LABEL=EXECUTABLE with a label no other controller uses", spec)
-        out.append(ControllerSpec(label, None, {}, target))
+        # a module:callable runs as a node (finger_task_controller); its factory says which input it commands
+        out.append(ControllerSpec(label, load_factory(target) if ":" in target else None, {}, target))
     for item in params:
         key, sep, value = item.partition("=")
         label, dot, name = key.partition(".")
@@ -117,7 +119,7 @@ def run_suite(tasks: Sequence[Task], controllers: Sequence[ControllerSpec], work
                     if commanded_input(c.factory) != task.input:
                         continue
                     runs.append(run_task(task, c.factory, label=c.label, params=c.params))
-                elif task.input == "torque":  # the ROS path drives a torque today
+                elif task.input == (commanded_input(c.factory) if c.factory is not None else "torque"):
                     folder = (workdir or Path(tmp)) / "ros" / f"{task.name}_{safe_name(c.label)}"
                     runs.append(run_ros_task(task, c.ros_executable, folder, label=c.label, params=c.params))
     return runs
