@@ -103,7 +103,7 @@ def test_steps_equal_a_simulator_stepped_by_hand_and_end_with_the_scene(tmp_path
     for _ in range(steps):
         reference.step(None)
     finger = session.fingers[0]
-    assert np.array_equal(finger.sim.q, reference.q) and np.array_equal(finger.sim.v, reference.v)
+    assert np.array_equal(finger.sim.q, reference.sim.q) and np.array_equal(finger.sim.v, reference.sim.v)
     assert finger.applied == TORQUE
     assert session.stamps("joint_states") == [n * DT_NS for n in range(steps + 1)]
     assert session.stamps("/clock") == [n * DT_NS for n in range(steps + 1)]
@@ -134,7 +134,7 @@ def test_pause_step_and_reset() -> None:
     initial = node_simulator(session.fingers[0].spec.scene_path, RATE_HZ)
     ok, where = session._reset()
     assert ok and "step=0 " in where and "episode=1" in where and session.events == ["reset"]
-    assert np.array_equal(session.sim.q, initial.q) and session.sim.step_index == 0
+    assert np.array_equal(session.sim.q, initial.sim.q) and session.sim.step_index == 0
     assert session.stamp_ns == 13 * DT_NS  # /clock goes on: step 0 of the new episode one dt after the last
     session._advance()
     assert session.stamps("joint_states")[-2:] == [13 * DT_NS, 14 * DT_NS]
