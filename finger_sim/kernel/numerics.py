@@ -176,13 +176,21 @@ def generalized_force(m, t, q0, q1, q2, v0, v1, v2, tau):
 @njit(**JIT)
 def accelerations(m, t, q0, q1, q2, v0, v1, v2, tau):
     """q'' (rad/s²) of the index-1 system: `FingerSystem.accelerations`, same Schur complement."""
-    m11, m22, m33, cc, r1, r2, r3, alpha = m[0], m[1], m[2], m[3], m[4], m[5], m[6], m[7]
+    alpha = m[7]
     s1, c1 = math.sin(q0), math.cos(q0)
     s2, c2 = math.sin(q1), math.cos(q1)
     s3, c3 = math.sin(q2), math.cos(q2)
     u = q0 - q2 - alpha
     su, cu = math.sin(u), math.cos(u)
     f1, f2, f3 = generalized_force(m, t, q0, q1, q2, v0, v1, v2, tau)
+    return solved_accelerations(m, s1, c1, s2, c2, s3, c3, su, cu, v0, v1, v2, f1, f2, f3)
+
+
+@njit(**JIT)
+def solved_accelerations(m, s1, c1, s2, c2, s3, c3, su, cu, v0, v1, v2, f1, f2, f3):
+    """q'' (rad/s²) under the generalized force (f1, f2, f3) (N·m), from the sines and cosines of
+    θ1, θ2, θ3 and θ1 − θ3 − α: `accelerations` after its force sum (a drive reuses them, kernel.drive)."""
+    m11, m22, m33, cc, r1, r2, r3 = m[0], m[1], m[2], m[3], m[4], m[5], m[6]
     f1 -= cc * su * v2 * v2
     f3 += cc * su * v0 * v0
     b = cc * cu
