@@ -12,9 +12,9 @@ lever the torque on θ1 per newton of grip (m), both calibrated for the object. 
 turns the force setpoint F* into a current setpoint i* = (lever F* + load_torque) / torque_per_ampere
 and runs in three phases:
 
-1. approach: `closing_voltage` until contact. The current shows it: its inrush (above
-   `contact_current` at rest), then its fall while the finger speeds up (back-EMF), then its rise
-   again when the object stops the finger;
+1. approach: `closing_voltage` until contact. The current shows it: after its inrush (the
+   motor starting from rest, ignored for `inrush_time`) it falls while the finger moves
+   (back-EMF) and rises to u/R when the object stops the finger (`contact_current`);
 2. current loop: u = closing_voltage + kp e + ki ∫e dt on e = i* − i, |u| ≤ max_voltage (the
    integral paused while u saturates). A self-locking mesh sticks at each turning point, where
    i = u/R says nothing about the grip; but it breaks free forward only once η_f N k_t i exceeds
@@ -40,6 +40,7 @@ from finger_sim.tasks.controllers import Controller
 GRIP_CURRENT = {
     "closing_voltage": 1.0,  # V: the approach (its impact on the cup leaves ≈ 0.9 N)
     "contact_current": 0.06,  # A: between the free finger's current (< 1 mA) and the stall's u/R (0.125 A at 1 V)
+    "inrush_time": 0.03,  # s: the start-up current is ignored this long (it decays in ≈ 5 ms)
     "torque_per_ampere": 0.4 * 300.0 * 4.0e-3,  # N·m/A: η_f N k_t
     "lever": 0.1139,  # m: torque on θ1 per newton of grip on the cup (docs/drive_grip_current.md)
     "load_torque": 3.0e-4,  # N·m: the paper spring's load on θ1 at the grasp pose
@@ -51,9 +52,6 @@ GRIP_CURRENT = {
     "opening_voltage": 2.0,  # V
     "opening_time": 0.2,  # s
 }
-
-#: The approach's crossings of contact_current that mean contact: up (inrush), down (moving), up (stopped).
-CONTACT_EDGES = 3
 
 
 def current_setpoint(force: float, p: Mapping[str, float]) -> float:
@@ -73,12 +71,12 @@ def grip_current(sample_period: float, feedback: str = "motor_current", **params
         if not (p[name] > 0.0 and math.isfinite(p[name])):
             raise ConfigError(f"controller parameter {name}", "a finite number > 0", p[name])
     state = {"setpoint": 0.0, "target": 0.0, "integral": 0.0, "in_band": 0.0, "locked": False, "since": 0.0,
-             "edges": 0}
+             "touched": False}
 
     def control(t: float, setpoint: float, measured: Mapping[str, float]) -> float:
         if setpoint != state["setpoint"]:
             state.update(setpoint=setpoint, target=current_setpoint(setpoint, p), integral=0.0, in_band=0.0,
-                         locked=False, since=t)
+                         locked=False, since=t, touched=False)
         if feedback not in measured:
             raise ConfigError("controller parameter feedback", f"one of the measured signals {sorted(measured)}", feedback)
         current = measured[feedback]
@@ -86,10 +84,9 @@ def grip_current(sample_period: float, feedback: str = "motor_current", **params
             return -p["opening_voltage"] if t - state["since"] < p["opening_time"] and t > 0.0 else 0.0
         if state["locked"]:
             return 0.0
-        if state["edges"] < CONTACT_EDGES:  # count the crossings of contact_current: inrush, fall, contact
-            if (current >= p["contact_current"]) == (state["edges"] % 2 == 0):
-                state["edges"] += 1
-            if state["edges"] < CONTACT_EDGES:
+        if not state["touched"]:
+            state["touched"] = t - state["since"] >= p["inrush_time"] and current >= p["contact_current"]
+            if not state["touched"]:
                 return p["closing_voltage"]
         target = state["target"]
         error = target - current
