@@ -354,3 +354,21 @@ def test_lean_compiled_step_equals_the_event_loop_bit_for_bit(drive, voltage):
         assert max(abs(x - y) for x, y in zip((*a.q, *a.v), (*c.q, *c.v))) <= 1e-13
         modes.add(lean.system.drive.mode)
     assert len(modes) >= 2 or drive.get("efficiency") == 1.0
+
+
+def test_carrying_a_drive_run_over_to_the_same_scene_changes_nothing():
+    """A task's scene change (a crush, a tip-force disturbance) carries the run over to a new Simulator:
+    the mesh mode and direction go with it, so carrying over to the same scene is no change at all,
+    through grasp, voltage drop and back-driven opening (modes drive, stuck, back)."""
+    from finger_sim.grasp_objects import carry_over
+
+    scene = load_scene(ref.CONFIG / "drive_grasp_backdrivable.yaml")
+    straight, carried = Simulator(scene, kernel="python"), Simulator(scene, kernel="python")
+    modes = set()
+    for k in range(scene.step_count):
+        if k % 50 == 25:
+            carried = carry_over(carried, carried.scene)
+        a, b = straight.step(), carried.step()
+        assert (a.q, a.v, straight.system.drive.mode) == (b.q, b.v, carried.system.drive.mode)
+        modes.add(straight.system.drive.mode)
+    assert BACK in modes
