@@ -75,8 +75,8 @@ class FingerSystem:
             f1 += e1
             f2 += e2
             f3 += e3
-        a1, a2, a3, lam1, lam2 = schur_solve(self._m11, self._m22, self._m33, self._c, *self._r, self.alpha, *q, *v,
-                                             f1, f2, f3)
+        a1, a2, a3, lam1, lam2 = schur_solve(self._m11, self._m22, self._m33, self._c, *self._r,
+                                             *trig(q[0], q[1], q[2], self.alpha), *v, f1, f2, f3)
         return (a1, a2, a3), (lam1, lam2)
 
     def mass_solve(self, q: Vec3, p: Vec3) -> Vec3:
@@ -112,21 +112,24 @@ class FingerSystem:
         return self.kinetic_energy(q, v) + self.potential_energy(q)
 
 
-def schur_solve(m11: float, m22: float, m33: float, cc: float, r1: float, r2: float, r3: float, alpha: float,
-                t1: float, t2: float, t3: float, w1: float, w2: float, w3: float,
-                f1: float, f2: float, f3: float) -> tuple[float, float, float, float, float]:
+def trig(t1: float, t2: float, t3: float, alpha: float) -> tuple[float, float, float, float, float, float, float, float]:
+    """(sin θ1, cos θ1, sin θ2, cos θ2, sin θ3, cos θ3, sin u, cos u), u = θ1 − θ3 − α: what `schur_solve` reads."""
+    u = t1 - t3 - alpha
+    return math.sin(t1), math.cos(t1), math.sin(t2), math.cos(t2), math.sin(t3), math.cos(t3), math.sin(u), math.cos(u)
+
+
+def schur_solve(m11: float, m22: float, m33: float, cc: float, r1: float, r2: float, r3: float,
+                s1: float, c1: float, s2: float, c2: float, s3: float, c3: float, su: float, cu: float,
+                w1: float, w2: float, w3: float, f1: float, f2: float, f3: float) -> tuple[float, float, float, float, float]:
     """(θ1'', θ2'', θ3'', λ1, λ2) of [M −Φ_qᵀ; Φ_q 0][q''; λ] = [Q − h; γ] (spec §4), by a Schur complement.
 
     The one definition of the solve: `FingerSystem.accelerations` calls it plainly, and the compiled
     kernel compiles it (`finger_sim.kernel.numerics.accelerations`). M's constant entries m11, m22,
     m33 (kg·m²) and M13's amplitude cc (kg·m², M13 = cc cos(θ1 − θ3 − α)); link lengths r (m);
-    α (rad); q (rad), q' (rad/s); Q = (f1, f2, f3), N·m. q'' in rad/s², λ in N.
+    the sines and cosines of θ1, θ2, θ3 and u = θ1 − θ3 − α (`trig`: a caller that needs them too,
+    as the drive's reflected inertia does, computes them once); q' (rad/s); Q = (f1, f2, f3), N·m.
+    q'' in rad/s², λ in N.
     """
-    s1, c1 = math.sin(t1), math.cos(t1)
-    s2, c2 = math.sin(t2), math.cos(t2)
-    s3, c3 = math.sin(t3), math.cos(t3)
-    u = t1 - t3 - alpha
-    su, cu = math.sin(u), math.cos(u)
     # f = Q − h
     f1 -= cc * su * w3 * w3
     f3 += cc * su * w1 * w1

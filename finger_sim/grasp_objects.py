@@ -89,4 +89,7 @@ def carry_over(sim: Simulator, scene: Scene) -> Simulator:
     new = Simulator(scene, kernel=sim.kernel)
     new.q, new.v, new.step_index, new.torque = sim.q, sim.v, sim.step_index, sim.torque
     new.impacts = sim.impacts
+    if sim.scene.drive is not None:  # the mesh mode is discrete state (spec §8): it carries over too
+        drive, old = new.system.drive, sim.system.drive  # type: ignore[attr-defined]
+        drive.mode, drive.direction = old.mode, old.direction
     return new

@@ -40,6 +40,7 @@ from finger_sim.inputs import HELD_ARRAY
 from finger_sim.kernel.layout import BREAKPOINT, OK
 from finger_sim.kernel.runner import advance
 from finger_sim.scene import Scene, load_scene, scene_from_dict
+from finger_sim.sensors import SOURCES, SensorBank
 from finger_sim.simulate import Simulator, output_names, state_columns
 from finger_sim.sweep import set_key
 
@@ -334,4 +335,22 @@ def _outputs(sims: list[Simulator], rows_scene: np.ndarray, t: np.ndarray, q: np
             _, _, values = state_columns(sims[j].system, t, np.hstack([q[i], v[i]]))
             for c, name in enumerate(names[j]):
                 out[name][i] = values[:, c]
+    return _sensed(sims, rows_scene, out)
+
+
+def _sensed(sims: list[Simulator], rows_scene: np.ndarray, out: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """`out` with the readings of each row's scene sensors (finger_sim.sensors) added, read from the
+    row's outputs after the run with the scene's seed, as `simulate` reads them; NaN for rows
+    without that sensor. A sensor of a drive output is refused: a rollout has no drive outputs."""
+    for i, j in enumerate(rows_scene.tolist()):
+        sensors = sims[j].scene.sensors
+        if sensors is None:
+            continue
+        for name in sensors.models:
+            if not all(src in out for src in SOURCES[name]):
+                raise ConfigError(f"sensors.{name}", "a sensor of a rollout's outputs (fsr_proximal, fsr_distal): "
+                                  "a rollout has no drive outputs", name)
+        readings = SensorBank(sensors, sims[j].dt).measure({name: column[i] for name, column in out.items()})
+        for name, values in readings.items():
+            out.setdefault(name, np.full((len(rows_scene), len(values)), np.nan))[i] = values
     return out

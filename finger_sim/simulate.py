@@ -118,6 +118,8 @@ class Simulator:
         self.reset()
         #: the lean compiled path of `step` (a compiled fixed-step method on a smooth scene), else None
         self.fast_stepper = setup.fast_stepper
+        #: what `step`'s lean path calls: the fast stepper, or a drive scene's (`actuators.stepping.fast_stepper`)
+        self._lean = self.fast_stepper if self._drive is None else drive_stepping.fast_stepper(self)
 
     def reset(self) -> None:
         """Back to the scene's initial state at t = 0."""
@@ -157,7 +159,7 @@ class Simulator:
 
     def step(self, torque: Profile | float | None = None) -> State:
         """Advance one dt under `torque`: the scene's profile if None, a profile, or a held value (N·m)."""
-        fast = self.fast_stepper
+        fast = self._lean
         if fast is not None and not isinstance(torque, Profile):
             # one kernel call: the compiled profile (or the held value) and the step, same numbers
             prof, held = (fast.profile, 0.0) if torque is None else (HELD_ARRAY, float(torque))

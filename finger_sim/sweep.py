@@ -185,13 +185,16 @@ def rows_of(vary: Sequence[Vary], start: int, result: BatchResult, grip: bool) -
         row["energy_change"] = float(result.energy_change[j])
         if grip:
             row[GRIP_COLUMN] = float(result.grip_force[j]) if result.grip_force is not None else 0.0
+        row.update({name: float(values[j]) for name, values in result.measured.items()})  # the sensors' last readings
         rows.append(row)
     return rows
 
 
 def columns(vary: Sequence[Vary], base: Scene) -> list[str]:
-    """The CSV header: the varied keys as given, the results, grip_force for a contact scene."""
-    return [*(v.key for v in vary), *RESULT_COLUMNS, *([GRIP_COLUMN] if base.objects else [])]
+    """The CSV header: the varied keys as given, the results, grip_force for a contact scene, and the
+    last reading of each scene sensor (`<sensor>_measured`, finger_sim.sensors)."""
+    sensors = [f"{name}_measured" for name in base.sensors.models] if base.sensors is not None else []
+    return [*(v.key for v in vary), *RESULT_COLUMNS, *([GRIP_COLUMN] if base.objects else []), *sensors]
 
 
 @dataclass(frozen=True)

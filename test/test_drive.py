@@ -329,3 +329,46 @@ def test_drive_grasp_at_1khz_with_auto_sticks_where_the_tight_solve_turns():
     _, hit = reference(scene, lambda t, y: kkt_drive(scene, t, y, ETA_F, 6.0), traj.t[traj.t < 0.3], events=[turn])
     assert traj.q[-1, 0] == pytest.approx(hit.y_events[-1][0][0], abs=1e-6)
     assert traj.outputs["mesh_mode"][-1] == STUCK and traj.outputs["motor_current"][-1] == 0.0
+
+
+@pytest.mark.parametrize("drive", DRIVES)
+@pytest.mark.parametrize("voltage", [{"type": "square", "amplitude": 2.0, "offset": 2.0, "frequency": 5.0},
+                                     {"type": "sine", "amplitude": 6.0, "frequency": 3.0}, None])
+def test_lean_compiled_step_equals_the_event_loop_bit_for_bit(drive, voltage):
+    """Without stops or contact a rolling step is one kernel call (`kernel.drive.driven_fast_step`):
+    the same bits as the event loop (`actuators.stepping.advance`, the Python kernel's path) through
+    current-limit kinks, reversals, sticking and breaking free; voltage=None: a held command per step
+    (the node's path)."""
+    pytest.importorskip("numba")
+    scene = drive_scene(drive, voltage, model={"spring_stiffness": 0.2}, integrator={"method": "rk6", "dt": 1e-3},
+                        duration=0.6)
+    lean, loop, python = (Simulator(scene, kernel=k) for k in ("compiled", "compiled", "python"))
+    assert lean._lean is not None
+    loop._lean = None
+    held = [4.0 * math.sin(2.0 * math.pi * 2.0 * k * scene.dt) + 2.0 for k in range(scene.step_count)]
+    modes = set()
+    for k in range(scene.step_count):
+        u = held[k] if voltage is None else None
+        a, b, c = lean.step(u), loop.step(u), python.step(u)
+        assert (a.q, a.v, lean.system.drive.mode) == (b.q, b.v, loop.system.drive.mode)
+        assert max(abs(x - y) for x, y in zip((*a.q, *a.v), (*c.q, *c.v))) <= 1e-13
+        modes.add(lean.system.drive.mode)
+    assert len(modes) >= 2 or drive.get("efficiency") == 1.0
+
+
+def test_carrying_a_drive_run_over_to_the_same_scene_changes_nothing():
+    """A task's scene change (a crush, a tip-force disturbance) carries the run over to a new Simulator:
+    the mesh mode and direction go with it, so carrying over to the same scene is no change at all,
+    through grasp, voltage drop and back-driven opening (modes drive, stuck, back)."""
+    from finger_sim.grasp_objects import carry_over
+
+    scene = load_scene(ref.CONFIG / "drive_grasp_backdrivable.yaml")
+    straight, carried = Simulator(scene, kernel="python"), Simulator(scene, kernel="python")
+    modes = set()
+    for k in range(scene.step_count):
+        if k % 50 == 25:
+            carried = carry_over(carried, carried.scene)
+        a, b = straight.step(), carried.step()
+        assert (a.q, a.v, straight.system.drive.mode) == (b.q, b.v, carried.system.drive.mode)
+        modes.add(straight.system.drive.mode)
+    assert BACK in modes

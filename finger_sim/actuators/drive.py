@@ -161,12 +161,18 @@ def linkage_inertia(r1: float, r2: float, r3: float, m11: float, m22: float, m33
 
     r1..r3 m; m11, m22, m33 and cc = m3 r1 L3/2 the mass matrix's constants (kg·m²), α rad."""
     s1, c1, s2, c2, s3, c3 = math.sin(q0), math.cos(q0), math.sin(q1), math.cos(q1), math.sin(q2), math.cos(q2)
+    return linkage_inertia_at(r1, r2, r3, m11, m22, m33, cc, s1, c1, s2, c2, s3, c3, math.cos(q0 - q2 - alpha))
+
+
+def linkage_inertia_at(r1: float, r2: float, r3: float, m11: float, m22: float, m33: float, cc: float, s1: float,
+                       c1: float, s2: float, c2: float, s3: float, c3: float, cu: float) -> float:
+    """`linkage_inertia` from the sines and cosines of θ1, θ2, θ3 and cu = cos(θ1 − θ3 − α)."""
     # [[r2 s2, r3 s3], [−r2 c2, −r3 c3]] (n2, n3) = (r1 s1, −r1 c1), as kinematics.dependent_rates
     det = r2 * s2 * (-r3 * c3) - r3 * s3 * (-r2 * c2)
     b1, b2 = r1 * s1, -r1 * c1
     n2 = (b1 * (-r3 * c3) - r3 * s3 * b2) / det
     n3 = (r2 * s2 * b2 - b1 * (-r2 * c2)) / det
-    m13 = cc * math.cos(q0 - q2 - alpha)
+    m13 = cc * cu
     return m11 + m22 * n2 * n2 + m33 * n3 * n3 + 2.0 * m13 * n3
 
 

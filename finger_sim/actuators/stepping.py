@@ -107,11 +107,23 @@ def start(sim: Simulator) -> None:
     system.drive.kernel_model, system.drive.guard_cache = model, None
     if model is not None:
         from finger_sim.kernel.drive import drive_guards as _compiled_guards
+
+        _compiled_guards(model, 0.0, *ZERO, *ZERO, 0.0, 1.0)  # load it now, not at the first event of a paced step
     u = sim.scene.torque(0.0)
     if sim.v[0] == 0.0:
         sim.v = _turn(system, 0.0, sim.q, u)
     else:
         _roll(system, 0.0, sim.q, sim.v, u, math.copysign(1.0, sim.v[0]))
+
+
+def fast_stepper(sim: Simulator) -> object | None:
+    """The lean compiled path of a drive scene's `Simulator.step` (`kernel.drive.DrivenFastStepper`):
+    a compiled fixed-step method on a scene without gaps (stops, contact); else None."""
+    if sim._gaps or not hasattr(sim.integrator, "step_plan"):
+        return None
+    from finger_sim.kernel.drive import DrivenFastStepper  # numba is loaded by now
+
+    return DrivenFastStepper(sim.integrator, sim.dt, sim.scene.torque, sim.system.drive)  # type: ignore[arg-type,attr-defined]
 
 
 def advance(sim: Simulator, t0: float, t1: float, u_fn: TorqueFn) -> None:

@@ -27,7 +27,7 @@ import importlib.util
 import time
 from collections import defaultdict
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -68,6 +68,8 @@ class BatchResult:
     trajectories: list[np.ndarray] | None  # per run, (steps + 1) × 3 angles, when recorded
     wall_time: float  # s, stepping and set-up
     cpu_time: float  # s of process CPU (every thread), stepping and set-up
+    #: the scene sensors' readings at the end, `<sensor>_measured` → (N,), NaN for runs without that sensor
+    measured: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 @dataclass
@@ -118,15 +120,20 @@ def run_batch(
     handed = np.zeros(n, dtype=np.int64)
     trajs: list[np.ndarray] | None = [np.empty(0)] * n if record else None
     groups: dict[str, list[int]] = defaultdict(list)
+    # a scene with sensors runs through `simulate`, which reads them (finger_sim.sensors) from its outputs
+    compiled = np.array([p.model is not None and p.scene.sensors is None for p in plans], dtype=bool)
     for i, p in enumerate(plans):
-        if p.model is not None:
+        if compiled[i]:
             groups[p.method].append(i)
     for method, members in groups.items():
         _run_compiled(method, [plans[i] for i in members], members, q, v, max_res, handed, trajs, progress)
+    measured: dict[str, np.ndarray] = {}
     for i, p in enumerate(plans):
-        if p.model is None:
+        if not compiled[i]:
             traj = simulate(p.scene, kernel=PYTHON if kernel == PYTHON else "auto")
             q[i], v[i], max_res[i] = traj.q[-1], traj.v[-1], traj.residual.max()
+            for name in _measured_names(p.scene):
+                measured.setdefault(name, np.full(n, np.nan))[i] = traj.outputs[name][-1]
             if trajs is not None:
                 trajs[i] = traj.q
             if progress is not None:
@@ -144,10 +151,14 @@ def run_batch(
                 has_grip = True
     return BatchResult(
         q=q, v=v, max_residual=max_res, energy_change=energy, grip_force=grip if has_grip else None,
-        methods=tuple(p.method for p in plans), compiled=np.array([p.model is not None for p in plans], dtype=bool),
-        handed_over=handed, trajectories=trajs,
-        wall_time=time.perf_counter() - wall0, cpu_time=time.process_time() - cpu0,
+        methods=tuple(p.method for p in plans), compiled=compiled, handed_over=handed, trajectories=trajs,
+        wall_time=time.perf_counter() - wall0, cpu_time=time.process_time() - cpu0, measured=measured,
     )
+
+
+def _measured_names(scene: Scene) -> tuple[str, ...]:
+    """The `<sensor>_measured` outputs of a scene's sensors (none without `sensors:`)."""
+    return () if scene.sensors is None else tuple(f"{name}_measured" for name in scene.sensors.models)
 
 
 class _Planner:

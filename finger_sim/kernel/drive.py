@@ -15,26 +15,42 @@ import types
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
+
 from finger_sim.actuators import drive as law
+from finger_sim.actuators.stepping import GUARD_TOLERANCE
+from finger_sim.inputs import HELD_ARRAY, SQUARE, STEP, Profile, profile_array
 from finger_sim.kernel import numerics
-from finger_sim.kernel.numerics import JIT, accelerations, njit
+from finger_sim.kernel.integrators import WARM_UP_STATE, CompiledRungeKutta, FastStepper, _entry_point
+from finger_sim.kernel.layout import BREAKPOINT, OK
+from finger_sim.kernel.numerics import JIT, generalized_force, njit, plan_parts, solved_accelerations, torque_at
 
 motor_current = njit(**JIT)(law.motor_current)
 unclamped_current = njit(**JIT)(law.unclamped_current)
 mesh_torque = njit(**JIT)(law.mesh_torque)
-linkage_inertia = njit(**JIT)(law.linkage_inertia)
+linkage_inertia_at = njit(**JIT)(law.linkage_inertia_at)
 unique = njit(**JIT)(law.unique)
 BLOCK = law.KERNEL_BLOCK
 DRIVE, STUCK = law.DRIVE, law.STUCK
 
 
 @njit(**JIT)
-def _mesh_torque(m, o, t, q0, q1, q2, v0, v1, v2, u):
-    """τ_g (N·m) of the rolling mesh in the mode m[o] (`DrivenSystem.mesh`); NaN where not unique."""
+def _trig(m, q0, q1, q2):
+    """The sines and cosines of θ1, θ2, θ3 and θ1 − θ3 − α that `accelerations` and the linkage's
+    inertia both use: computed once per state (the same values, so the same bits)."""
+    u = q0 - q2 - m[7]
+    return math.sin(q0), math.cos(q0), math.sin(q1), math.cos(q1), math.sin(q2), math.cos(q2), math.sin(u), math.cos(u)
+
+
+@njit(**JIT)
+def _mesh_torque(m, o, t, q0, q1, q2, v0, v1, v2, u, s1, c1, s2, c2, s3, c3, su, cu):
+    """τ_g (N·m) of the rolling mesh in the mode m[o] (`DrivenSystem.mesh`); NaN where not unique.
+    s1 … cu: `_trig` of the state."""
     ratio, rotor, k_t = m[o + 3], m[o + 4], m[o + 5]
     i = motor_current(u, ratio * v0, m[o + 6], k_t, m[o + 7], m[o + 8])
-    a0 = accelerations(m, t, q0, q1, q2, v0, v1, v2, 0.0)[0]
-    m_eff = linkage_inertia(m[4], m[5], m[6], m[0], m[1], m[2], m[3], m[7], q0, q1, q2)
+    f1, f2, f3 = generalized_force(m, t, q0, q1, q2, v0, v1, v2, 0.0)
+    a0 = solved_accelerations(m, s1, c1, s2, c2, s3, c3, su, cu, v0, v1, v2, f1, f2, f3)[0]
+    m_eff = linkage_inertia_at(m[4], m[5], m[6], m[0], m[1], m[2], m[3], s1, c1, s2, c2, s3, c3, cu)
     c = m[o + 1] if m[o] == DRIVE else m[o + 2]
     reflected = ratio * ratio * rotor / m_eff
     if not unique(c, reflected):
@@ -50,17 +66,27 @@ def driven_accelerations(m, t, q0, q1, q2, v0, v1, v2, u):
     o = m.shape[0] - BLOCK
     if m[o] == STUCK:
         return 0.0, 0.0, 0.0
-    return accelerations(m, t, q0, q1, q2, v0, v1, v2, _mesh_torque(m, o, t, q0, q1, q2, v0, v1, v2, u))
+    s1, c1, s2, c2, s3, c3, su, cu = _trig(m, q0, q1, q2)
+    tau_g = _mesh_torque(m, o, t, q0, q1, q2, v0, v1, v2, u, s1, c1, s2, c2, s3, c3, su, cu)
+    f1, f2, f3 = generalized_force(m, t, q0, q1, q2, v0, v1, v2, tau_g)
+    return solved_accelerations(m, s1, c1, s2, c2, s3, c3, su, cu, v0, v1, v2, f1, f2, f3)
+
+
+@njit(**JIT)
+def current_margin(m, o, u, v0):
+    """i_max − |unclamped current| (A) under u (V) at θ1' = v0: the limit guard (< 0 while the limit acts)."""
+    return m[o + 8] - abs(unclamped_current(u, m[o + 3] * v0, m[o + 6], m[o + 5], m[o + 7]))
 
 
 @njit(**JIT)
 def drive_guards(m, t, q0, q1, q2, v0, v1, v2, u, direction):
     """(turn, flank, limit) of the rolling mesh: `actuators.stepping._guards`, compiled."""
     o = m.shape[0] - BLOCK
-    limit = m[o + 8] - abs(unclamped_current(u, m[o + 3] * v0, m[o + 6], m[o + 5], m[o + 7]))
+    limit = current_margin(m, o, u, v0)
     if m[o + 1] == 1.0 and m[o + 2] == 1.0:  # an ideal gear: no modes
         return math.inf, math.inf, limit
-    tau_g = _mesh_torque(m, o, t, q0, q1, q2, v0, v1, v2, u)
+    s1, c1, s2, c2, s3, c3, su, cu = _trig(m, q0, q1, q2)
+    tau_g = _mesh_torque(m, o, t, q0, q1, q2, v0, v1, v2, u, s1, c1, s2, c2, s3, c3, su, cu)
     s = direction
     return s * v0, (s if m[o] == DRIVE else -s) * tau_g, limit
 
@@ -79,3 +105,59 @@ def _rebound(dispatcher: Any, **names: Callable) -> Any:
 driven_euler_step = _rebound(numerics.euler_step, accelerations=driven_accelerations)
 driven_rk_step = _rebound(numerics.rk_step, accelerations=driven_accelerations)
 driven_rk_step_tuple = _rebound(numerics.rk_step_tuple, euler_step=driven_euler_step, rk_step=driven_rk_step)
+driven_profile_step = _rebound(numerics._profile_step, euler_step=driven_euler_step, rk_step=driven_rk_step)
+
+
+@njit(**JIT)
+def driven_fast_step(plan, prof, held, k, q, v, direction):
+    """`numerics.fast_step` of a drive scene while its mesh rolls (drive or back) through the whole
+    step: (status, q, v, u at the step's end). A step that starts stuck, or in which a guard crosses
+    (`actuators.stepping._first_event`'s tests on the same values), is not done: status BREAKPOINT,
+    state unchanged, and `Simulator.step` takes it in Python, where the events are located.
+    direction: the sign of θ1' the rolling mode was entered with (`Drive.direction`)."""
+    dt, m, tab = plan_parts(plan)
+    o = m.shape[0] - BLOCK
+    if m[o] == STUCK:
+        return BREAKPOINT, q, v, 0.0
+    x = np.empty(6)
+    x[0], x[1], x[2], x[3], x[4], x[5] = q[0], q[1], q[2], v[0], v[1], v[2]
+    s = tab.shape[1]
+    status, end = driven_profile_step(m, tab, prof, held, k, dt, x, np.empty((max(s, 1), 6)), np.empty(max(s, 1)))
+    if status != OK:
+        return status, (x[0], x[1], x[2]), (x[3], x[4], x[5]), end
+    code = int(prof[0])
+    # the input at the step's start as the Python path sees it: a switching profile's value on the segment
+    start = end if code == STEP or code == SQUARE else torque_at(prof, held, k * dt)
+    turn, flank, limit = drive_guards(m, (k + 1) * dt, x[0], x[1], x[2], x[3], x[4], x[5], end, direction)
+    if turn < -GUARD_TOLERANCE or flank < -GUARD_TOLERANCE or (current_margin(m, o, start, v[0]) < 0.0) != (limit < 0.0):
+        return BREAKPOINT, q, v, 0.0
+    return OK, (x[0], x[1], x[2]), (x[3], x[4], x[5]), end
+
+
+class DrivenFastStepper:
+    """The Simulator's lean path for a drive scene without gaps (no stops, no contact): one kernel
+    call per step (`driven_fast_step`) while the mesh rolls; the steps with a mode change, a stuck
+    mesh or an energy ledger to fill go through `actuators.stepping`. Same numbers, bit for bit.
+
+    The interface `Simulator.step` calls: `call(plan, profile, held, k, q, v)`, `plan`, `profile`, `fail`."""
+
+    fail = FastStepper.fail
+
+    def __init__(self, integrator: CompiledRungeKutta, dt: float, profile: Profile, drive: law.Drive) -> None:
+        self.method, self.dt, self._drive = integrator.name, dt, drive
+        self.plan = integrator.step_plan(dt)
+        #: the plan's model, a view: the drive keeps its mode slot current (`Drive.mirror`)
+        self._model = self.plan[4: 4 + len(integrator.model)]
+        drive.mirror(self._model)
+        #: the scene profile's compiled form; None: it has none, steps under it go through Python
+        self.profile = profile_array(profile)
+        args = (self.plan, HELD_ARRAY, 0.0, 0, WARM_UP_STATE, WARM_UP_STATE, 1.0)
+        driven_fast_step(*args)  # load (or compile) it now, not in the first paced step
+        self._entry = _entry_point(driven_fast_step, args)
+
+    def call(self, plan: np.ndarray, prof: np.ndarray, held: float, k: int, q, v):  # type: ignore[no-untyped-def]
+        """`driven_fast_step` under the drive's current direction; BREAKPOINT while a ledger is kept."""
+        drive = self._drive
+        if drive.ledger is not None:
+            return BREAKPOINT, q, v, 0.0
+        return self._entry(plan, prof, held, k, q, v, drive.direction)

@@ -62,6 +62,7 @@ def compiled(law: Callable, **callees: Callable) -> Callable:
 
 #: The laws compiled from their one definition (the plain functions the Python path calls).
 schur_solve = njit(**LAW)(dynamics.schur_solve)
+trig = njit(**LAW)(dynamics.trig)
 project_state = njit(**LAW)(projection.project_state)
 spring_force = njit(**LAW)(spring.spring_force)
 damping_force = njit(**LAW)(damping.damping_force)
@@ -197,8 +198,18 @@ def generalized_force(m, t, q0, q1, q2, v0, v1, v2, tau):
 @njit(**JIT)
 def accelerations(m, t, q0, q1, q2, v0, v1, v2, tau):
     """q'' (rad/s²) of the index-1 system: `FingerSystem.accelerations`, the same `schur_solve`."""
+    s1, c1, s2, c2, s3, c3, su, cu = trig(q0, q1, q2, m[7])
     f1, f2, f3 = generalized_force(m, t, q0, q1, q2, v0, v1, v2, tau)
-    a0, a1, a2, _, _ = schur_solve(m[0], m[1], m[2], m[3], m[4], m[5], m[6], m[7], q0, q1, q2, v0, v1, v2, f1, f2, f3)
+    return solved_accelerations(m, s1, c1, s2, c2, s3, c3, su, cu, v0, v1, v2, f1, f2, f3)
+
+
+@njit(**JIT)
+def solved_accelerations(m, s1, c1, s2, c2, s3, c3, su, cu, v0, v1, v2, f1, f2, f3):
+    """q'' (rad/s²) under the generalized force (f1, f2, f3) (N·m), from the sines and cosines of
+    θ1, θ2, θ3 and θ1 − θ3 − α (`dynamics.trig`): `accelerations` after its force sum (a drive reuses
+    them, kernel.drive)."""
+    a0, a1, a2, _, _ = schur_solve(m[0], m[1], m[2], m[3], m[4], m[5], m[6], s1, c1, s2, c2, s3, c3, su, cu,
+                                   v0, v1, v2, f1, f2, f3)
     return a0, a1, a2
 
 

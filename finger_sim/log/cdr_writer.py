@@ -120,3 +120,18 @@ _FLOAT64 = struct.Struct("<d")
 def float64_cdr(value: float) -> bytes:
     """std_msgs/msg/Float64."""
     return _ENCAPSULATION + _FLOAT64.pack(value)
+
+
+_INT64 = struct.Struct("<q")
+_LENGTH = struct.Struct("<I")
+
+
+def int64_cdr(value: int) -> bytes:
+    """std_msgs/msg/Int64."""
+    return _ENCAPSULATION + _INT64.pack(value)
+
+
+def string_cdr(value: str) -> bytes:
+    """std_msgs/msg/String: the length with its NUL, the UTF-8 bytes, the NUL."""
+    data = value.encode()
+    return _ENCAPSULATION + _LENGTH.pack(len(data) + 1) + data + b"\0"

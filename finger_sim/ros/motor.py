@@ -10,18 +10,19 @@ reading a controller gets, seeded, so a resim publishes the same).
 from __future__ import annotations
 
 from collections.abc import Iterator
-from typing import Any
 
 import numpy as np
-from std_msgs.msg import Float64, Int64, String
 
 from finger_sim.actuators.drive import MESH_MODES, DrivenSystem
+from finger_sim.log.cdr_writer import float64_cdr, int64_cdr, string_cdr
 from finger_sim.scene import Scene
 from finger_sim.sensors import SensorBank, SensorSet
 from finger_sim.simulate import Simulator
 
 #: OUTPUTS key → the drive output it carries.
 FLOAT_TOPICS = {"motor/current": "motor_current", "motor/voltage": "motor_voltage", "motor/angle": "motor_angle"}
+#: The mesh modes' std_msgs/String messages, as CDR bytes.
+MODE_CDR = tuple(string_cdr(name) for name in MESH_MODES)
 
 
 def motor_state(sim: Simulator) -> dict[str, float]:
@@ -30,13 +31,14 @@ def motor_state(sim: Simulator) -> dict[str, float]:
     return system.motor_outputs(sim.time, sim.q, sim.v, sim.torque)
 
 
-def messages(state: dict[str, float]) -> Iterator[tuple[str, Any]]:
-    """(OUTPUTS key, message) for each motor topic of one state (`motor_state`)."""
+def messages(state: dict[str, float]) -> Iterator[tuple[str, bytes]]:
+    """(OUTPUTS key, message as CDR bytes: no message objects, no rclpy serialization at 1 kHz) for each
+    motor topic of one state (`motor_state`)."""
     for key, name in FLOAT_TOPICS.items():
-        yield key, Float64(data=float(state[name]))
+        yield key, float64_cdr(float(state[name]))
     if "encoder" in state:
-        yield "motor/encoder", Int64(data=int(state["encoder"]))
-    yield "motor/mesh_mode", String(data=MESH_MODES[int(state["mesh_mode"])])
+        yield "motor/encoder", int64_cdr(int(state["encoder"]))
+    yield "motor/mesh_mode", MODE_CDR[int(state["mesh_mode"])]
 
 
 class CurrentSensor:
@@ -57,9 +59,9 @@ class CurrentSensor:
         self._bank = SensorBank(self._set, self._dt)
         self._last: int | None = None
 
-    def message(self, step: int, state: dict[str, float]) -> Float64:
+    def message(self, step: int, state: dict[str, float]) -> bytes:
         """The reading at the simulator's step (its step_index) of the drive's state (`motor_state`)."""
         elapsed = 0.0 if self._last is None else (step - self._last) * self._dt  # one step: dt exactly, as offline
         self._last = step
         reading = self._bank.measure({"motor_current": np.array([state["motor_current"]])}, elapsed=elapsed)
-        return Float64(data=float(reading["motor_current_measured"][0]))
+        return float64_cdr(float(reading["motor_current_measured"][0]))

@@ -1,0 +1,105 @@
+"""`grip_current`: a grip controller for the device (spec §8) that closes its loop on the motor current.
+
+A prosthetic hand's controller has no force sensor: it reads the motor current and the encoder.
+While the mesh rolls forward (`drive`), the motor's torque reaches the link as η_f N k_t i (less the
+rotor's inertia, nothing while it creeps), and that torque holds the linkage's own load (spring,
+gravity) and the grip. So the current is the grip's proxy:
+
+    F̂ = (torque_per_ampere · i − load_torque) / lever,
+
+torque_per_ampere = η_f N k_t (N·m/A), load_torque the linkage's load at the grasp pose (N·m) and
+lever the torque on θ1 per newton of grip (m), both calibrated for the object. The controller
+turns the force setpoint F* into a current setpoint i* = (lever F* + load_torque) / torque_per_ampere
+and runs in three phases:
+
+1. approach: `closing_voltage` until contact. The current shows it: after its inrush (the
+   motor starting from rest, ignored for `inrush_time`) it falls while the finger moves
+   (back-EMF) and rises to u/R when the object stops the finger (`contact_current`);
+2. current loop: u = closing_voltage + kp e + ki ∫e dt on e = i* − i, |u| ≤ max_voltage (the
+   integral paused while u saturates). A self-locking mesh sticks at each turning point, where
+   i = u/R says nothing about the grip; but it breaks free forward only once η_f N k_t i exceeds
+   the load it holds, so raising i to i* presses the finger in until the grip's torque meets
+   η_f N k_t i*: the grip follows the current from below;
+3. hold: once |e| has stayed within lock_band · i* for lock_after s, 0 V for good (until the
+   setpoint changes). The stuck mesh holds the grip without power (u = 0, ω = 0: i = 0, any load).
+
+A setpoint of 0 opens: −opening_voltage for opening_time s, then 0 V. The current loop can only
+raise the grip: it cannot take back an approach that hits harder than F* (choose closing_voltage
+so that it does not), and F* is bounded by the current limit: i* ≤ i_max.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+from finger_sim.errors import ConfigError
+from finger_sim.tasks.controllers import Controller
+
+#: grip_current defaults, for the default drive (spec §8) on the cup of config/drive_grasp.yaml:
+GRIP_CURRENT = {
+    "closing_voltage": 1.0,  # V: the approach (its impact on the cup leaves ≈ 0.9 N)
+    "contact_current": 0.06,  # A: between the free finger's current (< 1 mA) and the stall's u/R (0.125 A at 1 V)
+    "inrush_time": 0.03,  # s: the start-up current is ignored this long (it decays in ≈ 5 ms)
+    "torque_per_ampere": 0.4 * 300.0 * 4.0e-3,  # N·m/A: η_f N k_t
+    "lever": 0.1139,  # m: torque on θ1 per newton of grip on the cup (docs/drive_grip_current.md)
+    "load_torque": 3.0e-4,  # N·m: the paper spring's load on θ1 at the grasp pose
+    "kp": 4.0,  # V/A: half the stuck mesh's loop gain R
+    "ki": 400.0,  # V/(A·s): ≈ 20 ms to the current setpoint with the mesh stuck (i = u/R)
+    "max_voltage": 6.0,  # V
+    "lock_band": 0.05,  # fraction of i*: the task metric's settling band
+    "lock_after": 0.05,  # s in the band before the voltage goes off
+    "opening_voltage": 2.0,  # V
+    "opening_time": 0.2,  # s
+}
+
+
+def current_setpoint(force: float, p: Mapping[str, float]) -> float:
+    """i* (A) that holds the grip `force` (N) through a forward-rolling mesh: (lever F + load) / (η_f N k_t)."""
+    return (p["lever"] * force + p["load_torque"]) / p["torque_per_ampere"]
+
+
+def grip_current(sample_period: float, feedback: str = "motor_current", **params: float) -> Controller:
+    """The current-loop grip controller (module docstring), commanding the motor voltage (V).
+    feedback: the current signal it reads: motor_current (A, the truth) or a scene sensor's
+    motor_current_measured (finger_sim.sensors). params: GRIP_CURRENT overrides."""
+    unknown = set(params) - set(GRIP_CURRENT)
+    if unknown:
+        raise ConfigError("controller parameter", f"one of {sorted(GRIP_CURRENT)}", sorted(unknown))
+    p = {**GRIP_CURRENT, **params}
+    for name in ("torque_per_ampere", "lever", "contact_current"):
+        if not (p[name] > 0.0 and math.isfinite(p[name])):
+            raise ConfigError(f"controller parameter {name}", "a finite number > 0", p[name])
+    state = {"setpoint": 0.0, "target": 0.0, "integral": 0.0, "in_band": 0.0, "locked": False, "since": 0.0,
+             "touched": False}
+
+    def control(t: float, setpoint: float, measured: Mapping[str, float]) -> float:
+        if setpoint != state["setpoint"]:
+            state.update(setpoint=setpoint, target=current_setpoint(setpoint, p), integral=0.0, in_band=0.0,
+                         locked=False, since=t, touched=False)
+        if feedback not in measured:
+            raise ConfigError("controller parameter feedback", f"one of the measured signals {sorted(measured)}", feedback)
+        current = measured[feedback]
+        if setpoint == 0.0:
+            return -p["opening_voltage"] if t - state["since"] < p["opening_time"] and t > 0.0 else 0.0
+        if state["locked"]:
+            return 0.0
+        if not state["touched"]:
+            state["touched"] = t - state["since"] >= p["inrush_time"] and current >= p["contact_current"]
+            if not state["touched"]:
+                return p["closing_voltage"]
+        target = state["target"]
+        error = target - current
+        state["in_band"] = state["in_band"] + sample_period if abs(error) <= p["lock_band"] * target else 0.0
+        if state["in_band"] >= p["lock_after"]:
+            state["locked"] = True
+            return 0.0
+        u = p["closing_voltage"] + p["kp"] * error + p["ki"] * (state["integral"] + error * sample_period)
+        if abs(u) < p["max_voltage"]:  # conditional integration: no wind-up while the voltage saturates
+            state["integral"] += error * sample_period
+        return min(max(u, -p["max_voltage"]), p["max_voltage"])
+
+    return control
+
+
+grip_current.input = "voltage"  # type: ignore[attr-defined]
