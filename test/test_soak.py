@@ -1,7 +1,7 @@
 """Soak (opt-in: FINGER_SIM_SOAK_S=<seconds>, e.g. 3600): finger_node at 1 kHz in real time with
 recording on and the PD controller in a closed loop, answering every state.
 
-References: the node's resident memory (/proc/<pid>/status VmRSS), sampled every RSS_PERIOD_S,
+References: the node's resident memory with its child processes' (/proc/<pid>/status VmRSS), sampled every RSS_PERIOD_S,
 must stay within RSS_BAND_MB of its value at the end of the warm-up; every /diagnostics window
 after the warm-up must show a real-time factor of at least MIN_WINDOW_RTF. The samples are
 written to soak.csv in the test's folder (and its path printed) for the report in docs/.
@@ -37,10 +37,16 @@ MIN_WINDOW_RTF = 0.99
 
 
 def rss_mb(pid: int) -> float:
+    """Resident memory of `pid` and its child processes (the node's log writer), MB."""
+    total = 0.0
     for line in Path(f"/proc/{pid}/status").read_text().splitlines():
         if line.startswith("VmRSS:"):
-            return int(line.split()[1]) / 1024
-    raise AssertionError(f"no VmRSS for pid {pid}")
+            total = int(line.split()[1]) / 1024
+            break
+    else:
+        raise AssertionError(f"no VmRSS for pid {pid}")
+    children = " ".join(p.read_text() for p in Path(f"/proc/{pid}/task").glob("*/children")).split()
+    return total + sum(rss_mb(int(child)) for child in children)
 
 
 def test_closed_loop_soak_holds_memory_and_real_time(launcher, ros_client, tmp_path):
