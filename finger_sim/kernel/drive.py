@@ -15,15 +15,19 @@ import types
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
+
 from finger_sim.actuators import drive as law
 from finger_sim.kernel import numerics
-from finger_sim.kernel.numerics import JIT, accelerations, njit
+from finger_sim.kernel.layout import OK
+from finger_sim.kernel.numerics import JIT, accelerations, njit, project
 
 motor_current = njit(**JIT)(law.motor_current)
 unclamped_current = njit(**JIT)(law.unclamped_current)
 mesh_torque = njit(**JIT)(law.mesh_torque)
 linkage_inertia = njit(**JIT)(law.linkage_inertia)
 unique = njit(**JIT)(law.unique)
+current_rate = njit(**JIT)(law.current_rate)
 BLOCK = law.KERNEL_BLOCK
 DRIVE, STUCK = law.DRIVE, law.STUCK
 
@@ -31,8 +35,14 @@ DRIVE, STUCK = law.DRIVE, law.STUCK
 @njit(**JIT)
 def _mesh_torque(m, o, t, q0, q1, q2, v0, v1, v2, u):
     """τ_g (N·m) of the rolling mesh in the mode m[o] (`DrivenSystem.mesh`); NaN where not unique."""
+    i = motor_current(u, m[o + 3] * v0, m[o + 6], m[o + 5], m[o + 7], m[o + 8])
+    return _mesh_torque_at(m, o, t, q0, q1, q2, v0, v1, v2, i)
+
+
+@njit(**JIT)
+def _mesh_torque_at(m, o, t, q0, q1, q2, v0, v1, v2, i):
+    """τ_g (N·m) of the rolling mesh in the mode m[o] at the current i (A); NaN where not unique."""
     ratio, rotor, k_t = m[o + 3], m[o + 4], m[o + 5]
-    i = motor_current(u, ratio * v0, m[o + 6], k_t, m[o + 7], m[o + 8])
     a0 = accelerations(m, t, q0, q1, q2, v0, v1, v2, 0.0)[0]
     m_eff = linkage_inertia(m[4], m[5], m[6], m[0], m[1], m[2], m[3], m[7], q0, q1, q2)
     c = m[o + 1] if m[o] == DRIVE else m[o + 2]
@@ -79,3 +89,61 @@ def _rebound(dispatcher: Any, **names: Callable) -> Any:
 driven_euler_step = _rebound(numerics.euler_step, accelerations=driven_accelerations)
 driven_rk_step = _rebound(numerics.rk_step, accelerations=driven_accelerations)
 driven_rk_step_tuple = _rebound(numerics.rk_step_tuple, euler_step=driven_euler_step, rk_step=driven_rk_step)
+
+
+# -- L > 0: the current as a seventh state (`finger_sim.actuators.inductive`) ------------------
+@njit(**JIT)
+def inductive_rates(m, t, q0, q1, q2, v0, v1, v2, u, i):
+    """(q'' rad/s², i' A/s) at the current i (A) under u (V) in the mesh mode of the model's drive
+    block: `DrivenSystem.mesh(..., current=i)` and `Drive.current_rate`."""
+    o = m.shape[0] - BLOCK
+    di = current_rate(u, i, m[o + 3] * v0, m[o + 6], m[o + 5], m[o + 9], m[o + 7], m[o + 8])
+    if m[o] == STUCK:
+        return 0.0, 0.0, 0.0, di
+    a0, a1, a2 = accelerations(m, t, q0, q1, q2, v0, v1, v2, _mesh_torque_at(m, o, t, q0, q1, q2, v0, v1, v2, i))
+    return a0, a1, a2, di
+
+
+@njit(**JIT)
+def inductive_rk_step(m, tab, t, x, h, taus, k):
+    """`numerics.rk_step` on x = (q, q', i) in place (`InductiveRungeKutta._substep`). Status."""
+    s = tab.shape[1]
+    for r in range(s):
+        x0, x1, x2, w0, w1, w2, c6 = x[0], x[1], x[2], x[3], x[4], x[5], x[6]
+        for j in range(r):
+            a = tab[r, j]
+            if a != 0.0:
+                ha = h * a
+                x0 += ha * k[j, 0]
+                x1 += ha * k[j, 1]
+                x2 += ha * k[j, 2]
+                w0 += ha * k[j, 3]
+                w1 += ha * k[j, 4]
+                w2 += ha * k[j, 5]
+                c6 += ha * k[j, 6]
+        k[r, 0], k[r, 1], k[r, 2] = w0, w1, w2
+        tau = taus[int(tab[s + 2, r])]
+        k[r, 3], k[r, 4], k[r, 5], k[r, 6] = inductive_rates(m, t + tab[s + 1, r] * h, x0, x1, x2, w0, w1, w2, tau, c6)
+    for j in range(s):
+        b = tab[s, j]
+        if b != 0.0:
+            hb = h * b
+            for c in range(7):
+                x[c] += hb * k[j, c]
+    return project(m, x)
+
+
+@njit(**JIT)
+def inductive_step_tuple(m, tab, t, q, v, i, h, n, taus):
+    """n substeps of h/n of `inductive_rk_step` from (q, q', i) at t; taus[k]: the input (V) at the
+    distinct nodes of substep k. Returns (status, q, q', i)."""
+    x = np.empty(7)
+    x[0], x[1], x[2], x[3], x[4], x[5], x[6] = q[0], q[1], q[2], v[0], v[1], v[2], i
+    k = np.empty((tab.shape[1], 7))
+    sub = h / n
+    status = OK
+    for j in range(n):
+        status = inductive_rk_step(m, tab, t + j * sub, x, sub, taus[j], k)
+        if status != OK:
+            break
+    return status, (x[0], x[1], x[2]), (x[3], x[4], x[5]), x[6]
