@@ -209,6 +209,8 @@ class Drive:
         self._mirrors: list[weakref.ref] = []  # compiled models whose block's first slot is the mode
         self._mode = DRIVE
         self.direction = 1.0
+        #: how often the mode was set: an integrator that keeps its own solution restarts when it changes
+        self.changes = 0
         #: L > 0: the current is a state (`i`), integrated with the linkage (`actuators.inductive`)
         self.inductive = params.inductance > 0.0
         #: the winding current at the Simulator's state, A: a state of its own when L > 0 (0 at t = 0)
@@ -227,6 +229,7 @@ class Drive:
     @mode.setter
     def mode(self, value: int) -> None:
         self._mode = value
+        self.changes += 1
         for ref in self._mirrors:
             model = ref()
             if model is not None:

@@ -44,9 +44,8 @@ MAX_EVENTS_PER_STEP = 16
 GAUSS_NODES = (0.5 - math.sqrt(15.0) / 10.0, 0.5, 0.5 + math.sqrt(15.0) / 10.0)
 GAUSS_WEIGHTS = (5.0 / 18.0, 8.0 / 18.0, 5.0 / 18.0)
 TURN, FLANK, LIMIT = 0, 1, 2
-#: Methods that cannot step a drive scene: rattle takes Q and M apart (not the mesh's accelerations),
-#: dop853 evaluates the compiled right-hand side, which has no drive yet.
-UNSUPPORTED_METHODS = ("rattle", "dop853")
+#: Methods that cannot step a drive scene: rattle takes Q and M apart (not the mesh's accelerations).
+UNSUPPORTED_METHODS = ("rattle",)
 #: auto's choices on a drive scene when its own is unsupported, in order: explicit (the table's usual
 #: pick), then L-stable where the explicit one is unstable at the step (a stiff scene at a coarse dt).
 DRIVE_FALLBACKS = ("rk4", "radau")

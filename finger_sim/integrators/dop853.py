@@ -96,6 +96,15 @@ class DormandPrince853(Integrator):
             raise ConfigError("integrator.method", "a method other than dop853 for a force element without a compiled "
                               "form (kernel_code)", self.name)
         self._numerics, self._model = numerics, model
+        #: the right-hand side and the attempt: with a drive (spec §8) the ones applying its mesh mode,
+        #: and the internal solution restarts whenever the mode changes (`Drive.changes`)
+        self._rhs, self._attempt = numerics._rhs, numerics.dop853_attempt
+        self._drive = getattr(system, "drive", None)
+        if self._drive is not None:
+            from finger_sim.kernel.drive import driven_dop853_attempt, driven_rhs
+
+            self._rhs, self._attempt = driven_rhs, driven_dop853_attempt
+        self._changes = -1  # `Drive.changes` the internal solution was computed under
         self.rtol, self.atol = rtol, atol
         self._torque: TorqueFn | None = None
         self._last: tuple[float, Vec3, Vec3] | None = None  # the last output (t, q, q')
@@ -131,6 +140,8 @@ class DormandPrince853(Integrator):
     def step(self, t: float, q: Vec3, v: Vec3, dt: float, torque: TorqueFn) -> tuple[Vec3, Vec3]:
         target = t + dt
         last = self._last
+        if self._drive is not None and self._drive.changes != self._changes:
+            self._torque = None  # the mesh mode changed: the internal solution is another mode's
         if torque is self._torque and self._origin == (t, q, v) and target >= t:
             pass  # a trial from the internal solution's start (event location): answered from it
         elif torque is self._torque and last is not None and last[1] == q and last[2] == v \
@@ -203,7 +214,9 @@ class DormandPrince853(Integrator):
         self._err = self._err_old = self._estimates.get(q, 0.0)
         self._t = self._t_old = t
         self._y[:3], self._y[3:] = q, v
-        self._numerics._rhs(self._model, t, self._y, torque(t), self._f)
+        if self._drive is not None:
+            self._changes = self._drive.changes
+        self._rhs(self._model, t, self._y, torque(t), self._f)
         if self._h <= 0.0:
             self._h = _initial_step(self._y, self._f, self.rtol, self.atol, dt)
 
@@ -217,7 +230,7 @@ class DormandPrince853(Integrator):
             if h < 10.0 * abs(math.nextafter(t, math.inf) - t):
                 break
             taus = np.array([torque(t + c * h) for c in _NODES])
-            norm = num.dop853_attempt(self._model, _A, _B, _C, _E3, _E5, _D, t, self._y, self._f, h, taus,
+            norm = self._attempt(self._model, _A, _B, _C, _E3, _E5, _D, t, self._y, self._f, h, taus,
                                       self.rtol, self.atol, self._kk, y_new, self._dense)
             if norm < 1.0:
                 self._err_old = self._err

@@ -89,6 +89,8 @@ def _rebound(dispatcher: Any, **names: Callable) -> Any:
 driven_euler_step = _rebound(numerics.euler_step, accelerations=driven_accelerations)
 driven_rk_step = _rebound(numerics.rk_step, accelerations=driven_accelerations)
 driven_rk_step_tuple = _rebound(numerics.rk_step_tuple, euler_step=driven_euler_step, rk_step=driven_rk_step)
+driven_rhs = _rebound(numerics._rhs, accelerations=driven_accelerations)
+driven_dop853_attempt = _rebound(numerics.dop853_attempt, _rhs=driven_rhs)
 
 
 # -- L > 0: the current as a seventh state (`finger_sim.actuators.inductive`) ------------------
