@@ -19,6 +19,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import math
+from contextlib import nullcontext
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, NamedTuple
 
@@ -161,7 +162,8 @@ def advance(sim: Simulator, t0: float, t1: float, u_fn: TorqueFn) -> None:
             end, qe, ve = crossing.t, crossing.q, crossing.v
         if ledger is not None:
             t_, q_, v_ = t, q, v
-            _integrate(ledger, system, t, end, lambda s: sim._step(t_, q_, v_, s - t_, u_fn), u_fn)
+            with getattr(sim.integrator, "aside", nullcontext)():  # dop853 continues as without the quadrature
+                _integrate(ledger, system, t, end, lambda s: sim._step(t_, q_, v_, s - t_, u_fn), u_fn)
         t, q, v = end, qe, ve
         if crossing is not None:
             if crossing.gap.restitution is not None:

@@ -19,6 +19,8 @@ import bisect
 import importlib.util
 import math
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from types import ModuleType
 
@@ -159,6 +161,16 @@ class DormandPrince853(Integrator):
         self._last = (target, q1, v1)
         self._remember(q1, target, t_old, h_old, err_old, err)
         return q1, v1
+
+    @contextmanager
+    def aside(self) -> Iterator[None]:
+        """Steps inside are trials from the internal solution that leave its continuation as it was
+        (the drive's energy quadrature between two steps): the next step continues as without them."""
+        last = self._last
+        try:
+            yield
+        finally:
+            self._last = last
 
     def _segment(self, target: float) -> tuple[float, float, np.ndarray, np.ndarray, float, float]:
         """The accepted internal step whose dense output covers `target` (s): the last one, or an
