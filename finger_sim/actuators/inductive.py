@@ -81,7 +81,8 @@ def method_for(method: str, reason: str, auto: bool) -> tuple[str, str]:
     if method in CARRYING_METHODS:
         return method, reason
     if auto:
-        return INDUCTIVE_DEFAULT, f"{reason}; the winding current (L > 0) is carried by {INDUCTIVE_DEFAULT}"
+        return INDUCTIVE_DEFAULT, (f"{reason}; {method} cannot carry the winding current (L > 0): {INDUCTIVE_DEFAULT} "
+                                   "instead, in substeps that resolve L/R")
     raise ConfigError("integrator.method", f"a method that carries the winding current ({', '.join(CARRYING_METHODS)}"
                       " or auto) for a drive with inductance > 0", method)
 
@@ -216,17 +217,13 @@ class CompiledInductiveRungeKutta(InductiveRungeKutta):
         self.nodes = tuple(dict.fromkeys(float(x) for x in ref.C))
         self._kernel = kernel_drive.inductive_step_tuple
         self._numerics = kernel_drive.numerics
-        self._taus = np.empty((self.substeps, len(self.nodes)))
 
     def step(self, t: float, q: Vec3, v: Vec3, dt: float, torque: TorqueFn) -> tuple[Vec3, Vec3]:
         i = self.current_of(q, v)
         n = self.substeps
         h = dt / n
-        taus = self._taus
-        for k in range(n):
-            tk = t + k * h
-            for j, c in enumerate(self.nodes):
-                taus[k, j] = torque(tk + c * h)
+        nodes = self.nodes
+        taus = np.array([torque(tk + c * h) for tk in [t + k * h for k in range(n)] for c in nodes]).reshape(n, len(nodes))
         status, q1, v1, i1 = self._kernel(self.model, self.tableau, t, q, v, i, dt, n, taus)
         if status != self._numerics.OK:
             from finger_sim.kernel.integrators import check_status
