@@ -199,3 +199,26 @@ def test_node_publishes_and_logs_the_current_state_and_resims_it_bit_for_bit(lau
     offline = simulate(scene_from_dict(data), kernel="compiled")
     assert currents == offline.outputs["motor_current"].tolist()
     assert 0.0 < currents[-1] < currents[300]  # decaying through L/R after the voltage drops
+
+
+@pytest.mark.parametrize("drive, leaves", [({}, False), ({"efficiency": 0.9, "backward_efficiency": 0.8}, True)])
+def test_a_finger_on_its_stop_keeps_its_current_going_and_is_held_or_let_go_after_the_voltage_drops(drive, leaves):
+    """Driven into the MCP stop it rests there while the current settles; at 0 V the current decays
+    through L/R: the self-locking mesh holds the finger on the stop (bit for bit), a back-drivable one
+    lets the spring pull it off. The energy still balances (impacts included)."""
+    sc = scene({**drive, "inductance": 1e-2}, {"type": "step", "before": 6.0, "after": 0.0, "at": 0.3},
+               model={"joint_limits": {"mcp": [0.0, 0.5]}, "spring_stiffness": 0.05}, duration=0.5,
+               integrator={"method": "auto", "dt": 0.001})
+    run = simulate(sc, kernel="compiled")
+    on_stop = (run.t > 0.25) & (run.t <= 0.3)
+    assert np.all(np.abs(run.q[on_stop, 0] - 0.5) < 1e-9)
+    # resting on the stop, ω_m = 0: the current settles to u/R limited, i.e. i_max, with L/R = 1.25 ms
+    assert run.outputs["motor_current"][on_stop][-1] == pytest.approx(IMAX, rel=1e-9)
+    after = run.t > 0.3
+    if leaves:
+        assert run.q[-1, 0] < 0.5 - 1e-3
+    else:
+        # the decaying current keeps it pressed on the stop for ≈ 2 L/R, then the mesh sticks where it rests
+        assert np.all(run.q[after] == run.q[-1]) and np.all(run.v[after] == 0.0)
+        assert np.all(run.outputs["mesh_mode"][run.t > 0.31] == STUCK)
+    assert abs(run.energy_report["residual"]) < 1e-3 * run.energy_report["electrical_work"]

@@ -95,6 +95,11 @@ def advance(sim: Simulator, t0: float, t1: float, u_fn: TorqueFn) -> None:
                 ie = integ.current_of(qe, ve)  # type: ignore[attr-defined]
         if ledger is not None:
             _integrate(ledger, system, t, end, lambda s, a=(t, q, v, i): trial(*a, s), u_fn)
+        if crossing is not None and end <= t and crossing.gap.restitution is not None and not any(v):
+            # back on the stop at once after an impact that left it at rest: the current (not the
+            # voltage) sets the push, and it turns into the stop within the step: the finger rests
+            sim._resting = crossing.gap
+            continue
         t, q, v, i = end, qe, ve, ie
         if crossing is not None:
             if crossing.gap.restitution is not None:
@@ -246,7 +251,8 @@ def _rest(sim: Simulator, t: float, t1: float, q: Vec3, i: float, u_fn: TorqueFn
         try:
             sim.integrator.begin(q, ZERO, i)  # type: ignore[attr-defined]
             qs, vs = sim.integrator.step(t, q, ZERO, s - t, u_fn)
-            return sim.integrator.current_of(qs, vs)  # type: ignore[attr-defined]
+            limit = drive.params.current_limit  # the driver's limit: a step's overshoot of it is cut off
+            return max(-limit, min(limit, sim.integrator.current_of(qs, vs)))  # type: ignore[attr-defined]
         finally:
             drive.mode = mode
 
@@ -255,10 +261,11 @@ def _rest(sim: Simulator, t: float, t1: float, q: Vec3, i: float, u_fn: TorqueFn
         return -(n[0] * a[0] + n[1] * a[1] + n[2] * a[2])
 
     ledger = drive.ledger
-    if push(t) <= 0.0:
+    pushed_at_end = push(t1) > 0.0
+    if push(t) <= 0.0 and not pushed_at_end:
         sim._resting = None
         return t, i, True
-    if push(t1) > 0.0:
+    if pushed_at_end:  # (a pull at t that the rising current turns into a push within the step: a rest)
         end, released = t1, False
     else:
         end = brentq(push, t, t1, xtol=LOCATE_TOLERANCE * (t1 - t), rtol=4 * np.finfo(float).eps)
