@@ -46,7 +46,8 @@ INDUCTIVE_DEFAULT = "rk4"
 ELECTRICAL_RESOLUTION = 0.25
 #: Most substeps auto takes per step; beyond that L/R is far below dt and L = 0 is the model to use.
 MAX_ELECTRICAL_SUBSTEPS = 1024
-#: MCP poses sampled for the linkage's inertia M_eff (as `stability.SAMPLES`).
+#: MCP poses sampled for the linkage's inertia M_eff (as `stability.SAMPLES`), off the toggles by
+#: `stability.TOGGLE_MARGIN`.
 SAMPLES = 33
 #: States the integrator remembers the current of (event location tries ≤ 2 × 60 per step).
 MEMORY = 256
@@ -56,9 +57,11 @@ def electrical_root(system: DrivenSystem, theta1_range: tuple[float, float]) -> 
     """The electromechanical root of largest magnitude, 1/s: s² + (R/L) s + N² k_t²/(L m) = 0 with
     m = c M_eff + N² J_m for each rolling flank's c (1/η_f, η_b; 1 for an ideal gear) where it is
     unique, M_eff (kg·m²) over poses θ1 in theta1_range (rad)."""
+    from finger_sim.stability import TOGGLE_MARGIN
+
     p = system.drive.params
     lo, hi = kinematics.assembly_range(system.params)
-    lo, hi = max(theta1_range[0], lo + 1e-3), min(theta1_range[1], hi - 1e-3)
+    lo, hi = max(theta1_range[0], lo + TOGGLE_MARGIN), min(theta1_range[1], hi - TOGGLE_MARGIN)
     reflected = p.gear_ratio**2 * p.rotor_inertia
     cs = (1.0,) if p.ideal else (system.drive.c(DRIVE), system.drive.c(BACK))
     worst = complex(-p.resistance / p.inductance)
