@@ -153,13 +153,17 @@ class InductiveRungeKutta(Integrator):
         return self.current
 
     def step(self, t: float, q: Vec3, v: Vec3, dt: float, torque: TorqueFn) -> tuple[Vec3, Vec3]:
-        i = self.current_of(q, v)
-        n = self.substeps
+        q, v, i = self.advance(t, q, v, self.current_of(q, v), dt, torque, self.substeps)
+        self._memory.append((q, v, i))
+        return q, v
+
+    def advance(self, t: float, q: Vec3, v: Vec3, i: float, dt: float, torque: TorqueFn,
+                n: int) -> tuple[Vec3, Vec3, float]:
+        """(q, q', i) at t + dt from (q, q', i) at t in n substeps, remembering nothing."""
         h = dt / n
         for k in range(n):
             q, v, i = self._substep(t + k * h, q, v, i, h, torque)
-        self._memory.append((q, v, i))
-        return q, v
+        return q, v, i
 
     def _substep(self, t: float, q: Vec3, v: Vec3, i: float, dt: float, torque: TorqueFn) -> tuple[Vec3, Vec3, float]:
         """`ExplicitRungeKutta.step` with the current as a seventh state (same order of operations)."""
@@ -221,9 +225,8 @@ class CompiledInductiveRungeKutta(InductiveRungeKutta):
         self._kernel = kernel_drive.inductive_step_tuple
         self._numerics = kernel_drive.numerics
 
-    def step(self, t: float, q: Vec3, v: Vec3, dt: float, torque: TorqueFn) -> tuple[Vec3, Vec3]:
-        i = self.current_of(q, v)
-        n = self.substeps
+    def advance(self, t: float, q: Vec3, v: Vec3, i: float, dt: float, torque: TorqueFn,
+                n: int) -> tuple[Vec3, Vec3, float]:
         h = dt / n
         nodes = self.nodes
         taus = np.array([torque(tk + c * h) for tk in [t + k * h for k in range(n)] for c in nodes]).reshape(n, len(nodes))
@@ -232,8 +235,7 @@ class CompiledInductiveRungeKutta(InductiveRungeKutta):
             from finger_sim.kernel.integrators import check_status
 
             check_status(status, self.name, t, q)
-        self._memory.append((q1, v1, i1))
-        return q1, v1
+        return q1, v1, i1
 
 
 def integrator_class(integrator_cls: type[Integrator], substeps: int) -> type[Integrator]:

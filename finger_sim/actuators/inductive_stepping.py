@@ -94,7 +94,7 @@ def advance(sim: Simulator, t0: float, t1: float, u_fn: TorqueFn) -> None:
                 end, qe, ve = crossing.t, crossing.q, crossing.v
                 ie = integ.current_of(qe, ve)  # type: ignore[attr-defined]
         if ledger is not None:
-            _integrate(ledger, system, t, end, lambda s, a=(t, q, v, i): trial(*a, s), u_fn)
+            _integrate_resolved(ledger, sim, t, end, (q, v, i), u_fn)
         if crossing is not None and end <= t and crossing.gap.restitution is not None and not any(v):
             # back on the stop at once after an impact that left it at rest: the current (not the
             # voltage) sets the push, and it turns into the stop within the step: the finger rests
@@ -290,3 +290,18 @@ def _integrate(ledger: EnergyLedger, system: DrivenSystem, a: float, b: float,
         ledger.copper_loss += w * h * copper
         ledger.mesh_loss += w * h * mesh
         ledger.element_work += w * h * work
+
+
+def _integrate_resolved(ledger: EnergyLedger, sim: Simulator, a: float, b: float, x: tuple[Vec3, Vec3, float],
+                        u_fn: TorqueFn) -> None:
+    """`_integrate` over [a, b] from the state x = (q, q', i) at a, in the integrator's substeps (the
+    electrical transient resolved): each substep's Gauss nodes by one integrator substep from its start."""
+    integ = sim.integrator
+    n = integ.substeps  # type: ignore[attr-defined]
+    h = (b - a) / n
+    for k in range(n):
+        s0 = a + k * h
+        _integrate(ledger, sim.system, s0, s0 + h,  # type: ignore[arg-type]
+                   lambda s, s0=s0, x=x: integ.advance(s0, *x, s - s0, u_fn, 1), u_fn)  # type: ignore[attr-defined]
+        if k < n - 1:
+            x = integ.advance(s0, *x, h, u_fn, 1)  # type: ignore[attr-defined]
