@@ -7,7 +7,8 @@ dense output of the internal step that covers t + dt, projected onto Φ = 0, Φ_
 The internal solution itself is never projected, so the output grid does not change it.
 
 It continues its internal solution only while the caller continues the last output with
-the same torque function (same object); anything else (a reset, a torque breakpoint, an
+the same torque function (same object) and, on a drive scene (spec §8), the same mesh mode
+(the drive's mode changes are events of the Simulator's step); anything else (a reset, a torque breakpoint, an
 event's trial step, a held command) restarts it from the given state. The step-size
 control, error norm and dense output are scipy's DOP853 (scipy/integrate/_ivp/rk.py,
 after Hairer, Nørsett & Wanner, *Solving ODEs I*, §II.10), with scipy's coefficients.
