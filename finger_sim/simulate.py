@@ -445,7 +445,8 @@ def _setup(scene: Scene, kernel: str, effects: tuple[Effect, ...]) -> _Setup:
             method, reason = fixed_step_method(scene)
     if getattr(system, "drive", None) is not None:
         method, reason = drive_stepping.drive_method(method, reason, scene.method == AUTO,
-                                                     lambda name: _stable_under_auto(scene, system, name))
+                                                     lambda name: _stable_under_auto(scene, system, name),
+                                                     system.drive.inductive)
     if scene.method == AUTO and stick_slip.in_scene(scene):  # no compiled form: error control in Python instead
         method, reason, options, substeps = stick_slip.auto_method(scene)
     elif scene.method == AUTO:
@@ -458,6 +459,11 @@ def _setup(scene: Scene, kernel: str, effects: tuple[Effect, ...]) -> _Setup:
     if depth_guard and scene.method != AUTO and method_cls.implicit:
         warn_unresolved_contact(scene, method_cls)
     integrator_cls, kernel_name = stepper_slot.kernel().select(method_cls, system, kernel)
+    if getattr(system, "drive", None) is not None and system.drive.inductive:  # L > 0: the current is a state
+        from finger_sim.actuators import inductive
+
+        integrator_cls = inductive.integrator_class(
+            integrator_cls, inductive.electrical_substeps(scene, system, method_cls, scene.method == AUTO))
     q0, _ = scene.initial_state()
     # every gap of every non-smooth element; empty on a smooth scene, which then pays nothing
     gaps = tuple(_Gap(e, i, e.impact(i)) for e in system.elements if not e.smooth for i in range(len(e.gaps(q0))))

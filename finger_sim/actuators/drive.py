@@ -91,9 +91,6 @@ def drive_from_dict(value: Any, key: str = "model.drive") -> DriveParams:
 
     efficiency = get("efficiency", d.efficiency, minimum=0.0, maximum=1.0, strict=True)
     inductance = get("inductance", d.inductance, minimum=0.0, maximum=MAX_INDUCTANCE)
-    if inductance > 0.0:
-        raise ConfigError(f"{key}.inductance", "0 H for now (an inductance > 0 makes the current a state of the "
-                          "step, which this version does not carry yet)", inductance)
     counts = data.get("encoder_counts", d.encoder_counts)
     if isinstance(counts, bool) or not isinstance(counts, int) or not 0 <= counts <= MAX_ENCODER_COUNTS:
         raise ConfigError(f"{key}.encoder_counts", f"an integer in [0, {MAX_ENCODER_COUNTS}] (0: no encoder)", counts)
@@ -123,6 +120,30 @@ def unclamped_current(u: float, omega_m: float, resistance: float, k_t: float, s
     """(sat(u) − k_e ω_m)/R, A: the current limit acts where its magnitude exceeds i_max."""
     u = min(supply, max(-supply, u))
     return (u - k_t * omega_m) / resistance
+
+
+def current_rate(u: float, current: float, omega_m: float, resistance: float, k_t: float, inductance: float,
+                 supply: float, limit: float) -> float:
+    """i' (A/s) of the winding with L > 0: (sat(u) − R i − k_e ω_m)/L, u V saturated at ±supply, i A,
+    ω_m rad/s, L H; 0 while |i| ≥ i_max and that would push |i| further (the driver lowers the
+    terminal voltage, §8)."""
+    u = min(supply, max(-supply, u))
+    push = u - resistance * current - k_t * omega_m
+    if (current >= limit and push > 0.0) or (current <= -limit and push < 0.0):
+        return 0.0
+    return push / inductance
+
+
+def current_limit_guard(u: float, current: float, omega_m: float, resistance: float, k_t: float, supply: float,
+                        limit: float) -> float:
+    """The current limit's guard with L > 0 (its sign changes where the limit starts or stops acting):
+    i_max − |i| (A) below the limit; at it, −sgn(i)·(sat(u) − R i − k_e ω_m) (V), negative while the
+    winding would push |i| further."""
+    if abs(current) < limit:
+        return limit - abs(current)
+    u = min(supply, max(-supply, u))
+    push = u - resistance * current - k_t * omega_m
+    return -push if current > 0.0 else push
 
 
 def mesh_torque(c: float, ratio: float, rotor_inertia: float, k_t: float, current: float, a0: float,
@@ -177,9 +198,9 @@ def linkage_inertia_at(r1: float, r2: float, r3: float, m11: float, m22: float, 
 
 
 #: Length of the drive's block at the end of the compiled model (`Drive.kernel_block`): mode, c in
-#: drive, c in back, N, J_m, k_t, R, u_max, i_max, then NaN, which marks the block (every other
+#: drive, c in back, N, J_m, k_t, R, u_max, i_max, L, then NaN, which marks the block (every other
 #: value of the model is finite).
-KERNEL_BLOCK = 10
+KERNEL_BLOCK = 11
 
 
 class Drive:
@@ -194,6 +215,12 @@ class Drive:
         self._mirrors: list[weakref.ref] = []  # compiled models whose block's first slot is the mode
         self._mode = DRIVE
         self.direction = 1.0
+        #: how often the mode was set: an integrator that keeps its own solution restarts when it changes
+        self.changes = 0
+        #: L > 0: the current is a state (`i`), integrated with the linkage (`actuators.inductive`)
+        self.inductive = params.inductance > 0.0
+        #: the winding current at the Simulator's state, A: a state of its own when L > 0 (0 at t = 0)
+        self.i = 0.0
         #: (q, q', (t, u, mode, direction), guards) of the last guard evaluation (`stepping._guards`)
         self.guard_cache: tuple | None = None
         #: the compiled model the Simulator steps with (None: the Python kernel)
@@ -208,6 +235,7 @@ class Drive:
     @mode.setter
     def mode(self, value: int) -> None:
         self._mode = value
+        self.changes += 1
         for ref in self._mirrors:
             model = ref()
             if model is not None:
@@ -217,12 +245,24 @@ class Drive:
         """The drive as the compiled model's last KERNEL_BLOCK floats (`finger_sim.kernel.layout`)."""
         p = self.params
         return [float(self._mode), self.c(DRIVE), self.c(BACK), p.gear_ratio, p.rotor_inertia, p.torque_constant,
-                p.resistance, p.supply_voltage, p.current_limit, math.nan]
+                p.resistance, p.supply_voltage, p.current_limit, p.inductance, math.nan]
 
     def mirror(self, model) -> None:  # type: ignore[no-untyped-def]
         """Keep the mode slot of compiled model `model` (a numpy array ending in `kernel_block`) current."""
         self._mirrors = [ref for ref in self._mirrors if ref() is not None]
         self._mirrors.append(weakref.ref(model))
+
+    def current_rate(self, u: float, current: float, theta1_dot: float) -> float:
+        """i' (A/s) with L > 0 (`current_rate`)."""
+        p = self.params
+        return current_rate(u, current, p.gear_ratio * theta1_dot, p.resistance, p.torque_constant, p.inductance,
+                            p.supply_voltage, p.current_limit)
+
+    def limit_guard(self, u: float, current: float, theta1_dot: float) -> float:
+        """The current limit's guard with L > 0 (`current_limit_guard`)."""
+        p = self.params
+        return current_limit_guard(u, current, p.gear_ratio * theta1_dot, p.resistance, p.torque_constant,
+                                   p.supply_voltage, p.current_limit)
 
     def c(self, mode: int) -> float:
         """The mesh law's coefficient on τ_g in a rolling mode."""
@@ -249,6 +289,7 @@ class DrivenSystem(FingerSystem):
     def __init__(self, params: FingerParams, elements: Sequence[ForceElement], drive: Drive) -> None:
         super().__init__(params, elements)
         self.drive = drive
+        self._inductive = drive.inductive
 
     def effective_inertia(self, q: Vec3) -> float:
         """M_eff = nᵀ M n, kg·m²: the linkage's inertia about θ1 (`linkage_inertia`)."""
@@ -260,14 +301,16 @@ class DrivenSystem(FingerSystem):
         a0 = FingerSystem.accelerations(self, t, q, v, 0.0)[0][0]
         return -a0 * self.effective_inertia(q)
 
-    def mesh(self, t: float, q: Vec3, v: Vec3, u: float, mode: int) -> tuple[float, float, Vec3, tuple[float, float]]:
-        """(τ_g N·m, i A, q'' rad/s², λ) at (t, q, q') under u (V) in `mode`.
+    def mesh(self, t: float, q: Vec3, v: Vec3, u: float, mode: int,
+             current: float | None = None) -> tuple[float, float, Vec3, tuple[float, float]]:
+        """(τ_g N·m, i A, q'' rad/s², λ) at (t, q, q') under u (V) in `mode`; `current` (A): the winding's
+        state when L > 0 (None: i follows u at once, L = 0).
 
         Stuck: q'' = 0 exactly and τ_g = τ_h. Rolling: τ_g from `mesh_torque`; SimulationDiverged where
         the back flank is not unique (N² J_m + η_b M_eff ≤ 0, near the toggle)."""
         drive = self.drive
         p = drive.params
-        i = drive.current(u, v[0])
+        i = drive.current(u, v[0]) if current is None else current
         a0, lam0 = FingerSystem.accelerations(self, t, q, v, 0.0)
         m_eff = self.effective_inertia(q)
         if mode == STUCK:
@@ -285,7 +328,7 @@ class DrivenSystem(FingerSystem):
 
     def accelerations(self, t: float, q: Vec3, v: Vec3, tau: float) -> tuple[Vec3, tuple[float, float]]:
         """(q'', λ) under the voltage command `tau` (V, the input slot) in the drive's current mode."""
-        _, _, a, lam = self.mesh(t, q, v, tau, self.drive.mode)
+        _, _, a, lam = self.mesh(t, q, v, tau, self.drive.mode, self.drive.i if self._inductive else None)
         return a, lam
 
     def output_names(self) -> tuple[str, ...]:
@@ -293,17 +336,23 @@ class DrivenSystem(FingerSystem):
         encoder = ("encoder",) if self.drive.params.encoder_counts else ()
         return ("motor_voltage", "motor_current", "motor_angle", *encoder, "mesh_mode", "mesh_loss", "mesh_torque")
 
-    def motor_outputs(self, t: float, q: Vec3, v: Vec3, u: float) -> dict[str, float]:
+    def motor_outputs(self, t: float, q: Vec3, v: Vec3, u: float, current: float | None = None) -> dict[str, float]:
         """The drive's outputs at a state (§8): motor_voltage (terminal, V), motor_current (A),
         motor_angle (rad, N θ1), encoder (counts, when set), mesh_mode (code, MESH_MODES), mesh_loss (W),
-        mesh_torque (N·m on θ1)."""
-        p = self.drive.params
-        mode = self.drive.mode
-        tau_g, i, a, _ = self.mesh(t, q, v, u, mode)
+        mesh_torque (N·m on θ1). With L > 0 the current is the state `current` (A; None: the drive's `i`)."""
+        drive = self.drive
+        p = drive.params
+        mode = drive.mode
+        if self._inductive and current is None:
+            current = drive.i
+        tau_g, i, a, _ = self.mesh(t, q, v, u, mode, current)
         omega = p.gear_ratio * v[0]
         tau_a = p.torque_constant * i - p.rotor_inertia * p.gear_ratio * a[0]
+        voltage = p.resistance * i + p.torque_constant * omega
+        if self._inductive:  # v = R i + L i' + k_e ω_m (L i' = 0 while the limit acts: the driver lowers v)
+            voltage = p.resistance * i + p.inductance * drive.current_rate(u, i, v[0]) + p.torque_constant * omega
         out = {
-            "motor_voltage": p.resistance * i + p.torque_constant * omega,
+            "motor_voltage": voltage,
             "motor_current": i,
             "motor_angle": p.gear_ratio * q[0],
         }
@@ -314,9 +363,10 @@ class DrivenSystem(FingerSystem):
         out["mesh_torque"] = tau_g
         return out
 
-    def powers(self, t: float, q: Vec3, v: Vec3, u: float) -> tuple[float, float, float, float]:
-        """(electrical v·i, copper R i², mesh loss, Σ elements' Q·q') in W at a state, current mode."""
-        out = self.motor_outputs(t, q, v, u)
+    def powers(self, t: float, q: Vec3, v: Vec3, u: float, current: float | None = None) -> tuple[float, float, float, float]:
+        """(electrical v·i, copper R i², mesh loss, Σ elements' Q·q') in W at a state, current mode
+        (`current`: the winding's state with L > 0, A)."""
+        out = self.motor_outputs(t, q, v, u, current)
         i = out["motor_current"]
         q_el = FingerSystem.generalized_force(self, t, q, v, 0.0)
         return (out["motor_voltage"] * i, self.drive.params.resistance * i * i, out["mesh_loss"],
@@ -326,3 +376,7 @@ class DrivenSystem(FingerSystem):
         """½ J_m ω_m², J."""
         p = self.drive.params
         return 0.5 * p.rotor_inertia * (p.gear_ratio * v[0]) ** 2
+
+    def magnetic_energy(self, current: float) -> float:
+        """½ L i², J."""
+        return 0.5 * self.drive.params.inductance * current * current

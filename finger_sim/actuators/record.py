@@ -46,9 +46,10 @@ def run(sim: Simulator, n: int) -> tuple[np.ndarray, dict[str, np.ndarray], dict
     (n + 1 rows, the start first) and the energy report between start and end (`EnergyLedger.report`)."""
     system: DrivenSystem = sim.system  # type: ignore[assignment]
     book = EnergyLedger()
-    q0, v0 = sim.q, sim.v
+    q0, v0, i0 = sim.q, sim.v, system.drive.i
     first = outputs_now(sim)
     xs, rows = steps(sim, n, book)
     values = np.vstack([first, rows])
     outputs = {name: values[:, i] for i, name in enumerate(system.output_names())}
-    return xs, outputs, book.report(system, q0, v0, sim.q, sim.v)
+    currents = (i0, system.drive.i) if system.drive.inductive else None
+    return xs, outputs, book.report(system, q0, v0, sim.q, sim.v, currents)

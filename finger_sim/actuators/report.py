@@ -13,4 +13,6 @@ def energy_line(report: Mapping[str, float]) -> str:
     return (f"drive energy: electrical work = {work:.6e} J  copper loss = {report['copper_loss']:.6e} J  "
             f"mesh loss = {report['mesh_loss']:.6e} J  rotor ΔE = {report['rotor_energy_change']:+.3e} J  "
             f"linkage ΔE = {report['linkage_energy_change']:+.6e} J  dissipated = {report['dissipated']:.3e} J  "
-            f"impacts = {report['impact_loss']:.3e} J  balance = {report['residual'] / scale:+.1e} of the work")
+            f"impacts = {report['impact_loss']:.3e} J  "
+            + (f"magnetic ΔE = {report['magnetic_energy_change']:+.3e} J  " if "magnetic_energy_change" in report else "")
+            + f"balance = {report['residual'] / scale:+.1e} of the work")

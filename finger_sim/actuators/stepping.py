@@ -19,6 +19,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import math
+from contextlib import nullcontext
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, NamedTuple
 
@@ -44,9 +45,8 @@ MAX_EVENTS_PER_STEP = 16
 GAUSS_NODES = (0.5 - math.sqrt(15.0) / 10.0, 0.5, 0.5 + math.sqrt(15.0) / 10.0)
 GAUSS_WEIGHTS = (5.0 / 18.0, 8.0 / 18.0, 5.0 / 18.0)
 TURN, FLANK, LIMIT = 0, 1, 2
-#: Methods that cannot step a drive scene: rattle takes Q and M apart (not the mesh's accelerations),
-#: dop853 evaluates the compiled right-hand side, which has no drive yet.
-UNSUPPORTED_METHODS = ("rattle", "dop853")
+#: Methods that cannot step a drive scene: rattle takes Q and M apart (not the mesh's accelerations).
+UNSUPPORTED_METHODS = ("rattle",)
 #: auto's choices on a drive scene when its own is unsupported, in order: explicit (the table's usual
 #: pick), then L-stable where the explicit one is unstable at the step (a stiff scene at a coarse dt).
 DRIVE_FALLBACKS = ("rk4", "radau")
@@ -63,17 +63,23 @@ class EnergyLedger:
     element_work: float = 0.0  # ∫ Σ Q_elements · q' dt (springs, damping, contact, ...)
     impact_loss: float = 0.0  # kinetic energy (linkage and rotor) taken by stop impacts
 
-    def report(self, system: DrivenSystem, q0: Vec3, v0: Vec3, q1: Vec3, v1: Vec3) -> dict[str, float]:
+    def report(self, system: DrivenSystem, q0: Vec3, v0: Vec3, q1: Vec3, v1: Vec3,
+               currents: tuple[float, float] | None = None) -> dict[str, float]:
         """The balance between two states: each term (J) and `residual`, which closes to the
-        integrator's accuracy: W − copper − mesh − Δ½J_m ω_m² − Δ(T + V) − dissipated − impacts."""
+        integrator's accuracy: W − copper − mesh − Δ½J_m ω_m² − Δ(T + V) − dissipated − impacts;
+        with L > 0 (`currents`: i at both states, A) also − Δ½L i² (`magnetic_energy_change`)."""
         rotor = system.rotor_energy(v1) - system.rotor_energy(v0)
         link = system.energy(q1, v1) - system.energy(q0, v0)
         dissipated = -self.element_work - (system.potential_energy(q1) - system.potential_energy(q0))
         residual = (self.electrical_work - self.copper_loss - self.mesh_loss - rotor - link - dissipated
                     - self.impact_loss)
-        return {"electrical_work": self.electrical_work, "copper_loss": self.copper_loss, "mesh_loss": self.mesh_loss,
-                "rotor_energy_change": rotor, "linkage_energy_change": link, "dissipated": dissipated,
-                "impact_loss": self.impact_loss, "residual": residual}
+        out = {"electrical_work": self.electrical_work, "copper_loss": self.copper_loss, "mesh_loss": self.mesh_loss,
+               "rotor_energy_change": rotor, "linkage_energy_change": link, "dissipated": dissipated,
+               "impact_loss": self.impact_loss, "residual": residual}
+        if currents is not None:
+            magnetic = system.magnetic_energy(currents[1]) - system.magnetic_energy(currents[0])
+            out["magnetic_energy_change"], out["residual"] = magnetic, residual - magnetic
+        return out
 
 
 class _Event(NamedTuple):
@@ -86,10 +92,16 @@ class _Event(NamedTuple):
 _compiled_guards = None  # finger_sim.kernel.drive.drive_guards, once a compiled Simulator starts
 
 
-def drive_method(method: str, reason: str, auto: bool, stable: Callable[[str], bool]) -> tuple[str, str]:
+def drive_method(method: str, reason: str, auto: bool, stable: Callable[[str], bool],
+                 inductive: bool = False) -> tuple[str, str]:
     """(method, reason) for a drive scene: auto's choice, or where it cannot step the drive the first of
     DRIVE_FALLBACKS that is `stable` at the scene's step (auto's substeps included); a named method that
-    cannot is refused (ConfigError naming integrator.method)."""
+    cannot is refused (ConfigError naming integrator.method). `inductive` (L > 0): a method that carries
+    the current (`inductive.method_for`)."""
+    if inductive:
+        from finger_sim.actuators.inductive import method_for
+
+        return method_for(method, reason, auto)
     if method not in UNSUPPORTED_METHODS:
         return method, reason
     if auto:
@@ -109,6 +121,11 @@ def start(sim: Simulator) -> None:
         from finger_sim.kernel.drive import drive_guards as _compiled_guards
 
         _compiled_guards(model, 0.0, *ZERO, *ZERO, 0.0, 1.0)  # load it now, not at the first event of a paced step
+    if system.drive.inductive:  # L > 0: the current is a state (actuators.inductive_stepping)
+        from finger_sim.actuators import inductive_stepping
+
+        inductive_stepping.start(sim)
+        return
     u = sim.scene.torque(0.0)
     if sim.v[0] == 0.0:
         sim.v = _turn(system, 0.0, sim.q, u)
@@ -131,6 +148,11 @@ def advance(sim: Simulator, t0: float, t1: float, u_fn: TorqueFn) -> None:
     change, current-limit kink and gap event (stops, contact) on the way."""
     system: DrivenSystem = sim.system  # type: ignore[assignment]
     drive = system.drive
+    if drive.inductive:  # L > 0: the current is a state
+        from finger_sim.actuators import inductive_stepping
+
+        inductive_stepping.advance(sim, t0, t1, u_fn)
+        return
     ledger: EnergyLedger | None = drive.ledger
     t, q, v = t0, sim.q, sim.v
     for _ in range(MAX_EVENTS_PER_STEP):
@@ -152,7 +174,8 @@ def advance(sim: Simulator, t0: float, t1: float, u_fn: TorqueFn) -> None:
             end, qe, ve = crossing.t, crossing.q, crossing.v
         if ledger is not None:
             t_, q_, v_ = t, q, v
-            _integrate(ledger, system, t, end, lambda s: sim._step(t_, q_, v_, s - t_, u_fn), u_fn)
+            with getattr(sim.integrator, "aside", nullcontext)():  # dop853 continues as without the quadrature
+                _integrate(ledger, system, t, end, lambda s: sim._step(t_, q_, v_, s - t_, u_fn), u_fn)
         t, q, v = end, qe, ve
         if crossing is not None:
             if crossing.gap.restitution is not None:

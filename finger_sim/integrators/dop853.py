@@ -7,7 +7,8 @@ dense output of the internal step that covers t + dt, projected onto Φ = 0, Φ_
 The internal solution itself is never projected, so the output grid does not change it.
 
 It continues its internal solution only while the caller continues the last output with
-the same torque function (same object); anything else (a reset, a torque breakpoint, an
+the same torque function (same object) and, on a drive scene (spec §8), the same mesh mode
+(the drive's mode changes are events of the Simulator's step); anything else (a reset, a torque breakpoint, an
 event's trial step, a held command) restarts it from the given state. The step-size
 control, error norm and dense output are scipy's DOP853 (scipy/integrate/_ivp/rk.py,
 after Hairer, Nørsett & Wanner, *Solving ODEs I*, §II.10), with scipy's coefficients.
@@ -19,6 +20,8 @@ import bisect
 import importlib.util
 import math
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from types import ModuleType
 
@@ -94,7 +97,16 @@ class DormandPrince853(Integrator):
         if model is None:
             raise ConfigError("integrator.method", "a method other than dop853 for a force element without a compiled "
                               "form (kernel_code)", self.name)
-        self._numerics, self._model = compiled.compiled_numerics(), model
+        numerics = compiled.compiled_numerics()
+        self._numerics, self._model = numerics, model
+        #: the right-hand side and the attempt: with a drive (spec §8) the ones applying its mesh mode,
+        #: and the internal solution restarts whenever the mode changes (`Drive.changes`)
+        self._rhs, self._attempt = numerics._rhs, numerics.dop853_attempt
+        self._drive = getattr(system, "drive", None)
+        if self._drive is not None:
+            driven = compiled.compiled_drive()
+            self._rhs, self._attempt = driven.driven_rhs, driven.driven_dop853_attempt
+        self._changes = -1  # `Drive.changes` the internal solution was computed under
         self.rtol, self.atol = rtol, atol
         self._torque: TorqueFn | None = None
         self._last: tuple[float, Vec3, Vec3] | None = None  # the last output (t, q, q')
@@ -130,6 +142,8 @@ class DormandPrince853(Integrator):
     def step(self, t: float, q: Vec3, v: Vec3, dt: float, torque: TorqueFn) -> tuple[Vec3, Vec3]:
         target = t + dt
         last = self._last
+        if self._drive is not None and self._drive.changes != self._changes:
+            self._torque = None  # the mesh mode changed: the internal solution is another mode's
         if torque is self._torque and self._origin == (t, q, v) and target >= t:
             pass  # a trial from the internal solution's start (event location): answered from it
         elif torque is self._torque and last is not None and last[1] == q and last[2] == v \
@@ -147,6 +161,16 @@ class DormandPrince853(Integrator):
         self._last = (target, q1, v1)
         self._remember(q1, target, t_old, h_old, err_old, err)
         return q1, v1
+
+    @contextmanager
+    def aside(self) -> Iterator[None]:
+        """Steps inside are trials from the internal solution that leave its continuation as it was
+        (the drive's energy quadrature between two steps): the next step continues as without them."""
+        last = self._last
+        try:
+            yield
+        finally:
+            self._last = last
 
     def _segment(self, target: float) -> tuple[float, float, np.ndarray, np.ndarray, float, float]:
         """The accepted internal step whose dense output covers `target` (s): the last one, or an
@@ -202,7 +226,9 @@ class DormandPrince853(Integrator):
         self._err = self._err_old = self._estimates.get(q, 0.0)
         self._t = self._t_old = t
         self._y[:3], self._y[3:] = q, v
-        self._numerics._rhs(self._model, t, self._y, torque(t), self._f)
+        if self._drive is not None:
+            self._changes = self._drive.changes
+        self._rhs(self._model, t, self._y, torque(t), self._f)
         if self._h <= 0.0:
             self._h = _initial_step(self._y, self._f, self.rtol, self.atol, dt)
 
@@ -216,7 +242,7 @@ class DormandPrince853(Integrator):
             if h < 10.0 * abs(math.nextafter(t, math.inf) - t):
                 break
             taus = np.array([torque(t + c * h) for c in _NODES])
-            norm = num.dop853_attempt(self._model, _A, _B, _C, _E3, _E5, _D, t, self._y, self._f, h, taus,
+            norm = self._attempt(self._model, _A, _B, _C, _E3, _E5, _D, t, self._y, self._f, h, taus,
                                       self.rtol, self.atol, self._kk, y_new, self._dense)
             if norm < 1.0:
                 self._err_old = self._err

@@ -157,4 +157,11 @@ def compiled_numerics() -> "ModuleType":
     return compiled
 
 
+def compiled_drive() -> "ModuleType":
+    """The compiled drive module (spec §8)."""
+    from finger_sim.kernel import drive as compiled
+
+    return compiled
+
+
 stepper_slot.install(sys.modules[__name__])  # type: ignore[arg-type]

@@ -23,31 +23,38 @@ from finger_sim.inputs import HELD_ARRAY, SQUARE, STEP, Profile, profile_array
 from finger_sim.kernel import numerics
 from finger_sim.kernel.integrators import WARM_UP_STATE, CompiledRungeKutta, FastStepper, _entry_point
 from finger_sim.kernel.layout import BREAKPOINT, OK
-from finger_sim.kernel.numerics import JIT, generalized_force, njit, plan_parts, solved_accelerations, torque_at
+from finger_sim.kernel.numerics import (JIT, generalized_force, njit, plan_parts, project, solved_accelerations, torque_at,
+                                        trig)
 
 motor_current = njit(**JIT)(law.motor_current)
 unclamped_current = njit(**JIT)(law.unclamped_current)
 mesh_torque = njit(**JIT)(law.mesh_torque)
 linkage_inertia_at = njit(**JIT)(law.linkage_inertia_at)
 unique = njit(**JIT)(law.unique)
+current_rate = njit(**JIT)(law.current_rate)
 BLOCK = law.KERNEL_BLOCK
 DRIVE, STUCK = law.DRIVE, law.STUCK
 
 
 @njit(**JIT)
 def _trig(m, q0, q1, q2):
-    """The sines and cosines of θ1, θ2, θ3 and θ1 − θ3 − α that `accelerations` and the linkage's
-    inertia both use: computed once per state (the same values, so the same bits)."""
-    u = q0 - q2 - m[7]
-    return math.sin(q0), math.cos(q0), math.sin(q1), math.cos(q1), math.sin(q2), math.cos(q2), math.sin(u), math.cos(u)
+    """The sines and cosines of θ1, θ2, θ3 and θ1 − θ3 − α (`dynamics.trig`) that the acceleration
+    solve and the linkage's inertia both use: computed once per state (the same values, so the same bits)."""
+    return trig(q0, q1, q2, m[7])
 
 
 @njit(**JIT)
 def _mesh_torque(m, o, t, q0, q1, q2, v0, v1, v2, u, s1, c1, s2, c2, s3, c3, su, cu):
     """τ_g (N·m) of the rolling mesh in the mode m[o] (`DrivenSystem.mesh`); NaN where not unique.
     s1 … cu: `_trig` of the state."""
+    i = motor_current(u, m[o + 3] * v0, m[o + 6], m[o + 5], m[o + 7], m[o + 8])
+    return _mesh_torque_at(m, o, t, q0, q1, q2, v0, v1, v2, i, s1, c1, s2, c2, s3, c3, su, cu)
+
+
+@njit(**JIT)
+def _mesh_torque_at(m, o, t, q0, q1, q2, v0, v1, v2, i, s1, c1, s2, c2, s3, c3, su, cu):
+    """τ_g (N·m) of the rolling mesh in the mode m[o] at the current i (A); NaN where not unique."""
     ratio, rotor, k_t = m[o + 3], m[o + 4], m[o + 5]
-    i = motor_current(u, ratio * v0, m[o + 6], k_t, m[o + 7], m[o + 8])
     f1, f2, f3 = generalized_force(m, t, q0, q1, q2, v0, v1, v2, 0.0)
     a0 = solved_accelerations(m, s1, c1, s2, c2, s3, c3, su, cu, v0, v1, v2, f1, f2, f3)[0]
     m_eff = linkage_inertia_at(m[4], m[5], m[6], m[0], m[1], m[2], m[3], s1, c1, s2, c2, s3, c3, cu)
@@ -161,3 +168,68 @@ class DrivenFastStepper:
         if drive.ledger is not None:
             return BREAKPOINT, q, v, 0.0
         return self._entry(plan, prof, held, k, q, v, drive.direction)
+
+
+driven_rhs = _rebound(numerics._rhs, accelerations=driven_accelerations)
+driven_dop853_attempt = _rebound(numerics.dop853_attempt, _rhs=driven_rhs)
+
+
+# -- L > 0: the current as a seventh state (`finger_sim.actuators.inductive`) ------------------
+@njit(**JIT)
+def inductive_rates(m, t, q0, q1, q2, v0, v1, v2, u, i):
+    """(q'' rad/s², i' A/s) at the current i (A) under u (V) in the mesh mode of the model's drive
+    block: `DrivenSystem.mesh(..., current=i)` and `Drive.current_rate`."""
+    o = m.shape[0] - BLOCK
+    di = current_rate(u, i, m[o + 3] * v0, m[o + 6], m[o + 5], m[o + 9], m[o + 7], m[o + 8])
+    if m[o] == STUCK:
+        return 0.0, 0.0, 0.0, di
+    s1, c1, s2, c2, s3, c3, su, cu = _trig(m, q0, q1, q2)
+    tau_g = _mesh_torque_at(m, o, t, q0, q1, q2, v0, v1, v2, i, s1, c1, s2, c2, s3, c3, su, cu)
+    f1, f2, f3 = generalized_force(m, t, q0, q1, q2, v0, v1, v2, tau_g)
+    a0, a1, a2 = solved_accelerations(m, s1, c1, s2, c2, s3, c3, su, cu, v0, v1, v2, f1, f2, f3)
+    return a0, a1, a2, di
+
+
+@njit(**JIT)
+def inductive_rk_step(m, tab, t, x, h, taus, k):
+    """`numerics.rk_step` on x = (q, q', i) in place (`InductiveRungeKutta._substep`). Status."""
+    s = tab.shape[1]
+    for r in range(s):
+        x0, x1, x2, w0, w1, w2, c6 = x[0], x[1], x[2], x[3], x[4], x[5], x[6]
+        for j in range(r):
+            a = tab[r, j]
+            if a != 0.0:
+                ha = h * a
+                x0 += ha * k[j, 0]
+                x1 += ha * k[j, 1]
+                x2 += ha * k[j, 2]
+                w0 += ha * k[j, 3]
+                w1 += ha * k[j, 4]
+                w2 += ha * k[j, 5]
+                c6 += ha * k[j, 6]
+        k[r, 0], k[r, 1], k[r, 2] = w0, w1, w2
+        tau = taus[int(tab[s + 2, r])]
+        k[r, 3], k[r, 4], k[r, 5], k[r, 6] = inductive_rates(m, t + tab[s + 1, r] * h, x0, x1, x2, w0, w1, w2, tau, c6)
+    for j in range(s):
+        b = tab[s, j]
+        if b != 0.0:
+            hb = h * b
+            for c in range(7):
+                x[c] += hb * k[j, c]
+    return project(m, x)
+
+
+@njit(**JIT)
+def inductive_step_tuple(m, tab, t, q, v, i, h, n, taus):
+    """n substeps of h/n of `inductive_rk_step` from (q, q', i) at t; taus[k]: the input (V) at the
+    distinct nodes of substep k. Returns (status, q, q', i)."""
+    x = np.empty(7)
+    x[0], x[1], x[2], x[3], x[4], x[5], x[6] = q[0], q[1], q[2], v[0], v[1], v[2], i
+    k = np.empty((tab.shape[1], 7))
+    sub = h / n
+    status = OK
+    for j in range(n):
+        status = inductive_rk_step(m, tab, t + j * sub, x, sub, taus[j], k)
+        if status != OK:
+            break
+    return status, (x[0], x[1], x[2]), (x[3], x[4], x[5]), x[6]
