@@ -53,6 +53,10 @@ class CompiledKernel(Protocol):
         """The compiled numerics (DOP853's attempt, dense output and right-hand side)."""
         ...
 
+    def compiled_inductive(self) -> type:
+        """The compiled Runge–Kutta class of an inductive drive (`actuators.inductive`'s twin)."""
+        ...
+
     def compiled_drive(self) -> ModuleType:
         """The compiled drive (spec §8): its right-hand side and DOP853 attempt under the mesh mode."""
         ...

@@ -24,9 +24,8 @@ import math
 from collections import deque
 from typing import TYPE_CHECKING, ClassVar
 
-import numpy as np
 
-from finger_sim import kinematics
+from finger_sim import kinematics, stepper_slot
 from finger_sim.actuators.drive import BACK, DRIVE, DrivenSystem, unique
 from finger_sim.errors import ConfigError
 from finger_sim.integrators.base import Integrator, TorqueFn
@@ -210,37 +209,9 @@ class InductiveRungeKutta(Integrator):
         return cls.reference.is_stable(z / cls.substeps)
 
 
-class CompiledInductiveRungeKutta(InductiveRungeKutta):
-    """`InductiveRungeKutta` in the compiled kernel (`kernel.drive.inductive_step_tuple`), same numbers."""
-
-    def __init__(self, system: DrivenSystem) -> None:  # type: ignore[override]
-        from finger_sim.kernel import drive as kernel_drive
-        from finger_sim.kernel.layout import model_array, tableau_array
-
-        super().__init__(system)
-        ref = self.reference
-        self.model = model_array(system)
-        self.tableau = tableau_array(ref.A, ref.B, ref.C)
-        self.nodes = tuple(dict.fromkeys(float(x) for x in ref.C))
-        self._kernel = kernel_drive.inductive_step_tuple
-        self._numerics = kernel_drive.numerics
-
-    def advance(self, t: float, q: Vec3, v: Vec3, i: float, dt: float, torque: TorqueFn,
-                n: int) -> tuple[Vec3, Vec3, float]:
-        h = dt / n
-        nodes = self.nodes
-        taus = np.array([torque(tk + c * h) for tk in [t + k * h for k in range(n)] for c in nodes]).reshape(n, len(nodes))
-        status, q1, v1, i1 = self._kernel(self.model, self.tableau, t, q, v, i, dt, n, taus)
-        if status != self._numerics.OK:
-            from finger_sim.kernel.integrators import check_status
-
-            check_status(status, self.name, t, q)
-        return q1, v1, i1
-
-
 def integrator_class(integrator_cls: type[Integrator], substeps: int) -> type[Integrator]:
     """The class that steps an inductive drive with the method of `integrator_cls` (a Python
     ExplicitRungeKutta or its compiled twin, `kernel.integrators.CompiledRungeKutta`)."""
     compiled = hasattr(integrator_cls, "step_plan")
-    base = CompiledInductiveRungeKutta if compiled else InductiveRungeKutta
+    base = stepper_slot.kernel().compiled_inductive() if compiled else InductiveRungeKutta
     return base.of(integrator_cls, substeps)

@@ -9,14 +9,19 @@ The kernel serves the core through `finger_sim.stepper_slot` (the core never imp
 module is the `CompiledKernel` there, installed when it is imported.
 
 Compilation is cached on disk (numba's `cache=True`), so the node and the CLI pay it once
-per machine. numba writes the cache into `__pycache__` next to the modules; where that is
-read-only (a colcon or system install) `use_writable_cache()` points NUMBA_CACHE_DIR at
-FALLBACK_CACHE_DIR, unless the user has set NUMBA_CACHE_DIR.
+per machine. numba checks a cached function against its own source file only, not against the
+laws it compiles from other modules (`numerics.compiled`, `drive._rebound`, the effects' laws):
+an edited law would be served stale. So `use_writable_cache()` points NUMBA_CACHE_DIR at a
+folder named by a digest of every source the kernel compiles from (`compiled_sources_digest`):
+`kernel/__pycache__/numba/<digest>` beside the modules, or FALLBACK_CACHE_DIR/<digest> where the
+package is read-only (a colcon or system install), or <NUMBA_CACHE_DIR>/<digest> when the user
+set one. Any change to those sources starts a fresh cache.
 """
 
 from __future__ import annotations
 
 import functools
+import hashlib
 import importlib.metadata
 import importlib.util
 import os
@@ -51,17 +56,41 @@ OFFLINE_BREAK_EVEN_STEPS = 20_000
 FALLBACK_CACHE_DIR = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "finger_sim" / "numba"
 
 
+#: The package's folders whose modules the kernel compiles from (besides the top-level modules).
+COMPILED_FOLDERS = ("kernel", "effects", "integrators", "actuators")
+
+
+@functools.cache
+def compiled_sources_digest() -> str:
+    """A digest (16 hex digits) of the name, size and modification time of every source the
+    kernel compiles from: the package's top-level modules and COMPILED_FOLDERS."""
+    package = Path(__file__).parent.parent
+    files = sorted([*package.glob("*.py"), *(f for d in COMPILED_FOLDERS for f in (package / d).glob("*.py"))])
+    digest = hashlib.sha256()
+    for f in files:
+        stat = f.stat()
+        digest.update(f"{f.relative_to(package)}:{stat.st_size}:{stat.st_mtime_ns}\n".encode())
+    return digest.hexdigest()[:16]
+
+
+@functools.cache
 def use_writable_cache() -> None:
-    """Point numba's cache at a writable folder when the package's own folder is not writable."""
-    if "NUMBA_CACHE_DIR" in os.environ or os.access(Path(__file__).parent, os.W_OK):
-        return
-    target = FALLBACK_CACHE_DIR
-    try:
-        target.mkdir(parents=True, exist_ok=True)
-    except OSError:
-        target = Path(tempfile.gettempdir()) / "finger_sim_numba"
-        target.mkdir(parents=True, exist_ok=True)
-    os.environ["NUMBA_CACHE_DIR"] = str(target)
+    """Point numba's cache at a writable folder keyed by `compiled_sources_digest` (module docstring)."""
+    user = os.environ.get("NUMBA_CACHE_DIR")
+    own = Path(__file__).parent / "__pycache__" / "numba"
+    candidates = [Path(user)] if user else [own, FALLBACK_CACHE_DIR, Path(tempfile.gettempdir()) / "finger_sim_numba"]
+    for base in candidates:
+        target = base / compiled_sources_digest()
+        try:
+            target.mkdir(parents=True, exist_ok=True)
+        except OSError:
+            continue
+        if os.access(target, os.W_OK):
+            break
+    # numba's config, not the environment: child processes (a node, Dask workers) key their own
+    import numba
+
+    numba.config.CACHE_DIR = str(target)
 
 
 @functools.cache
@@ -162,6 +191,13 @@ def compiled_drive() -> "ModuleType":
     from finger_sim.kernel import drive as compiled
 
     return compiled
+
+
+def compiled_inductive() -> type:
+    """The inductive drive's compiled Runge–Kutta class (`kernel.inductive`)."""
+    from finger_sim.kernel.inductive import CompiledInductiveRungeKutta
+
+    return CompiledInductiveRungeKutta
 
 
 stepper_slot.install(sys.modules[__name__])  # type: ignore[arg-type]
