@@ -129,12 +129,14 @@ def contact_gaps(m, o, q0, q2, gap):
 
 
 @njit(**SERIAL)
-def kink(m, xa, xb, h, ga, gb, shifted):
+def kink(m, xa, xb, h, ga, gb, shifted, depth):
     """Whether a step of length h (s) from state xa to xb may hold a contact event that the
     Simulator would split it at: a contact gap of model m is closed at one end and open at the
     other, or `simulate._predicted_crossing` (the Simulator's own test, from the gaps and their
-    rates at both ends) predicts a crossing inside it. ga, gb, shifted: scratch arrays (one per
-    candidate). The rates are forward differences along q' over RATE_STEP·h."""
+    rates at both ends) predicts a crossing inside it; the same for the depth gap depth − δ
+    (`depth_guard`: depth is the thinner phalanx's radius ρ, m, so the Simulator sees every
+    candidate that may reach its own). ga, gb, shifted: scratch arrays (one per candidate).
+    The rates are forward differences along q' over RATE_STEP·h."""
     o = HEADER + 1
     eps = RATE_STEP * h
     for _ in range(int(m[HEADER])):
@@ -144,7 +146,7 @@ def kink(m, xa, xb, h, ga, gb, shifted):
             count = contact_gaps(m, o, xa[0], xa[2], ga)
             contact_gaps(m, o, xb[0], xb[2], gb)
             for c in range(count):
-                if (ga[c] < -EVENT_TOLERANCE) != (gb[c] < -EVENT_TOLERANCE):
+                if (ga[c] < -EVENT_TOLERANCE) != (gb[c] < -EVENT_TOLERANCE) or gb[c] + depth < -EVENT_TOLERANCE:
                     return True
             contact_gaps(m, o, xa[0] + eps * xa[3], xa[2] + eps * xa[5], shifted)
             for c in range(count):
@@ -154,6 +156,8 @@ def kink(m, xa, xb, h, ga, gb, shifted):
             for c in range(count):
                 rate_b = (shifted[c] - gb[c]) / eps
                 if predicted_crossing(ga[c], rates_a[c], gb[c], rate_b, h, ga[c] < -EVENT_TOLERANCE) is not None:
+                    return True
+                if predicted_crossing(ga[c] + depth, rates_a[c], gb[c] + depth, rate_b, h, False) is not None:
                     return True
         o += n
     return False
@@ -168,7 +172,7 @@ def residual(m, x):
 
 
 @njit(**SERIAL)
-def _finger(m, tab, nodes, code, p, dt, stop, limits, gaps, x, step, last, max_res, traj, record):
+def _finger(m, tab, nodes, code, p, dt, stop, limits, gaps, depth, x, step, last, max_res, traj, record):
     """Steps one finger from `step` up to `last`; returns (status, step reached, max |Φ|)."""
     s = tab.shape[1]
     k = np.empty((max(s, 1), 6))
@@ -206,7 +210,7 @@ def _finger(m, tab, nodes, code, p, dt, stop, limits, gaps, x, step, last, max_r
                 event = True
             elif stop and (x[0] - limits[0] < -EVENT_TOLERANCE or limits[1] - x[0] < -EVENT_TOLERANCE):
                 event = True
-            elif gaps > 0 and kink(m, xa, x, h, before, after, shifted):
+            elif gaps > 0 and kink(m, xa, x, h, before, after, shifted, depth):
                 event = True
             if event:
                 break
@@ -223,19 +227,21 @@ def _finger(m, tab, nodes, code, p, dt, stop, limits, gaps, x, step, last, max_r
 
 
 @njit(**PARALLEL)
-def run(models, tab, nodes, codes, params, dts, stops, limits, gaps, states, steps, lasts, max_res, trajs, record):
+def run(models, tab, nodes, codes, params, dts, stops, limits, gaps, depths, states, steps, lasts, max_res, trajs,
+        record):
     """Advance every finger i from step steps[i] to lasts[i] (in place: states (N × 6), steps,
     max_res; trajs[i, k] = q after step k when record). Returns each finger's status (DONE or EVENT).
 
     models: N × L flat models (`kernel.layout.model_array`, zero-padded); tab, nodes: the method's
     tableau and distinct nodes (one method per call); codes, params: each torque profile; stops,
-    limits: whether finger i has MCP stops, and (lower, upper) rad; gaps: contact candidates.
+    limits: whether finger i has MCP stops, and (lower, upper) rad; gaps: contact candidates; depths:
+    the thinner phalanx radius, m (`kink`).
     """
     n = states.shape[0]
     status = np.empty(n, dtype=np.int64)
     for i in prange(n):
         status[i], steps[i], max_res[i] = _finger(
-            models[i], tab, nodes, codes[i], params[i], dts[i], stops[i], limits[i], gaps[i],
+            models[i], tab, nodes, codes[i], params[i], dts[i], stops[i], limits[i], gaps[i], depths[i],
             states[i], steps[i], lasts[i], max_res[i], trajs[i], record,
         )
     return status
