@@ -21,8 +21,8 @@ import numpy as np
 
 from finger_sim.actuators import stepping as drive_stepping
 from finger_sim.sensors import SensorBank
-from finger_sim.auto import (ERROR_CONTROLLED, choose_method, contact_substeps, fixed_step_method, integrator_options,
-                             warn_unresolved_contact)
+from finger_sim.auto import (ERROR_CONTROLLED, PYTHON_STAGES_NOTE, choose_method, contact_substeps,
+                             integrator_options, warn_unresolved_contact)
 from finger_sim.depth_guard import DepthLimit, depth_limit
 from finger_sim.dynamics import FingerSystem
 from finger_sim.effects import EFFECTS, Effect, ForceElement
@@ -441,7 +441,7 @@ def _setup(scene: Scene, kernel: str, effects: tuple[Effect, ...]) -> _Setup:
     if method == AUTO:
         method, reason = choose_method(scene)
         if method == ERROR_CONTROLLED and getattr(system, "drive", None) is None and model_array(system) is None:
-            method, reason = fixed_step_method(scene)
+            reason += PYTHON_STAGES_NOTE
     if getattr(system, "drive", None) is not None:
         method, reason = drive_stepping.drive_method(method, reason, scene.method == AUTO,
                                                      lambda name: _stable_under_auto(scene, system, name))

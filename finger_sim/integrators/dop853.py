@@ -11,6 +11,11 @@ the same torque function (same object); anything else (a reset, a torque breakpo
 event's trial step, a held command) restarts it from the given state. The step-size
 control, error norm and dense output are scipy's DOP853 (scipy/integrate/_ivp/rk.py,
 after Hairer, Nørsett & Wanner, *Solving ODEs I*, §II.10), with scipy's coefficients.
+
+A system with a force element that has no compiled form (an object with its own contact law, a
+moving object) is stepped the same way with its stages evaluated in Python (`_python_attempt`, the
+same arithmetic as `numerics.dop853_attempt` on `FingerSystem.accelerations`): slower, just as
+error-controlled.
 """
 
 from __future__ import annotations
@@ -25,7 +30,7 @@ from types import ModuleType
 import numpy as np
 
 from finger_sim.dynamics import FingerSystem
-from finger_sim.errors import ConfigError, SimulationDiverged
+from finger_sim.errors import SimulationDiverged
 from finger_sim.integrators.base import Integrator, TorqueFn
 from finger_sim.kinematics import Vec3
 
@@ -92,9 +97,10 @@ class DormandPrince853(Integrator):
 
         super().__init__(system)
         model = model_array(system)
-        if model is None:
-            raise ConfigError("integrator.method", "a method other than dop853 for a force element without a compiled "
-                              "form (kernel_code)", self.name)
+        #: whether the stages run compiled; else in Python (a force element without a compiled form)
+        self.compiled = model is not None
+        if model is None:  # the geometry alone (no elements) for the compiled dense output and projection
+            model = model_array(FingerSystem(system.params))
         self._numerics, self._model = numerics, model
         self.rtol, self.atol = rtol, atol
         self._torque: TorqueFn | None = None
@@ -203,7 +209,10 @@ class DormandPrince853(Integrator):
         self._err = self._err_old = self._estimates.get(q, 0.0)
         self._t = self._t_old = t
         self._y[:3], self._y[3:] = q, v
-        self._numerics._rhs(self._model, t, self._y, torque(t), self._f)
+        if self.compiled:
+            self._numerics._rhs(self._model, t, self._y, torque(t), self._f)
+        else:
+            self._f[:] = _python_rhs(self.system, t, self._y, torque(t))
         if self._h <= 0.0:
             self._h = _initial_step(self._y, self._f, self.rtol, self.atol, dt)
 
@@ -217,8 +226,12 @@ class DormandPrince853(Integrator):
             if h < 10.0 * abs(math.nextafter(t, math.inf) - t):
                 break
             taus = np.array([torque(t + c * h) for c in _NODES])
-            norm = num.dop853_attempt(self._model, _A, _B, _C, _E3, _E5, _D, t, self._y, self._f, h, taus,
-                                      self.rtol, self.atol, self._kk, y_new, self._dense)
+            if self.compiled:
+                norm = num.dop853_attempt(self._model, _A, _B, _C, _E3, _E5, _D, t, self._y, self._f, h, taus,
+                                          self.rtol, self.atol, self._kk, y_new, self._dense)
+            else:
+                norm = _python_attempt(self.system, t, self._y, self._f, h, taus, self.rtol, self.atol, self._kk,
+                                       y_new, self._dense)
             if norm < 1.0:
                 self._err_old = self._err
                 self._err += _theta_error(self._kk, h)
@@ -244,6 +257,37 @@ class DormandPrince853(Integrator):
     @classmethod
     def is_stable(cls, z: complex) -> bool:
         return True  # error control shrinks the internal step as needed
+
+
+def _python_rhs(system: FingerSystem, t: float, y: np.ndarray, tau: float) -> list[float]:
+    """y' = (q', q'') at (t, y) under torque tau (N·m), by `FingerSystem.accelerations`."""
+    q0, q1, q2, v0, v1, v2 = y.tolist()
+    a, _ = system.accelerations(t, (q0, q1, q2), (v0, v1, v2), tau)
+    return [v0, v1, v2, *a]
+
+
+def _python_attempt(system: FingerSystem, t: float, y: np.ndarray, f: np.ndarray, h: float, taus: np.ndarray,
+                    rtol: float, atol: float, kk: np.ndarray, y_new: np.ndarray, dense: np.ndarray) -> float:
+    """`numerics.dop853_attempt` with the stages evaluated in Python (same arguments but the model:
+    the system itself, whatever its elements). Returns the error norm (accepted when < 1)."""
+    kk[0] = f
+    for s in range(1, _N_STAGES):
+        kk[s] = _python_rhs(system, t + _C[s] * h, y + h * (_A[s, :s] @ kk[:s]), taus[s])
+    y_new[:] = y + h * (_B @ kk[:_N_STAGES])
+    kk[_N_STAGES] = _python_rhs(system, t + h, y_new, taus[_N_STAGES])
+    scale = atol + np.maximum(np.abs(y), np.abs(y_new)) * rtol
+    e5, e3 = (_E53 @ kk[: _N_STAGES + 1]) / scale
+    err5, err3 = float(e5 @ e5), float(e3 @ e3)
+    norm = 0.0 if err5 == 0.0 and err3 == 0.0 else abs(h) * err5 / math.sqrt((err5 + E3_WEIGHT * err3) * 6)
+    if norm < 1.0:
+        for s in range(_N_STAGES + 1, 16):
+            kk[s] = _python_rhs(system, t + _C[s] * h, y + h * (_A[s, :s] @ kk[:s]), taus[s])
+        dy = y_new - y
+        dense[0] = dy
+        dense[1] = h * kk[0] - dy
+        dense[2] = 2.0 * dy - h * (kk[_N_STAGES] + kk[0])
+        dense[3:] = h * (_D @ kk)
+    return norm
 
 
 def _theta_error(kk: np.ndarray, h: float) -> float:
