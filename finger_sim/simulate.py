@@ -28,7 +28,7 @@ from finger_sim.dynamics import FingerSystem
 from finger_sim.effects import EFFECTS, Effect, ForceElement
 from finger_sim.errors import SimulationDiverged, StabilityError
 from finger_sim.inputs import BREAK_EPS, HELD_ARRAY, Profile
-from finger_sim.integrators import METHODS, Integrator, TorqueFn
+from finger_sim.integrators import METHODS, HeldTorque, Integrator, TorqueFn
 from finger_sim.kernel import offline_kernel
 from finger_sim.kernel import select as select_kernel
 from finger_sim.kernel.layout import BREAKPOINT, model_array
@@ -178,8 +178,9 @@ class Simulator:
             value = self.torque = float(profile)
             if self._held is None or self._held[0] != value:
                 # one function object per held value: an error-controlled method continues its internal
-                # solution from step to step while the value is held (it restarts for a new function)
-                self._held = (value, lambda s: value)
+                # solution from step to step while the value is held (it restarts for a new function);
+                # a HeldTorque, whose `value` tells it that τ is the same at every stage
+                self._held = (value, HeldTorque(value))
             self._advance(t0, t1, self._held[1])
         if not math.isfinite(sum(self.q) + sum(self.v)):  # a NaN or inf anywhere makes the sum non-finite
             raise SimulationDiverged(f"non-finite state (step {self.step_index + 1})", method=self.method, t=t1, dt=self.dt)

@@ -114,6 +114,7 @@ class DormandPrince853(Integrator):
         self._dense = np.zeros((7, 6))
         self._kk = np.empty((16, 6))
         self._out = np.empty(6)
+        self._taus = np.empty(len(_NODES))  # τ at the stage times of a held torque
         #: accepted and rejected internal steps so far (for benchmarks)
         self.accepted = self.rejected = 0
         self._err = 0.0  # Σ local θ error estimates of the internal solution since its start, rad
@@ -225,7 +226,12 @@ class DormandPrince853(Integrator):
         for _ in range(MAX_ATTEMPTS):
             if h < 10.0 * abs(math.nextafter(t, math.inf) - t):
                 break
-            taus = np.array([torque(t + c * h) for c in _NODES])
+            held = getattr(torque, "value", None)  # a held or constant torque (`HeldTorque`, `inputs.Constant`)
+            if held is not None:
+                taus = self._taus
+                taus.fill(held)
+            else:
+                taus = np.array([torque(t + c * h) for c in _NODES])
             if self.compiled:
                 norm = num.dop853_attempt(self._model, _A, _B, _C, _E3, _E5, _D, t, self._y, self._f, h, taus,
                                           self.rtol, self.atol, self._kk, y_new, self._dense)
@@ -234,17 +240,18 @@ class DormandPrince853(Integrator):
                                        y_new, self._dense)
             if norm < 1.0:
                 self._err_old = self._err
-                self._err += _theta_error(self._kk, h)
+                self._err += num.dop853_theta_error(_E53, self._kk, h, E3_WEIGHT)
                 factor = num.MAX_FACTOR if norm == 0.0 else min(num.MAX_FACTOR, num.SAFETY * norm**num.ERROR_EXPONENT)
                 self._t_old, self._h_old = t, h
-                self._y_old[:] = self._y
-                self._y[:] = y_new
+                # y_new is this attempt's own array: the state moves on without copies (no array is
+                # written again once it is y_old, so the history keeps it as it is)
+                self._y_old, self._y = self._y, y_new
                 self._f[:] = self._kk[_N_STAGES]
                 self._t = t + h
                 self._h = min(MAX_STEP, h * (min(1.0, factor) if rejected else factor))
                 self.accepted += 1
                 if self._keep_history:
-                    self._history.append((t, h, self._y_old.copy(), self._dense.copy(), self._err_old, self._err))
+                    self._history.append((t, h, self._y_old, self._dense.copy(), self._err_old, self._err))
                     self._history_starts.append(t)
                 return
             # a non-finite trial (e.g. a contact state far outside its law) is rejected like a large
@@ -288,19 +295,6 @@ def _python_attempt(system: FingerSystem, t: float, y: np.ndarray, f: np.ndarray
         dense[2] = 2.0 * dy - h * (kk[_N_STAGES] + kk[0])
         dense[3:] = h * (_D @ kk)
     return norm
-
-
-def _theta_error(kk: np.ndarray, h: float) -> float:
-    """The local error estimate of an accepted step on θ (rad): scipy's DOP853 combination of its
-    5th- and 3rd-order estimates, h·e5²/√(e5² + 0.01·e3²), for each angle, the largest of the three.
-    kk: the step's stages (rows, as `dop853_attempt` leaves them); h: its length, s."""
-    (e5, e3) = (_E53 @ kk[: _N_STAGES + 1, :3]).tolist()
-    worst = 0.0
-    for a, b in zip(e5, e3):
-        denominator = a * a + E3_WEIGHT * b * b
-        if denominator > 0.0:
-            worst = max(worst, a * a / math.sqrt(denominator))
-    return abs(h) * worst
 
 
 def _initial_step(y: np.ndarray, f: np.ndarray, rtol: float, atol: float, dt: float) -> float:
