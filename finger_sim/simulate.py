@@ -246,9 +246,12 @@ class Simulator:
         """
         first: _Crossing | None = None
         start, end = self._gap_states(t, q, v), self._gap_states(t1, q1, v1)
+        h = t1 - t
         for gap, (g0, r0), (g1, r1) in zip(self._gaps, start, end):
             if gap.restitution is not None:
                 g0 = max(g0, 0.0)  # an impact gap: the step starts on the open side
+            if min(g0, g1) > h * (abs(r0) + abs(r1)):
+                continue  # open at both ends, and too far for `_predicted_crossing` to see a crossing between
             found = self._bracket(gap, t, q, v, torque, (t, g0, r0), (t1, g1, r1, q1, v1), BRACKET_DEPTH)
             if found is not None:
                 crossing = self._locate(gap, t, q, v, (t, g0), found, torque)

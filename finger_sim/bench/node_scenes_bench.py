@@ -6,7 +6,8 @@ Each scene runs in its own finger_node process (physics and publishing at 1 kHz,
 torque from the topic), driven by this client as `node_bench` drives it (small alternating torques
 at --command-hz, each held until the next, so the node's integrator restarts at every command):
 the real-time factor from the joint_states stamps against the client's wall clock, the node's CPU
-as a fraction of one core, and its overruns from /diagnostics. A drive scene takes voltage, not
+as a fraction of one core, their ratio (the node's CPU seconds per simulated second: below 1, one
+free core holds real time, whatever else loads the machine), and its overruns from /diagnostics. A drive scene takes voltage, not
 torque: the commands are refused (logged) and it runs at 0 V.
 """
 
@@ -37,14 +38,16 @@ def main(argv: list[str] | None = None) -> int:
     from finger_sim.scene import load_scene
     from finger_sim.simulate import Simulator
 
-    rows = ["| scene | auto's method | real-time factor | node CPU (cores) | overruns |", "|---|---|---|---|---|"]
+    rows = ["| scene | auto's method | real-time factor | node CPU (cores) | CPU s per simulated s | overruns |",
+            "|---|---|---|---|---|---|"]
     with tempfile.TemporaryDirectory(prefix="node_scenes_") as tmp:
         for name in args.scenes:
             method = Simulator(load_scene(ROOT / "config" / f"{name}.yaml")).method
             run = node_bench.measure(1.0, args.duration, args.domain_id, Path(tmp), commands=True, scene=name,
                                      command_hz=args.command_hz)
             overruns = run.diagnostics[-1].get("overruns", "?") if run.diagnostics else "?"
-            rows.append(f"| {name} | {method} | {run.rtf:.3f} | {run.cpu_cores:.2f} | {overruns} |")
+            per_sim_s = run.cpu_cores / run.rtf if run.rtf else float("nan")
+            rows.append(f"| {name} | {method} | {run.rtf:.3f} | {run.cpu_cores:.2f} | {per_sim_s:.2f} | {overruns} |")
             print(rows[-1], flush=True)
     command = "python -m finger_sim.bench.node_scenes_bench " + " ".join(argv if argv is not None else sys.argv[1:])
     text = (f"Measured {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC on {machine()['cpu']} ({os.cpu_count()} cores), load average "
