@@ -70,6 +70,10 @@ IMPLICIT_CONTACT_MODE_DT = 0.5
 #: The error-controlled method auto steps every scene with events (stops, contact) or a stiff mode with:
 #: compiled, stable wherever its error control lets it be, and far cheaper than radau.
 ERROR_CONTROLLED = "dop853"
+#: Added to auto's reason where an element has no compiled form: the error-controlled path evaluates its stages
+#: in Python (`DormandPrince853.compiled`), the same promise at several times the CPU.
+PYTHON_STAGES_NOTE = ("; an element without a compiled form (an object's own contact law or motion): its stages run "
+                      "in Python, several times slower")
 #: Its rtol = atol per unit of the promised global tolerance. The global error is the sum of the local
 #: errors along the run (hundreds of internal steps, each error-controlled) plus event location; measured
 #: on the hard scenes (config/hard/, docs/auto_accuracy.md) at 1e-3·1e-6 rad: 3e-10 to 1.7e-7
@@ -258,26 +262,6 @@ def choose_method(scene: Scene) -> tuple[str, str]:
               + realtime_note(scene, root))
     LOG.info("method auto → %s: %s", ERROR_CONTROLLED, reason)
     return ERROR_CONTROLLED, reason
-
-
-def fixed_step_method(scene: Scene) -> tuple[str, str]:
-    """(method, reason) for `method: auto` where ERROR_CONTROLLED cannot run (an element without a
-    compiled form, e.g. an object with its own contact law or motion): the table's cheapest method
-    that is stable at its step (dt, or dt/m in contact: `contact_substeps`). The run's tolerance is
-    not checked on this path, and the reason says so."""
-    root = fastest_mode(scene.build_system(), mcp_range(scene))
-    substeps = contact_substeps(scene)
-    kind, why = scene_kind(scene, root, substeps)
-    rows = RECOMMENDATION.get(kind, {})
-    label = "contact" if kind == "stops" and scene.objects else kind
-    note = f"{ERROR_CONTROLLED} needs a compiled form of every element, so the tolerance is not checked"
-    if not rows:
-        return FALLBACK, f"{label} scene ({why}); {note}; {FALLBACK}, stable at every dt"
-    rate, rate_text = table_rate(list(rows), scene.dt)
-    method, because = pick(rows[rate], root, scene.dt / substeps)
-    reason = f"{label} scene ({why}); {note}; at {rate_text} {because}"
-    LOG.info("method auto → %s: %s", method, reason)
-    return method, reason
 
 
 def realtime_note(scene: Scene, root: complex) -> str:

@@ -22,14 +22,14 @@ import numpy as np
 from finger_sim import stick_slip
 from finger_sim.actuators import stepping as drive_stepping
 from finger_sim.sensors import SensorBank
-from finger_sim.auto import (ERROR_CONTROLLED, choose_method, contact_substeps, fixed_step_method, integrator_options,
-                             warn_unresolved_contact)
-from finger_sim.depth_guard import DepthGuard
+from finger_sim.auto import (ERROR_CONTROLLED, PYTHON_STAGES_NOTE, choose_method, contact_substeps,
+                             integrator_options, warn_unresolved_contact)
+from finger_sim.depth_guard import DepthLimit, depth_limit
 from finger_sim.dynamics import FingerSystem
 from finger_sim.effects import EFFECTS, Effect, ForceElement
 from finger_sim.errors import SimulationDiverged, StabilityError
 from finger_sim.inputs import BREAK_EPS, HELD_ARRAY, Profile
-from finger_sim.integrators import METHODS, Integrator, TorqueFn
+from finger_sim.integrators import METHODS, HeldTorque, Integrator, TorqueFn
 from finger_sim import stepper_slot
 from finger_sim.projection import OK as FAST_OK
 from finger_sim.stepper_slot import BREAKPOINT
@@ -110,11 +110,11 @@ class Simulator:
         #: the stick–slip contact (spec §7) whose friction modes this Simulator steps, or None
         self._friction = stick_slip.element(self.system)
         self._method_cls, self._integrator_cls, self.kernel = setup.method_cls, setup.integrator_cls, setup.kernel
-        #: stops the run when a phalanx's axis enters an object; empty without objects
-        self._depth_guard = setup.depth_guard
         self._gaps, self._kinks, self._gap_elements = setup.gaps, setup.kinks, setup.gap_elements
+        #: the depth gaps (`DepthLimit`, last in `_gaps`): (position of the contact gap in `_gaps`, ρ) each
+        self._depth_sources = setup.depth_sources
         #: elements whose gaps move with time too (contact with a moving object): asked at (t, q)
-        self._timed = frozenset(e for e, _ in self._gap_elements if getattr(e, "time_varying", False))
+        self._timed = frozenset(g.element for g in self._gaps if getattr(g.element, "time_varying", False))
         self.reset()
         #: the lean compiled path of `step` (a compiled fixed-step method on a smooth scene), else None
         self.fast_stepper = setup.fast_stepper
@@ -185,13 +185,12 @@ class Simulator:
             value = self.torque = float(profile)
             if self._held is None or self._held[0] != value:
                 # one function object per held value: an error-controlled method continues its internal
-                # solution from step to step while the value is held (it restarts for a new function)
-                self._held = (value, lambda s: value)
+                # solution from step to step while the value is held (it restarts for a new function);
+                # a HeldTorque, whose `value` tells it that τ is the same at every stage
+                self._held = (value, HeldTorque(value))
             self._advance(t0, t1, self._held[1])
         if not math.isfinite(sum(self.q) + sum(self.v)):  # a NaN or inf anywhere makes the sum non-finite
             raise SimulationDiverged(f"non-finite state (step {self.step_index + 1})", method=self.method, t=t1, dt=self.dt)
-        if self._depth_guard:
-            self._depth_guard.check(t1, self.q, self.method)
         self.step_index += 1
         return self.state
 
@@ -257,14 +256,19 @@ class Simulator:
         """
         first: _Crossing | None = None
         start, end = self._gap_states(t, q, v), self._gap_states(t1, q1, v1)
+        h = t1 - t
         for gap, (g0, r0), (g1, r1) in zip(self._gaps, start, end):
             if gap.restitution is not None:
                 g0 = max(g0, 0.0)  # an impact gap: the step starts on the open side
+            if min(g0, g1) > h * (abs(r0) + abs(r1)):
+                continue  # open at both ends, and too far for `_predicted_crossing` to see a crossing between
             found = self._bracket(gap, t, q, v, torque, (t, g0, r0), (t1, g1, r1, q1, v1), BRACKET_DEPTH)
             if found is not None:
                 crossing = self._locate(gap, t, q, v, (t, g0), found, torque)
                 if first is None or crossing.t < first.t:
                     first = crossing
+        if first is not None and isinstance(first.gap.element, DepthLimit):  # a phalanx axis reached an object
+            raise first.gap.element.crossed(first.gap.index, first.t, first.q, first.v, self.method)
         return first
 
     def _gap_states(self, t: float, q: Vec3, v: Vec3) -> list[tuple[float, float]]:
@@ -283,6 +287,7 @@ class Simulator:
             for i in indices:
                 n = element.gap_gradient(i, q)
                 out.append((values[i], n[0] * v[0] + n[1] * v[1] + n[2] * v[2]))
+        out.extend((out[p][0] + rho, out[p][1]) for p, rho in self._depth_sources)  # ρ − δ, at the rate of −δ
         self._gap_cache = (q, v, out, t)
         return out
 
@@ -295,7 +300,9 @@ class Simulator:
 
         Either hi is across already, or the gap crosses and comes back inside: predicted by
         `_predicted_crossing` from the ends' values and rates, then checked by stepping to the
-        predicted time; a check that finds no crossing refines on both halves, `depth` deep.
+        predicted time; a check that finds no crossing checks the cubic's extremum too (the start's
+        rate falls short of a convex gap's crossing, e.g. an axis passing a circle), then refines on
+        both halves, `depth` deep.
         """
         sa, ga, ra = lo
         sb, gb, rb, qb, vb = hi
@@ -311,6 +318,13 @@ class Simulator:
         mid = (s, gs, rs, qs, vs)
         if (gs < -EVENT_TOLERANCE) != closed:
             return s, gs, qs, vs
+        extremum = _predicted_crossing(ga, ra, gb, rb, sb - sa, closed, False)
+        if extremum is not None and extremum > x:
+            s2 = sa + extremum * (sb - sa)
+            q2, v2 = self._step(t, q, v, s2 - t, torque)
+            g2, _ = self._gap_states(s2, q2, v2)[self._gaps.index(gap)]
+            if (g2 < -EVENT_TOLERANCE) != closed:
+                return s2, g2, q2, v2
         return (self._bracket(gap, t, q, v, torque, lo, mid, depth - 1)
                 or self._bracket(gap, t, q, v, torque, (s, gs, rs), hi, depth - 1))
 
@@ -415,7 +429,7 @@ class _Setup(NamedTuple):
     gaps: tuple[_Gap, ...]
     kinks: tuple[_Gap, ...]
     gap_elements: tuple[tuple[ForceElement, tuple[int, ...]], ...]
-    depth_guard: DepthGuard
+    depth_sources: tuple[tuple[int, float], ...]
     fast_stepper: object  # kernel.integrators.FastStepper | None
 
 
@@ -442,7 +456,7 @@ def _setup(scene: Scene, kernel: str, effects: tuple[Effect, ...]) -> _Setup:
         method, reason = choose_method(scene)
         if (method == ERROR_CONTROLLED and getattr(system, "drive", None) is None
                 and stepper_slot.kernel().model_array(system) is None):
-            method, reason = fixed_step_method(scene)
+            reason += PYTHON_STAGES_NOTE
     if getattr(system, "drive", None) is not None:
         method, reason = drive_stepping.drive_method(method, reason, scene.method == AUTO,
                                                      lambda name: _stable_under_auto(scene, system, name),
@@ -455,8 +469,8 @@ def _setup(scene: Scene, kernel: str, effects: tuple[Effect, ...]) -> _Setup:
             substeps = contact_substeps(scene, METHODS[method].implicit)
     method_cls = METHODS[method]
     _check_stability(scene, system, method_cls, substeps)
-    depth_guard = DepthGuard(system.elements, scene.phalanx_radius)
-    if depth_guard and scene.method != AUTO and method_cls.implicit:
+    depth = depth_limit(system.elements, scene.phalanx_radius)
+    if depth is not None and scene.method != AUTO and method_cls.implicit:
         warn_unresolved_contact(scene, method_cls)
     integrator_cls, kernel_name = stepper_slot.kernel().select(method_cls, system, kernel)
     if getattr(system, "drive", None) is not None and system.drive.inductive:  # L > 0: the current is a state
@@ -471,11 +485,16 @@ def _setup(scene: Scene, kernel: str, effects: tuple[Effect, ...]) -> _Setup:
     # the gaps grouped by element, in `gaps` order: each element's gaps are evaluated once per state
     gap_elements = tuple((e, tuple(g.index for g in gaps if g.element is e))
                          for e in dict.fromkeys(g.element for g in gaps))
+    depth_sources: tuple[tuple[int, float], ...] = ()
+    if depth is not None:  # a depth gap ρ − δ per contact candidate, after every other gap
+        depth_sources = tuple((next(p for p, g in enumerate(gaps) if g.element is depth.contact and g.index == i), rho)
+                              for i, rho in enumerate(depth.offsets))
+        gaps += tuple(_Gap(depth, i, None) for i in range(len(depth.offsets)))  # type: ignore[arg-type]
     fast_stepper = None
     if hasattr(integrator_cls, "step_plan") and not gaps and getattr(system, "drive", None) is None:
         fast_stepper = stepper_slot.kernel().fast_stepper(integrator_cls(system), scene.dt, scene.torque)
     return _Setup(system, method, reason, substeps, options, method_cls, integrator_cls, kernel_name, gaps, kinks,
-                  gap_elements, depth_guard, fast_stepper)
+                  gap_elements, depth_sources, fast_stepper)
 
 
 def _stable_under_auto(scene: Scene, system: FingerSystem, name: str) -> bool:
@@ -496,12 +515,14 @@ def _check_stability(scene: Scene, system: FingerSystem, cls: type[Integrator], 
                              if contact and stable_at(cls, root, scene.dt) else "")
 
 
-def _predicted_crossing(ga: float, ra: float, gb: float, rb: float, h: float, closed: bool) -> float | None:
+def _predicted_crossing(ga: float, ra: float, gb: float, rb: float, h: float, closed: bool,
+                        start_rate: bool = True) -> float | None:
     """Where (a fraction x of h, in (0, 1)) a gap that is on the same side at both ends of an
     interval of length h (s) may cross and come back inside it; None if nothing suggests so.
 
     ga, gb: the gap at the ends; ra, rb: its rates (gap units/s); closed: the side at both
-    ends (below −EVENT_TOLERANCE). Two predictions, the earlier one counts:
+    ends (below −EVENT_TOLERANCE). Two predictions, the earlier one counts (start_rate False:
+    the second only):
     - the start's rate: ga + x h ra reaches zero at x < 1 (the start state is the trustworthy
       one: a step straddling a whole contact bounces in its stages and ends on the open side);
     - the cubic Hermite interpolant of (gap, rate) at both ends has an extremum across the
@@ -509,7 +530,7 @@ def _predicted_crossing(ga: float, ra: float, gb: float, rb: float, h: float, cl
     """
     sign = 1.0 if closed else -1.0  # the direction that crosses
     best = None
-    if sign * ra > 0.0 and sign * (ga + h * ra) > -sign * EVENT_TOLERANCE:
+    if start_rate and sign * ra > 0.0 and sign * (ga + h * ra) > -sign * EVENT_TOLERANCE:
         best = min(1.0, max(0.0, -ga / (h * ra)))
     # H(x) = ((a x + b) x + c) x + ga; H'(x) = 3a x² + 2b x + c
     a = 2.0 * (ga - gb) + h * (ra + rb)

@@ -8,6 +8,11 @@ each smooth piece and stops at every torque switch, contact onset or release (a 
 impact (solve_ivp events), where it restarts. A finger whose rebound off a stop would come back
 within `rest_dt` rests on the stop until the free acceleration stops pushing into it: the rest
 convention of the stepping code (a rebound shorter than one step), the one thing taken from it.
+
+An object may carry its own `stiffness` and `damping` (spec §7's k_c, d_c for that object) and a
+prescribed `motion` (push or vibration, the scene schema's): its centre or point then moves by
+c(t) − c = s(t) u, the contact's velocity is the phalanx's relative to it, and the motion's kinks
+(where s'' jumps) are restart points like a torque switch.
 """
 
 from __future__ import annotations
@@ -36,16 +41,50 @@ class ContactLaw:
     rho: tuple[float, float] = (0.008, 0.007)  # m, proximal and distal capsule radii
 
 
-def _candidates(q, objects, rho):
-    """(δ, n, J) of every contact candidate (spec §7): J = ∂p/∂q of the phalanx's material point at p."""
+def motion_offset(obj: dict, t: float) -> tuple[np.ndarray, np.ndarray]:
+    """(c(t) − c, ċ(t)) of an object (m, m/s): zero without a `motion`. Push: s = L (1 − cos(π (t − t0)/T))/2
+    over [t0, t0 + T], L after; vibration: s = A (1 − cos(2π f (t − t0)))/2 from t0 on."""
+    m = obj.get("motion")
+    if m is None:
+        return np.zeros(2), np.zeros(2)
+    u = np.array(m["direction"], dtype=float)
+    u /= np.linalg.norm(u)
+    x = t - m.get("start", 0.0)
+    if m["type"] == "push":
+        extent, w, end = m["distance"], math.pi / m["duration"], m["duration"]
+    else:
+        extent, w, end = m["amplitude"], 2.0 * math.pi * m["frequency"], math.inf
+    if x <= 0.0:
+        return np.zeros(2), np.zeros(2)
+    if x >= end:
+        return extent * u, np.zeros(2)
+    return 0.5 * extent * (1.0 - math.cos(w * x)) * u, 0.5 * extent * w * math.sin(w * x) * u
+
+
+def motion_kinks(objects, t_end: float) -> list[float]:
+    """Times where an object's s'' jumps (the start and end of a push, the start of a vibration), s."""
+    out = []
+    for obj in objects:
+        m = obj.get("motion")
+        if m is not None:
+            out.append(m.get("start", 0.0))
+            if m["type"] == "push":
+                out.append(m.get("start", 0.0) + m["duration"])
+    return [t for t in out if 0.0 < t < t_end]
+
+
+def _candidates(q, objects, rho, t: float = 0.0):
+    """(δ, n, J) of every contact candidate (spec §7) at time t (s, for moving objects): J = ∂p/∂q of
+    the phalanx's material point at p."""
     b = ref.R1 * ref.e(q[0])
     jb = np.column_stack([ref.R1 * ref.e_perp(q[0]), np.zeros(2), np.zeros(2)])
     psi = q[2] + ref.ALPHA
     tip = b + ref.L3 * ref.e(psi)
     out = []
     for obj in objects:
+        shift, _ = motion_offset(obj, t)
         if obj["type"] == "circle":
-            c, radius = np.array(obj["center"]), obj["radius"]
+            c, radius = np.array(obj["center"]) + shift, obj["radius"]
             for a, end, r, prox in ((np.zeros(2), b, rho[0], True), (b, tip, rho[1], False)):
                 s = float(np.clip(np.dot(c - a, end - a) / np.dot(end - a, end - a), 0.0, 1.0))
                 p = a + s * (end - a)
@@ -57,7 +96,7 @@ def _candidates(q, objects, rho):
                     j = jb + s * ref.L3 * np.column_stack([np.zeros(2), np.zeros(2), ref.e_perp(psi)])
                 out.append((r + radius - dist, n, j))
         else:
-            o, n = np.array(obj["point"]), np.array(obj["normal"], dtype=float)
+            o, n = np.array(obj["point"]) + shift, np.array(obj["normal"], dtype=float)
             n = n / np.linalg.norm(n)
             jt = jb + ref.L3 * np.column_stack([np.zeros(2), np.zeros(2), ref.e_perp(psi)])
             for p, r, j in ((b, rho[0], jb), (b, rho[1], jb), (tip, rho[1], jt)):
@@ -65,14 +104,21 @@ def _candidates(q, objects, rho):
     return out
 
 
-def contact_force(q, v, objects, law: ContactLaw) -> np.ndarray:
-    """Q_c = Σ J_pᵀ (F_n n + F_t t) over the candidates in contact (δ > 0), N·m."""
+def _owners(objects) -> list[dict]:
+    """The object of every candidate, in `_candidates`' order (a circle has two, a plane three)."""
+    return [obj for obj in objects for _ in range(2 if obj["type"] == "circle" else 3)]
+
+
+def contact_force(q, v, objects, law: ContactLaw, t: float = 0.0) -> np.ndarray:
+    """Q_c = Σ J_pᵀ (F_n n + F_t t) over the candidates in contact (δ > 0), N·m; an object's own
+    stiffness and damping replace the law's."""
     out = np.zeros(3)
-    for delta, n, j in _candidates(q, objects, law.rho):
+    for (delta, n, j), obj in zip(_candidates(q, objects, law.rho, t), _owners(objects)):
         if delta <= 0.0:
             continue
-        pv = j @ np.asarray(v)
-        fn = max(0.0, law.k * delta**law.e * (1.0 + law.d * (-float(n @ pv))))
+        pv = j @ np.asarray(v) - motion_offset(obj, t)[1]
+        k, d = obj.get("stiffness", law.k), obj.get("damping", law.d)
+        fn = max(0.0, k * delta**law.e * (1.0 + d * (-float(n @ pv))))
         t = np.array([-n[1], n[0]])
         ft = -law.mu * fn * math.tanh(float(t @ pv) / law.vs)
         out += j.T @ (fn * n + ft * t)
@@ -116,7 +162,7 @@ def solve(data: dict, *, rest_dt: float = 1e-3) -> HybridReference:
     init = data.get("initial", {})
     q0 = ref.assemble(init.get("theta1", 0.0))
     y = np.concatenate([q0, ref.rates(q0, init.get("theta1_dot", 0.0))])
-    edges = [0.0, *[s for s in switches(t_end) if 0.0 < s < t_end], t_end]
+    edges = sorted({0.0, *[s for s in switches(t_end) if 0.0 < s < t_end], *motion_kinks(objects, t_end), t_end})
     out = HybridReference([])
     resting = False
     for a, b in zip(edges, edges[1:]):
@@ -124,7 +170,7 @@ def solve(data: dict, *, rest_dt: float = 1e-3) -> HybridReference:
 
         def acc(t, y):
             q, v = y[:3], y[3:]
-            qdd = kkt_with(q, v, tau(t), fx, contact_force(q, v, objects, law) if objects else np.zeros(3))
+            qdd = kkt_with(q, v, tau(t), fx, contact_force(q, v, objects, law, t) if objects else np.zeros(3))
             return qdd
 
         def push(t, q, side):  # free acceleration of θ1 into the stop at rest (> 0: into it)
@@ -144,10 +190,10 @@ def solve(data: dict, *, rest_dt: float = 1e-3) -> HybridReference:
                     t = tr
                 resting = False
             events = []
-            for i in range(len(_candidates(y[:3], objects, law.rho))):
-                d0 = _candidates(y[:3], objects, law.rho)[i][0]
-                side = 1.0 if d0 > ON_GAP else (-1.0 if d0 < -ON_GAP else (1.0 if _gap_rate(y, objects, law, i) > 0 else -1.0))
-                f = (lambda s, yy, i=i, side=side: side * _candidates(yy[:3], objects, law.rho)[i][0])
+            for i in range(len(_candidates(y[:3], objects, law.rho, t))):
+                d0 = _candidates(y[:3], objects, law.rho, t)[i][0]
+                side = 1.0 if d0 > ON_GAP else (-1.0 if d0 < -ON_GAP else (1.0 if _gap_rate(y, objects, law, i, t) > 0 else -1.0))
+                f = (lambda s, yy, i=i, side=side: side * _candidates(yy[:3], objects, law.rho, s)[i][0])
                 f.terminal, f.direction = True, -1
                 events.append(f)
             if limits is not None:
@@ -192,6 +238,6 @@ def kkt_with(q, v, tau: float, fx: ref.Effects, extra: np.ndarray) -> np.ndarray
     return np.linalg.solve(a, rhs)[:3]
 
 
-def _gap_rate(y, objects, law, i) -> float:
-    d, n, j = _candidates(y[:3], objects, law.rho)[i]
-    return -float(n @ (j @ y[3:]))
+def _gap_rate(y, objects, law, i, t: float = 0.0) -> float:
+    d, n, j = _candidates(y[:3], objects, law.rho, t)[i]
+    return -float(n @ (j @ y[3:] - motion_offset(_owners(objects)[i], t)[1]))

@@ -274,6 +274,7 @@ def _run_compiled(method: str, plans: list[_Plan], members: list[int], q: np.nda
     lasts = np.empty(n, dtype=np.int64)
     stops, limits = np.zeros(n, dtype=np.bool_), np.zeros((n, 2))
     gaps = np.empty(n, dtype=np.int64)
+    depths = np.array([min(p.scene.phalanx_radius) for p in plans])  # the loop hands over a step that may reach it
     states = np.empty((n, 6))
     for j, p in enumerate(plans):
         plan_rows[j, : len(steps_plans[j])] = steps_plans[j]
@@ -302,7 +303,8 @@ def _run_compiled(method: str, plans: list[_Plan], members: list[int], q: np.nda
         sub_states, sub_steps, sub_res = states[active], steps[active], max_res_local[active]
         sub_paths = paths[active] if record else paths[np.zeros(len(active), dtype=np.int64)]
         status = rollout_loop.run_rows(plan_rows[active], profiles[active], stops[active], limits[active],
-                                       gaps[active], sub_states, sub_steps, lasts[active], sub_res, sub_paths, record)
+                                       gaps[active], depths[active], sub_states, sub_steps, lasts[active], sub_res,
+                                       sub_paths, record)
         states[active], steps[active], max_res_local[active] = sub_states, sub_steps, sub_res
         if record:
             paths[active] = sub_paths

@@ -82,7 +82,7 @@ class Run:
 
 
 def measure(realtime_factor: float, duration: float, domain_id: int, workdir: Path, *, commands: bool,
-            publish_rate_hz: float = 1000.0) -> Run:
+            publish_rate_hz: float = 1000.0, scene: str = "paper_flexion", command_hz: float = COMMAND_HZ) -> Run:
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.executors import SingleThreadedExecutor
@@ -91,7 +91,7 @@ def measure(realtime_factor: float, duration: float, domain_id: int, workdir: Pa
     from std_msgs.msg import Float64
 
     env = ros_env(domain_id)
-    params = dict(scene="paper_flexion", torque_source="topic", physics_rate_hz=1000.0, publish_rate_hz=publish_rate_hz,
+    params = dict(scene=scene, torque_source="topic", physics_rate_hz=1000.0, publish_rate_hz=publish_rate_hz,
                   realtime_factor=realtime_factor, command_timeout=0.5)
     proc = start_node(params, workdir, env)
     context = rclpy.Context()
@@ -141,7 +141,7 @@ def measure(realtime_factor: float, duration: float, domain_id: int, workdir: Pa
                 raise RuntimeError(f"finger_node did not come up; see {workdir}")
             executor.spin_once(timeout_sec=0.05)
         if commands:
-            node.create_timer(1.0 / COMMAND_HZ, send)
+            node.create_timer(1.0 / command_hz, send)
         end_warmup = time.monotonic() + WARMUP_S
         while time.monotonic() < end_warmup:
             executor.spin_once(timeout_sec=0.05)

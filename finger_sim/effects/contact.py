@@ -360,6 +360,10 @@ class Contact:
             out.append(ContactPoint(PHALANGES[phalanx], self.objects[i].name, (px, py), (nx, ny), d, fn, (fx, fy)))
         return tuple(out)
 
+    def candidates(self) -> tuple[tuple[str, str], ...]:
+        """(phalanx, object name) of every candidate, in `gaps` order."""
+        return tuple((PHALANGES[hit[0]], self.objects[hit[1]].name) for hit in self._hits((0.0, 0.0, 0.0), True))
+
     def object_forces(self, t: float, q: Vec3, v: Vec3) -> tuple[float, ...]:
         """The normal force on each object (N, Σ F_n over its contacts), in `objects` order:
         what a `break_force` is compared with."""

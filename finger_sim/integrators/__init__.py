@@ -1,7 +1,7 @@
 """Integrators sharing one step interface; `METHODS` maps scene names to classes."""
 
 from finger_sim.integrators.adaptive import AdaptiveReference
-from finger_sim.integrators.base import Integrator, TorqueFn
+from finger_sim.integrators.base import HeldTorque, Integrator, TorqueFn
 from finger_sim.integrators.dop853 import DormandPrince853
 from finger_sim.integrators.explicit import RK4, ExplicitRungeKutta, PaperEuler
 from finger_sim.integrators.high_order import ButcherRK6, DormandPrince8
@@ -20,6 +20,7 @@ __all__ = [
     "DormandPrince8",
     "DormandPrince853",
     "ExplicitRungeKutta",
+    "HeldTorque",
     "Integrator",
     "PaperEuler",
     "RK4",

@@ -24,6 +24,19 @@ TorqueFn = Callable[[float], float]
 STABILITY_SLACK = 1e-3
 
 
+class HeldTorque:
+    """τ(s) = value (N·m) at every s: a command held over a step. `value` tells a method that τ is the
+    same at every stage (DOP853 then skips evaluating it per stage)."""
+
+    __slots__ = ("value",)
+
+    def __init__(self, value: float) -> None:
+        self.value = value
+
+    def __call__(self, s: float) -> float:
+        return self.value
+
+
 class Integrator(ABC):
     """A fixed-step method for the constrained finger. Subclasses write only `step`."""
 

@@ -12,6 +12,11 @@ the same torque function (same object) and, on a drive scene (spec §8), the sam
 event's trial step, a held command) restarts it from the given state. The step-size
 control, error norm and dense output are scipy's DOP853 (scipy/integrate/_ivp/rk.py,
 after Hairer, Nørsett & Wanner, *Solving ODEs I*, §II.10), with scipy's coefficients.
+
+A system with a force element that has no compiled form (an object with its own contact law, a
+moving object) is stepped the same way with its stages evaluated in Python (`_python_attempt`, the
+same arithmetic as `numerics.dop853_attempt` on `FingerSystem.accelerations`): slower, just as
+error-controlled.
 """
 
 from __future__ import annotations
@@ -29,7 +34,7 @@ import numpy as np
 
 from finger_sim import stepper_slot
 from finger_sim.dynamics import FingerSystem
-from finger_sim.errors import ConfigError, SimulationDiverged
+from finger_sim.errors import SimulationDiverged
 from finger_sim.integrators.base import Integrator, TorqueFn
 from finger_sim.kinematics import Vec3
 
@@ -94,9 +99,10 @@ class DormandPrince853(Integrator):
         compiled = stepper_slot.kernel()
         super().__init__(system)
         model = compiled.model_array(system)
-        if model is None:
-            raise ConfigError("integrator.method", "a method other than dop853 for a force element without a compiled "
-                              "form (kernel_code)", self.name)
+        #: whether the stages run compiled; else in Python (a force element without a compiled form)
+        self.compiled = model is not None
+        if model is None:  # the geometry alone (no elements) for the compiled dense output and projection
+            model = compiled.model_array(FingerSystem(system.params))
         numerics = compiled.compiled_numerics()
         self._numerics, self._model = numerics, model
         #: the right-hand side and the attempt: with a drive (spec §8) the ones applying its mesh mode,
@@ -119,6 +125,7 @@ class DormandPrince853(Integrator):
         self._dense = np.zeros((7, 6))
         self._kk = np.empty((16, 6))
         self._out = np.empty(6)
+        self._taus = np.empty(len(_NODES))  # τ at the stage times of a held torque
         #: accepted and rejected internal steps so far (for benchmarks)
         self.accepted = self.rejected = 0
         self._err = 0.0  # Σ local θ error estimates of the internal solution since its start, rad
@@ -228,7 +235,10 @@ class DormandPrince853(Integrator):
         self._y[:3], self._y[3:] = q, v
         if self._drive is not None:
             self._changes = self._drive.changes
-        self._rhs(self._model, t, self._y, torque(t), self._f)
+        if self.compiled:
+            self._rhs(self._model, t, self._y, torque(t), self._f)
+        else:
+            self._f[:] = _python_rhs(self.system, t, self._y, torque(t))
         if self._h <= 0.0:
             self._h = _initial_step(self._y, self._f, self.rtol, self.atol, dt)
 
@@ -241,22 +251,32 @@ class DormandPrince853(Integrator):
         for _ in range(MAX_ATTEMPTS):
             if h < 10.0 * abs(math.nextafter(t, math.inf) - t):
                 break
-            taus = np.array([torque(t + c * h) for c in _NODES])
-            norm = self._attempt(self._model, _A, _B, _C, _E3, _E5, _D, t, self._y, self._f, h, taus,
-                                      self.rtol, self.atol, self._kk, y_new, self._dense)
+            held = getattr(torque, "value", None)  # a held or constant torque (`HeldTorque`, `inputs.Constant`)
+            if held is not None:
+                taus = self._taus
+                taus.fill(held)
+            else:
+                taus = np.array([torque(t + c * h) for c in _NODES])
+            if self.compiled:
+                norm = self._attempt(self._model, _A, _B, _C, _E3, _E5, _D, t, self._y, self._f, h, taus,
+                                     self.rtol, self.atol, self._kk, y_new, self._dense)
+            else:
+                norm = _python_attempt(self.system, t, self._y, self._f, h, taus, self.rtol, self.atol, self._kk,
+                                       y_new, self._dense)
             if norm < 1.0:
                 self._err_old = self._err
-                self._err += _theta_error(self._kk, h)
+                self._err += num.dop853_theta_error(_E53, self._kk, h, E3_WEIGHT)
                 factor = num.MAX_FACTOR if norm == 0.0 else min(num.MAX_FACTOR, num.SAFETY * norm**num.ERROR_EXPONENT)
                 self._t_old, self._h_old = t, h
-                self._y_old[:] = self._y
-                self._y[:] = y_new
+                # y_new is this attempt's own array: the state moves on without copies (no array is
+                # written again once it is y_old, so the history keeps it as it is)
+                self._y_old, self._y = self._y, y_new
                 self._f[:] = self._kk[_N_STAGES]
                 self._t = t + h
                 self._h = min(MAX_STEP, h * (min(1.0, factor) if rejected else factor))
                 self.accepted += 1
                 if self._keep_history:
-                    self._history.append((t, h, self._y_old.copy(), self._dense.copy(), self._err_old, self._err))
+                    self._history.append((t, h, self._y_old, self._dense.copy(), self._err_old, self._err))
                     self._history_starts.append(t)
                 return
             # a non-finite trial (e.g. a contact state far outside its law) is rejected like a large
@@ -271,17 +291,35 @@ class DormandPrince853(Integrator):
         return True  # error control shrinks the internal step as needed
 
 
-def _theta_error(kk: np.ndarray, h: float) -> float:
-    """The local error estimate of an accepted step on θ (rad): scipy's DOP853 combination of its
-    5th- and 3rd-order estimates, h·e5²/√(e5² + 0.01·e3²), for each angle, the largest of the three.
-    kk: the step's stages (rows, as `dop853_attempt` leaves them); h: its length, s."""
-    (e5, e3) = (_E53 @ kk[: _N_STAGES + 1, :3]).tolist()
-    worst = 0.0
-    for a, b in zip(e5, e3):
-        denominator = a * a + E3_WEIGHT * b * b
-        if denominator > 0.0:
-            worst = max(worst, a * a / math.sqrt(denominator))
-    return abs(h) * worst
+def _python_rhs(system: FingerSystem, t: float, y: np.ndarray, tau: float) -> list[float]:
+    """y' = (q', q'') at (t, y) under torque tau (N·m), by `FingerSystem.accelerations`."""
+    q0, q1, q2, v0, v1, v2 = y.tolist()
+    a, _ = system.accelerations(t, (q0, q1, q2), (v0, v1, v2), tau)
+    return [v0, v1, v2, *a]
+
+
+def _python_attempt(system: FingerSystem, t: float, y: np.ndarray, f: np.ndarray, h: float, taus: np.ndarray,
+                    rtol: float, atol: float, kk: np.ndarray, y_new: np.ndarray, dense: np.ndarray) -> float:
+    """`numerics.dop853_attempt` with the stages evaluated in Python (same arguments but the model:
+    the system itself, whatever its elements). Returns the error norm (accepted when < 1)."""
+    kk[0] = f
+    for s in range(1, _N_STAGES):
+        kk[s] = _python_rhs(system, t + _C[s] * h, y + h * (_A[s, :s] @ kk[:s]), taus[s])
+    y_new[:] = y + h * (_B @ kk[:_N_STAGES])
+    kk[_N_STAGES] = _python_rhs(system, t + h, y_new, taus[_N_STAGES])
+    scale = atol + np.maximum(np.abs(y), np.abs(y_new)) * rtol
+    e5, e3 = (_E53 @ kk[: _N_STAGES + 1]) / scale
+    err5, err3 = float(e5 @ e5), float(e3 @ e3)
+    norm = 0.0 if err5 == 0.0 and err3 == 0.0 else abs(h) * err5 / math.sqrt((err5 + E3_WEIGHT * err3) * 6)
+    if norm < 1.0:
+        for s in range(_N_STAGES + 1, 16):
+            kk[s] = _python_rhs(system, t + _C[s] * h, y + h * (_A[s, :s] @ kk[:s]), taus[s])
+        dy = y_new - y
+        dense[0] = dy
+        dense[1] = h * kk[0] - dy
+        dense[2] = 2.0 * dy - h * (kk[_N_STAGES] + kk[0])
+        dense[3:] = h * (_D @ kk)
+    return norm
 
 
 def _initial_step(y: np.ndarray, f: np.ndarray, rtol: float, atol: float, dt: float) -> float:

@@ -125,8 +125,10 @@ def select(method: type["Integrator"], system: "FingerSystem", kernel: str = "au
     """
     if not isinstance(kernel, str) or not (kernel in KERNELS or kernel.startswith("numba-")):
         raise ConfigError("kernel", f"one of {list(KERNELS)} or a recorded 'numba-<version>'", kernel)
-    if method.name == "dop853":  # compiled by construction (plain Python without numba)
-        return method, compiled_name() or PYTHON
+    if method.name == "dop853":  # compiled by construction (plain Python without numba), its stages where they can be
+        from finger_sim.kernel.layout import model_array
+
+        return method, (compiled_name() or PYTHON) if model_array(system) is not None else PYTHON
     if kernel == PYTHON:
         return method, PYTHON
     name = compiled_name()

@@ -11,8 +11,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from finger_sim.kernel import use_writable_cache
 
 use_writable_cache()  # before numba reads NUMBA_CACHE_DIR
@@ -81,12 +79,14 @@ def contact_gaps(m, o, q0, q2, gap):
 
 
 @njit(**SERIAL)
-def kink(m, xa, xb, h, ga, gb, shifted, rates_a):
+def kink(m, xa, xb, h, ga, gb, shifted, rates_a, depth):
     """Whether a step of length h (s) from state xa to xb may hold a contact event that the
     Simulator would split it at: a contact gap of model m is closed at one end and open at the
     other, or `simulate._predicted_crossing` (the Simulator's own test, from the gaps and their
-    rates at both ends) predicts a crossing inside it. ga, gb, shifted, rates_a: scratch arrays
-    (one per candidate). The rates are forward differences along q' over RATE_STEP·h."""
+    rates at both ends) predicts a crossing inside it; the same for the depth gap depth − δ
+    (`depth_guard`: depth is the thinner phalanx's radius ρ, m, so the Simulator sees every
+    candidate that may reach its own). ga, gb, shifted, rates_a: scratch arrays (one per
+    candidate). The rates are forward differences along q' over RATE_STEP·h."""
     o = HEADER + 1
     eps = RATE_STEP * h
     for _ in range(int(m[HEADER])):
@@ -96,7 +96,7 @@ def kink(m, xa, xb, h, ga, gb, shifted, rates_a):
             count = contact_gaps(m, o, xa[0], xa[2], ga)
             contact_gaps(m, o, xb[0], xb[2], gb)
             for c in range(count):
-                if (ga[c] < -EVENT_TOLERANCE) != (gb[c] < -EVENT_TOLERANCE):
+                if (ga[c] < -EVENT_TOLERANCE) != (gb[c] < -EVENT_TOLERANCE) or gb[c] + depth < -EVENT_TOLERANCE:
                     return True
             contact_gaps(m, o, xa[0] + eps * xa[3], xa[2] + eps * xa[5], shifted)
             for c in range(count):
@@ -105,6 +105,8 @@ def kink(m, xa, xb, h, ga, gb, shifted, rates_a):
             for c in range(count):
                 rate_b = (shifted[c] - gb[c]) / eps
                 if predicted_crossing(ga[c], rates_a[c], gb[c], rate_b, h, ga[c] < -EVENT_TOLERANCE) is not None:
+                    return True
+                if predicted_crossing(ga[c] + depth, rates_a[c], gb[c] + depth, rate_b, h, False) is not None:
                     return True
         o += n
     return False

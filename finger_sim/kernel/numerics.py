@@ -336,6 +336,24 @@ def dop853_attempt(m, a, b, c, e3, e5, d, t, y, f, h, taus, rtol, atol, kk, y_ne
 
 
 @njit(**JIT)
+def dop853_theta_error(e53, kk, h, weight):
+    """The local error estimate of an accepted step on θ (rad): scipy's DOP853 combination of its
+    5th- and 3rd-order estimates, |h|·e5²/√(e5² + weight·e3²), for each angle, the largest of the three.
+    e53: the E5 and E3 rows (2 × 13); kk: the step's stages (as `dop853_attempt` leaves them); h: s."""
+    worst = 0.0
+    for i in range(3):
+        e5 = 0.0
+        e3 = 0.0
+        for j in range(e53.shape[1]):
+            e5 += e53[0, j] * kk[j, i]
+            e3 += e53[1, j] * kk[j, i]
+        denominator = e5 * e5 + weight * e3 * e3
+        if denominator > 0.0:
+            worst = max(worst, e5 * e5 / math.sqrt(denominator))
+    return abs(h) * worst
+
+
+@njit(**JIT)
 def dop853_dense(t_old, h, y_old, dense, t, out):
     """The dense output of the last accepted step at t, into out (6): scipy's `Dop853DenseOutput`."""
     x = (t - t_old) / h

@@ -104,24 +104,25 @@ def run(plans, profiles, which, control, q, v, status, reached):
 
 
 @njit(**PARALLEL)
-def run_rows(plans, profiles, stops, limits, gaps, states, steps, lasts, max_res, trajs, record):
+def run_rows(plans, profiles, stops, limits, gaps, depths, states, steps, lasts, max_res, trajs, record):
     """Advance every row i from step steps[i] to lasts[i] under its own profile (in place: states
     (N × 6, q then q'), steps, max_res, the largest |Φ| so far; trajs[i, k] = q after step k when
     record). Returns each row's status, DONE or EVENT.
 
     plans, profiles: each row's step plan and compiled profile (zero-padded rows); stops[i],
-    limits[i]: whether row i has MCP stops, and (lower, upper) rad; gaps[i]: its contact candidates.
+    limits[i]: whether row i has MCP stops, and (lower, upper) rad; gaps[i]: its contact candidates;
+    depths[i]: its thinner phalanx radius, m (`event_checks.kink`).
     """
     n = states.shape[0]
     status = np.empty(n, dtype=np.int64)
     for i in prange(n):
-        status[i], steps[i], max_res[i] = _row(plans[i], profiles[i], stops[i], limits[i], gaps[i], states[i],
-                                               steps[i], lasts[i], max_res[i], trajs[i], record)
+        status[i], steps[i], max_res[i] = _row(plans[i], profiles[i], stops[i], limits[i], gaps[i], depths[i],
+                                               states[i], steps[i], lasts[i], max_res[i], trajs[i], record)
     return status
 
 
 @njit(**SERIAL)
-def _row(plan, prof, stop, limits, gaps, x, step, last, max_res, traj, record):
+def _row(plan, prof, stop, limits, gaps, depth, x, step, last, max_res, traj, record):
     """One row of `run_rows`: (status, step reached, max |Φ|)."""
     dt, m, tab = plan_parts(plan)
     s = tab.shape[1]
@@ -132,7 +133,7 @@ def _row(plan, prof, stop, limits, gaps, x, step, last, max_res, traj, record):
         start[:] = x
         code, _ = _profile_step(m, tab, prof, 0.0, step, dt, x, work, taus)
         if code != OK or (stop and stop_closed(x, limits)) or \
-                (gaps > 0 and kink(m, start, x, (step + 1) * dt - step * dt, before, after, shifted, rates)):
+                (gaps > 0 and kink(m, start, x, (step + 1) * dt - step * dt, before, after, shifted, rates, depth)):
             x[:] = start
             return EVENT, step, max_res
         step += 1
