@@ -85,11 +85,13 @@ def with_tip_force(scene: Scene, force: tuple[float, float]) -> Scene:
 
 
 def carry_over(sim: Simulator, scene: Scene) -> Simulator:
-    """A Simulator of `scene` (the same kernel) in the state `sim` has reached: q, q', step, torque."""
+    """A Simulator of `scene` (the same kernel) in the state `sim` has reached: q, q', step, torque, and
+    a drive's mesh mode, direction and current. An error-controlled method (dop853) starts its step
+    size afresh there, as at any change of the scene."""
     new = Simulator(scene, kernel=sim.kernel)
     new.q, new.v, new.step_index, new.torque = sim.q, sim.v, sim.step_index, sim.torque
     new.impacts = sim.impacts
     if sim.scene.drive is not None:  # the mesh mode is discrete state (spec §8): it carries over too
         drive, old = new.system.drive, sim.system.drive  # type: ignore[attr-defined]
-        drive.mode, drive.direction = old.mode, old.direction
+        drive.mode, drive.direction, drive.i = old.mode, old.direction, old.i
     return new

@@ -88,8 +88,10 @@ def use_writable_cache() -> None:
         if os.access(target, os.W_OK):
             break
     # numba's config, not the environment: child processes (a node, Dask workers) key their own
-    import numba
-
+    try:
+        import numba
+    except ImportError:  # the Python path only: nothing is compiled, nothing cached
+        return
     numba.config.CACHE_DIR = str(target)
 
 
