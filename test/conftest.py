@@ -67,6 +67,15 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             item.add_marker(skip)
 
 
+ROS_LAYER = Path(__file__).resolve().parent / "ros"
+
+
+def pytest_itemcollected(item: pytest.Item) -> None:
+    """Every test under test/ros/ is marked `ros`: `pytest -m "not ros"` runs the ROS-free layers."""
+    if ROS_LAYER in item.path.resolve().parents:
+        item.add_marker(pytest.mark.ros)
+
+
 def allocate_domain_id() -> int:
     return TEST_DOMAINS[next(_counter) % len(TEST_DOMAINS)]
 

@@ -15,20 +15,26 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
-from builtin_interfaces.msg import Time
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import PoseStamped
-from mcap.exceptions import McapError
-from mcap.reader import NonSeekingReader, SeekingReader, make_reader
-from mcap_ros2.decoder import DecoderFactory
-from rclpy.serialization import deserialize_message, serialize_message
-from rosbags.highlevel import AnyReader
-from rosbags.typesys import Stores, get_typestore
-from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import Imu, JointState
-from std_msgs.msg import Char, Float64, Float64MultiArray, MultiArrayDimension, MultiArrayLayout, String
+# The messages written and read here are rclpy's: without ROS this module is skipped, the rest of
+# the log layer runs.
+pytest.importorskip("rclpy")
 
-from finger_sim.log import (
+from conftest import allocate_domain_id, ros_environment  # noqa: E402
+
+from builtin_interfaces.msg import Time  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue  # noqa: E402
+from geometry_msgs.msg import PoseStamped  # noqa: E402
+from mcap.exceptions import McapError  # noqa: E402
+from mcap.reader import NonSeekingReader, SeekingReader, make_reader  # noqa: E402
+from mcap_ros2.decoder import DecoderFactory  # noqa: E402
+from rclpy.serialization import deserialize_message, serialize_message  # noqa: E402
+from rosbags.highlevel import AnyReader  # noqa: E402
+from rosbags.typesys import Stores, get_typestore  # noqa: E402
+from rosgraph_msgs.msg import Clock  # noqa: E402
+from sensor_msgs.msg import Imu, JointState  # noqa: E402
+from std_msgs.msg import Char, Float64, Float64MultiArray, MultiArrayDimension, MultiArrayLayout, String  # noqa: E402
+
+from finger_sim.log import (  # noqa: E402
     LogArgumentError,
     LogReader,
     McapRecorder,
@@ -38,8 +44,6 @@ from finger_sim.log import (
     type_name_of,
 )
 
-# Child processes that import rclpy stay on this machine and in their own DDS domain.
-ROS_ENV = {"ROS_DOMAIN_ID": "61", "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
 SHARE = Path(sys.prefix) / "share"  # where the ROS 2 wheels install their .msg files
 DEADLINE_S = 20.0  # generous bound for conditions that normally hold within milliseconds
 STEPS = 5
@@ -321,7 +325,7 @@ def test_kill_9_leaves_a_readable_prefix(tmp_path: Path) -> None:
     path, ready_after = tmp_path / "killed.mcap", 200
     child = subprocess.Popen(
         [sys.executable, "-c", CHILD, str(path), str(ready_after), str(DEADLINE_S)],
-        stdout=subprocess.PIPE, text=True, env={**os.environ, **ROS_ENV},
+        stdout=subprocess.PIPE, text=True, env=ros_environment(allocate_domain_id()),
     )
     try:
         ready, _, _ = select.select([child.stdout], [], [], DEADLINE_S)
