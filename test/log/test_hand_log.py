@@ -11,8 +11,6 @@ from __future__ import annotations
 
 import csv
 import io
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -20,21 +18,16 @@ import pytest
 
 from finger_sim.scene import load_scene
 from finger_sim.simulate import Simulator, Trajectory, output_names, output_values
+from helpers import run_cli
 
 HAND = "finger_sim.ros.hand"
 CONFIG = Path(__file__).resolve().parents[2] / "config"
 SCENES = {"index": "paper_flexion", "middle": "bang_bang", "ring": "grasp_cylinder"}  # the shortest: 0.3 s
 STEPS = 300  # the run ends with its shortest scene
 RATE = 1000.0
-FINGER_SIM = Path(sys.executable).with_name("finger-sim")
 TIMEOUT_S = 60.0
 TOL = 1e-12  # rad, rad/s: the joint states → paper coordinates round trip
 EXIT_ERROR = 2
-
-
-def run_cli(*args: str | Path) -> subprocess.CompletedProcess:
-    return subprocess.run([str(FINGER_SIM), *map(str, args)], capture_output=True, text=True, timeout=TIMEOUT_S,
-                          check=False)
 
 
 def offline(scene: str) -> np.ndarray:

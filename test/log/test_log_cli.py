@@ -13,7 +13,6 @@ import csv
 import io
 import math
 import subprocess
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -27,17 +26,15 @@ from conftest import Launcher, allocate_domain_id, ros_environment
 from finger_sim import kinematics
 from finger_sim.log import message_definition
 from finger_sim.scene import load_scene
+from helpers import NODE, run_cli
 
-NODE = "finger_sim.ros.node"
 ROOT = Path(__file__).resolve().parents[2]
 PAPER = ROOT / "config" / "paper_flexion.yaml"
-FINGER_SIM = Path(sys.executable).with_name("finger-sim")  # the venv's console script
 CSV_HEADER = "t,theta1,theta2,theta3,theta1_dot,theta2_dot,theta3_dot,energy,constraint_residual"
 JOINTS = ["mcp_joint", "coupler_joint", "pip_joint"]
 PAPER_DEG = (34.34, 54.39, -53.02)  # spec §5: θ at t = 0.3 s, to the digits shown
 CHUNK_S = 0.05  # record_chunk_interval of the node run: six chunks in 0.3 s, to cut and corrupt
 NODE_TIMEOUT_S = 60.0
-SUBPROCESS_TIMEOUT_S = 60.0
 TOL = 1e-12  # rad, rad/s, J: against `finger-sim simulate`
 EXIT_ERROR, EXIT_TRUNCATED = 2, 3
 
@@ -51,11 +48,6 @@ class NodeLog:
     chunks: list  # mcap ChunkIndex records, by offset
     counts: dict[str, int]  # topic → messages, from the summary
     types: dict[str, str]  # topic → schema name
-
-
-def run_cli(*args: str | Path) -> subprocess.CompletedProcess:
-    return subprocess.run([str(FINGER_SIM), *map(str, args)], capture_output=True, text=True,
-                          timeout=SUBPROCESS_TIMEOUT_S, check=False)
 
 
 def read_csv(path: Path) -> tuple[str, np.ndarray]:

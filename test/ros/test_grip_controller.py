@@ -33,6 +33,7 @@ from finger_sim.ros import conversions  # noqa: E402
 from finger_sim.runtime.grip import KI, KP  # noqa: E402
 from finger_sim.scene import load_scene, scene_from_dict  # noqa: E402
 from finger_sim.simulate import Simulator  # noqa: E402
+from ros_helpers import stamp  # noqa: E402
 
 NODE = "finger_sim.ros.node"
 CONFIG = Path(__file__).resolve().parents[2] / "config"
@@ -49,10 +50,6 @@ OVERSHOOT = 0.10  # grip force never above (1 + OVERSHOOT)·setpoint
 HOLD_FROM_S, HOLD_TO_S = 0.7, 1.2  # sim s after the first torque: the last 0.5 s of holding ...
 HOLD_TOL = 0.02  # ... within 2 % of the setpoint
 OPEN_S = 0.5  # sim s after the setpoint 0: out of contact (grip force 0)
-
-
-def stamp(msg) -> int:
-    return conversions.from_time(msg.header.stamp)
 
 
 def contact_element(sim: Simulator):

@@ -26,6 +26,7 @@ from finger_sim.runtime.hand_config import load_hand, resolve_hand  # noqa: E402
 from finger_sim.scene import load_scene  # noqa: E402
 from finger_sim.simulate import Simulator  # noqa: E402
 from finger_sim.urdf import hand_urdf  # noqa: E402
+from ros_helpers import stamp  # noqa: E402
 
 HAND = "finger_sim.ros.hand"
 RATE = 1000.0
@@ -38,10 +39,6 @@ COMMANDS = {
     "ring": ("joint_command", JointState(name=["ring_mcp_joint"], effort=[0.01]), 0.01),
 }
 RELIABLE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
-
-
-def stamp(msg) -> int:
-    return conversions.from_time(msg.header.stamp if hasattr(msg, "header") else msg.clock)
 
 
 def offline(scene_path: Path, torque: float) -> list:

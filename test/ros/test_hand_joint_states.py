@@ -22,16 +22,13 @@ from std_srvs.srv import Trigger  # noqa: E402
 
 from finger_sim.ros import conversions  # noqa: E402
 from finger_sim.runtime.hand_config import load_hand, resolve_hand  # noqa: E402
+from ros_helpers import stamp  # noqa: E402
 
 HAND = "finger_sim.ros.hand"
 STEPS = 50
 DT_NS = 1_000_000  # 1 kHz
 TORQUES = {"index": 0.003, "middle": 0.0, "ring": 0.01}  # N·m, so that the fingers' states differ
 RELIABLE = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
-
-
-def stamp(msg) -> int:
-    return conversions.from_time(msg.header.stamp)
 
 
 def fields(msg) -> tuple:

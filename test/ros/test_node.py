@@ -28,11 +28,11 @@ from std_srvs.srv import SetBool, Trigger  # noqa: E402
 from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
 
 from finger_sim import joints, kinematics  # noqa: E402
-from finger_sim.ros import conversions  # noqa: E402
 from finger_sim.scene import load_scene  # noqa: E402
 from finger_sim.simulate import Simulator, simulate  # noqa: E402
+from helpers import NODE  # noqa: E402
+from ros_helpers import start_when_heard, stamp, values  # noqa: E402
 
-NODE = "finger_sim.ros.node"
 CONFIG = Path(__file__).resolve().parents[2] / "config"
 PAPER = CONFIG / "paper_flexion.yaml"
 RATE = 1000.0
@@ -44,8 +44,6 @@ WHERE = re.compile(r"clock=(\S+) time=(\S+) step=(\d+) episode=(\d+)")
 
 
 # -- helpers ---------------------------------------------------------------------------------
-def stamp(msg) -> int:
-    return conversions.from_time(msg.header.stamp if hasattr(msg, "header") else msg.clock)
 
 
 def where(message: str) -> tuple[int, int, int]:
@@ -53,10 +51,6 @@ def where(message: str) -> tuple[int, int, int]:
     m = WHERE.search(message)
     assert m, message
     return round(float(m.group(1)) * 1e9), int(m.group(3)), int(m.group(4))
-
-
-def values(msg: DiagnosticStatus) -> dict[str, str]:
-    return conversions.parse_values(msg)
 
 
 def publish_until(client, publisher, msg, log: list, match, what: str, timeout: float = 20.0) -> dict[str, str]:
@@ -78,20 +72,6 @@ def publish_until(client, publisher, msg, log: list, match, what: str, timeout: 
         except AssertionError:
             continue
     raise AssertionError(f"timed out after {timeout:g} s waiting for {what}; log: {[values(e) for e in log]}")
-
-
-def start_when_heard(client, node_name: str, *received: list) -> None:
-    """Advance a paused node one step at a time until a message of each topic reaches us: from
-    then on the node's publishers and our subscriptions are matched, and nothing is lost for lack
-    of it. (Stepping is the node's one path, so the steps taken here are part of the run.)"""
-
-    def heard():
-        if all(received):
-            return True
-        client.call(Trigger, f"{node_name}/step")
-        return False
-
-    client.wait_for(heard, f"the first messages from {node_name}")
 
 
 def probe_command_log(client, publisher, log: list) -> None:

@@ -26,7 +26,9 @@ from finger_sim.run_log import load_run, resimulate  # noqa: E402
 from finger_sim.runtime.drive_commands import REFUSED_TORQUE  # noqa: E402
 from finger_sim.scene import load_scene  # noqa: E402
 from finger_sim.simulate import Simulator, simulate  # noqa: E402
-from test_node import DT_NS, NODE, publish_until, start_when_heard, stamp, state_by_step, values  # noqa: E402
+from helpers import NODE  # noqa: E402
+from ros_helpers import start_when_heard, stamp, values  # noqa: E402
+from test_node import DT_NS, publish_until, state_by_step  # noqa: E402
 
 CONFIG = Path(__file__).resolve().parents[2] / "config"
 GRASP = CONFIG / "drive_grasp.yaml"

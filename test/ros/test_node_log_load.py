@@ -8,8 +8,6 @@ file is read up to its last whole chunk) and by rosbags (an independent reader).
 from __future__ import annotations
 
 import signal
-import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -25,8 +23,8 @@ from finger_sim.cli import EXIT_INCOMPLETE  # noqa: E402
 from finger_sim.log import RECORDING_STATUS  # noqa: E402
 from finger_sim.log.reader import LogReader  # noqa: E402
 from finger_sim.ros import conversions  # noqa: E402
+from helpers import NODE, run_cli  # noqa: E402
 
-NODE = "finger_sim.ros.node"
 CONFIG = Path(__file__).resolve().parents[2] / "config"
 PAPER = CONFIG / "paper_flexion.yaml"
 DT_NS = 1_000_000
@@ -36,7 +34,6 @@ PAUSED_WAIT_S = 2.5
 #: Period of the commands sent while paused: they are logged on arrival, so the recorder never
 #: sits idle long enough for its idle flush.
 COMMAND_PERIOD_S = 0.1
-FINGER_SIM = Path(sys.executable).with_name("finger-sim")  # the venv's console script
 #: A queue of 50 messages between the stepping thread and the log's writer (which takes the
 #: queue every 50 ms): far less than one handover of a 1 kHz run's 4 messages a step.
 SMALL_QUEUE = 50
@@ -92,10 +89,6 @@ def read_rosbags(path: Path) -> dict[str, list]:
         for c, _, raw in reader.messages():
             out.setdefault(c.topic, []).append(reader.deserialize(raw, c.msgtype))
     return out
-
-
-def run_cli(*args: str | Path) -> subprocess.CompletedProcess:
-    return subprocess.run([str(FINGER_SIM), *map(str, args)], capture_output=True, text=True, timeout=120)
 
 
 def test_as_fast_as_possible_the_log_keeps_every_message(launcher, tmp_path):

@@ -17,7 +17,7 @@ from finger_sim.run_log import load_run, resimulate  # noqa: E402
 from finger_sim.scene import load_scene  # noqa: E402
 from finger_sim.scene_yaml import dump_scene  # noqa: E402
 from finger_sim.simulate import simulate  # noqa: E402
-from test_node import NODE  # noqa: E402
+from helpers import NODE  # noqa: E402
 
 CONFIG = Path(__file__).resolve().parents[2] / "config"
 RATE = 1000.0

@@ -18,7 +18,6 @@ import math
 import os
 import re
 import signal
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -50,13 +49,13 @@ from finger_sim.log import McapRecorder, read_log  # noqa: E402
 from finger_sim.run_log import FINGER_SIM_METADATA, load_run, resimulate  # noqa: E402
 from finger_sim.scene import load_scene, scene_from_dict  # noqa: E402
 from finger_sim.simulate import Simulator  # noqa: E402
+from helpers import NODE, run_cli  # noqa: E402
+from ros_helpers import start_when_heard, values  # noqa: E402
 
-NODE = "finger_sim.ros.node"
 CONTROLLER = "finger_sim.ros.pd_controller"
 ROOT = Path(__file__).resolve().parents[2]
 PAPER = ROOT / "config" / "paper_flexion.yaml"
 NODE_DEFAULTS = ROOT / "config" / "finger_node.yaml"
-FINGER_SIM = Path(sys.executable).with_name("finger-sim")  # the venv's console script
 RATE = 1000.0
 DT_NS = 1_000_000
 MAX_TORQUE = 0.05  # N·m, the node's default saturation
@@ -204,14 +203,7 @@ def output(proc) -> str:
     return proc.log_path.read_text(errors="replace")
 
 
-def run_cli(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([str(FINGER_SIM), *args], capture_output=True, text=True, timeout=SUBPROCESS_TIMEOUT_S,
-                          check=False)
-
-
 # -- talking to the node ---------------------------------------------------------------------
-def values(msg: Any) -> dict[str, str]:
-    return {kv.key: kv.value for kv in msg.values}
 
 
 def where(message: str) -> tuple[int, int, int]:
@@ -223,19 +215,6 @@ def where(message: str) -> tuple[int, int, int]:
 
 def js_stamp(msg: JointState) -> int:
     return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-
-
-def start_when_heard(client, *received: list) -> None:
-    """Step a paused node until a message of each topic reaches us: from then on nothing is lost
-    for want of a match (the steps taken are part of the run, and of its log)."""
-
-    def heard():
-        if all(received):
-            return True
-        client.call(Trigger, "/finger_node/step")
-        return False
-
-    client.wait_for(heard, "the first messages from /finger_node")
 
 
 def publish_until(client, publisher, value: float, sent: list, log: list, match, what: str,
@@ -296,7 +275,7 @@ def test_round_trip_read_by_rosbags_and_mcap(launcher, ros_client, tmp_path):
     events = ros_client.collect(DiagnosticStatus, "/finger_node/command_log")
     diagnostics = ros_client.collect(DiagnosticArray, "/diagnostics")
     torque_pub = ros_client.publisher(Float64, "/motor_torque")
-    start_when_heard(ros_client, states, poses, clocks)
+    start_when_heard(ros_client, "/finger_node", states, poses, clocks)
     ros_client.wait_for(lambda: torque_pub.get_subscription_count(), "the motor_torque subscription")
     sent: list[float] = []
     publish_until(ros_client, torque_pub, math.nan, sent, events, lambda v: v["event"] == "refused", "NaN refused")
@@ -469,7 +448,7 @@ def test_kill_9_leaves_a_readable_prefix(launcher, ros_client, tmp_path):
     node = launcher.node(NODE, dict(scene=str(PAPER), realtime_factor=1.0, record_dir=str(bags), start_paused=True,
                                     record_chunk_interval=CHUNK_S))
     states = ros_client.collect(JointState, "/joint_states")
-    start_when_heard(ros_client, states)
+    start_when_heard(ros_client, "/finger_node", states)
     assert ros_client.call(SetBool, "/finger_node/pause", SetBool.Request(data=False)).success
     first = js_stamp(states[0])
     ros_client.wait_for(lambda: js_stamp(states[-1]) >= first + 8 * CHUNK_S * 1e9, "8 chunk intervals of states")
