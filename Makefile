@@ -32,7 +32,7 @@ run: $(STAMP)
 test: $(STAMP) browser
 	$(VENV)/bin/pytest -q
 
-# The viewer's browser tests drive Debian's Chromium (test/test_view_browser.py): installed here
+# The viewer's browser tests drive Debian's Chromium (test/view/test_view_browser.py): installed here
 # when missing and run as root (CI); otherwise they skip, saying why (and fail under CI=true).
 browser:
 	@test -x /usr/bin/chromium || { [ "$$(id -u)" = 0 ] && apt-get update -qq && \

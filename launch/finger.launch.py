@@ -9,7 +9,7 @@ link and joint names carry the same prefix as finger_node's joint_states (robot_
 own `frame_prefix` parameter would prefix only the TF frames, not the joint names it matches).
 With no prefix and the shipped geometry it is share/finger_sim/urdf/finger.urdf byte for byte.
 
-Untested where ROS 2's `launch` is absent: test/test_launch.py checks this file statically.
+Untested where ROS 2's `launch` is absent: test/cli/test_launch.py checks this file statically.
 """
 
 from launch import LaunchDescription

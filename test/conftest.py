@@ -67,6 +67,18 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             item.add_marker(skip)
 
 
+ROS_LAYER = Path(__file__).resolve().parent / "ros"
+#: Fixtures that start a node over DDS, in the other layers (the logs are a node's real run).
+NODE_FIXTURES = frozenset({"launcher", "ros_client", "ros_domain", "node_log", "hand_log", "real_log", "grasp_log"})
+
+
+def pytest_itemcollected(item: pytest.Item) -> None:
+    """Every test under test/ros/, and every test that starts a node, is marked `ros`:
+    `pytest -m "not ros"` runs the ROS-free rest."""
+    if ROS_LAYER in item.path.resolve().parents or NODE_FIXTURES & set(getattr(item, "fixturenames", ())):
+        item.add_marker(pytest.mark.ros)
+
+
 def allocate_domain_id() -> int:
     return TEST_DOMAINS[next(_counter) % len(TEST_DOMAINS)]
 

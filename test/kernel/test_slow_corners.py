@@ -1,0 +1,72 @@
+"""Slow corners (issue 17 item 5): a Simulator of a scene seen before reuses its set-up, importing
+the simulator does not import scipy.integrate, and the install step leaves numba's cache warm.
+
+Speed itself is measured in docs/sweep_performance.md; these tests check the mechanisms, with
+numbers held against an uncached run.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from finger_sim.scene import load_scene
+from finger_sim.simulate import Simulator, simulate
+
+CONFIG = Path(__file__).resolve().parents[2] / "config"
+TOLERANCE = 1e-12  # rad
+
+
+def _python(code: str) -> str:
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=240, check=True)
+    return done.stdout.strip()
+
+
+def test_a_scene_seen_before_shares_its_set_up_but_not_its_state():
+    scene = load_scene(CONFIG / "paper_flexion.yaml")
+    first, second = Simulator(scene), Simulator(scene)
+    assert first.system is second.system and first.fast_stepper is second.fast_stepper
+    for _ in range(150):
+        first.step()
+    assert second.step_index == 0 and second.q == scene.initial_state()[0]
+    for _ in range(150):
+        second.step()
+    assert second.q == first.q and second.v == first.v
+    reference = simulate(scene, kernel="python")  # the readable path, no compiled set-up shared
+    np.testing.assert_allclose(first.q, reference.q[150], rtol=0, atol=TOLERANCE)
+
+
+def test_importing_the_simulator_leaves_scipy_integrate_until_a_method_needs_it():
+    out = _python(
+        "import sys\n"
+        "import finger_sim.simulate as s\n"
+        "from finger_sim.scene import load_scene\n"
+        f"scene = load_scene({str(CONFIG / 'paper_flexion.yaml')!r})\n"
+        "print('scipy.integrate' in sys.modules)\n"
+        "s.simulate(scene.with_overrides(method='dop853', duration=0.01))\n"
+        "print('scipy.integrate' in sys.modules)\n"
+        "s.simulate(scene.with_overrides(method='adaptive', duration=0.002))\n"
+        "print('scipy.integrate' in sys.modules)\n")
+    assert out.split() == ["False", "False", "True"]
+
+
+def test_the_install_step_leaves_every_kernel_compiled_in_the_cache():
+    # make's install step runs finger_sim.kernel.warm; running it again must compile nothing
+    out = _python(
+        "from numba.core.registry import CPUDispatcher\n"
+        "from finger_sim.kernel.warm import warm\n"
+        "warm()\n"
+        "from finger_sim.kernel import event_checks, numerics, rollout_loop\n"
+        "hits = misses = 0\n"
+        "for module in (numerics, rollout_loop, event_checks):\n"
+        "    for f in vars(module).values():\n"
+        "        if isinstance(f, CPUDispatcher):\n"
+        "            hits += sum(f.stats.cache_hits.values())\n"
+        "            misses += sum(f.stats.cache_misses.values())\n"
+        "print(hits, misses)\n")
+    hits, misses = map(int, out.split())
+    assert hits >= 8 and misses == 0

@@ -1,0 +1,139 @@
+"""finger_node's log under stress: a kill -9 after a pause, a run as fast as possible, a slow recorder.
+
+References: the node's own answers (the step at which ~/pause stopped it), the count of steps
+it ran, and the logs read back by finger_sim.log.reader (a linear scan, so a killed node's
+file is read up to its last whole chunk) and by rosbags (an independent reader).
+"""
+
+from __future__ import annotations
+
+import signal
+import time
+from pathlib import Path
+
+import pytest
+
+rclpy = pytest.importorskip("rclpy")
+
+from sensor_msgs.msg import JointState  # noqa: E402
+from std_msgs.msg import Float64  # noqa: E402
+from std_srvs.srv import SetBool  # noqa: E402
+
+from finger_sim.cli import EXIT_INCOMPLETE  # noqa: E402
+from finger_sim.log import RECORDING_STATUS  # noqa: E402
+from finger_sim.log.reader import LogReader  # noqa: E402
+from finger_sim.ros import conversions  # noqa: E402
+from helpers import NODE, run_cli  # noqa: E402
+
+CONFIG = Path(__file__).resolve().parents[2] / "config"
+PAPER = CONFIG / "paper_flexion.yaml"
+DT_NS = 1_000_000
+#: Wall time the test waits while paused before the kill: longer than the recorder's 1 s
+#: wall-time bound on an open chunk.
+PAUSED_WAIT_S = 2.5
+#: Period of the commands sent while paused: they are logged on arrival, so the recorder never
+#: sits idle long enough for its idle flush.
+COMMAND_PERIOD_S = 0.1
+#: A queue of 50 messages between the stepping thread and the log's writer (which takes the
+#: queue every 50 ms): far less than one handover of a 1 kHz run's 4 messages a step.
+SMALL_QUEUE = 50
+
+
+def the_log(folder: Path) -> Path:
+    (path,) = folder.glob("*.mcap")
+    return path
+
+
+def test_a_kill_after_a_pause_keeps_the_paused_second(launcher, ros_client, tmp_path):
+    """Issue 19 item 8: chunks close on sim time (60 s here) and on wall time (1 s); the node is
+    paused at about 1 s of sim time while a controller keeps sending, then killed with SIGKILL.
+    Every state up to the pause is in the file."""
+    node = launcher.node(NODE, dict(scene=str(PAPER), realtime_factor=1.0, record_chunk_interval=60.0,
+                                    command_qos="reliable", command_timeout=0.0))
+    states = ros_client.collect(JointState, "/joint_states")
+    torque = ros_client.publisher(Float64, "/motor_torque")
+    ros_client.wait_for(lambda: states and conversions.from_time(states[-1].header.stamp) >= 1000 * DT_NS,
+                        "a second of sim time")
+    paused = ros_client.call(SetBool, "/finger_node/pause", SetBool.Request(data=True))
+    assert paused.success, paused.message
+    step = int(paused.message.split("step=")[1].split()[0])
+    end = time.monotonic() + PAUSED_WAIT_S
+    while time.monotonic() < end:  # a controller that goes on sending while the sim is paused
+        torque.publish(Float64(data=0.001))
+        ros_client.spin(COMMAND_PERIOD_S)
+    node.send_signal(signal.SIGKILL)
+    node.wait(10.0)
+
+    log = LogReader(the_log(tmp_path / "bags"))
+    assert log.truncated  # no summary: killed
+    logged = [conversions.from_time(m.msg.header.stamp) for m in log.messages("/joint_states")]
+    assert logged == [n * DT_NS for n in range(step + 1)]
+
+
+def scene_file(tmp_path: Path, duration: float) -> Path:
+    """finger_default driven by a constant scripted torque for `duration` s."""
+    text = (CONFIG / "finger_default.yaml").read_text()
+    text = text.replace("torque: {type: constant, value: 0.0}", "torque: {type: constant, value: 0.01}")
+    text = text.replace("duration: 3600.0", f"duration: {duration}")
+    path = tmp_path / "held.yaml"
+    path.write_text(text)
+    return path
+
+
+def read_rosbags(path: Path) -> dict[str, list]:
+    """Messages by topic, by rosbags (an independent reader)."""
+    from rosbags.highlevel import AnyReader
+
+    out: dict[str, list] = {}
+    with AnyReader([path]) as reader:
+        for c, _, raw in reader.messages():
+            out.setdefault(c.topic, []).append(reader.deserialize(raw, c.msgtype))
+    return out
+
+
+def test_as_fast_as_possible_the_log_keeps_every_message(launcher, tmp_path):
+    """realtime_factor 0 with a queue far too small for the rate: the stepping waits for the
+    writer (back-pressure), so every state, pose and clock tick of every step is in the log."""
+    steps = 5000
+    node = launcher.node(NODE, dict(scene=str(scene_file(tmp_path, steps / 1000)), torque_source="scene",
+                                    realtime_factor=0.0, record_queue_size=SMALL_QUEUE))
+    assert node.wait(120.0) == 0, node.output()
+    path = the_log(tmp_path / "bags")
+    log = read_rosbags(path)
+    for topic in ("/joint_states", "/fingertip_pose"):
+        assert [conversions.from_time(m.header.stamp) for m in log[topic]] == [n * DT_NS for n in range(steps + 1)]
+    assert len(log["/clock"]) == steps + 1
+    status = LogReader(path).metadata_record(RECORDING_STATUS)
+    assert status["messages_dropped"] == "0"
+    assert int(status["messages_recorded"]) == sum(len(v) for v in log.values())
+    assert "INCOMPLETE" not in run_cli("info", path).stdout
+
+
+def test_a_real_time_run_that_drops_says_so_in_its_log(launcher, tmp_path):
+    """realtime_factor 1 with the same small queue: messages are dropped, and the log says how
+    many (its 'recording' record, written at close); `info` shows it; `export` and `resim` refuse
+    the log (exit 7) unless --accept-incomplete."""
+    steps = 1000
+    node = launcher.node(NODE, dict(scene=str(scene_file(tmp_path, steps / 1000)), torque_source="scene",
+                                    realtime_factor=1.0, record_queue_size=SMALL_QUEUE))
+    assert node.wait(120.0) == 0, node.output()
+    path = the_log(tmp_path / "bags")
+    log = read_rosbags(path)
+    status = LogReader(path).metadata_record(RECORDING_STATUS)
+    dropped = int(status["messages_dropped"])
+    by_topic = dict(item.split("=") for item in status["dropped_by_topic"].split(", "))
+    assert dropped > 0 and sum(int(n) for n in by_topic.values()) == dropped
+    assert int(status["messages_recorded"]) == sum(len(v) for v in log.values())  # all handed over reached the file
+    states = len(log["/joint_states"])
+    assert states + int(by_topic.get("/joint_states", 0)) == steps + 1  # every state: in the file or counted
+
+    info = run_cli("info", path)
+    assert info.returncode == 0 and f"INCOMPLETE: {dropped} messages dropped while recording" in info.stdout
+    for command in (("resim", path), ("export", path, "--csv", tmp_path / "out.csv")):
+        refused = run_cli(*command)
+        assert refused.returncode == EXIT_INCOMPLETE, refused.stderr
+        assert f"{dropped} messages were dropped while recording" in refused.stderr
+        assert "--accept-incomplete" in refused.stderr
+    accepted = run_cli("resim", path, "--accept-incomplete")
+    assert accepted.returncode == 0, accepted.stdout + accepted.stderr  # the states that are there agree
+    assert "warning" in accepted.stderr and "incomplete" in accepted.stderr

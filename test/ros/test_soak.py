@@ -1,0 +1,82 @@
+"""Soak (opt-in: FINGER_SIM_SOAK_S=<seconds>, e.g. 3600): finger_node at 1 kHz in real time with
+recording on and the PD controller in a closed loop, answering every state.
+
+References: the node's resident memory with its child processes' (/proc/<pid>/status VmRSS), sampled every RSS_PERIOD_S,
+must stay within RSS_BAND_MB of its value at the end of the warm-up; every /diagnostics window
+after the warm-up must show a real-time factor of at least MIN_WINDOW_RTF. The samples are
+written to soak.csv in the test's folder (and its path printed) for the report in docs/.
+
+    FINGER_SIM_SOAK_S=3600 FINGER_SIM_TEST_DOMAINS=65-69 .venv/bin/pytest -q -s -m soak test/ros/test_soak.py
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+import pytest
+
+rclpy = pytest.importorskip("rclpy")
+
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from rclpy.qos import QoSProfile  # noqa: E402
+
+from finger_sim.ros import conversions  # noqa: E402
+
+SOAK_S = float(os.environ.get("FINGER_SIM_SOAK_S", "0"))
+pytestmark = [pytest.mark.soak,
+              pytest.mark.skipif(SOAK_S <= 0, reason="opt-in: set FINGER_SIM_SOAK_S to the soak's duration in s"),
+              pytest.mark.timeout(int(SOAK_S) + 600)]
+
+#: Wall time after the first state before RSS and real-time factor are judged, s.
+WARMUP_S = 60.0
+RSS_PERIOD_S = 5.0
+RSS_BAND_MB = 5.0
+MIN_WINDOW_RTF = 0.99
+
+
+def rss_mb(pid: int) -> float:
+    """Resident memory of `pid` and its child processes (the node's log writer), MB."""
+    total = 0.0
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            total = int(line.split()[1]) / 1024
+            break
+    else:
+        raise AssertionError(f"no VmRSS for pid {pid}")
+    children = " ".join(p.read_text() for p in Path(f"/proc/{pid}/task").glob("*/children")).split()
+    return total + sum(rss_mb(int(child)) for child in children)
+
+
+def test_closed_loop_soak_holds_memory_and_real_time(launcher, ros_client, tmp_path):
+    launcher.node("finger_sim.ros.pd_controller", dict(setpoint=0.8))
+    node = launcher.node("finger_sim.ros.node", dict(realtime_factor=1.0, command_qos="reliable", command_timeout=0.0))
+    diagnostics: list[DiagnosticArray] = ros_client.collect(DiagnosticArray, "/diagnostics", QoSProfile(depth=10_000))
+    ros_client.wait_for(lambda: diagnostics, "the first /diagnostics", 60.0)
+    start = time.monotonic()
+    samples: list[tuple[float, float]] = []  # (wall s since start, RSS MB)
+    while (elapsed := time.monotonic() - start) < SOAK_S:
+        samples.append((elapsed, rss_mb(node.pid)))
+        deadline = time.monotonic() + RSS_PERIOD_S
+        while time.monotonic() < deadline:
+            ros_client.spin(0.1)
+        assert node.running(), node.output()
+    windows = []  # (wall s since start, the window's real-time factor, torque, commands received)
+    for d in diagnostics:
+        v = conversions.parse_values(d.status[0])
+        windows.append((float(v["clock"]), float(v["realtime_factor"]), int(v["commands_received"])))
+    out = tmp_path / "soak.csv"
+    out.write_text("t_s,rss_mb\n" + "".join(f"{t:.1f},{m:.2f}\n" for t, m in samples))
+    (tmp_path / "soak_windows.csv").write_text("sim_t_s,window_rtf\n" + "".join(f"{c:.3f},{r:.4f}\n" for c, r, _ in windows))
+    judged = [m for t, m in samples if t >= WARMUP_S]
+    base = judged[0]
+    late = [(c, r) for c, r, _ in windows if c >= WARMUP_S]
+    worst = min(late, key=lambda w: w[1])
+    print(f"\nsoak {SOAK_S:g} s: RSS {samples[0][1]:.1f} MB at start, {base:.1f} MB after warm-up, "
+          f"{min(judged):.1f}..{max(judged):.1f} MB after it, {samples[-1][1]:.1f} MB at the end; "
+          f"worst window RTF {worst[1]:.4f} at sim t = {worst[0]:.0f} s; {len(late)} windows, "
+          f"{sum(r < MIN_WINDOW_RTF for _, r in late)} below {MIN_WINDOW_RTF}; "
+          f"commands received {windows[-1][2]}; samples in {out}")
+    assert max(abs(m - base) for m in judged) <= RSS_BAND_MB
+    assert worst[1] >= MIN_WINDOW_RTF
