@@ -12,7 +12,7 @@ import time
 import numpy as np
 
 import stick_slip_reference as ssr
-from test_stick_slip import data, mode_changes, row_after
+from effects.test_stick_slip import data, mode_changes, row_after
 
 from finger_sim.scene import scene_from_dict
 from finger_sim.simulate import simulate

@@ -181,9 +181,9 @@ def test_node_publishes_and_logs_the_current_state_and_resims_it_bit_for_bit(lau
 
     from finger_sim.log import read_log
     from finger_sim.run_log import load_run, resimulate
-    from test_node import NODE
+    from helpers import NODE
 
-    data = yaml.safe_load((Path(__file__).resolve().parents[1] / "config" / "drive_grasp.yaml").read_text())
+    data = yaml.safe_load((Path(__file__).resolve().parents[2] / "config" / "drive_grasp.yaml").read_text())
     data["model"]["drive"] = {"inductance": 5e-4}
     data["duration"] = 0.35
     path = tmp_path / "drive_grasp_inductive.yaml"

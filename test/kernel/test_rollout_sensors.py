@@ -14,7 +14,7 @@ from finger_sim.scene import load_scene, scene_from_dict
 from finger_sim.simulate import simulate
 from finger_sim.sweep import set_key
 
-CONFIG = Path(__file__).resolve().parents[1] / "config"
+CONFIG = Path(__file__).resolve().parents[2] / "config"
 #: an FSR that lags, is noisy and saturates (no rounding: a 1e-15 difference of the truth can not flip a step)
 FSR = {"noise": 0.05, "time_constant": 0.005, "range": [0.0, 0.3]}
 

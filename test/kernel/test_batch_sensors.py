@@ -14,7 +14,7 @@ from finger_sim.scene import load_scene, scene_from_dict
 from finger_sim.simulate import simulate
 from finger_sim.sweep import run_chunk, set_key
 
-CONFIG = Path(__file__).resolve().parents[1] / "config"
+CONFIG = Path(__file__).resolve().parents[2] / "config"
 SENSORS = {"seed": 3, "fsr_distal": {"noise": 0.05, "time_constant": 0.005}, "fsr_proximal": {"resolution": 0.01}}
 
 

@@ -18,7 +18,7 @@ from finger_sim.simulate import simulate
 from finger_sim.batch import run_batch
 from finger_sim.tip_force_profile import static_scene, tip_force_switches
 
-CONFIG = Path(__file__).resolve().parents[1] / "config"
+CONFIG = Path(__file__).resolve().parents[2] / "config"
 
 
 def cup_with(spans) -> dict:

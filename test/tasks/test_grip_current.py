@@ -20,9 +20,9 @@ from finger_sim.tasks.current_grip import GRIP_CURRENT, current_setpoint, grip_c
 from finger_sim.tasks.metrics import SETTLE_BAND, Segment, settle_time
 from finger_sim.tasks.runner import run_task
 from finger_sim.tasks.schema import load_task
-from test_contact import equilibrium
+from effects.test_contact import equilibrium
 
-TASK = load_task(Path(__file__).resolve().parents[1] / "config" / "tasks" / "hold_voltage_off.yaml")
+TASK = load_task(Path(__file__).resolve().parents[2] / "config" / "tasks" / "hold_voltage_off.yaml")
 #: Spec §8's defaults typed in again: η_f N k_t (N·m/A) and the current limit (A).
 TORQUE_PER_AMPERE, I_MAX = 0.4 * 300.0 * 4.0e-3, 0.5
 

@@ -21,9 +21,9 @@ from rosbags.highlevel import AnyReader  # noqa: E402
 
 from finger_sim.scene import load_scene  # noqa: E402
 from finger_sim.simulate import simulate  # noqa: E402
-from test_node import NODE  # noqa: E402
+from helpers import NODE  # noqa: E402
 
-CONFIG = Path(__file__).resolve().parents[1] / "config"
+CONFIG = Path(__file__).resolve().parents[2] / "config"
 #: N: below the force with which the cup scene's finger comes to rest on it (≈ 0.17 N), so it breaks.
 BREAK_FORCE = 0.1
 SUBPROCESS_TIMEOUT_S = 120.0

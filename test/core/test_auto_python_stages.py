@@ -21,7 +21,7 @@ from finger_sim.auto import AUTO_TARGET
 from finger_sim.scene import scene_from_dict
 from finger_sim.simulate import Simulator, simulate
 
-HARD = Path(__file__).resolve().parent.parent / "config" / "hard"
+HARD = Path(__file__).resolve().parents[2] / "config" / "hard"
 #: The run's own estimate lies within this factor of its true error (test_auto_promise.py), or its square here.
 ESTIMATE_FACTOR = 10.0
 

@@ -23,7 +23,7 @@ from finger_sim.rollouts import rollout
 from finger_sim.scene import load_scene, scene_from_dict
 from finger_sim.simulate import Simulator, simulate
 
-HARD = Path(__file__).resolve().parent.parent / "config" / "hard"
+HARD = Path(__file__).resolve().parents[2] / "config" / "hard"
 RHO3 = 0.007  # m, the distal capsule of the scene
 #: The crossing's time on auto's error-controlled path (its θ error ≤ 1e-6 rad at δ' ≈ 0.8 m/s,
 #: about a lever of 0.08 m: ≈ 1e-7 s) and on rk4 at 0.1 ms (its θ error there ≈ 1e-6 rad).
