@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from finger_sim.effects.friction_modes import LOCKED, SLIDING, STICK_SLIP, StickSlipContact
-from finger_sim.errors import SimulationDiverged
+from finger_sim.errors import ConfigError, SimulationDiverged
 from finger_sim.integrators.base import TorqueFn
 from finger_sim.kinematics import Vec3
 
@@ -70,6 +70,16 @@ def auto_method(scene: Scene) -> tuple[str, str, dict[str, float], int]:
               "and the steps cost milliseconds: not for real time")
     LOG.info("method auto → %s: %s", AUTO_METHOD, reason)
     return AUTO_METHOD, reason, {"rtol": rtol, "atol": atol}, 1
+
+
+def check_method(method: str) -> None:
+    """Refuse a method named for a stick–slip scene that its mode stepping does not drive: our dop853
+    keeps its own solution across steps, which the locked and sliding modes do not restart."""
+    from finger_sim.auto import ERROR_CONTROLLED
+
+    if method == ERROR_CONTROLLED:
+        raise ConfigError("integrator.method", f"a method other than {ERROR_CONTROLLED} for {STICK_SLIP} friction "
+                          f"(auto takes {AUTO_METHOD})", method)
 
 
 def element(system: FingerSystem) -> StickSlipContact | None:

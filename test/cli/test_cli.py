@@ -238,12 +238,14 @@ def test_a_streamed_run_takes_constant_memory(tmp_path):
     quarter of the same run held in memory."""
     import tracemalloc
 
+    from finger_sim import simulate as simulate_module
     from finger_sim.streaming import stream_csv
 
     base = load_scene(ref.CONFIG / "free_swing.yaml").with_overrides(method="rk4")
     stream_csv(base.with_overrides(duration=0.01), tmp_path / "warm.csv")  # first-call costs out of the way
 
     def peak(run, steps: int) -> int:
+        simulate_module._setup.cache_clear()  # each run builds its set-up alike (the cache would hold it or evict others)
         tracemalloc.start()
         try:
             run(base.with_overrides(duration=steps * base.dt))
