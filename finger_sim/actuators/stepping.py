@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 from scipy.optimize import brentq
 
+from finger_sim import stepper_slot
 from finger_sim.actuators.drive import BACK, DRIVE, STUCK, ZERO, DrivenSystem, holding_margin
 from finger_sim.errors import ConfigError, SimulationDiverged
 from finger_sim.integrators.base import TorqueFn
@@ -118,8 +119,7 @@ def start(sim: Simulator) -> None:
     model = getattr(sim.integrator, "model", None)  # a compiled integrator's model: its guards are compiled
     system.drive.kernel_model, system.drive.guard_cache = model, None
     if model is not None:
-        from finger_sim.kernel.drive import drive_guards as _compiled_guards
-
+        _compiled_guards = stepper_slot.kernel().compiled_drive().drive_guards
         _compiled_guards(model, 0.0, *ZERO, *ZERO, 0.0, 1.0)  # load it now, not at the first event of a paced step
     if system.drive.inductive:  # L > 0: the current is a state (actuators.inductive_stepping)
         from finger_sim.actuators import inductive_stepping
@@ -138,9 +138,8 @@ def fast_stepper(sim: Simulator) -> object | None:
     a compiled fixed-step method on a scene without gaps (stops, contact); else None."""
     if sim._gaps or not hasattr(sim.integrator, "step_plan"):
         return None
-    from finger_sim.kernel.drive import DrivenFastStepper  # numba is loaded by now
-
-    return DrivenFastStepper(sim.integrator, sim.dt, sim.scene.torque, sim.system.drive)  # type: ignore[arg-type,attr-defined]
+    driven = stepper_slot.kernel().compiled_drive()  # numba is loaded by now
+    return driven.DrivenFastStepper(sim.integrator, sim.dt, sim.scene.torque, sim.system.drive)  # type: ignore[arg-type,attr-defined]
 
 
 def advance(sim: Simulator, t0: float, t1: float, u_fn: TorqueFn) -> None:

@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING, ClassVar
 from finger_sim.effects.base import Vec3, effect
 from finger_sim.effects.contact_geometry import PHALANX_RADII, Circle, ContactParams, Plane, SceneObject, Vec2
 from finger_sim.errors import ConfigError
-from finger_sim.kernel.layout import CONTACT
+from finger_sim.effects.base import CONTACT
 from finger_sim.kinematics import distal_offset
 from finger_sim.model import FingerParams
 
