@@ -28,7 +28,7 @@ from finger_sim.log.qos import OFFERED_QOS_PROFILES, offered_qos_profiles  # noq
 REPLAY = Path(sys.executable).with_name("finger_replay")
 URDF = "<robot name='latched'/>"
 STEP_NS = 10_000_000  # 100 Hz states
-STATES = 300  # 3 s of log time: the replay still runs when the late subscriber joins
+STATES = 1000  # 10 s of log time: the replay still runs when the late subscriber joins, even on a slow start
 LATCHED_SUB = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
