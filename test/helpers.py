@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 FINGER_SIM = Path(sys.executable).with_name("finger-sim")  # the venv's console script
@@ -15,3 +16,31 @@ def run_cli(*args: str | Path, timeout: float = CLI_TIMEOUT_S) -> subprocess.Com
     """`finger-sim ARGS...` in its own process; its exit status is the caller's to check."""
     return subprocess.run([str(FINGER_SIM), *map(str, args)], capture_output=True, text=True, timeout=timeout,
                           check=False)
+
+
+#: How long a killed recorder's writer process may take to write what it was handed, s.
+WRITER_EXIT_S = 30.0
+
+
+def child_pids(pid: int) -> list[int]:
+    """The child processes of `pid` (e.g. a node's log writer), from /proc."""
+    return [int(c) for p in Path(f"/proc/{pid}/task").glob("*/children") for c in p.read_text().split()]
+
+
+def wait_until_gone(pids: list[int], timeout: float = WRITER_EXIT_S) -> None:
+    """Wait until every process in `pids` (not our children) has exited: gone, or a zombie.
+
+    A recorder's writer process outlives a killed caller until it has written what it was handed,
+    so a log is read after it is done, not while it still grows."""
+    deadline = time.monotonic() + timeout
+    for pid in pids:
+        stat = Path(f"/proc/{pid}/stat")
+        while True:
+            try:
+                if stat.read_text().rsplit(")", 1)[1].split()[0] == "Z":
+                    break
+            except FileNotFoundError:
+                break
+            if time.monotonic() > deadline:
+                raise AssertionError(f"process {pid} still runs after {timeout:g} s")
+            time.sleep(0.01)

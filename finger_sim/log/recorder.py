@@ -415,6 +415,12 @@ class McapRecorder:
         return self._written
 
     @property
+    def writer_pid(self) -> int | None:
+        """The writer process's pid (None before `open`): it outlives a killed caller until it has
+        written what it was handed."""
+        return self._process.pid if self._process is not None else None
+
+    @property
     def dropped(self) -> int:
         """Messages lost: queue full, written after close, or hit by an I/O error."""
         return self._dropped + self._lost

@@ -43,6 +43,7 @@ from finger_sim.log import (  # noqa: E402
     message_definition,
     type_name_of,
 )
+from helpers import wait_until_gone  # noqa: E402
 
 SHARE = Path(sys.prefix) / "share"  # where the ROS 2 wheels install their .msg files
 DEADLINE_S = 20.0  # generous bound for conditions that normally hold within milliseconds
@@ -316,7 +317,7 @@ CHILD = textwrap.dedent("""
         if i == ready_after:
             while recorder.written < ready_after // 2:
                 time.sleep(0.001)
-            print("written", recorder.written, flush=True)
+            print("written", recorder.written, recorder.writer_pid, flush=True)
         time.sleep(0.0002)
 """)
 
@@ -332,9 +333,10 @@ def test_kill_9_leaves_a_readable_prefix(tmp_path: Path) -> None:
         assert ready, "the child never reported progress"
         line = child.stdout.readline().split()
         assert line[0] == "written", line
-        written = int(line[1])
+        written, writer = int(line[1]), int(line[2])
         child.kill()  # SIGKILL: no finally, no atexit, no close()
         child.wait(DEADLINE_S)
+        wait_until_gone([writer])  # it writes what it was handed, then leaves the file as a crash does
     finally:
         if child.poll() is None:
             child.kill()

@@ -23,7 +23,7 @@ from finger_sim.cli import EXIT_INCOMPLETE  # noqa: E402
 from finger_sim.log import RECORDING_STATUS  # noqa: E402
 from finger_sim.log.reader import LogReader  # noqa: E402
 from finger_sim.ros import conversions  # noqa: E402
-from helpers import NODE, run_cli  # noqa: E402
+from helpers import NODE, child_pids, run_cli, wait_until_gone  # noqa: E402
 
 CONFIG = Path(__file__).resolve().parents[2] / "config"
 PAPER = CONFIG / "paper_flexion.yaml"
@@ -61,8 +61,10 @@ def test_a_kill_after_a_pause_keeps_the_paused_second(launcher, ros_client, tmp_
     while time.monotonic() < end:  # a controller that goes on sending while the sim is paused
         torque.publish(Float64(data=0.001))
         ros_client.spin(COMMAND_PERIOD_S)
+    writers = child_pids(node.pid)
     node.send_signal(signal.SIGKILL)
     node.wait(10.0)
+    wait_until_gone(writers)
 
     log = LogReader(the_log(tmp_path / "bags"))
     assert log.truncated  # no summary: killed

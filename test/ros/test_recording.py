@@ -49,7 +49,7 @@ from finger_sim.log import McapRecorder, read_log  # noqa: E402
 from finger_sim.run_log import FINGER_SIM_METADATA, load_run, resimulate  # noqa: E402
 from finger_sim.scene import load_scene, scene_from_dict  # noqa: E402
 from finger_sim.simulate import Simulator  # noqa: E402
-from helpers import NODE, run_cli  # noqa: E402
+from helpers import NODE, child_pids, run_cli, wait_until_gone  # noqa: E402
 from ros_helpers import start_when_heard, values  # noqa: E402
 
 CONTROLLER = "finger_sim.ros.pd_controller"
@@ -452,8 +452,10 @@ def test_kill_9_leaves_a_readable_prefix(launcher, ros_client, tmp_path):
     assert ros_client.call(SetBool, "/finger_node/pause", SetBool.Request(data=False)).success
     first = js_stamp(states[0])
     ros_client.wait_for(lambda: js_stamp(states[-1]) >= first + 8 * CHUNK_S * 1e9, "8 chunk intervals of states")
+    writers = child_pids(node.pid)
     os.killpg(node.pid, signal.SIGKILL)
     assert node.wait(10.0) == -signal.SIGKILL
+    wait_until_gone(writers)
     drain(ros_client, states)
     path = the_log(bags)
 
@@ -516,8 +518,10 @@ def test_a_kill_at_any_moment_leaves_a_repairable_log(launcher, tmp_path, after_
     deadline = time.monotonic() + after_s
     while time.monotonic() < deadline and not list(bags.glob("*.mcap")):
         time.sleep(0.001)  # kill as soon as the log file appears, or at after_s
+    writers = child_pids(node.pid)
     os.killpg(node.pid, signal.SIGKILL)
     assert node.wait(10.0) == -signal.SIGKILL
+    wait_until_gone(writers)
     for path in sorted(bags.glob("*.mcap")):
         head = path.read_bytes()[:8]
         assert head in (b"", MCAP0_MAGIC), head  # empty (name reserved) or a whole header follows
