@@ -259,9 +259,15 @@ def test_bad_commands_saturation_and_timeout(launcher, ros_client):
     # the newest state only (they arrive in order): scanning every state on each poll falls behind a node stepping
     # as fast as it can
     ros_client.wait_for(lambda: states and stamp(states[-1]) > (s_neg + 20) * DT_NS, "states after the negative command")
+    # the torque each state carries, from the command log: the latest accepted or timed-out command
+    # before it (publish_until may have sent a command twice, and both copies are accepted)
+    changes = sorted((int(v["step"]), float(v["torque"])) for v in map(values, log) if v["event"] in ("accepted", "timeout"))
     for n, msg in state_by_step(states).items():
-        applied = 0.01 if s_sat < n <= s_sat + 50 else -0.01 if s_neg < n <= s_neg + 50 else 0.0
+        applied = next((torque for step, torque in reversed(changes) if step < n), 0.0)
         assert msg.effort[0] == applied, n
+    assert changes[0] == (s_sat, 0.01) and (s_sat + 50, 0.0) in changes and (s_neg, -0.01) in changes
+    by_step = state_by_step(states)
+    assert any(s_neg < n <= s_neg + 20 for n in by_step)  # the states the test waited for carry it
 
     n_refused = sum(values(e)["event"] == "refused" for e in log)
     assert n_refused >= 5
