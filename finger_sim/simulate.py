@@ -197,11 +197,11 @@ class Simulator:
     # -- internals ---------------------------------------------------------------------
     def _advance(self, t0: float, t1: float, torque: TorqueFn) -> None:
         """Integrate [t0, t1] under a smooth torque, splitting it at every event on the way."""
+        if self._friction is not None:  # with a drive too: the mesh and the friction share one lock
+            stick_slip.advance(self, t0, t1, torque)
+            return
         if self._drive is not None:
             drive_stepping.advance(self, t0, t1, torque)
-            return
-        if self._friction is not None:
-            stick_slip.advance(self, t0, t1, torque)
             return
         if not self._gaps:
             self.q, self.v = self.integrator.step(t0, self.q, self.v, t1 - t0, torque)
@@ -657,13 +657,13 @@ def simulate(scene: Scene, *, kernel: str = "auto") -> Trajectory:
     start = time.perf_counter()
     drive_outputs: dict[str, np.ndarray] = {}
     report: dict[str, float] = {}
+    if sim._friction is not None:  # its holding torques are read back after the run: keep every row's
+        sim._friction.memory = n + 1
     if sim._drive is not None:  # the mesh mode is discrete state: its outputs are taken as the run goes
         from finger_sim.actuators import record
 
         xs, drive_outputs, report = record.run(sim, n)
     else:
-        if sim._friction is not None:  # its holding torques are read back after the run: keep every row's
-            sim._friction.memory = n + 1
         xs = stepper_slot.kernel().advance(sim, n)  # in the kernel where it can, else step by step
     wall = time.perf_counter() - start
     x = np.vstack([x0, xs])

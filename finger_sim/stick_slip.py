@@ -10,19 +10,29 @@ The pattern of the drive's stuck mesh (`finger_sim.actuators.stepping`) and of t
 τ_h is the torque on θ1 that keeps θ1'' = 0 with the friction left out (§4 at q' = 0); the
 accelerations are affine in the torque on θ1, so two solves give it exactly.
 
+With a drive (§8, L = 0) the linkage locks as one: the friction cones and the stuck mesh share τ_h
+(τ_h = τ_mesh + Σ j_k F_t,k, τ_mesh in the stuck set), which holds while τ_h lies within Σ μ_s F_n,k |j_k|
+of that set: the margin is the mesh's `holding_margin` plus the cones' capacity. Locked, the mesh is
+`stuck` and the friction `locked`; moving, the mesh rolls (its flank and current-limit guards located
+as `finger_sim.actuators.stepping` does) and the friction slides, both towards the same direction. It
+breaks free towards sgn(N τ_a − τ_h) (−sgn τ_h without a drive).
+
 A stop impact reverses θ1' (the sliding direction follows); at rest on a stop the stop holds the
 load and the friction is idle; leaving the stop is a turning point. Objects that move and a drive
-are refused by the scene (`finger_sim.scene`): neither is in this law yet.
+with inductance are refused by the scene (`finger_sim.scene`): neither is in this law yet.
 """
 
 from __future__ import annotations
 
 import logging
 import math
+from contextlib import nullcontext
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from finger_sim.actuators import stepping as drive_stepping
+from finger_sim.actuators.drive import STUCK, DrivenSystem, holding_margin
 from finger_sim.effects.friction_modes import LOCKED, SLIDING, STICK_SLIP, StickSlipContact
 from finger_sim.errors import ConfigError, SimulationDiverged
 from finger_sim.integrators.base import TorqueFn
@@ -107,14 +117,17 @@ def start(sim: Simulator) -> None:
     if sim.v[0] == 0.0:
         sim.v = _turn(sim, friction, 0.0, sim.q, sim.scene.torque)
         friction.remember(0.0, sim.q)
-    else:
+    else:  # a drive's flank was chosen by `actuators.stepping.start`
         friction.mode, friction.direction = SLIDING, math.copysign(1.0, sim.v[0])
 
 
 def advance(sim: Simulator, t0: float, t1: float, torque: TorqueFn) -> None:
-    """Integrate [t0, t1] of a stick–slip scene under a smooth torque τ(s), splitting it at every
-    turn, breakaway and gap event (stops, contact onsets) on the way."""
+    """Integrate [t0, t1] of a stick–slip scene under a smooth input (torque τ(s), or a drive's voltage
+    u(s)), splitting it at every turn, breakaway, mesh flank, current-limit kink and gap event (stops,
+    contact onsets) on the way."""
     friction: StickSlipContact = sim._friction
+    drive = sim._drive
+    ledger = None if drive is None else drive.ledger
     t, q, v = t0, sim.q, sim.v
     for _ in range(MAX_EVENTS_PER_STEP):
         if sim._resting is not None:  # on a stop: it holds the load; leaving it is a turning point
@@ -122,70 +135,154 @@ def advance(sim: Simulator, t0: float, t1: float, torque: TorqueFn) -> None:
             if release is None:
                 friction.mode, friction.hold = LOCKED, 0.0  # the stop holds the load
                 friction.remember(t1, q)
+                _account(ledger, sim, t, t1, q, torque)
                 sim.q, sim.v = q, ZERO
                 return
+            _account(ledger, sim, t, release, q, torque)
             sim._resting = None
             t, v = release, _turn(sim, friction, release, q, torque)
         if friction.mode == LOCKED:
             release = _release_time(sim, friction, t, t1, q, torque)
+            _account(ledger, sim, t, t1 if release is None else release, q, torque)
             if release is None:
-                friction.hold = holding_torque(sim.system, friction, t1, q, torque(t1))
+                friction.hold = _holding(sim, friction, t1, q, torque)
                 friction.remember(t1, q)
                 sim.q, sim.v = q, ZERO
                 return
             t, v = release, ZERO
-            friction.mode = SLIDING
-            friction.direction = -math.copysign(1.0, holding_torque(sim.system, friction, t, q, torque(t)))
+            _slide(sim, friction, t, q, torque, _break_direction(sim, t, _holding(sim, friction, t, q, torque), torque))
         q1, v1 = sim._step(t, q, v, t1 - t, torque)
-        turn = _turn_event(sim, friction, t, q, v, t1, q1, v1, torque)
+        guard = drive_stepping.TURN
+        if drive is None:
+            turn = _turn_event(sim, friction, t, q, v, t1, q1, v1, torque)
+        else:  # the mesh's guards: turn (the friction's too), flank and current limit
+            event = drive_stepping._first_event(sim, sim.system, t, q, v, t1, q1, v1, torque)
+            turn = None if event is None else (event.t, event.q, event.v)
+            guard = drive_stepping.TURN if event is None else event.guard
         end, qe, ve = (t1, q1, v1) if turn is None else turn
         crossing = sim._first_crossing(t, q, v, end, qe, ve, torque) if sim._gaps else None
         if crossing is not None:  # a stop or a contact change first: the turn is looked for again after it
             end, qe, ve = crossing.t, crossing.q, crossing.v
+        if ledger is not None:
+            t_, q_, v_ = t, q, v
+            with getattr(sim.integrator, "aside", nullcontext)():
+                drive_stepping._integrate(ledger, sim.system, t, end, lambda s: sim._step(t_, q_, v_, s - t_, torque),
+                                          torque)
         t, q, v = end, qe, ve
         if crossing is not None:
             if crossing.gap.restitution is not None:
+                before = sim.system.kinetic_energy(q, v) + _rotor_energy(sim, v)
                 v = sim._impact(crossing, torque)
+                if ledger is not None:
+                    ledger.impact_loss += before - sim.system.kinetic_energy(q, v) - _rotor_energy(sim, v)
                 if sim._resting is not None:
                     friction.mode, friction.hold, v = LOCKED, 0.0, ZERO  # idle while the stop holds the load
                 elif v[0] == 0.0:
                     v = _turn(sim, friction, t, q, torque)
-                else:
-                    friction.direction = math.copysign(1.0, v[0])  # the impact reversed the motion
+                else:  # the impact reversed the motion
+                    _slide(sim, friction, t, q, torque, math.copysign(1.0, v[0]), v)
         elif turn is not None:
-            v = _turn(sim, friction, t, q, torque)
+            if guard == drive_stepping.TURN:
+                v = _turn(sim, friction, t, q, torque)
+            elif guard == drive_stepping.FLANK:
+                drive.mode = drive_stepping.BACK if drive.mode == drive_stepping.DRIVE else drive_stepping.DRIVE
+            # the current limit: a kink of the force, no mode change
         else:
             sim.q, sim.v = q1, v1
             return
         if t >= t1:
             if v[0] == 0.0:  # at rest: the mode is not a function of the state
                 if friction.mode == LOCKED and sim._resting is None:
-                    friction.hold = holding_torque(sim.system, friction, t1, q, torque(t1))
+                    friction.hold = _holding(sim, friction, t1, q, torque)
                 friction.remember(t1, q)
             sim.q, sim.v = q, v
             return
-    raise SimulationDiverged(f"more than {MAX_EVENTS_PER_STEP} events (friction lock and breakaway, stops, contact) "
-                             "in one step", method=sim.method, t=t0, dt=sim.dt)
+    raise SimulationDiverged(f"more than {MAX_EVENTS_PER_STEP} events (friction lock and breakaway, mesh modes, stops, "
+                             "contact) in one step", method=sim.method, t=t0, dt=sim.dt)
+
+
+def _rotor_energy(sim: Simulator, v: Vec3) -> float:
+    """½ J_m ω_m² with a drive (J), else 0."""
+    return 0.0 if sim._drive is None else sim.system.rotor_energy(v)  # type: ignore[attr-defined]
+
+
+def _account(ledger, sim: Simulator, a: float, b: float, q: Vec3, torque: TorqueFn) -> None:  # type: ignore[no-untyped-def]
+    """Add a drive's energy integrals over [a, b] at rest at q to `ledger` (None: nothing to add)."""
+    if ledger is not None and b > a:
+        drive_stepping._integrate(ledger, sim.system, a, b, lambda s: (q, ZERO), torque)
+
+
+def _holding(sim: Simulator, friction: StickSlipContact, t: float, q: Vec3, torque: TorqueFn) -> float:
+    """τ_h, N·m, at rest at q at time t: the torque on θ1 that keeps θ1'' = 0, friction left out (with a
+    drive: the torque the mesh and the friction must share, `DrivenSystem.holding_torque`)."""
+    if sim._drive is None:
+        return holding_torque(sim.system, friction, t, q, torque(t))
+    system: DrivenSystem = sim.system  # type: ignore[assignment]
+    mode = friction.mode
+    friction.mode = LOCKED  # the locked law: normal forces only
+    try:
+        return system.holding_torque(t, q, ZERO)
+    finally:
+        friction.mode = mode
+
+
+def holding_test(sim: Simulator, friction: StickSlipContact, t: float, q: Vec3, torque: TorqueFn,
+                 capacity: float | None = None) -> tuple[float, float]:
+    """(margin N·m, τ_h N·m) of the locked linkage at rest at q at time t: the margin is ≥ 0 while the
+    friction cones (capacity Σ μ_s F_n,k |j_k|) and a stuck mesh can share τ_h (§7): capacity − |τ_h|
+    without a drive, capacity + the mesh's `holding_margin` under τ_a = k_t i(u(t), 0) with one."""
+    tau_h = _holding(sim, friction, t, q, torque)
+    if capacity is None:
+        capacity = friction.capacity(q)
+    drive = sim._drive
+    if drive is None:
+        return capacity - abs(tau_h), tau_h
+    p = drive.params
+    tau_a = p.torque_constant * drive.current(torque(t), 0.0)
+    return capacity + holding_margin(tau_h, tau_a, p.gear_ratio, p.efficiency, p.backward_efficiency), tau_h
+
+
+def _break_direction(sim: Simulator, t: float, tau_h: float, torque: TorqueFn) -> float:
+    """The way a linkage that does not hold starts to move: −sgn τ_h, with a drive sgn(N τ_a − τ_h) (§8)."""
+    drive = sim._drive
+    if drive is None:
+        return -math.copysign(1.0, tau_h)
+    p = drive.params
+    excess = p.gear_ratio * p.torque_constant * drive.current(torque(t), 0.0) - tau_h
+    return 1.0 if excess >= 0.0 else -1.0
+
+
+def _slide(sim: Simulator, friction: StickSlipContact, t: float, q: Vec3, torque: TorqueFn, direction: float,
+           v: Vec3 = ZERO) -> None:
+    """Enter sliding towards `direction` at (t, q, q'); a drive rolls on the flank that motion takes
+    (`actuators.stepping._roll`, with the kinetic friction opposing the motion already applied)."""
+    friction.mode, friction.direction = SLIDING, direction
+    if sim._drive is not None:
+        drive_stepping._roll(sim.system, t, q, v, torque(t), direction)  # type: ignore[arg-type]
 
 
 def _turn(sim: Simulator, friction: StickSlipContact, t: float, q: Vec3, torque: TorqueFn) -> Vec3:
-    """At θ1' = 0: lock if the friction cones hold τ_h, else slide towards −sgn τ_h. Returns q' (zero)."""
-    tau_h = holding_torque(sim.system, friction, t, q, torque(t))
-    if friction.capacity(q) - abs(tau_h) >= 0.0:
+    """At θ1' = 0: lock if the friction cones (and a stuck mesh) hold τ_h, else slide towards the excess
+    (`_break_direction`). Returns q' (zero)."""
+    margin, tau_h = holding_test(sim, friction, t, q, torque)
+    if margin >= 0.0:
         friction.mode, friction.direction, friction.hold = LOCKED, 0.0, tau_h
+        if sim._drive is not None:
+            sim._drive.mode = STUCK
     else:
-        friction.mode, friction.direction = SLIDING, -math.copysign(1.0, tau_h)
+        _slide(sim, friction, t, q, torque, _break_direction(sim, t, tau_h, torque))
     return ZERO
 
 
 def _release_time(sim: Simulator, friction: StickSlipContact, t: float, t1: float, q: Vec3,
                   torque: TorqueFn) -> float | None:
     """When in [t, t1] the locked linkage breaks free; None if it holds throughout. q is fixed and
-    q' = 0 (the objects are fixed), so the margin is a function of time alone: its root, by brentq."""
+    q' = 0 (the objects are fixed), so the margin (`holding_test`) is a function of time alone: its
+    root, by brentq."""
     capacity = friction.capacity(q)
 
     def margin(s: float) -> float:
-        return capacity - abs(holding_torque(sim.system, friction, s, q, torque(s)))
+        return holding_test(sim, friction, s, q, torque, capacity)[0]
 
     if margin(t) < 0.0:
         return t

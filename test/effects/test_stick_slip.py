@@ -229,15 +229,10 @@ def test_bad_friction_keys_are_refused_in_one_line_naming_the_key_and_range(cont
     assert message.startswith(key + ":") and allowed in message and "\n" not in message
 
 
-@pytest.mark.parametrize("extra", [{"drive": {}}, {"moving": True}])
-def test_stick_slip_with_a_drive_or_a_moving_object_is_refused(extra):
+def test_stick_slip_with_a_moving_object_is_refused():
     d = data({"friction": 0.5}, {"type": "constant", "value": 0.02}, 0.1)
-    if "drive" in extra:
-        d["model"]["drive"] = {}
-        d["input"] = {"voltage": {"type": "constant", "value": 1.0}}
-    else:
-        d["objects"] = [dict(TABLE[0], motion={"type": "push", "direction": [1.0, 0.0], "distance": 0.01, "start": 0.0,
-                                               "duration": 0.1})]
+    d["objects"] = [dict(TABLE[0], motion={"type": "push", "direction": [1.0, 0.0], "distance": 0.01, "start": 0.0,
+                                           "duration": 0.1})]
     with pytest.raises(ConfigError, match=r"^model\.contact\.friction_model: .*covers fixed objects"):
         scene_from_dict(d)
 
