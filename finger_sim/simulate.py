@@ -461,9 +461,7 @@ def _setup(scene: Scene, kernel: str, effects: tuple[Effect, ...]) -> _Setup:
         method, reason = drive_stepping.drive_method(method, reason, scene.method == AUTO,
                                                      lambda name: _stable_under_auto(scene, system, name),
                                                      system.drive.inductive)
-    if stick_slip.in_scene(scene):
-        stick_slip.check_method(method)
-    if scene.method == AUTO and stick_slip.in_scene(scene):  # no compiled form: error control in Python instead
+    if scene.method == AUTO and stick_slip.in_scene(scene):  # dop853, restarted at every friction mode change
         method, reason, options, substeps = stick_slip.auto_method(scene)
     elif scene.method == AUTO:
         options = integrator_options(scene, method)

@@ -34,7 +34,7 @@ import numpy as np
 from finger_sim.actuators import stepping as drive_stepping
 from finger_sim.actuators.drive import STUCK, DrivenSystem, holding_margin
 from finger_sim.effects.friction_modes import LOCKED, SLIDING, STICK_SLIP, StickSlipContact
-from finger_sim.errors import ConfigError, SimulationDiverged
+from finger_sim.errors import SimulationDiverged
 from finger_sim.integrators.base import TorqueFn
 from finger_sim.kinematics import Vec3
 
@@ -53,8 +53,9 @@ MAX_LOCATE_ITERATIONS = 100
 #: Events (turns, breakaways, impacts, contact changes) allowed within one step before it is
 #: declared chattering.
 MAX_EVENTS_PER_STEP = 16
-#: auto's method on a stick–slip scene (`auto_method`): scipy's error-controlled DOP853.
-AUTO_METHOD = "adaptive"
+#: auto's method on a stick–slip scene (`auto_method`): our error-controlled DOP853, restarted at every
+#: friction mode change (`StickSlipContact.law_state`).
+AUTO_METHOD = "dop853"
 #: The torque step (N·m) by which `holding_torque` probes the affine map τ ↦ θ1''.
 PROBE_TORQUE = 1.0
 
@@ -67,29 +68,17 @@ def in_scene(scene: Scene) -> bool:
 
 
 def auto_method(scene: Scene) -> tuple[str, str, dict[str, float], int]:
-    """(method, reason, options, substeps) of `method: auto` on a stick–slip scene. The friction has no
-    compiled form, so the compiled error-controlled dop853 cannot run it; scipy's DOP853 (`adaptive`)
-    can, at auto's tolerances for scene.tolerance, restarted at every step and every event. Its global
-    error is not estimated, and it is far from real time: the reason says both."""
-    from finger_sim.auto import ERROR_CONTROLLED, error_control
+    """(method, reason, options, substeps) of `method: auto` on a stick–slip scene: our error-controlled
+    DOP853 (`AUTO_METHOD`) at auto's tolerances for scene.tolerance, its internal solution restarted at
+    every mode change and every event; compiled where the contact has a compiled form."""
+    from finger_sim.auto import error_control
 
     rtol, atol = error_control(scene.tolerance)
-    reason = (f"contact scene with {STICK_SLIP} friction, which has no compiled form (so not {ERROR_CONTROLLED}); "
-              f"scipy's error-controlled DOP853 in Python at rtol = atol = {rtol:.0e} for {scene.tolerance:g} rad on θ, "
-              "turns, breakaways and contact changes located inside the step; the global error is not estimated, "
-              "and the steps cost milliseconds: not for real time")
+    reason = (f"contact scene with {STICK_SLIP} friction: error-controlled DOP853 at rtol = atol = {rtol:.0e} for "
+              f"{scene.tolerance:g} rad on θ, restarted at every friction mode change; turns, breakaways and contact "
+              "changes located inside the step")
     LOG.info("method auto → %s: %s", AUTO_METHOD, reason)
     return AUTO_METHOD, reason, {"rtol": rtol, "atol": atol}, 1
-
-
-def check_method(method: str) -> None:
-    """Refuse a method named for a stick–slip scene that its mode stepping does not drive: our dop853
-    keeps its own solution across steps, which the locked and sliding modes do not restart."""
-    from finger_sim.auto import ERROR_CONTROLLED
-
-    if method == ERROR_CONTROLLED:
-        raise ConfigError("integrator.method", f"a method other than {ERROR_CONTROLLED} for {STICK_SLIP} friction "
-                          f"(auto takes {AUTO_METHOD})", method)
 
 
 def element(system: FingerSystem) -> StickSlipContact | None:

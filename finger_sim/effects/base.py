@@ -30,7 +30,9 @@ DAMPING = 2
 GRAVITY = 3
 TIP_FORCE = 4
 CONTACT = 5
-CODES = (NO_FORCE, SPRING, DAMPING, GRAVITY, TIP_FORCE, CONTACT)
+#: the contact with stick–slip friction (`effects.friction_modes.StickSlipContact`)
+STICK_SLIP_CONTACT = 6
+CODES = (NO_FORCE, SPRING, DAMPING, GRAVITY, TIP_FORCE, CONTACT, STICK_SLIP_CONTACT)
 
 
 class ForceElement(Protocol):

@@ -17,13 +17,17 @@ is untouched by this one.
 from __future__ import annotations
 
 import math
+import weakref
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
+import numpy as np
+
+from finger_sim.effects.base import STICK_SLIP_CONTACT
 from finger_sim.effects.contact import Contact, _Hit
 from finger_sim.errors import ConfigError
-from finger_sim.kinematics import Vec3, dependent_rates
+from finger_sim.kinematics import Vec3
 
 REGULARIZED, STICK_SLIP = "regularized", "stick_slip"
 FRICTION_MODELS = (REGULARIZED, STICK_SLIP)
@@ -38,6 +42,37 @@ SLIDING, LOCKED = 0, 1
 #: Locked step ends whose holding torque an element remembers for `outputs` (the oldest go first):
 #: more than a streamed block's rows (`streaming.BLOCK_STEPS`), whose outputs are taken after the block.
 HOLD_MEMORY = 4096
+#: Length of the law's block before the contact's own parameters in `kernel_params`: mode, direction,
+#: μ_k, μ_s, v_st (0: no Stribeck term).
+KERNEL_BLOCK = 5
+
+
+# -- the law, plain float functions (the kernel compiles these same functions) -------------------
+def linkage_slope(r1: float, r2: float, r3: float, q0: float, q1: float, q2: float) -> float:
+    """dθ3/dθ1 on Φ = 0 at q = (q0, q1, q2) rad (r1..r3 m): `kinematics.dependent_rates` at θ1' = 1,
+    the same Cramer solve. Singular at the toggle (the scene keeps away from it)."""
+    b1 = r1 * math.sin(q0) * 1.0
+    b2 = -r1 * math.cos(q0) * 1.0
+    s2, c2, s3, c3 = math.sin(q1), math.cos(q1), math.sin(q2), math.cos(q2)
+    d = r2 * s2 * (-r3 * c3) - r3 * s3 * (-r2 * c2)
+    return (r2 * s2 * b2 - b1 * (-r2 * c2)) / d
+
+
+def tangent_gain(nx: float, ny: float, j1x: float, j1y: float, j3x: float, j3y: float, n3: float) -> float:
+    """j_k = t_c·∂p/∂θ1 along the linkage, m/rad: t_c = (−ny, nx), ∂p/∂θ1 = j1 + n3 j3 (n3 = dθ3/dθ1)."""
+    return -ny * (j1x + n3 * j3x) + nx * (j1y + n3 * j3y)
+
+
+def sliding_friction(fn: float, j: float, direction: float, theta1_dot: float, mu_k: float, mu_s: float,
+                     v_st: float) -> float:
+    """F_t along t_c (N) of a contact sliding with the linkage towards `direction` (±1): −μ F_n sgn(j direction),
+    μ = μ_k, or with v_st > 0 (m/s) μ_k + (μ_s − μ_k) exp(−(j θ1'/v_st)²); 0 where j = 0 (no tangential motion)."""
+    if j == 0.0:
+        return 0.0
+    mu = mu_k
+    if v_st > 0.0:
+        mu += (mu_s - mu_k) * math.exp(-((j * theta1_dot) / v_st) ** 2)
+    return -mu * fn * math.copysign(1.0, j * direction)
 
 
 @dataclass(frozen=True)
@@ -104,18 +139,22 @@ class StickSlipContact(Contact):
     """The §7 contact (Hunt–Crossley normal force, the same candidates and gaps) with stick–slip
     friction in place of the regularized law. It holds the linkage's friction mode (`mode`, LOCKED or
     SLIDING, and the sliding `direction` ±1), which `finger_sim.stick_slip` switches; each Simulator
-    of such a scene builds its own element. No compiled form: it steps in Python."""
+    of such a scene builds its own element. Its compiled form (`kernel_code`: KERNEL_BLOCK floats, then the
+    contact's) reads the mode and direction from the flat model, whose slots follow them (`mirror`)."""
 
-    kernel_code: ClassVar[None] = None  # type: ignore[assignment]
+    kernel_code: ClassVar[int] = STICK_SLIP_CONTACT
 
     def __init__(self, *args: Any, law: FrictionLaw, **kwargs: Any) -> None:
+        self._mirrors: list[tuple[weakref.ref, int]] = []  # (compiled model, offset of the mode slot)
+        self._mode, self._direction = LOCKED, 0.0
         super().__init__(*args, **kwargs)
         self.kinetic = self._mu
         self.static = self._mu if law.static_friction is None else law.static_friction
         self.stribeck = law.stribeck_velocity
+        self._v_st = 0.0 if law.stribeck_velocity is None else law.stribeck_velocity  # 0: no Stribeck term
+        self._r = (self.params.r1, self.params.r2, self.params.r3)
         # the regularized law's viscous slope μ F_n / v_s is not in this law: `modal` sees none
         self._mu, self._friction_design = 0.0, 0.0
-        self.mode, self.direction = LOCKED, 0.0
         #: the holding torque τ_h of the locked state, N·m (set by the stepper)
         self.hold = 0.0
         #: t → (q, mode, direction, friction torque) of the recent states at rest (`remember`), for `outputs`
@@ -124,6 +163,45 @@ class StickSlipContact(Contact):
         self.memory = HOLD_MEMORY
         self._at: Vec3 = (0.0, 0.0, 0.0)  # the pose of the last `_hits`: its hits' j_k are taken there
         self._slope: tuple[Vec3 | None, float] = (None, 0.0)  # (q, dθ3/dθ1 at q), see `_tangent_gain`
+
+    # -- the mode, mirrored into compiled models -------------------------------------------
+    @property
+    def mode(self) -> int:
+        return self._mode
+
+    @mode.setter
+    def mode(self, value: int) -> None:
+        self._mode = value
+        self._mirror_modes()
+
+    @property
+    def direction(self) -> float:
+        return self._direction
+
+    @direction.setter
+    def direction(self, value: float) -> None:
+        self._direction = value
+        self._mirror_modes()
+
+    def law_state(self) -> tuple[int, float]:
+        """(mode, direction): what the force law depends on besides the state (an integrator that keeps
+        its own solution restarts when it changes)."""
+        return self._mode, self._direction
+
+    def kernel_params(self) -> tuple[float, ...]:
+        """(mode, direction, μ_k, μ_s, v_st or 0, then the contact's `kernel_params`), read by the compiled law."""
+        return (float(self._mode), self._direction, self.kinetic, self.static, self._v_st, *super().kernel_params())
+
+    def mirror(self, model: np.ndarray, offset: int) -> None:
+        """Keep the mode and direction slots of compiled model `model` (at `offset`, `offset` + 1) current."""
+        self._mirrors = [(ref, o) for ref, o in self._mirrors if ref() is not None]
+        self._mirrors.append((weakref.ref(model), offset))
+
+    def _mirror_modes(self) -> None:
+        for ref, offset in self._mirrors:
+            model = ref()
+            if model is not None:
+                model[offset], model[offset + 1] = float(self._mode), self._direction
 
     # -- the law -------------------------------------------------------------------------
     def _hits(self, q: Vec3, all_candidates: bool, t: float = 0.0) -> list[_Hit]:
@@ -137,9 +215,8 @@ class StickSlipContact(Contact):
         _, _, _, _, _, nx, ny, j1x, j1y, j3x, j3y = hit
         q = self._at
         if self._slope[0] != q:
-            self._slope = (q, dependent_rates(self.params, q, 1.0)[2])
-        n3 = self._slope[1]
-        return -ny * (j1x + n3 * j3x) + nx * (j1y + n3 * j3y)
+            self._slope = (q, linkage_slope(*self._r, *q))
+        return tangent_gain(nx, ny, j1x, j1y, j3x, j3y, self._slope[1])
 
     def _forces(self, hit: _Hit, v: Vec3, t: float = 0.0) -> tuple[float, float, float]:
         """(F_n, Fx, Fy), N: the Hunt–Crossley normal force, and while sliding the kinetic friction
@@ -151,15 +228,11 @@ class StickSlipContact(Contact):
         if fn <= 0.0:
             return (0.0, 0.0, 0.0)
         fx, fy = fn * nx, fn * ny
-        if self.mode == SLIDING and self.static:  # μ_s ≥ μ_k: zero only without friction
-            j = self._tangent_gain(hit)
-            if j != 0.0:
-                mu = self.kinetic
-                if self.stribeck is not None:
-                    mu += (self.static - self.kinetic) * math.exp(-((j * v[0]) / self.stribeck) ** 2)
-                ft = -mu * fn * math.copysign(1.0, j * self.direction)
-                fx -= ft * ny  # along t_c = (−ny, nx)
-                fy += ft * nx
+        if self._mode == SLIDING and self.static:  # μ_s ≥ μ_k: zero only without friction
+            ft = sliding_friction(fn, self._tangent_gain(hit), self._direction, v[0], self.kinetic, self.static,
+                                  self._v_st)
+            fx -= ft * ny  # along t_c = (−ny, nx)
+            fy += ft * nx
         return (fn, fx, fy)
 
     def capacity(self, q: Vec3) -> float:

@@ -113,6 +113,9 @@ class DormandPrince853(Integrator):
             driven = compiled.compiled_drive()
             self._rhs, self._attempt = driven.driven_rhs, driven.driven_dop853_attempt
         self._changes = -1  # `Drive.changes` the internal solution was computed under
+        #: a stick–slip contact's friction mode (`StickSlipContact.law_state`), and the one the solution is under
+        self._friction = next((e for e in system.elements if hasattr(e, "law_state")), None)
+        self._law_state: tuple | None = None
         self.rtol, self.atol = rtol, atol
         self._torque: TorqueFn | None = None
         self._last: tuple[float, Vec3, Vec3] | None = None  # the last output (t, q, q')
@@ -151,6 +154,8 @@ class DormandPrince853(Integrator):
         last = self._last
         if self._drive is not None and self._drive.changes != self._changes:
             self._torque = None  # the mesh mode changed: the internal solution is another mode's
+        if self._friction is not None and self._friction.law_state() != self._law_state:
+            self._torque = None  # the friction mode changed: the same
         if torque is self._torque and self._origin == (t, q, v) and target >= t:
             pass  # a trial from the internal solution's start (event location): answered from it
         elif torque is self._torque and last is not None and last[1] == q and last[2] == v \
@@ -235,6 +240,8 @@ class DormandPrince853(Integrator):
         self._y[:3], self._y[3:] = q, v
         if self._drive is not None:
             self._changes = self._drive.changes
+        if self._friction is not None:
+            self._law_state = self._friction.law_state()
         if self.compiled:
             self._rhs(self._model, t, self._y, torque(t), self._f)
         else:

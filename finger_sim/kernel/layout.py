@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from finger_sim.effects.base import CODES, CONTACT, DAMPING, GRAVITY, NO_FORCE, SPRING, TIP_FORCE
+from finger_sim.effects.base import CODES, CONTACT, DAMPING, GRAVITY, NO_FORCE, SPRING, STICK_SLIP_CONTACT, TIP_FORCE
 from finger_sim.projection import NON_FINITE, NOT_CONVERGED, OK
 from finger_sim.stepper_slot import BREAKPOINT, STATE_NON_FINITE, STEP_TOO_SMALL
 
@@ -45,17 +45,21 @@ def model_array(system: "FingerSystem") -> np.ndarray | None:
         p.m3 * p.r1 * p.L3 / 2.0, p.r1, p.r2, p.r3, system.alpha,
         p.r4 * math.cos(p.theta4), p.r4 * math.sin(p.theta4), float(len(system.elements)),
     ]
+    mirrored = []  # (element, offset of its parameters): elements whose discrete state the model follows
     for element in system.elements:
         code = getattr(element, "kernel_code", None)
         if code not in CODES:
             return None
         params = [float(x) for x in element.kernel_params()]
+        if hasattr(element, "mirror"):
+            mirrored.append((element, len(data) + 2))
         data += [float(code), float(len(params)), *params]
     drive = getattr(system, "drive", None)
-    if drive is None:
-        return np.array(data, dtype=np.float64)
-    model = np.array(data + drive.kernel_block(), dtype=np.float64)
-    drive.mirror(model)
+    model = np.array(data if drive is None else data + drive.kernel_block(), dtype=np.float64)
+    for element, offset in mirrored:  # a stick–slip contact's friction mode (`StickSlipContact.mirror`)
+        element.mirror(model, offset)
+    if drive is not None:
+        drive.mirror(model)
     return model
 
 

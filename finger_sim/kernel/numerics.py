@@ -33,10 +33,13 @@ except ImportError:  # no numba: the same functions run as plain Python (slow, s
 from finger_sim import dynamics, inputs, projection
 from finger_sim.effects import damping, gravity, spring
 from finger_sim.effects import tip_force as tip_force_effect
+from finger_sim.effects import friction_modes
 from finger_sim.effects.contact import MIN_DISTANCE
+from finger_sim.effects.friction_modes import KERNEL_BLOCK as SLIP_BLOCK
+from finger_sim.effects.friction_modes import SLIDING
 from finger_sim.inputs import BREAK_EPS, SQUARE, STEP
 from finger_sim.kernel.layout import (BREAKPOINT, CONTACT, DAMPING, GRAVITY, HEADER, NON_FINITE, NOT_CONVERGED, OK,
-                                     SPRING, STATE_NON_FINITE, TIP_FORCE)
+                                     SPRING, STATE_NON_FINITE, STICK_SLIP_CONTACT, TIP_FORCE)
 
 
 # DOP853's step-size control: scipy's constants (scipy/integrate/_ivp/rk.py).
@@ -68,6 +71,9 @@ spring_force = njit(**LAW)(spring.spring_force)
 damping_force = njit(**LAW)(damping.damping_force)
 gravity_force = njit(**LAW)(gravity.gravity_force)
 tip_force = njit(**LAW)(tip_force_effect.tip_force)
+linkage_slope = njit(**LAW)(friction_modes.linkage_slope)
+tangent_gain = njit(**LAW)(friction_modes.tangent_gain)
+sliding_friction = njit(**LAW)(friction_modes.sliding_friction)
 _PROFILE_LAWS = {name: njit(**LAW)(getattr(inputs, name))
                  for name in ("ramp_torque", "sine_torque", "step_torque", "square_torque", "square_switch")}
 torque_at = compiled(inputs.torque_at, **_PROFILE_LAWS)
@@ -75,8 +81,10 @@ switches_inside = compiled(inputs.switches_inside, **_PROFILE_LAWS)
 
 
 @njit(**JIT)
-def _contact(m, o, q0, q2, v0, v2):
-    """Contact's (Q1, Q3): `finger_sim.effects.contact.Contact.force`, same order of terms."""
+def _contact(m, o, q0, q2, v0, v2, slide, direction, mu_k, mu_s, v_st, n3):
+    """Contact's (Q1, Q3): `finger_sim.effects.contact.Contact.force`, same order of terms. `slide`: the
+    stick–slip law's sliding friction too (`StickSlipContact._forces`; direction ±1, μ_k, μ_s, v_st m/s,
+    n3 = dθ3/dθ1)."""
     r1, l3, alpha = m[o], m[o + 1], m[o + 2]
     k, e, d, mu, vs = m[o + 3], m[o + 4], m[o + 5], m[o + 6], m[o + 7]
     n_prox, n_dist, n_ends, n_tips = int(m[o + 8]), int(m[o + 9]), int(m[o + 10]), int(m[o + 11])
@@ -99,7 +107,8 @@ def _contact(m, o, q0, q2, v0, v2):
                 nx, ny = dx / dist, dy / dist
             else:
                 nx, ny = -s1, c1
-            f1, f3 = _contact_force(delta, nx, ny, -s * by, s * bx, 0.0, 0.0, v0, v2, k, e, d, mu, vs)
+            f1, f3 = _contact_force(delta, nx, ny, -s * by, s * bx, 0.0, 0.0, v0, v2, k, e, d, mu, vs,
+                                     slide, direction, mu_k, mu_s, v_st, n3)
             out1 += f1
             out3 += f3
     ux = uy = 0.0
@@ -124,7 +133,8 @@ def _contact(m, o, q0, q2, v0, v2):
                 nx, ny = dx / dist, dy / dist
             else:
                 nx, ny = -uy, ux
-            f1, f3 = _contact_force(delta, nx, ny, -by, bx, -ell * uy, ell * ux, v0, v2, k, e, d, mu, vs)
+            f1, f3 = _contact_force(delta, nx, ny, -by, bx, -ell * uy, ell * ux, v0, v2, k, e, d, mu, vs,
+                                     slide, direction, mu_k, mu_s, v_st, n3)
             out1 += f1
             out3 += f3
     for _ in range(n_ends):
@@ -132,7 +142,8 @@ def _contact(m, o, q0, q2, v0, v2):
         j += 5
         delta = rho - (nx * (bx - ox) + ny * (by - oy))
         if delta > 0.0:
-            f1, f3 = _contact_force(delta, nx, ny, -by, bx, 0.0, 0.0, v0, v2, k, e, d, mu, vs)
+            f1, f3 = _contact_force(delta, nx, ny, -by, bx, 0.0, 0.0, v0, v2, k, e, d, mu, vs,
+                                     slide, direction, mu_k, mu_s, v_st, n3)
             out1 += f1
             out3 += f3
     for _ in range(n_tips):
@@ -147,15 +158,18 @@ def _contact(m, o, q0, q2, v0, v2):
         px, py = bx + l3 * ux, by + l3 * uy
         delta = rho - (nx * (px - ox) + ny * (py - oy))
         if delta > 0.0:
-            f1, f3 = _contact_force(delta, nx, ny, -by, bx, -l3 * uy, l3 * ux, v0, v2, k, e, d, mu, vs)
+            f1, f3 = _contact_force(delta, nx, ny, -by, bx, -l3 * uy, l3 * ux, v0, v2, k, e, d, mu, vs,
+                                     slide, direction, mu_k, mu_s, v_st, n3)
             out1 += f1
             out3 += f3
     return out1, out3
 
 
 @njit(**JIT)
-def _contact_force(delta, nx, ny, j1x, j1y, j3x, j3y, v0, v2, k, e, d, mu, vs):
-    """J_pᵀ F of one candidate in contact: `Contact._forces` then the sum in `Contact.force`."""
+def _contact_force(delta, nx, ny, j1x, j1y, j3x, j3y, v0, v2, k, e, d, mu, vs, slide, direction, mu_k, mu_s, v_st,
+                   n3):
+    """J_pᵀ F of one candidate in contact: `Contact._forces` (with `slide`, `StickSlipContact._forces`) then
+    the sum in `Contact.force`."""
     vx, vy = j1x * v0 + j3x * v2, j1y * v0 + j3y * v2
     fn = k * delta**e * (1.0 - d * (nx * vx + ny * vy))
     if fn <= 0.0:
@@ -164,6 +178,10 @@ def _contact_force(delta, nx, ny, j1x, j1y, j3x, j3y, v0, v2, k, e, d, mu, vs):
         fx, fy = fn * nx, fn * ny
         if mu != 0.0:
             ft = -mu * fn * math.tanh((nx * vy - ny * vx) / vs)
+            fx -= ft * ny
+            fy += ft * nx
+        if slide:
+            ft = sliding_friction(fn, tangent_gain(nx, ny, j1x, j1y, j3x, j3y, n3), direction, v0, mu_k, mu_s, v_st)
             fx -= ft * ny
             fy += ft * nx
     return j1x * fx + j1y * fy, j3x * fx + j3y * fy
@@ -187,7 +205,11 @@ def generalized_force(m, t, q0, q1, q2, v0, v1, v2, tau):
         elif code == TIP_FORCE:
             e1, e2, e3 = tip_force(m[o], m[o + 1], m[o + 2], m[o + 3], m[o + 4], q0, q2)
         elif code == CONTACT:
-            e1, e3 = _contact(m, o, q0, q2, v0, v2)
+            e1, e3 = _contact(m, o, q0, q2, v0, v2, False, 0.0, 0.0, 0.0, 0.0, 0.0)
+        elif code == STICK_SLIP_CONTACT:  # the mode block first (`StickSlipContact.kernel_params`)
+            slide = m[o] == SLIDING and m[o + 3] != 0.0
+            n3 = linkage_slope(m[4], m[5], m[6], q0, q1, q2) if slide else 0.0
+            e1, e3 = _contact(m, o + SLIP_BLOCK, q0, q2, v0, v2, slide, m[o + 1], m[o + 2], m[o + 3], m[o + 4], n3)
         f1 += e1
         f2 += e2
         f3 += e3

@@ -238,21 +238,34 @@ def test_stick_slip_with_a_moving_object_is_refused():
 
 
 def test_a_stick_slip_scene_round_trips_and_auto_says_what_it_runs():
-    """The law's keys survive to_dict; auto steps it in Python (no compiled form) with scipy's error-controlled
-    DOP853 and says so; dop853 named by hand is refused; the CSV has the friction columns."""
+    """The law's keys survive to_dict; auto steps it with our error-controlled DOP853 on the compiled law
+    and says so; the CSV has the friction columns."""
     d = data({"friction": 0.5, "static_friction": 0.8, "stribeck_velocity": 0.001}, {"type": "constant", "value": 0.02}, 0.05)
     scene = scene_from_dict(d)
     assert scene_from_dict(scene.to_dict()) == scene
     assert scene.to_dict()["model"]["contact"]["friction_model"] == "stick_slip"
     assert "friction_model" not in load_scene(ref.CONFIG / "press_table.yaml").to_dict()["model"]["contact"]
     sim = Simulator(scene)
-    assert sim.kernel == "python" and sim.method == "adaptive"
-    assert "no compiled form" in sim.method_reason and "rtol = atol = 1e-09" in sim.method_reason
-    d["integrator"]["method"] = "dop853"
-    with pytest.raises(ConfigError, match="integrator.method"):
-        Simulator(scene_from_dict(d))
+    assert sim.kernel.startswith("numba-") and sim.method == "dop853" and sim.integrator.compiled
+    assert "restarted at every friction mode change" in sim.method_reason and "rtol = atol = 1e-09" in sim.method_reason
     traj = simulate(scene)
     assert {"friction_mode", "friction_torque", "friction_power"} <= set(traj.outputs)
+
+
+@pytest.mark.parametrize("contact, torque, duration", [
+    ({"friction": 1.0}, {"type": "step", "before": 0.05, "after": 0.02, "at": 0.5}, 1.0),  # slips back once
+    ({"friction": 0.5, "static_friction": 1.0, "stribeck_velocity": 0.002}, {"type": "ramp", "offset": 0.02, "slope": 0.1},
+     0.6),  # the sawtooth with Stribeck
+])
+def test_the_compiled_law_steps_as_the_python_law(contact, torque, duration):
+    """rk4 on the compiled kernel (the friction law compiled from the same plain functions) against rk4 in
+    Python: the same locks and breakaways in the same rows, θ within 1e-12 rad; held exactly still."""
+    d = data(contact, torque, duration) | {"integrator": {"method": "rk4", "dt": DT}}
+    runs = [simulate(scene_from_dict(d), kernel=k) for k in ("python", "compiled")]
+    assert mode_changes(runs[0]) == mode_changes(runs[1]) and len(mode_changes(runs[0])) >= 3
+    assert np.abs(runs[0].q - runs[1].q).max() < 1e-12
+    lock_row = mode_changes(runs[1])[0][0]
+    assert (runs[1].q[lock_row:mode_changes(runs[1])[1][0]] == runs[1].q[lock_row]).all()
 
 
 @pytest.mark.parametrize("restitution", [0.0, 0.5])
