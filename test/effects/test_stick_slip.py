@@ -279,7 +279,10 @@ def test_sliding_into_a_stop_never_adds_energy_and_rests_on_it(restitution):
     d["model"] |= {"restitution": restitution, "joint_limits": {"mcp": [-0.1, stop]}}
     traj = simulate(scene_from_dict(d))
     h = traj.energy - 0.02 * traj.q[:, 0]
-    assert np.diff(h).max() <= 1e-15 and h[-1] < h[0] - 1e-3
+    # auto's DOP853 (rtol = atol = 1e-9) answers the rows from its dense output: in free flight after the
+    # rebound H drifts by its error, of the order of rtol·|H| (measured 6.6e-12 J, |H| = 4.3e-3 J); the
+    # friction's work is 1e-4 J a step
+    assert np.diff(h).max() <= 1e-11 and h[-1] < h[0] - 1e-3
     assert traj.q[:, 0].max() <= stop + 1e-12
     assert traj.q[-1, 0] == pytest.approx(stop, abs=1e-12) and (traj.v[-1] == 0.0).all()
     assert traj.outputs["friction_torque"][-1] == 0.0  # the stop holds the load, the friction is idle
