@@ -30,7 +30,12 @@ WP_SCENES = ("paper_flexion", "toggle_passage", "free_swing", "bang_bang", "stif
 CONTACT_WP_SCENES = ("grasp_cylinder", "press_table")
 CONTACT_HARD_SCENES = ("grasp_impact", "grasp_rigid")
 CONTACT_SCENES = CONTACT_WP_SCENES + CONTACT_HARD_SCENES
-ALL_SCENES = WP_SCENES + ("paper_to_stop",) + CONTACT_SCENES
+#: Issue 22's hard scenes (config/hard/, not shipped scenes): the elastic fast impact, the chatter on a tilted
+#: wall, grasp and release, the table with friction, the near-rigid fast impact, the elastic stops. `auto`
+#: itself is run on them too (its error control is what they test).
+ISSUE_HARD_FOLDER = "hard"
+ISSUE_HARD_SCENES = ("elastic_impact", "chatter_wall", "grasp_release", "friction_table", "rigid_fast", "stops_elastic")
+ALL_SCENES = WP_SCENES + ("paper_to_stop",) + CONTACT_SCENES + ISSUE_HARD_SCENES
 #: Scene kinds of the recommendation table and the scenes measured for each (the same
 #: kinds `finger_sim.auto.scene_kind` recognizes in a scene).
 KINDS: dict[str, tuple[str, ...]] = {
@@ -110,8 +115,14 @@ def dt_grid(method: str, *, quick: bool) -> tuple[float, ...]:
 
 
 def scene_methods(name: str) -> list[str]:
-    """The project's methods run on a scene: every one, and AUTO itself on a contact scene."""
-    return project_methods() + ([AUTO] if name in CONTACT_SCENES else [])
+    """The project's methods run on a scene: every one, and AUTO itself on a contact or issue-22 hard scene."""
+    return project_methods() + ([AUTO] if name in CONTACT_SCENES + ISSUE_HARD_SCENES else [])
+
+
+def scene_file(name: str) -> Path:
+    """The YAML file of a bench scene: config/<name>.yaml, config/hard/<name>.yaml for ISSUE_HARD_SCENES."""
+    folder = config_dir()
+    return (folder / ISSUE_HARD_FOLDER if name in ISSUE_HARD_SCENES else folder) / f"{name}.yaml"
 
 
 def mujoco_tasks(name: str, scene: Scene, ref: Reference, *, quick: bool) -> list[Task]:

@@ -22,7 +22,7 @@ from tqdm import tqdm
 from finger_sim import auto
 from finger_sim.bench.figures import write_figure
 from finger_sim.bench.markdown import RunInfo, render
-from finger_sim.bench.plan import ALL_SCENES, SPACING, config_dir, tasks
+from finger_sim.bench.plan import ALL_SCENES, SPACING, scene_file, tasks
 from finger_sim.bench.reference import Reference, build_reference
 from finger_sim.bench.runners import Run
 from finger_sim.bench.tables import Tables, build_tables
@@ -46,8 +46,7 @@ def measure(*, quick: bool, argv: list[str]) -> Measurements:
     """Build every scene's reference, then run the plan's tasks one after another (progress on stderr)."""
     started = _dt.datetime.now(_dt.timezone.utc)
     wall0, cpu0, load0 = time.perf_counter(), time.process_time(), os.getloadavg()
-    folder = config_dir()
-    scenes = {name: load_scene(folder / f"{name}.yaml") for name in ALL_SCENES}
+    scenes = {name: load_scene(scene_file(name)) for name in ALL_SCENES}
     refs: dict[str, Reference] = {}
     # disable=None: no bar unless stderr is a terminal (a CI log or a pipe gets no flood of updates)
     for name in tqdm(ALL_SCENES, desc="references", file=sys.stderr, leave=False, disable=None):

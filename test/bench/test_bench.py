@@ -29,6 +29,7 @@ from finger_sim.bench.plan import (
     CONTACT_SCENES,
     CONTACT_WP_SCENES,
     HARD_SCENES,
+    ISSUE_HARD_SCENES,
     KINDS,
     MUJOCO_INTEGRATORS,
     MUJOCO_SETTINGS,
@@ -115,7 +116,7 @@ def test_every_run_is_in_its_scene_table_once_and_rendered_as_one_row(bench):
         assert [line.split(" | ")[:2] for line in body] == [[f"| {r.family}", r.method] for r in rows]
 
 
-@pytest.mark.parametrize("scene", [s for s in ALL_SCENES if s not in CONTACT_SCENES])
+@pytest.mark.parametrize("scene", [s for s in ALL_SCENES if s not in CONTACT_SCENES + ISSUE_HARD_SCENES])
 @pytest.mark.slow
 def test_every_project_method_has_rows_with_finite_numbers(bench, scene):
     rows = [r for r in bench[2].scenes[scene] if r.family == FAMILY_PROJECT]
