@@ -8,7 +8,9 @@ The pattern of the drive's stuck mesh (`finger_sim.actuators.stepping`) and of t
   time alone (the input): its root (brentq) is the breakaway, and the finger slides towards
   −sgn τ_h (the way the unheld linkage accelerates).
 τ_h is the torque on θ1 that keeps θ1'' = 0 with the friction left out (§4 at q' = 0); the
-accelerations are affine in the torque on θ1, so two solves give it exactly.
+accelerations are affine in the torque on θ1, so two solves give it exactly. The steps themselves
+(`Simulator._step`) run on the compiled friction law where the scene has one (the element mirrors its
+mode into the flat model); the loops here are Python and cost a few evaluations per step.
 
 With a drive (§8, L = 0) the linkage locks as one: the friction cones and the stuck mesh share τ_h
 (τ_h = τ_mesh + Σ j_k F_t,k, τ_mesh in the stuck set), which holds while τ_h lies within Σ μ_s F_n,k |j_k|

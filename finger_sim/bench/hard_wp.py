@@ -1,11 +1,11 @@
 """Work-precision of issue 22's hard scenes alone, in one run: their sections of the bench report.
 
-    python -m finger_sim.bench.hard_wp [--scenes NAME ...] [--out docs] [--quick]
+    python -m finger_sim.bench.hard_wp [--scenes NAME ...] [--out docs] [--quick] [--repeats 3]
 
 The same measurements as `finger-sim bench` makes of these scenes (`plan.tasks`: every project method over
 its dt grid and `auto` itself, against the same reference, `reference.build_reference`), the same figures
 (wp_<name>.png) and the same per-scene tables (`markdown.render_scene`), written to <out>/performance_hard.md
-with the date, the load and the command. A full `finger-sim bench` includes these scenes in
+with the date, the load and the command, rewritten after each scene (a scene finished is kept). A full `finger-sim bench` includes these scenes in
 performance.md (`plan.ISSUE_HARD_SCENES`); this runs them alone, for a machine too loaded to run the rest.
 """
 
@@ -20,7 +20,7 @@ from pathlib import Path
 
 from finger_sim.bench.figures import write_figure
 from finger_sim.bench.markdown import render_scene
-from finger_sim.bench.plan import ISSUE_HARD_SCENES, SPACING, scene_file, tasks
+from finger_sim.bench.plan import ISSUE_HARD_SCENES, REPEATS, SPACING, scene_file, tasks
 from finger_sim.bench.reference import build_reference
 from finger_sim.bench.tables import scene_rows
 from finger_sim.scene import load_scene
@@ -31,20 +31,26 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--scenes", nargs="+", choices=ISSUE_HARD_SCENES, default=list(ISSUE_HARD_SCENES))
     parser.add_argument("--out", type=Path, default=Path("docs"))
     parser.add_argument("--quick", action="store_true", help="the bench's reduced grids")
+    parser.add_argument("--repeats", type=int, default=REPEATS, help="timing repeats per run (median)")
     args = parser.parse_args(argv)
     started, load0, wall0 = datetime.now(timezone.utc), os.getloadavg(), time.perf_counter()
     sections: list[str] = []
+    command = "python -m finger_sim.bench.hard_wp" + (" " + " ".join(argv if argv is not None else sys.argv[1:])).rstrip()
     for name in args.scenes:
         scene = load_scene(scene_file(name))
         ref = build_reference(scene, quick=args.quick, spacing=SPACING)
         runs = []
-        for task in tasks({name: scene}, {name: ref}, quick=args.quick):
+        for task in tasks({name: scene}, {name: ref}, quick=args.quick, repeats=args.repeats):
             print(task.label, file=sys.stderr, flush=True)
             runs.append(task.call())
         figure = write_figure(name, runs, ref, args.out)
         sections += render_scene(scene, ref, figure, scene_rows(runs, name))
+        _write(args.out / "performance_hard.md", command, started, load0, time.perf_counter() - wall0, sections)
+
+
+def _write(path: Path, command: str, started: datetime, load0: tuple[float, float, float], wall: float,
+           sections: list[str]) -> None:
     load1 = os.getloadavg()
-    command = "python -m finger_sim.bench.hard_wp" + (" " + " ".join(argv if argv is not None else sys.argv[1:])).rstrip()
     head = [
         "# Work-precision of issue 22's hard scenes",
         "",
@@ -52,13 +58,13 @@ def main(argv: list[str] | None = None) -> None:
         "`finger-sim bench` (docs/performance.md, which explains the columns) makes of these scenes, run alone.",
         "",
         f"- Command: `{command}`",
-        f"- Date: {started:%Y-%m-%d %H:%M} UTC; {time.perf_counter() - wall0:.0f} s wall",
-        f"- Load average (1, 5, 15 min) at start {load0[0]:.2f}, {load0[1]:.2f}, {load0[2]:.2f}; at end {load1[0]:.2f}, "
+        f"- Started {started:%Y-%m-%d %H:%M} UTC; {wall:.0f} s wall so far",
+        f"- Load average (1, 5, 15 min) at start {load0[0]:.2f}, {load0[1]:.2f}, {load0[2]:.2f}; now {load1[0]:.2f}, "
         f"{load1[1]:.2f}, {load1[2]:.2f} (2 shared cores: CPU times of one scene's rows are comparable with each other, "
         "not with docs/performance.md's)",
         "",
     ]
-    (args.out / "performance_hard.md").write_text("\n".join(head + sections) + "\n")
+    path.write_text("\n".join(head + sections) + "\n")
 
 
 if __name__ == "__main__":

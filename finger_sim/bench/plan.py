@@ -148,10 +148,11 @@ def _accepts(scene: Scene, dt: float) -> bool:
     return True
 
 
-def tasks(scenes: dict[str, Scene], refs: dict[str, Reference], *, quick: bool) -> list[Task]:
-    """The measurements, in the order they run: per scene the project's methods, then scipy and MuJoCo."""
+def tasks(scenes: dict[str, Scene], refs: dict[str, Reference], *, quick: bool, repeats: int = REPEATS) -> list[Task]:
+    """The measurements, in the order they run: per scene the project's methods, then scipy and MuJoCo
+    (each timed `repeats` times, the median kept)."""
     out: list[Task] = []
-    kw = {"spacing": SPACING, "repeats": REPEATS}
+    kw = {"spacing": SPACING, "repeats": repeats}
     for name, scene in scenes.items():
         ref = refs[name]
         for method in scene_methods(name):
