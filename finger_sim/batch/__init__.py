@@ -183,7 +183,7 @@ class _Planner:
         model = self._model_array(system) if self.compile else None
         key = None if model is None else (scene.params, model.tobytes(), mcp_range(scene))
         method = scene.method
-        if method == AUTO and stick_slip.in_scene(scene):  # no compiled form: its Simulator's choice
+        if method == AUTO and stick_slip.in_scene(scene):  # its Simulator's choice (dop853, restarted at mode changes)
             method = stick_slip.AUTO_METHOD
         if method == AUTO:
             # choose_method reads the model, the MCP range, dt, and the torque's switches and kind
