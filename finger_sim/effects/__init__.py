@@ -9,12 +9,14 @@ order, so a new effect needs only its module and its schema entry.
 import importlib
 import pkgutil
 
-from finger_sim.effects.base import EFFECTS, Effect, ForceElement, Smooth, build_elements, declared_parameters, effect
+from finger_sim.effects.base import (EFFECTS, Effect, ForceElement, Output, Smooth, build_elements, declared_outputs,
+                                     declared_parameters, effect)
 
 #: The original effects, in their summation order.
 _FIRST = ("spring", "damping", "gravity", "tip_force", "stops")
 
-for _name in (*_FIRST, *sorted(m.name for m in pkgutil.iter_modules(__path__) if m.name not in (*_FIRST, "base", "parameters"))):
+for _name in (*_FIRST, *sorted(m.name for m in pkgutil.iter_modules(__path__) if m.name not in (*_FIRST, "base", "parameters", "contact_schema"))):
     importlib.import_module(f"{__name__}.{_name}")
 
-__all__ = ["EFFECTS", "Effect", "ForceElement", "Smooth", "build_elements", "declared_parameters", "effect"]
+__all__ = ["EFFECTS", "Effect", "ForceElement", "Output", "Smooth", "build_elements", "declared_outputs", "declared_parameters",
+           "effect"]
