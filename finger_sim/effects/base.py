@@ -6,8 +6,9 @@ effect (is it affine in q'? smooth? how stiff along the linkage? what energy doe
 what does it report?) is a member of `ForceElement`. An element exists only when the scene
 turns its effect on, so an absent effect costs nothing per step.
 
-Adding an effect takes its module (a class implementing `ForceElement` and a builder
-decorated with `@effect("scene_key", ...)`) and its schema entry (the keys it reads).
+Adding an effect takes its module: a class implementing `ForceElement` and a builder decorated with
+`@effect("scene_key", ..., parameters, outputs=...)`, declaring the scene keys it reads (a key that is no
+`Scene` field is read through `Scene.effect_value`) and the quantities it reports.
 """
 
 from __future__ import annotations
