@@ -85,11 +85,12 @@ def _simulate(args: argparse.Namespace) -> int:
     if note := promise_note(scene, traj.method, traj.error_estimate):
         print(note)
     if csv and (args.columns != "paper" or args.every > 1):
+        from finger_sim.actuators.drive_outputs import MESH_TORQUE
         from finger_sim.csv_columns import write_paper, write_ros
 
         with atomic_path(csv) as part:
             if args.columns == "ros":
-                efforts = traj.outputs.get("mesh_torque", [scene.torque(t) for t in traj.t])  # with a drive: τ_g
+                efforts = traj.outputs.get(MESH_TORQUE.name, [scene.torque(t) for t in traj.t])  # with a drive: τ_g
                 samples = ((t, tuple(q), tuple(v), e) for t, q, v, e in zip(traj.t, traj.q, traj.v, efforts))
                 write_ros(part, scene.build_system(), samples, every=args.every, total=len(traj.t))
             else:
@@ -336,11 +337,12 @@ def _urdf(args: argparse.Namespace) -> int:
 
 
 def _schema(args: argparse.Namespace) -> int:
-    """The JSON Schema of scene (or hand) files, on stdout or to -o (for an editor's YAML language server)."""
+    """The JSON Schema of scene (or hand, or task) files, on stdout or to -o (for an editor's YAML language server)."""
     from finger_sim.runtime.hand_schema import hand_schema
     from finger_sim.scene_schema import scene_schema, schema_text
+    from finger_sim.tasks.task_schema import task_schema
 
-    text = schema_text(hand_schema() if args.hand else scene_schema())
+    text = schema_text(hand_schema() if args.hand else task_schema() if args.task else scene_schema())
     if args.out is None:
         sys.stdout.write(text)
         return 0
@@ -503,7 +505,9 @@ def build_parser() -> argparse.ArgumentParser:
     schema = sub.add_parser("schema", help="the JSON Schema of scene files, which editors complete and check "
                                            "scenes with (README: YAML language server)")
     schema.add_argument("-o", "--out", type=Path, help="write the schema to this file (default: stdout)")
-    schema.add_argument("--hand", action="store_true", help="the schema of finger_hand's hand files (config/hands/)")
+    kind = schema.add_mutually_exclusive_group()
+    kind.add_argument("--hand", action="store_true", help="the schema of finger_hand's hand files (config/hands/)")
+    kind.add_argument("--task", action="store_true", help="the schema of grasp task files (config/tasks/)")
     schema.set_defaults(func=_schema)
 
     sweep = sub.add_parser("sweep", help="a scene over the Cartesian product of varied keys, run as one "

@@ -28,6 +28,7 @@ import numpy as np
 
 from finger_sim import kinematics
 from finger_sim.actuators import record
+from finger_sim.actuators.drive_outputs import MESH_TORQUE
 from finger_sim.dynamics import FingerSystem
 from finger_sim.effects.spring import spring_force
 from finger_sim.joints import joint_positions, joint_velocities, pip_stiffness
@@ -168,7 +169,7 @@ def write_simulated(path: str | Path, scene: Scene, *, columns: str, every: int 
 
     total, desc = scene.step_count + 1, f"simulate {scene.name}"
     if columns == "ros":
-        effort = system.output_names().index("mesh_torque") if drive else None  # type: ignore[attr-defined]
+        effort = system.output_names().index(MESH_TORQUE.name) if drive else None  # type: ignore[attr-defined]
         write_ros(path, system, ((t, q, v, scene.torque(t) if effort is None else extra[effort])
                                  for t, q, v, extra in states()), every=every, total=total, desc=desc)
         return sim

@@ -13,6 +13,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from finger_sim import kinematics  # noqa: E402
+from finger_sim.effects.contact_outputs import GRIP_FORCE  # noqa: E402
 from finger_sim.model import FingerParams  # noqa: E402
 
 #: Postures drawn by `finger-sim kinematics` (MCP angles, degrees), as in the paper's Fig. 5.
@@ -32,7 +33,7 @@ def plot_angles(t: np.ndarray, q: np.ndarray, path: str | Path, title: str,
     if forces:
         ax = axes[3]
         for name, values in forces.items():
-            ax.plot(t, values, label=name, lw=2.0 if name == "grip_force" else 1.0)
+            ax.plot(t, values, label=name, lw=2.0 if name == GRIP_FORCE.name else 1.0)
         ax.set_ylabel("force (N)")
         ax.legend(fontsize=7, ncol=2)
         ax.grid(True, alpha=0.3)

@@ -24,6 +24,7 @@ import numpy as np
 import yaml
 
 from finger_sim import __version__, kinematics
+from finger_sim.effects.contact_outputs import CONTACT_FORCES, GRIP_FORCE, WRENCH_TOPICS
 from finger_sim.errors import FingerSimError, shown
 from finger_sim.joints import JOINT_NAMES, joint_positions, joint_velocities, paper_coordinates
 from finger_sim.kinematics import Vec3
@@ -384,9 +385,8 @@ def logged_samples(run: RecordedRun) -> Iterator[tuple[float, Vec3, Vec3, float]
         yield stamp / NS_PER_S, q, v, torque
 
 
-#: The contact topics of a finger (finger_sim.ros.interfaces): grip force and each phalanx's wrench.
-GRIP_FORCE_TOPIC = "grip_force"
-WRENCH_TOPICS = {"proximal": "contact_wrench/proximal", "distal": "contact_wrench/distal"}
+#: The contact topics of a finger (the contact outputs' declared topics): grip force and each phalanx's wrench.
+GRIP_FORCE_TOPIC = GRIP_FORCE.topic
 
 
 def logged_outputs(reader: LogReader, run: RecordedRun, finger: str = "") -> dict[str, np.ndarray]:
@@ -403,7 +403,7 @@ def logged_outputs(reader: LogReader, run: RecordedRun, finger: str = "") -> dic
     if topics[GRIP_FORCE_TOPIC] is None:
         return {}
     row = {stamp: i for i, (stamp, _) in enumerate(run.joint_states)}
-    columns = ["grip_force"] + [f"contact_force_{p}_{a}" for p in WRENCH_TOPICS for a in ("x", "y")]
+    columns = [GRIP_FORCE.name] + [o.name for pair in CONTACT_FORCES.values() for o in pair]
     out = {name: np.full(len(run.joint_states), np.nan) for name in columns}
     by_topic = {t: name for name, t in topics.items() if t is not None}
     offset = run.metadata.log_time_offset_ns
@@ -412,13 +412,13 @@ def logged_outputs(reader: LogReader, run: RecordedRun, finger: str = "") -> dic
         if name == GRIP_FORCE_TOPIC:
             i = row.get(message.log_time_ns - offset)
             if i is not None:
-                out["grip_force"][i] = msg.data
+                out[GRIP_FORCE.name][i] = msg.data
             continue
         i = row.get(msg.header.stamp.sec * NS_PER_S + msg.header.stamp.nanosec)
         if i is not None:
-            phalanx = name.rsplit("/", 1)[1]
-            out[f"contact_force_{phalanx}_x"][i] = msg.wrench.force.x
-            out[f"contact_force_{phalanx}_y"][i] = -msg.wrench.force.z + 0.0
+            x, y = CONTACT_FORCES[name.rsplit("/", 1)[1]]
+            out[x.name][i] = msg.wrench.force.x
+            out[y.name][i] = -msg.wrench.force.z + 0.0
     return out
 
 

@@ -139,6 +139,13 @@ class Scene:
     sensors: SensorSet | None = None
     #: the tip-force profile (`input.tip_force`): spans over which a force replaces `tip_force`
     tip_force_profile: tuple[TipForceSpan, ...] = ()
+    #: (key, value) of every declared effect parameter that is no field above, in registration order:
+    #: a new effect's keys, read, dumped and validated through its declarations alone (`effect_value`)
+    effect_values: tuple[tuple[str, Any], ...] = ()
+
+    def effect_value(self, key: str) -> Any:
+        """The value of the declared effect parameter `model.<key>` (SI, its declaration's default when absent)."""
+        return getattr(self, key) if key in _FIELD_KEYS else dict(self.effect_values)[key]
 
     @property
     def step_count(self) -> int:
@@ -176,6 +183,7 @@ class Scene:
             model["joint_limits"] = {"mcp": list(self.mcp_limits)}
         if self.drive is not None:
             model["drive"] = self.drive.to_dict()
+        model.update((k, list(v) if isinstance(v, tuple) else v) for k, v in self.effect_values)
         return {
             "name": self.name,
             "description": self.description,
@@ -207,6 +215,10 @@ class Scene:
         return scene_from_dict(data)
 
 
+#: The Scene fields that hold a declared effect parameter themselves (the original effects').
+_FIELD_KEYS = frozenset(f.name for f in fields(Scene))
+
+
 def load_scene(path: str | Path) -> Scene:
     """Read and validate a scene file; ConfigError names the file, key, allowed values and value."""
     path = Path(path)
@@ -235,7 +247,7 @@ def safe_name(stem: str) -> str:
 def scene_from_dict(data: Any, *, default_name: str = "scene") -> Scene:
     """Validate a scene mapping (as loaded from YAML) into a Scene."""
     data = mapping(data, "scene", _TOP_KEYS)
-    model = mapping(data.get("model", {}), "model", _MODEL_KEYS)
+    model = mapping(data.get("model", {}), "model", _MODEL_KEYS | set(declared_parameters()))
     geometry = mapping(model.get("geometry", {}), "model.geometry", {f.name for f in fields(FingerParams)})
     params = FingerParams(**{k: number(v, f"model.geometry.{k}") for k, v in geometry.items()})
     inp = mapping(data.get("input", {}), "input", {"torque", "voltage", "tip_force"})
@@ -288,6 +300,7 @@ def scene_from_dict(data: Any, *, default_name: str = "scene") -> Scene:
         sensors=(sensors_from_dict(data["sensors"], has_drive=drive is not None, has_objects=bool(data.get("objects")))
                  if "sensors" in data else None),
         tip_force_profile=spans_from_list(inp["tip_force"], duration) if "tip_force" in inp else (),
+        effect_values=tuple((k, _effect_value(model, k)) for k in declared_parameters() if k not in _FIELD_KEYS),
     )
     q0, _ = scene.initial_state()  # refuses a θ1 outside the assemblable range, or at a toggle
     for element in build_elements(scene):  # through the registry: an element that must start clear checks it

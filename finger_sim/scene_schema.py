@@ -1,21 +1,29 @@
 """The JSON Schema of a scene file, for editors that complete and check YAML (`finger-sim schema`).
 
-Built with pydantic from the declarations the loader itself reads: each effect's parameters
-(`finger_sim.effects`' registry, bounds and defaults), the scene's own bounds (`finger_sim.scene`),
-the integrators and torque profiles by name. Sections whose keys belong to elements still being
-reworked (contact, the drive, objects, sensors, geometry) are checked as mappings or lists only; the
-loader stays the authority on them and on the checks between keys (e.g. stops inside the range).
+Built with pydantic from the declarations the loader itself reads, field by field: each effect's
+parameters (`finger_sim.effects`' registry, bounds and defaults), the contact effect's law, friction law
+and objects (`effects.contact_schema`), the drive (`actuators.drive_schema`), the sensors
+(`sensor_schema`), the geometry (`model.FingerParams`), the input profiles (`inputs.PROFILES`) and the
+scene's own bounds (`finger_sim.scene`). The loader stays the authority on the checks between keys that
+JSON Schema cannot state (e.g. stops inside the assemblable range, μ_s ≥ μ_k, a voltage only with a drive).
 """
 
 from __future__ import annotations
 
 import json
-from typing import Annotated, Any, Literal
+from dataclasses import MISSING, fields
+from typing import Annotated, Any, Literal, Union
 
 from pydantic import BaseModel, ConfigDict, Field, create_model
 
+from finger_sim.actuators.drive_schema import DriveSchema
 from finger_sim.effects import declared_parameters
-from finger_sim.inputs import PROFILES
+from finger_sim.effects.contact_schema import ContactLaw, objects_field, phalanx_radius_field
+from finger_sim.effects.parameters import bounded, pair_of
+from finger_sim.inputs import _LIMITS, MAX_TORQUE, PROFILES
+from finger_sim.model import FingerParams
+from finger_sim.sensor_schema import sensors_model
+from finger_sim.tip_force_profile import MAX_SPAN_FORCE, MAX_SPANS
 from finger_sim.integrators import METHODS
 from finger_sim.scene import (AUTO, DESCRIPTION_LENGTH, MAX_DT, MAX_RATE, MAX_TOLERANCE, MIN_TOLERANCE, NAME_LENGTH,
                               NAME_PATTERN, Scene)
@@ -23,7 +31,6 @@ from finger_sim.scene import (AUTO, DESCRIPTION_LENGTH, MAX_DT, MAX_RATE, MAX_TO
 #: The JSON Schema dialect pydantic writes (and the test validates with).
 DIALECT = "https://json-schema.org/draft/2020-12/schema"
 Number = Annotated[float, Field(allow_inf_nan=False)]
-Mapping = dict[str, Any]
 
 
 class _Closed(BaseModel):
@@ -49,16 +56,39 @@ class Integrator(_Closed):
         Scene.tolerance, description="global θ error that `method: auto` delivers (rad)")
 
 
-class Profile(BaseModel):
-    """A torque or voltage profile: its `type` and that type's numbers (see `finger_sim.inputs`)."""
+def _profile(kind: str) -> type[BaseModel]:
+    """One profile type of `finger_sim.inputs.PROFILES`: its `type` and its numbers, bounded as the loader
+    bounds them (magnitude ≤ MAX_TORQUE, slope ≤ MAX_SLOPE, frequency > 0)."""
+    numbers: dict[str, Any] = {}
+    for f in fields(PROFILES[kind]):
+        limit = _LIMITS.get(f.name, MAX_TORQUE)
+        low = {"gt": 0.0} if f.name == "frequency" else {} if limit == float("inf") else {"ge": -limit}
+        numbers[f.name] = (Annotated[float, Field(le=limit, allow_inf_nan=False, **low)],
+                           ... if f.default is MISSING else f.default)
+    return create_model(kind.capitalize(), __base__=_Closed, type=(Literal[kind], ...), **numbers)
 
-    model_config = ConfigDict(extra="allow")
-    type: Literal[tuple(sorted(PROFILES))]  # type: ignore[valid-type]
+
+#: A torque or voltage profile, told apart by its `type`.
+Profile = Annotated[Union[tuple(_profile(k) for k in sorted(PROFILES))], Field(discriminator="type")]  # noqa: UP007
+
+
+class TipForceSpan(_Closed):
+    start: bounded("start (s), within the duration", minimum=0.0)
+    end: bounded("end (s), after start, within the duration (default: the duration)", minimum=0.0, default=None)
+    force: pair_of("fingertip force over [start, end) (N, model plane)", MAX_SPAN_FORCE)
 
 
 class Input(_Closed):
-    torque: Profile | None = Field(None, description="motor torque profile (N·m)")
-    voltage: Profile | None = Field(None, description="drive voltage profile (V), with model.drive")
+    torque: Profile | None = Field(None, description="motor torque profile (N·m); not with model.drive")
+    voltage: Profile | None = Field(None, description="drive voltage profile (V), with model.drive only")
+    tip_force: Annotated[list[TipForceSpan], Field(max_length=MAX_SPANS)] | None = Field(
+        None, description="spans over which a force replaces model.tip_force (not overlapping)")
+
+
+def _geometry() -> type[BaseModel]:
+    """`model.geometry`: any field of `FingerParams` (the loader checks the linkage assembles)."""
+    return create_model("Geometry", __base__=_Closed,
+                        **{f.name: (Number, Field(f.default)) for f in fields(FingerParams)})
 
 
 def _model_section() -> type[BaseModel]:
@@ -66,10 +96,11 @@ def _model_section() -> type[BaseModel]:
     fields: dict[str, Any] = {key: (p.annotation, p.default) for key, p in declared_parameters().items()}
     fields.update(
         joint_limits=(JointLimits | None, Field(None, description="hard MCP stops, with `restitution`")),
-        geometry=(dict[str, Number] | None, Field(None, description="link lengths (m), masses (kg), inertias (kg·m²)")),
-        phalanx_radius=(Number | tuple[Number, Number] | None, Field(None, description="contact capsule radii (m)")),
-        contact=(Mapping | None, Field(None, description="contact law (spec §7)")),
-        drive=(Mapping | None, Field(None, description="DC motor and gear (spec §8)")),
+        geometry=(_geometry() | None, Field(None, description="FingerParams overrides: lengths (m), masses (kg), "
+                                                          "inertias (kg·m²), angles (rad)")),
+        phalanx_radius=phalanx_radius_field(),
+        contact=(ContactLaw | None, Field(None, description="contact law (spec §7)")),
+        drive=(DriveSchema | None, Field(None, description="DC motor and gear (spec §8); {} = its defaults")),
     )
     return create_model("Model", __base__=_Closed, **fields)
 
@@ -86,8 +117,8 @@ def scene_model() -> type[BaseModel]:
         initial=(Initial | None, None),
         duration=(Annotated[float, Field(gt=0.0, allow_inf_nan=False)], Scene.duration),
         integrator=(Integrator | None, None),
-        objects=(list[Mapping] | None, Field(None, description="fixed or moving objects (spec §7)")),
-        sensors=(Mapping | None, Field(None, description="seeded sensor models")),
+        objects=objects_field(),
+        sensors=(sensors_model() | None, Field(None, description="seeded sensor models (finger_sim.sensors)")),
     )
 
 

@@ -28,16 +28,17 @@ from typing import Any
 
 import numpy as np
 
+from finger_sim.actuators.drive_outputs import MOTOR_ANGLE, MOTOR_CURRENT
+from finger_sim.effects.contact_outputs import CONTACT_FORCES
 from finger_sim.errors import ConfigError
 from finger_sim.scene_yaml import mapping, number, pair
 
 #: The sensors a scene may declare, and the true signal each reads (a run output's name, or for an
 #: FSR the force components whose magnitude it reads).
 SOURCES: dict[str, tuple[str, ...]] = {
-    "motor_current": ("motor_current",),
-    "encoder": ("motor_angle",),
-    "fsr_proximal": ("contact_force_proximal_x", "contact_force_proximal_y"),
-    "fsr_distal": ("contact_force_distal_x", "contact_force_distal_y"),
+    "motor_current": (MOTOR_CURRENT.name,),
+    "encoder": (MOTOR_ANGLE.name,),
+    **{f"fsr_{phalanx}": tuple(o.name for o in forces) for phalanx, forces in CONTACT_FORCES.items()},
 }
 #: Bounds of a sensor's values: far beyond a finger's signals (A, rad at the motor, N), finite.
 MAX_SIGNAL = 1e6

@@ -29,6 +29,7 @@ import numpy as np
 
 from finger_sim.atomic_write import atomic_path
 from finger_sim.batch import BatchResult, run_batch
+from finger_sim.effects.contact_outputs import GRIP_FORCE
 from finger_sim.errors import ConfigError
 from finger_sim.scene import Scene, load_scene, scene_from_dict
 from finger_sim.scene_yaml import parse_scene_text
@@ -38,7 +39,7 @@ from finger_sim.sweep_plan import Progress, check_values, combination, scene_blo
 #: The final-state columns, named as in `finger-sim simulate`'s CSV.
 STATE_COLUMNS = tuple(Trajectory.CSV_HEADER.split(",")[1:7])
 RESULT_COLUMNS = (*STATE_COLUMNS, "max_constraint_residual", "energy_change")
-GRIP_COLUMN = "grip_force"
+GRIP_COLUMN = GRIP_FORCE.name
 #: Finger-steps a sweep may take unless the user raises the limit: about a minute of the
 #: compiled batch on two cores (≈ 0.3 µs of wall time per rk6 finger-step), hours in Python.
 DEFAULT_MAX_SWEEP_STEPS = 200_000_000

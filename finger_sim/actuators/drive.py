@@ -28,6 +28,8 @@ from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
+from finger_sim.actuators.drive_outputs import (DRIVE_OUTPUTS, ENCODER, MESH_LOSS, MESH_MODE, MESH_TORQUE, MOTOR_ANGLE,
+                                                MOTOR_CURRENT, MOTOR_VOLTAGE)
 from finger_sim.dynamics import FingerSystem
 from finger_sim.effects.base import ForceElement
 from finger_sim.errors import ConfigError, SimulationDiverged
@@ -333,8 +335,8 @@ class DrivenSystem(FingerSystem):
 
     def output_names(self) -> tuple[str, ...]:
         """The names of `motor_outputs`, in order (the drive's CSV columns)."""
-        encoder = ("encoder",) if self.drive.params.encoder_counts else ()
-        return ("motor_voltage", "motor_current", "motor_angle", *encoder, "mesh_mode", "mesh_loss", "mesh_torque")
+        counts = self.drive.params.encoder_counts
+        return tuple(o.name for o in DRIVE_OUTPUTS if counts or o is not ENCODER)
 
     def motor_outputs(self, t: float, q: Vec3, v: Vec3, u: float, current: float | None = None) -> dict[str, float]:
         """The drive's outputs at a state (§8): motor_voltage (terminal, V), motor_current (A),
@@ -352,24 +354,24 @@ class DrivenSystem(FingerSystem):
         if self._inductive:  # v = R i + L i' + k_e ω_m (L i' = 0 while the limit acts: the driver lowers v)
             voltage = p.resistance * i + p.inductance * drive.current_rate(u, i, v[0]) + p.torque_constant * omega
         out = {
-            "motor_voltage": voltage,
-            "motor_current": i,
-            "motor_angle": p.gear_ratio * q[0],
+            MOTOR_VOLTAGE.name: voltage,
+            MOTOR_CURRENT.name: i,
+            MOTOR_ANGLE.name: p.gear_ratio * q[0],
         }
         if p.encoder_counts:
-            out["encoder"] = float(math.floor(p.gear_ratio * q[0] / (2.0 * math.pi) * p.encoder_counts))
-        out["mesh_mode"] = float(mode)
-        out["mesh_loss"] = tau_a * omega - tau_g * v[0]
-        out["mesh_torque"] = tau_g
+            out[ENCODER.name] = float(math.floor(p.gear_ratio * q[0] / (2.0 * math.pi) * p.encoder_counts))
+        out[MESH_MODE.name] = float(mode)
+        out[MESH_LOSS.name] = tau_a * omega - tau_g * v[0]
+        out[MESH_TORQUE.name] = tau_g
         return out
 
     def powers(self, t: float, q: Vec3, v: Vec3, u: float, current: float | None = None) -> tuple[float, float, float, float]:
         """(electrical v·i, copper R i², mesh loss, Σ elements' Q·q') in W at a state, current mode
         (`current`: the winding's state with L > 0, A)."""
         out = self.motor_outputs(t, q, v, u, current)
-        i = out["motor_current"]
+        i = out[MOTOR_CURRENT.name]
         q_el = FingerSystem.generalized_force(self, t, q, v, 0.0)
-        return (out["motor_voltage"] * i, self.drive.params.resistance * i * i, out["mesh_loss"],
+        return (out[MOTOR_VOLTAGE.name] * i, self.drive.params.resistance * i * i, out[MESH_LOSS.name],
                 q_el[0] * v[0] + q_el[1] * v[1] + q_el[2] * v[2])
 
     def rotor_energy(self, v: Vec3) -> float:

@@ -35,6 +35,7 @@ from finger_sim import kinematics, stick_slip
 from finger_sim.tip_force_profile import refuse_profile
 from finger_sim.auto import choose_method, contact_substeps
 from finger_sim.dynamics import FingerSystem
+from finger_sim.effects import contact_outputs
 from finger_sim.errors import ConfigError, StabilityError
 from finger_sim.inputs import profile_array
 from finger_sim.integrators import METHODS
@@ -45,7 +46,7 @@ from finger_sim.simulate import Simulator, simulate
 from finger_sim.stability import fastest_mode, largest_stable_dt, mcp_range, stable_at
 
 #: The output a contact element reports as the grip force (N): a column of contact sweeps.
-GRIP_FORCE = "grip_force"
+GRIP_FORCE = contact_outputs.GRIP_FORCE.name
 
 #: Most bytes of paths that the lock-step loop keeps at once (a group runs in blocks of rows).
 LOCKSTEP_BYTES = 64 * 2**20

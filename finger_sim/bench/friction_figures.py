@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from finger_sim.effects.contact_outputs import FRICTION_MODE, GRIP_FORCE
 from finger_sim.effects.friction_modes import FrictionLaw
 from finger_sim.scene import Scene, load_scene
 from finger_sim.simulate import Simulator, Trajectory, simulate
@@ -46,7 +47,7 @@ def hold_figure(out: Path) -> Path:
     fig, (ax_q, ax_f) = plt.subplots(2, 1, figsize=FIGSIZE, sharex=True)
     for label, traj in runs.items():
         ax_q.plot(traj.t, np.degrees(traj.q[:, 0]), label=label)
-        ax_f.plot(traj.t, traj.outputs["grip_force"], label=label)
+        ax_f.plot(traj.t, traj.outputs[GRIP_FORCE.name], label=label)
     ax_q.set_ylim(16.45, 16.70)
     ax_q.set_ylabel("θ1 (°)")
     ax_f.set_ylim(0.0, 1.0)
@@ -84,7 +85,7 @@ def sawtooth_figure(out: Path) -> Path:
     t = traj.t[start:]
     ax_q.plot(t, np.degrees(traj.q[start:, 0]), color="#1f77b4")
     ax_q.set_ylabel("θ1 (°)")
-    locked = traj.outputs["friction_mode"][start:] == 1.0
+    locked = traj.outputs[FRICTION_MODE.name][start:] == 1.0
     ax_f.plot(t, traj.outputs["friction_torque"][start:], color="#d62728", label="friction torque on θ1")
     ax_f.plot(t, -cap[start:], color="0.4", lw=0.8, ls="--", label="− Σ μ_s F_n |j_k| (the cone's edge)")
     ax_f.fill_between(t, -cap[start:], 0.0, where=locked, color="#d62728", alpha=0.08, label="locked")

@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from finger_sim.effects.contact_outputs import GRIP_FORCE
 from finger_sim.errors import ConfigError
 from finger_sim.rollouts import rollout
 from finger_sim.runtime.grip import CLOSING_TORQUE, CONTACT_THRESHOLD, MAX_TORQUE
@@ -76,7 +77,7 @@ def gains(count: int) -> tuple[np.ndarray, np.ndarray]:
 
 def by_loop(task: Task, kp: np.ndarray, ki: np.ndarray) -> np.ndarray:
     runs = [run_task(task, grip_pi, params={"kp": p, "ki": i}) for p, i in zip(kp.tolist(), ki.tolist())]
-    return np.array([r.samples["grip_force"] for r in runs])
+    return np.array([r.samples[GRIP_FORCE.name] for r in runs])
 
 
 def by_rollout(task: Task, kp: np.ndarray, ki: np.ndarray) -> np.ndarray:
@@ -90,7 +91,7 @@ def by_rollout(task: Task, kp: np.ndarray, ki: np.ndarray) -> np.ndarray:
         except ConfigError as exc:  # a restart in contact: rollout checks each start's clearance
             raise Refused(k, str(exc)) from None
         state = np.column_stack([res.q[:, 1, 0], res.v[:, 1, 0]])
-        force[:, k + 1] = res.outputs["grip_force"][:, 1]
+        force[:, k + 1] = res.outputs[GRIP_FORCE.name][:, 1]
     return force
 
 
@@ -98,7 +99,7 @@ def by_lockstep(task: Task, kp: np.ndarray, ki: np.ndarray) -> np.ndarray:
     scene, n = task.scene, task.scene.step_count
     law = BatchPi(kp, ki, task.setpoints[0][1], scene.dt)
     sims = [Simulator(scene) for _ in kp]
-    column = output_names(sims[0].system.elements, sims[0].q).index("grip_force")
+    column = output_names(sims[0].system.elements, sims[0].q).index(GRIP_FORCE.name)
     force = np.zeros((len(kp), n + 1))
     for k in range(n):
         for sim, u in zip(sims, law(force[:, k]).tolist()):

@@ -17,6 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
+from finger_sim.actuators.drive_outputs import MOTOR_CURRENT
+from finger_sim.effects.contact_outputs import GRIP_FORCE
 from finger_sim.tasks.current_grip import GRIP_CURRENT, current_setpoint, grip_current
 from finger_sim.tasks.metrics import SETTLE_BAND
 from finger_sim.tasks.runner import TaskRun, run_task
@@ -34,10 +36,10 @@ def row(setpoint: float, result: TaskRun) -> str:
     s = result.samples
     target = current_setpoint(setpoint, GRIP_CURRENT)
     off = int(np.flatnonzero(s["command"] != 0.0)[-1]) + 1
-    held = s["grip_force"][-1]
-    return (f"| {setpoint:.2f} | {target:.4f} | {s['t'][off]:.3f} | {s['motor_current'][off]:.4f} "
-            f"({(s['motor_current'][off] - target) / target * 100:+.2f} %) | {held:.4f} "
-            f"({(held - setpoint) / setpoint * 100:+.2f} %) | {int(np.all(s['motor_current'][off + 2:] == 0.0))} | "
+    held = s[GRIP_FORCE.name][-1]
+    return (f"| {setpoint:.2f} | {target:.4f} | {s['t'][off]:.3f} | {s[MOTOR_CURRENT.name][off]:.4f} "
+            f"({(s[MOTOR_CURRENT.name][off] - target) / target * 100:+.2f} %) | {held:.4f} "
+            f"({(held - setpoint) / setpoint * 100:+.2f} %) | {int(np.all(s[MOTOR_CURRENT.name][off + 2:] == 0.0))} | "
             f"{result.scores['settle_time']:.3f} | {result.scores['overshoot']:.2f} | "
             f"{result.scores['electrical_energy']:.4f} | {'pass' if result.ok else 'fail'} |")
 
@@ -51,11 +53,11 @@ def figure(setpoint: float, result: TaskRun, path: Path) -> None:
     s = result.samples
     target = current_setpoint(setpoint, GRIP_CURRENT)
     fig, axes = plt.subplots(3, 1, sharex=True, figsize=(7.0, 6.5))
-    axes[0].plot(s["t"], s["grip_force"], label="grip force (truth)")
+    axes[0].plot(s["t"], s[GRIP_FORCE.name], label="grip force (truth)")
     axes[0].axhline(setpoint, color="k", lw=0.8, ls="--", label="setpoint")
     axes[0].axhspan(setpoint * (1 - SETTLE_BAND), setpoint * (1 + SETTLE_BAND), color="0.85")
     axes[0].set_ylabel("N")
-    axes[1].plot(s["t"], s["motor_current"], label="motor current (what the loop reads)")
+    axes[1].plot(s["t"], s[MOTOR_CURRENT.name], label="motor current (what the loop reads)")
     axes[1].axhline(target, color="k", lw=0.8, ls="--", label="current setpoint i*")
     axes[1].set_ylabel("A")
     axes[2].plot(s["t"], s["command"], label="voltage command")

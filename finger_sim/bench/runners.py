@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from finger_sim.effects.contact_outputs import GRIP_FORCE
 from finger_sim import kinematics
 from finger_sim.bench.reference import Reference, sample_times
 from finger_sim.effects.contact import build_contact
@@ -137,7 +138,7 @@ def grip_forces(scene: Scene, times: np.ndarray, q: np.ndarray, v: np.ndarray) -
     contact = build_contact(scene)
     if contact is None:
         return np.zeros(len(times))
-    return np.array([contact.outputs(t, tuple(a), tuple(b))["grip_force"] for t, a, b in zip(times, q, v)])
+    return np.array([contact.outputs(t, tuple(a), tuple(b))[GRIP_FORCE.name] for t, a, b in zip(times, q, v)])
 
 
 def fill_grip(run: Run, times: np.ndarray, grip: np.ndarray) -> None:

@@ -3,18 +3,22 @@
 Importing this package registers every effect. The five below come first, in this order,
 because the order the elements are summed in fixes the last bits of every run (old logs
 re-simulate bit for bit); any other module in this folder registers after them, in name
-order, so a new effect needs only its module and its schema entry.
+order, so a new effect needs only its module: a builder decorated with `@effect(key, ..., PARAMETERS,
+outputs=...)`, which the scene loader, the JSON Schema and every output table read (test_new_effect).
+A compiled form (a `kernel_code` law in the kernel) and node topics for its outputs are extra.
 """
 
 import importlib
 import pkgutil
 
-from finger_sim.effects.base import EFFECTS, Effect, ForceElement, Smooth, build_elements, declared_parameters, effect
+from finger_sim.effects.base import (EFFECTS, Effect, ForceElement, Output, Smooth, build_elements, declared_outputs,
+                                     declared_parameters, effect)
 
 #: The original effects, in their summation order.
 _FIRST = ("spring", "damping", "gravity", "tip_force", "stops")
 
-for _name in (*_FIRST, *sorted(m.name for m in pkgutil.iter_modules(__path__) if m.name not in (*_FIRST, "base", "parameters"))):
+for _name in (*_FIRST, *sorted(m.name for m in pkgutil.iter_modules(__path__) if m.name not in (*_FIRST, "base", "parameters", "contact_schema"))):
     importlib.import_module(f"{__name__}.{_name}")
 
-__all__ = ["EFFECTS", "Effect", "ForceElement", "Smooth", "build_elements", "declared_parameters", "effect"]
+__all__ = ["EFFECTS", "Effect", "ForceElement", "Output", "Smooth", "build_elements", "declared_outputs", "declared_parameters",
+           "effect"]

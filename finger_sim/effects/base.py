@@ -6,8 +6,9 @@ effect (is it affine in q'? smooth? how stiff along the linkage? what energy doe
 what does it report?) is a member of `ForceElement`. An element exists only when the scene
 turns its effect on, so an absent effect costs nothing per step.
 
-Adding an effect takes its module (a class implementing `ForceElement` and a builder
-decorated with `@effect("scene_key", ...)`) and its schema entry (the keys it reads).
+Adding an effect takes its module: a class implementing `ForceElement` and a builder decorated with
+`@effect("scene_key", ..., parameters, outputs=...)`, declaring the scene keys it reads (a key that is no
+`Scene` field is read through `Scene.effect_value`) and the quantities it reports.
 """
 
 from __future__ import annotations
@@ -64,7 +65,7 @@ class ForceElement(Protocol):
         ...
 
     def outputs(self, t: float, q: Vec3, v: Vec3) -> Mapping[str, float]:
-        """Quantities the element reports (e.g. grip_force, N); {} for none."""
+        """Quantities the element reports, by the names its effect declares (`Effect.outputs`); {} for none."""
         ...
 
     def impact(self, index: int) -> float | None:
@@ -95,6 +96,21 @@ class ForceElement(Protocol):
         ...
 
 
+@dataclass(frozen=True)
+class Output:
+    """One quantity an element or actuator reports at each sample, declared once: `name` is its column in
+    CSV, sweep, batch and rollout outputs, its name in plots and in a log's export; `topic` and `message`
+    are the finger_node topic that carries it and that topic's ROS message type, where it has one;
+    `measurable`: whether a real device's controller could measure it (task runs hand it to the controller)."""
+
+    name: str
+    unit: str
+    description: str
+    topic: str | None = None
+    message: str | None = None
+    measurable: bool = True
+
+
 #: Builds the element of one effect from a resolved scene, or None when the scene leaves it off.
 Builder = Callable[["Scene"], "ForceElement | None"]
 
@@ -108,21 +124,23 @@ class Effect:
     description: str
     #: the scene keys it reads (under `model:`), declared once (`effects.parameters`)
     parameters: Mapping[str, Parameter] = field(default_factory=dict, hash=False, compare=False)
+    #: every quantity its element may report (`ForceElement.outputs` returns a subset, in this order)
+    outputs: tuple[Output, ...] = ()
 
 
 #: scene key → effect, in registration order (the order elements are summed in).
 EFFECTS: dict[str, Effect] = {}
 
 
-def effect(key: str, description: str,
-           parameters: Mapping[str, Parameter] | None = None) -> Callable[[Builder], Builder]:
+def effect(key: str, description: str, parameters: Mapping[str, Parameter] | None = None,
+           outputs: tuple[Output, ...] = ()) -> Callable[[Builder], Builder]:
     """Register the builder of the effect switched on by `model.<key>` in a scene, with the scene
-    keys it reads (`parameters`: key → declaration)."""
+    keys it reads (`parameters`: key → declaration) and the quantities its element reports (`outputs`)."""
 
     def register(build: Builder) -> Builder:
         if key in EFFECTS:
             raise ValueError(f"effect '{key}' registered twice")
-        EFFECTS[key] = Effect(key, build, description, dict(parameters or {}))
+        EFFECTS[key] = Effect(key, build, description, dict(parameters or {}), tuple(outputs))
         return build
 
     return register
@@ -131,6 +149,11 @@ def effect(key: str, description: str,
 def declared_parameters() -> dict[str, Parameter]:
     """Every registered effect's scene keys (under `model:`) → their declarations."""
     return {key: p for eff in EFFECTS.values() for key, p in eff.parameters.items()}
+
+
+def declared_outputs() -> dict[str, Output]:
+    """Every registered effect's outputs, by name."""
+    return {o.name: o for eff in EFFECTS.values() for o in eff.outputs}
 
 
 def build_elements(scene: "Scene") -> list[ForceElement]:

@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING, ClassVar
 
 from finger_sim.effects.base import Vec3, effect
 from finger_sim.effects.contact_geometry import PHALANX_RADII, Circle, ContactParams, Plane, SceneObject, Vec2
+from finger_sim.effects.contact_outputs import CONTACT_FORCES, CONTACT_OUTPUTS, GRIP_FORCE, MOTION_POWER
 from finger_sim.errors import ConfigError
 from finger_sim.effects.base import CONTACT
 from finger_sim.kinematics import distal_offset
@@ -332,16 +333,12 @@ class Contact:
 
     def outputs(self, t: float, q: Vec3, v: Vec3) -> Mapping[str, float]:
         """grip_force = Σ F_n (N) and the force on each phalanx, N, model plane (sum over objects)."""
-        grip, (prox, dist) = self._totals(q, v, t)
-        out = {
-            "grip_force": grip,
-            "contact_force_proximal_x": prox[0],
-            "contact_force_proximal_y": prox[1],
-            "contact_force_distal_x": dist[0],
-            "contact_force_distal_y": dist[1],
-        }
+        grip, phalanx_forces = self._totals(q, v, t)
+        out = {GRIP_FORCE.name: grip}
+        for (x, y), force in zip(CONTACT_FORCES.values(), phalanx_forces):  # proximal, distal
+            out[x.name], out[y.name] = force[0], force[1]
         if self.time_varying:
-            out["motion_power"] = self.motion_power(t, q, v)  # W, only with moving objects
+            out[MOTION_POWER.name] = self.motion_power(t, q, v)  # W, only with moving objects
         return out
 
     # -- reports -------------------------------------------------------------------------
@@ -406,7 +403,8 @@ class Contact:
         return grip, (tuple(sums[0]), tuple(sums[1]))  # type: ignore[return-value]
 
 
-@effect("contact", "Hunt–Crossley contact of the phalanx capsules with the scene's objects (spec §7)")
+@effect("contact", "Hunt–Crossley contact of the phalanx capsules with the scene's objects (spec §7)",
+        outputs=CONTACT_OUTPUTS)
 def build_contact(scene: "Scene") -> Contact | None:
     """The contact element of a scene with objects; None (no element, no cost) without any."""
     objects = tuple(getattr(scene, "objects", ()) or ())

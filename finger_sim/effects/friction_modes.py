@@ -26,6 +26,7 @@ import numpy as np
 
 from finger_sim.effects.base import STICK_SLIP_CONTACT
 from finger_sim.effects.contact import Contact, _Hit
+from finger_sim.effects.contact_outputs import FRICTION_MODE, FRICTION_POWER, FRICTION_TORQUE
 from finger_sim.errors import ConfigError
 from finger_sim.kinematics import Vec3
 
@@ -286,12 +287,12 @@ class StickSlipContact(Contact):
         try:
             out = dict(super().outputs(t, q, v))
             if v[0] == 0.0:
-                out["friction_mode"] = math.nan if known is None else float(known[1])
-                out["friction_torque"] = math.nan if known is None else known[3]
-                out["friction_power"] = 0.0
+                out[FRICTION_MODE.name] = math.nan if known is None else float(known[1])
+                out[FRICTION_TORQUE.name] = math.nan if known is None else known[3]
+                out[FRICTION_POWER.name] = 0.0
             else:
-                out["friction_mode"] = float(SLIDING)
-                out["friction_torque"], out["friction_power"] = self.friction_torque(t, q, v)
+                out[FRICTION_MODE.name] = float(SLIDING)
+                out[FRICTION_TORQUE.name], out[FRICTION_POWER.name] = self.friction_torque(t, q, v)
         finally:
             self.mode, self.direction = mode, direction
         return out

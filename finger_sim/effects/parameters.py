@@ -55,3 +55,23 @@ def scalar(default: float, unit: str, description: str, *, minimum: float | None
 def vector(default: tuple[float, float], unit: str, description: str, *, bound: float = math.inf) -> Parameter:
     """A pair of floats (x, y in the model plane), each of magnitude ≤ bound."""
     return Parameter(default, unit, description, bound=bound)
+
+
+def bounded(description: str, *, minimum: float | None = None, maximum: float | None = None, strict: bool = False,
+            default: Any = ...) -> Any:
+    """The pydantic type of a finite float in [minimum, maximum] ((minimum, maximum] if strict), as the
+    loader's `scene_yaml.number` bounds it; `default` omitted: a required key."""
+    low = {"gt" if strict else "ge": minimum} if minimum is not None else {}
+    return Annotated[float, Field(default=default, le=maximum, description=description, allow_inf_nan=False, **low)]
+
+
+def pair_of(description: str, bound: float = math.inf, *, default: Any = ...) -> Any:
+    """The pydantic type of a list of two finite floats, each of magnitude ≤ bound (`scene_yaml.pair`)."""
+    limit = {} if math.isinf(bound) else {"ge": -bound, "le": bound}
+    component = Annotated[float, Field(allow_inf_nan=False, **limit)]
+    return Annotated[tuple[component, component], Field(default=default, description=description)]
+
+
+def whole(description: str, minimum: int, maximum: int, *, default: Any = ...) -> Any:
+    """The pydantic type of an integer in [minimum, maximum] (a YAML int; the loader refuses 1.0)."""
+    return Annotated[int, Field(default=default, ge=minimum, le=maximum, description=description, strict=True)]

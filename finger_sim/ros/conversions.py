@@ -34,7 +34,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from finger_sim import joints, kinematics
 from finger_sim.dynamics import FingerSystem
-from finger_sim.effects import ForceElement
+from finger_sim.effects import ForceElement, contact_outputs
 from finger_sim.effects.contact_geometry import Circle, SceneObject
 from finger_sim.effects.spring import spring_force
 from finger_sim.kinematics import Vec3
@@ -46,13 +46,13 @@ NS_PER_S = 1_000_000_000
 
 #: The element output that marks a scene with contact (N): its elements' reports become the
 #: grip_force and contact_wrench topics (keys of finger_sim.ros.interfaces.OUTPUTS).
-GRIP_FORCE = "grip_force"
+GRIP_FORCE = contact_outputs.GRIP_FORCE.name
 #: grip_force with its state's stamp: geometry_msgs/WrenchStamped whose wrench.force.x is Σ F_n
 #: (N, a magnitude, not a direction of header.frame_id), every other field 0; a stamped type of
 #: common_interfaces that a controller pairs with its time (std_msgs has no stamped Float64).
 GRIP_FORCE_STAMPED = "grip_force_stamped"
-PHALANGES = ("proximal", "distal")
-WRENCH_KEYS = tuple(f"contact_wrench/{phalanx}" for phalanx in PHALANGES)
+PHALANGES = contact_outputs.PHALANGES
+WRENCH_KEYS = tuple(contact_outputs.WRENCH_TOPICS[phalanx] for phalanx in PHALANGES)
 
 #: Line width of the link markers and diameter of the fingertip sphere, m.
 LINK_WIDTH = 0.002

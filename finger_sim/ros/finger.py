@@ -12,6 +12,7 @@ from collections.abc import Callable
 from typing import Any
 
 from finger_sim import joints, kinematics
+from finger_sim.actuators.drive_outputs import MESH_TORQUE
 from finger_sim.grasp_objects import Crush
 from finger_sim.kinematics import Vec3
 from finger_sim.log.cdr_writer import JointStateCdr, PoseStampedCdr
@@ -141,7 +142,7 @@ class Finger:
             effort = self.applied
             if self.driven:  # the mcp effort is the mesh torque on link 1; the motor's state has its own topics
                 state = motor.motor_state(self.sim)
-                effort = state["mesh_torque"]
+                effort = state[MESH_TORQUE.name]
                 for key, msg in motor.messages(state):
                     publish(self.outputs[key], msg)
                 if self.current_sensor is not None:

@@ -25,6 +25,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64
 
+from finger_sim.effects.contact_outputs import GRIP_FORCE
 from finger_sim.ros import parameters
 from finger_sim.ros.controller_main import spin_controller
 from finger_sim.runtime.grip import GRIP_PARAMETERS, GripController, GripSettings
@@ -48,7 +49,7 @@ class GripControllerNode(Node):
         self._clock_ns: int | None = None  # the newest /clock, ns
         self._sampled_ns: int | None = None  # /clock at the last sample, ns
         self._pub = self.create_publisher(Float64, "motor_torque", COMMAND_QOS)
-        self.create_subscription(Float64, "grip_force", self._on_grip_force, SENSOR_QOS)
+        self.create_subscription(Float64, GRIP_FORCE.topic, self._on_grip_force, SENSOR_QOS)
         self.create_subscription(Float64, "grip_setpoint", self._on_setpoint, COMMAND_QOS)
         self.create_subscription(Clock, "/clock", self._on_clock, CLOCK_QOS)
         self.get_logger().info(

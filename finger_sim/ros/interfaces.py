@@ -30,6 +30,9 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray, Int64, String
 from visualization_msgs.msg import MarkerArray
 
+from finger_sim.actuators.drive_outputs import ENCODER, MESH_MODE, MOTOR_ANGLE, MOTOR_CURRENT, MOTOR_VOLTAGE
+from finger_sim.effects.contact_outputs import GRIP_FORCE, WRENCH_TOPICS
+
 from finger_sim.runtime.commands import joint_effort
 from finger_sim.runtime.parameters import CommandQos, HandSettings, RunSettings
 
@@ -116,20 +119,17 @@ OUTPUTS: dict[str, OutputSpec] = {
     # an object crushed (its break_force exceeded; finger_sim.runtime.crushing): one record per crush
     "crush_log": OutputSpec("~/crush_log", DiagnosticStatus, EVENT_QOS, acked=True, reported_by="crush_log"),
     # contact (spec §7; conversions.ContactReport): Σ F_n (N) and each phalanx's wrench in finger_base
-    "grip_force": OutputSpec("grip_force", Float64, STATE_QOS, acked=True, reported_by="grip_force"),
+    GRIP_FORCE.topic: OutputSpec(GRIP_FORCE.topic, Float64, STATE_QOS, acked=True, reported_by=GRIP_FORCE.name),
     # grip_force with the state's stamp (conversions.GRIP_FORCE_STAMPED: wrench.force.x = Σ F_n, N)
     "grip_force_stamped": OutputSpec("grip_force_stamped", WrenchStamped, STATE_QOS, acked=True,
-                                     reported_by="grip_force"),
-    "contact_wrench/proximal": OutputSpec("contact_wrench/proximal", WrenchStamped, STATE_QOS, acked=True,
-                                          reported_by="grip_force"),
-    "contact_wrench/distal": OutputSpec("contact_wrench/distal", WrenchStamped, STATE_QOS, acked=True,
-                                        reported_by="grip_force"),
+                                     reported_by=GRIP_FORCE.name),
+    **{topic: OutputSpec(topic, WrenchStamped, STATE_QOS, acked=True, reported_by=GRIP_FORCE.name)
+       for topic in WRENCH_TOPICS.values()},  # contact_wrench/proximal, contact_wrench/distal
     # the drive (spec §8; finger_sim.ros.motor): what a prosthetic controller reads from the device
-    "motor/current": OutputSpec("motor/current", Float64, STATE_QOS, acked=True, reported_by="motor_current"),
-    "motor/voltage": OutputSpec("motor/voltage", Float64, STATE_QOS, acked=True, reported_by="motor_current"),
-    "motor/angle": OutputSpec("motor/angle", Float64, STATE_QOS, acked=True, reported_by="motor_current"),
-    "motor/encoder": OutputSpec("motor/encoder", Int64, STATE_QOS, acked=True, reported_by="encoder"),
-    "motor/mesh_mode": OutputSpec("motor/mesh_mode", String, STATE_QOS, acked=True, reported_by="motor_current"),
+    **{o.topic: OutputSpec(o.topic, Float64, STATE_QOS, acked=True, reported_by=MOTOR_CURRENT.name)
+       for o in (MOTOR_CURRENT, MOTOR_VOLTAGE, MOTOR_ANGLE)},  # motor/current, motor/voltage, motor/angle
+    ENCODER.topic: OutputSpec(ENCODER.topic, Int64, STATE_QOS, acked=True, reported_by=ENCODER.name),
+    MESH_MODE.topic: OutputSpec(MESH_MODE.topic, String, STATE_QOS, acked=True, reported_by=MOTOR_CURRENT.name),
     "motor/current_measured": OutputSpec("motor/current_measured", Float64, STATE_QOS, acked=True,
                                          reported_by="motor_current_measured"),  # scene sensors: the reading
 }

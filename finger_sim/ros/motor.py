@@ -14,13 +14,14 @@ from collections.abc import Iterator
 import numpy as np
 
 from finger_sim.actuators.drive import MESH_MODES, DrivenSystem
+from finger_sim.actuators.drive_outputs import ENCODER, MESH_MODE, MOTOR_ANGLE, MOTOR_CURRENT, MOTOR_VOLTAGE
 from finger_sim.log.cdr_writer import float64_cdr, int64_cdr, string_cdr
 from finger_sim.scene import Scene
 from finger_sim.sensors import SensorBank, SensorSet
 from finger_sim.simulate import Simulator
 
 #: OUTPUTS key → the drive output it carries.
-FLOAT_TOPICS = {"motor/current": "motor_current", "motor/voltage": "motor_voltage", "motor/angle": "motor_angle"}
+FLOAT_TOPICS = {o.topic: o.name for o in (MOTOR_CURRENT, MOTOR_VOLTAGE, MOTOR_ANGLE)}
 #: The mesh modes' std_msgs/String messages, as CDR bytes.
 MODE_CDR = tuple(string_cdr(name) for name in MESH_MODES)
 
@@ -36,9 +37,9 @@ def messages(state: dict[str, float]) -> Iterator[tuple[str, bytes]]:
     motor topic of one state (`motor_state`)."""
     for key, name in FLOAT_TOPICS.items():
         yield key, float64_cdr(float(state[name]))
-    if "encoder" in state:
-        yield "motor/encoder", int64_cdr(int(state["encoder"]))
-    yield "motor/mesh_mode", MODE_CDR[int(state["mesh_mode"])]
+    if ENCODER.name in state:
+        yield ENCODER.topic, int64_cdr(int(state[ENCODER.name]))
+    yield MESH_MODE.topic, MODE_CDR[int(state[MESH_MODE.name])]
 
 
 class CurrentSensor:
@@ -63,5 +64,5 @@ class CurrentSensor:
         """The reading at the simulator's step (its step_index) of the drive's state (`motor_state`)."""
         elapsed = 0.0 if self._last is None else (step - self._last) * self._dt  # one step: dt exactly, as offline
         self._last = step
-        reading = self._bank.measure({"motor_current": np.array([state["motor_current"]])}, elapsed=elapsed)
+        reading = self._bank.measure({MOTOR_CURRENT.name: np.array([state[MOTOR_CURRENT.name]])}, elapsed=elapsed)
         return float64_cdr(float(reading["motor_current_measured"][0]))

@@ -21,6 +21,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from std_msgs.msg import Float64
 
+from finger_sim.effects.contact_outputs import GRIP_FORCE
 from finger_sim.errors import ConfigError, shown
 from finger_sim.ros.controller_main import spin_controller
 from finger_sim.runtime.parameters import ParameterError
@@ -58,7 +59,7 @@ class TaskControllerNode(Node):
         self.samples = 0
         topic = TOPICS[commanded_input(factory)]
         self._pub = self.create_publisher(Float64, topic, COMMAND_QOS)
-        self.create_subscription(Float64, "grip_force", self._on_grip_force, SENSOR_QOS)
+        self.create_subscription(Float64, GRIP_FORCE.topic, self._on_grip_force, SENSOR_QOS)
         self.create_subscription(Float64, "grip_setpoint", self._on_setpoint, COMMAND_QOS)
         self.get_logger().info(f"{spec} ({params}) every {self.sample_period:g} s, answering on {topic}")
 
@@ -68,7 +69,7 @@ class TaskControllerNode(Node):
     def _on_grip_force(self, msg: Float64) -> None:
         t = self.samples * self.sample_period
         self.samples += 1
-        self._pub.publish(Float64(data=float(self.control(t, self.setpoint, {"grip_force": msg.data}))))
+        self._pub.publish(Float64(data=float(self.control(t, self.setpoint, {GRIP_FORCE.name: msg.data}))))
 
 
 def _number(value: Any, key: str) -> float:

@@ -24,12 +24,13 @@ import math
 from collections.abc import Callable, Mapping
 from typing import Any, Protocol
 
+from finger_sim.effects.contact_outputs import GRIP_FORCE
 from finger_sim.errors import ConfigError
 from finger_sim.runtime.grip import GripController, GripSettings
 from finger_sim.runtime.parameters import ParameterError
 
 #: What every run measures for its controller: the force sensor and the MCP encoder.
-MEASURED = ("grip_force", "theta1", "theta1_dot")
+MEASURED = (GRIP_FORCE.name, "theta1", "theta1_dot")
 #: Grip PI settings of `grip_pi_aggressive`: a 3× faster closing torque that hits the object at
 #: speed, and 5× the gains (a lightly damped loop): a large impact and a ringing force.
 AGGRESSIVE = {"closing_torque": 0.05, "kp": 0.025, "ki": 20.0}
@@ -72,7 +73,7 @@ def grip_pi(sample_period: float, **params: float) -> Controller:
     def control(t: float, setpoint: float, measured: Mapping[str, float]) -> float:
         if setpoint != law.setpoint:
             law.set_setpoint(setpoint)
-        return law.update(measured["grip_force"], sample_period)
+        return law.update(measured[GRIP_FORCE.name], sample_period)
 
     return control
 
@@ -90,7 +91,7 @@ GRIP_VOLTAGE = {"closing_voltage": 2.0, "kp": 1.0, "ki": 20.0, "max_voltage": 6.
                 "lock_after": 0.05, "contact_threshold": 0.01, "opening_voltage": 2.0, "opening_time": 0.2}
 
 
-def grip_voltage(sample_period: float, feedback: str = "grip_force", force_per_unit: float = 1.0,
+def grip_voltage(sample_period: float, feedback: str = GRIP_FORCE.name, force_per_unit: float = 1.0,
                  **params: float) -> Controller:
     """A grip controller for a self-locking drive, commanding the motor voltage (V): with a setpoint
     F* > 0 it applies `closing_voltage` until contact (F > contact_threshold), then

@@ -33,6 +33,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 
+from finger_sim.actuators.drive_outputs import MOTOR_CURRENT
 from finger_sim.errors import ConfigError
 from finger_sim.tasks.controllers import Controller
 
@@ -59,7 +60,7 @@ def current_setpoint(force: float, p: Mapping[str, float]) -> float:
     return (p["lever"] * force + p["load_torque"]) / p["torque_per_ampere"]
 
 
-def grip_current(sample_period: float, feedback: str = "motor_current", **params: float) -> Controller:
+def grip_current(sample_period: float, feedback: str = MOTOR_CURRENT.name, **params: float) -> Controller:
     """The current-loop grip controller (module docstring), commanding the motor voltage (V).
     feedback: the current signal it reads: motor_current (A, the truth) or a scene sensor's
     motor_current_measured (finger_sim.sensors). params: GRIP_CURRENT overrides."""

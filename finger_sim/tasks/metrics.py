@@ -36,6 +36,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from finger_sim.actuators.drive_outputs import MOTOR_CURRENT, MOTOR_VOLTAGE
+
 #: The band around the setpoint that counts as reached, as a fraction of the setpoint.
 SETTLE_BAND = 0.05
 #: name → (unit, short definition): what a task's `limits` may name.
@@ -52,7 +54,7 @@ METRICS: dict[str, tuple[str, str]] = {
 }
 BOOLEAN_METRICS = frozenset({"crushed", "contact_lost"})
 #: The drive outputs electrical_energy integrates (a scene with a DC-motor drive reports them).
-VOLTAGE, CURRENT = "motor_voltage", "motor_current"
+VOLTAGE, CURRENT = MOTOR_VOLTAGE.name, MOTOR_CURRENT.name
 
 Scores = dict[str, "float | bool | None"]
 

@@ -9,6 +9,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from finger_sim.actuators.drive_outputs import MOTOR_CURRENT
+from finger_sim.effects.contact_outputs import GRIP_FORCE
 from finger_sim.tasks.metrics import METRICS
 from finger_sim.tasks.runner import TaskRun
 
@@ -79,15 +81,15 @@ def figure(runs: Sequence[TaskRun], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    driven = "motor_current" in runs[0].samples  # a drive task: the command is a voltage; draw the current
+    driven = MOTOR_CURRENT.name in runs[0].samples  # a drive task: the command is a voltage; draw the current
     fig, axes = plt.subplots(4 if driven else 3, 1, sharex=True, figsize=(7.5, 8.0 if driven else 6.5))
     for i, r in enumerate(runs):
         s, z = r.samples, len(runs) - i  # the first controller drawn on top
-        axes[0].plot(s["t"], s["grip_force"], label=r.controller, zorder=z)
+        axes[0].plot(s["t"], s[GRIP_FORCE.name], label=r.controller, zorder=z)
         axes[1].plot(s["t"], [math.degrees(x) for x in s["theta1"]], label=r.controller, zorder=z)
         axes[2].plot(s["t"], s["command"], label=r.controller, zorder=z)
         if driven:
-            axes[3].plot(s["t"], s["motor_current"], label=r.controller, zorder=z)
+            axes[3].plot(s["t"], s[MOTOR_CURRENT.name], label=r.controller, zorder=z)
     axes[0].plot(runs[0].samples["t"], runs[0].samples["setpoint"], "k--", lw=1, label="setpoint", zorder=len(runs) + 1)
     axes[0].set_ylabel("grip force (N)")
     axes[1].set_ylabel("θ1 (°)")

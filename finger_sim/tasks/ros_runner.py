@@ -42,6 +42,8 @@ from pathlib import Path
 
 import numpy as np
 
+from finger_sim.actuators.drive_outputs import MOTOR_CURRENT, MOTOR_VOLTAGE
+from finger_sim.effects.contact_outputs import GRIP_FORCE
 from finger_sim.errors import ConfigError, FingerSimError
 from finger_sim.scene_yaml import dump_scene
 from finger_sim.tasks.metrics import judge, task_scores
@@ -52,7 +54,7 @@ from finger_sim.tasks.schema import Task
 from finger_sim.tip_force_profile import first_step, tip_force_switches
 
 #: The topic on which the runner hands grip_force samples to the controller.
-RELAY_TOPIC = "task_runner/grip_force"
+RELAY_TOPIC = f"task_runner/{GRIP_FORCE.topic}"
 #: Where the controller's /clock goes (nothing publishes there: it counts samples instead).
 NO_CLOCK_TOPIC = "task_runner/no_clock"
 #: Wall seconds between a setpoint change and the sample that must see it (a local reliable
@@ -115,7 +117,7 @@ def run_ros_task(task: Task, executable: str, workdir: Path, *, label: str = "",
     own = {"controller": executable} if ":" in executable else {}
     controller_cmd = [*controller_command(executable), "--ros-args",
                       *_params(**{**own, "setpoint": task.setpoints[0][1], "sample_period": dt, **(params or {})}),
-                      "-r", f"grip_force:={RELAY_TOPIC}", "-r", f"/clock:={NO_CLOCK_TOPIC}"]
+                      "-r", f"{GRIP_FORCE.topic}:={RELAY_TOPIC}", "-r", f"/clock:={NO_CLOCK_TOPIC}"]
     changes = {first_step(t, dt): v for t, v in task.setpoints[1:]}
     start = time.perf_counter()
     procs: list[tuple[subprocess.Popen, Path]] = []
@@ -143,7 +145,7 @@ def run_ros_task(task: Task, executable: str, workdir: Path, *, label: str = "",
     samples, crushes = read_samples(log_dir, n, task.setpoints, scene)
     grid = tuple((first_step(t, dt) * dt, v) for t, v in task.setpoints)
     drive = {c: samples[c] for c in DRIVE_COLUMNS if c in samples}
-    scores = task_scores(samples["t"], samples["grip_force"], grid, task.hold_after, bool(crushes), outputs=drive,
+    scores = task_scores(samples["t"], samples[GRIP_FORCE.name], grid, task.hold_after, bool(crushes), outputs=drive,
                          torque=(samples["command"], samples["theta1"]) if task.input == "torque" else None)
     return TaskRun(task.name, label, samples, crushes, scores, judge(scores, task.limits), grid, dict(task.limits), wall)
 
@@ -162,7 +164,7 @@ def read_samples(log_dir: Path, n: int, setpoints: tuple[tuple[float, float], ..
         raise FingerSimError(f"expected one MCAP log in {log_dir}, found {len(logs)}")
     step_ns = round(dt * 1e9)
     states: dict[int, tuple[float, float, float]] = {}
-    topics = {"/grip_force": "grip_force", "/motor/voltage": "motor_voltage", "/motor/current": "motor_current"}
+    topics = {f"/{o.topic}": o.name for o in (GRIP_FORCE, MOTOR_VOLTAGE, MOTOR_CURRENT)}
     series: dict[str, dict[int, float]] = {name: {} for name in topics.values()}
     crushes: list[Crush] = []
     with AnyReader(logs) as reader:
@@ -179,7 +181,7 @@ def read_samples(log_dir: Path, n: int, setpoints: tuple[tuple[float, float], ..
             else:
                 series[topics[conn.topic]][log_time // step_ns] = msg.data
     drive = scene.drive is not None
-    needed = [series["grip_force"], *((series["motor_voltage"], series["motor_current"]) if drive else ())]
+    needed = [series[GRIP_FORCE.name], *((series[MOTOR_VOLTAGE.name], series[MOTOR_CURRENT.name]) if drive else ())]
     missing = [k for k in range(n + 1) if k not in states or any(k not in s for s in needed)]
     if missing:
         raise FingerSimError(f"the log {logs[0]} lacks the states of {len(missing)} steps (first: {missing[0]})")
@@ -192,11 +194,11 @@ def read_samples(log_dir: Path, n: int, setpoints: tuple[tuple[float, float], ..
         setpoint = [v for s, v in set_steps if s <= k][-1]
         tip = next((f for s, f in reversed(switches) if s <= k), scene.tip_force)
         after = min(k + 1, n)
-        command = series["motor_voltage"][after] if drive else states[after][2]
-        rows[k, :9] = (k * dt, series["grip_force"][k], setpoint, theta, rate, command, tip[0], tip[1],
+        command = series[MOTOR_VOLTAGE.name][after] if drive else states[after][2]
+        rows[k, :9] = (k * dt, series[GRIP_FORCE.name][k], setpoint, theta, rate, command, tip[0], tip[1],
                        sum(c.step <= k for c in crushes))
         if drive:
-            rows[k, 9:] = (series["motor_voltage"][k], series["motor_current"][k])
+            rows[k, 9:] = (series[MOTOR_VOLTAGE.name][k], series[MOTOR_CURRENT.name][k])
     return {name: np.ascontiguousarray(rows[:, i]) for i, name in enumerate(columns)}, crushes
 
 
@@ -219,7 +221,7 @@ class _Relay:
         qos = QoSProfile(depth=DEPTH)
         self._relay = self._node.create_publisher(Float64, RELAY_TOPIC, qos)
         self._setpoint = self._node.create_publisher(Float64, "grip_setpoint", qos)
-        self._force = self._node.create_subscription(Float64, "grip_force", self._on_force, qos)
+        self._force = self._node.create_subscription(Float64, GRIP_FORCE.topic, self._on_force, qos)
         self._executor = SingleThreadedExecutor(context=self._context)
         self._executor.add_node(self._node)
         self._thread = threading.Thread(target=self._spin, daemon=True)

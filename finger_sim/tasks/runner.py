@@ -24,6 +24,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from finger_sim.actuators.drive_outputs import MOTOR_CURRENT, MOTOR_VOLTAGE
+from finger_sim.effects import declared_outputs
+from finger_sim.effects.contact_outputs import GRIP_FORCE
 from finger_sim.errors import FingerSimError, SimulationDiverged
 from finger_sim.grasp_objects import Crush
 from finger_sim.scene_changes import SceneChanges
@@ -37,13 +40,12 @@ from finger_sim.tasks.schema import Task
 LOG = logging.getLogger(__name__)
 
 #: The columns a task run records at every sample, in this order (N, rad, rad/s, N·m, N).
-COLUMNS = ("t", "grip_force", "setpoint", "theta1", "theta1_dot", "command", "tip_force_x", "tip_force_y", "crushed")
+COLUMNS = ("t", GRIP_FORCE.name, "setpoint", "theta1", "theta1_dot", "command", "tip_force_x", "tip_force_y", "crushed")
 #: The drive's outputs a run on a drive scene records too (V, A; spec §8), for electrical_energy.
-DRIVE_COLUMNS = ("motor_voltage", "motor_current")
-#: Element outputs that are not measurements a real controller has: the contact wrenches and
-#: the power of a prescribed object motion.
-UNMEASURED_PREFIX = "contact_force_"
-UNMEASURED = frozenset({"motion_power"})
+DRIVE_COLUMNS = (MOTOR_VOLTAGE.name, MOTOR_CURRENT.name)
+#: Element outputs that are not measurements a real controller has (declared so: the contact wrenches
+#: and the power of a prescribed object motion).
+UNMEASURED = frozenset(o.name for o in declared_outputs().values() if not o.measurable)
 
 
 @dataclass
@@ -85,7 +87,7 @@ def run_task(task: Task, factory: Factory, *, label: str = "", params: Mapping[s
     start = time.perf_counter()
 
     def record(k: int, outputs: Mapping[str, float]) -> None:
-        rows[k] = (k * dt, outputs.get("grip_force", 0.0), setpoint, sim.q[0], sim.v[0], command,
+        rows[k] = (k * dt, outputs.get(GRIP_FORCE.name, 0.0), setpoint, sim.q[0], sim.v[0], command,
                    sim.scene.tip_force[0], sim.scene.tip_force[1], len(crushes), *(outputs[c] for c in drive_columns))
 
     outputs = _outputs(sim)
@@ -96,10 +98,10 @@ def run_task(task: Task, factory: Factory, *, label: str = "", params: Mapping[s
         changes.before_step()
         sim = changes.sim
         if k % task.sample_steps == 0:
-            sensed = {"grip_force": outputs.get("grip_force", 0.0), "theta1": sim.q[0], "theta1_dot": sim.v[0]}
+            sensed = {GRIP_FORCE.name: outputs.get(GRIP_FORCE.name, 0.0), "theta1": sim.q[0], "theta1_dot": sim.v[0]}
             measured = {name: sensed[name] for name in MEASURED}
             measured.update({k_: v for k_, v in outputs.items()
-                             if not k_.startswith(UNMEASURED_PREFIX) and k_ not in UNMEASURED})
+                             if k_ not in UNMEASURED})
             if sensors is not None:  # an FSR reads 0 N once its object is gone (crushed)
                 truth = {src: np.array([outputs.get(src, 0.0)]) for name in sensors.sensors.models for src in SOURCES[name]}
                 readings = sensors.measure(truth, elapsed=0.0 if sensed_at is None else (k - sensed_at) * dt)
@@ -130,7 +132,7 @@ def run_task(task: Task, factory: Factory, *, label: str = "", params: Mapping[s
     samples = {name: np.ascontiguousarray(rows[:, i]) for i, name in enumerate(COLUMNS + drive_columns)}
     grid = tuple((k * dt, v) for k, v in set_steps)
     torque = (samples["command"], samples["theta1"]) if task.input == "torque" else None
-    scores = task_scores(samples["t"], samples["grip_force"], grid, task.hold_after, bool(crushes),
+    scores = task_scores(samples["t"], samples[GRIP_FORCE.name], grid, task.hold_after, bool(crushes),
                          outputs={c: samples[c] for c in drive_columns}, torque=torque)
     passed = judge(scores, task.limits)
     if stopped:  # a run the simulation had to stop fails its task

@@ -42,6 +42,12 @@ MAX_EVENTS = 1000
 INPUTS = ("torque", "voltage")
 #: The default holding window: from this long after a setpoint change, s.
 HOLD_AFTER = 0.4
+#: Most steps of dt between controller samples, or of delay.
+MAX_STEPS = 10**6
+#: Largest grip-force setpoint and disturbance force, N.
+MAX_FORCE = 1e3
+#: Longest description and scene path, characters.
+TEXT_LENGTH = 4096
 
 
 @dataclass(frozen=True)
@@ -88,7 +94,7 @@ def task_from_dict(data: Any, *, base: Path, default_name: str = "task") -> Task
     name = text(data.get("name", default_name), "name", NAME_LENGTH)
     if "scene" not in data:
         raise ConfigError("scene", "the path of a scene file (relative to the task file)", None)
-    scene_path = base / text(data["scene"], "scene", 4096)
+    scene_path = base / text(data["scene"], "scene", TEXT_LENGTH)
     try:
         scene = load_scene(scene_path)
     except ConfigError as exc:
@@ -114,7 +120,7 @@ def task_from_dict(data: Any, *, base: Path, default_name: str = "task") -> Task
     scene = dataclasses.replace(scene, tip_force_profile=check_spans(spans, "disturbances"))
     return Task(
         name=name,
-        description=text(data.get("description", ""), "description", 4096),
+        description=text(data.get("description", ""), "description", TEXT_LENGTH),
         scene=scene,
         sample_steps=sample_steps,
         delay_steps=delay_steps,
@@ -127,8 +133,8 @@ def task_from_dict(data: Any, *, base: Path, default_name: str = "task") -> Task
 
 
 def _whole(value: Any, key: str, low: int) -> int:
-    if not isinstance(value, int) or isinstance(value, bool) or not low <= value <= 10**6:
-        raise ConfigError(key, f"a whole number of steps in [{low}, 1000000]", value)
+    if not isinstance(value, int) or isinstance(value, bool) or not low <= value <= MAX_STEPS:
+        raise ConfigError(key, f"a whole number of steps in [{low}, {MAX_STEPS}]", value)
     return value
 
 
@@ -146,7 +152,7 @@ def _setpoints(value: Any, duration: float) -> tuple[tuple[float, float], ...]:
     for i, item in enumerate(items):
         item = mapping(item, f"setpoints[{i}]", {"t", "value"})
         t = number(item.get("t"), f"setpoints[{i}].t", minimum=0.0, maximum=duration)
-        v = number(item.get("value"), f"setpoints[{i}].value", minimum=0.0, maximum=1e3)
+        v = number(item.get("value"), f"setpoints[{i}].value", minimum=0.0, maximum=MAX_FORCE)
         if (i == 0 and t != 0.0) or (out and t <= out[-1][0]):
             raise ConfigError(f"setpoints[{i}].t", "times increasing from 0 (s)", t)
         out.append((t, v))
@@ -162,7 +168,7 @@ def _disturbances(value: Any, duration: float) -> tuple[Disturbance, ...]:
             raise ConfigError(f"{where}.type", "tip_force (a pull on the fingertip)", item.get("type"))
         start = number(item.get("start"), f"{where}.start", minimum=0.0, maximum=duration)
         end = number(item.get("end", duration), f"{where}.end", minimum=start, maximum=duration, strict=True)
-        out.append(Disturbance(start, end, pair(item.get("force"), f"{where}.force", 1e3)))
+        out.append(Disturbance(start, end, pair(item.get("force"), f"{where}.force", MAX_FORCE)))
     spans = sorted(out, key=lambda d: d.start)
     for a, b in zip(spans, spans[1:]):
         if b.start < a.end:
