@@ -12,6 +12,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from os import PathLike
 from pathlib import Path
+from typing import Any
 
 from finger_sim.errors import FingerSimError, shown
 
