@@ -17,6 +17,7 @@ from scipy.optimize import brentq
 rclpy = pytest.importorskip("rclpy")
 
 from rclpy.qos import QoSProfile  # noqa: E402
+from rosbags.highlevel import AnyReader  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
 from finger_sim import kinematics  # noqa: E402
@@ -79,26 +80,29 @@ def offline_pd(steps: int) -> list[tuple[float, float, float]]:
 
 def test_pd_brings_the_mcp_to_the_setpoint(launcher, ros_client):
     """finger_node in lockstep (each state waits for the PD's answer) + finger_pd_controller with
-    the setpoint from its start: every state equals the offline closed loop at the same timing,
-    bit for bit, and on that run the stated performance holds. Not in real time: there the
-    command lands on a step that depends on scheduling, and the trajectory with it."""
+    the setpoint from its start: every state in the node's log equals the offline closed loop at
+    the same timing, bit for bit, and on that run the stated performance holds. Not in real time:
+    there the command lands on a step that depends on scheduling, and the trajectory with it."""
     launcher.node("finger_sim.ros.pd_controller", dict(setpoint=SETPOINT), name="pd")
     states = ros_client.collect(JointState, "/joint_states", QoSProfile(depth=10_000))
     node = launcher.node("finger_sim.ros.node", dict(scene=str(PAPER), lockstep=True, lockstep_timeout=LOCKSTEP_TIMEOUT_S,
                                                      realtime_factor=0.0, command_qos="reliable", marker_rate_hz=0.0,
-                                                     record=False), name="finger_node")
+                                                     record_dir=str(launcher.tmp / "bags")), name="finger_node")
     steps = round(WINDOW_S * 1e9 / DT_NS)
     ros_client.wait_for(lambda: states and conversions.from_time(states[-1].header.stamp) >= steps * DT_NS,
                         f"{steps} lockstep states", timeout=120.0)
     assert node.stop() == 0, node.output()
 
-    # the node waits for the controller, not for this client: its first states may go out before
-    # this subscription matched (volatile); from the first one received, every state is there
-    by_step = {conversions.from_time(m.header.stamp) // DT_NS: m for m in states}
-    first = min(by_step)
-    assert first < steps // 4, first
+    # the node's log (rosbags) holds every state from the first: this client's subscription may
+    # have matched after the first states went out (the node waits for the controller, not for us)
+    (log,) = (launcher.tmp / "bags").glob("*.mcap")
+    with AnyReader([log]) as reader:
+        (conn,) = [c for c in reader.connections if c.topic == "/joint_states"]
+        logged = [reader.deserialize(raw, conn.msgtype) for _, _, raw in reader.messages(connections=[conn])]
+    by_step = {conversions.from_time(m.header.stamp) // DT_NS: m for m in logged}
+    assert sorted(by_step)[: steps + 1] == list(range(steps + 1))
     ref = offline_pd(steps)
-    for k in range(first, steps + 1):
+    for k in range(steps + 1):
         m = by_step[k]
         assert (m.position[0], m.velocity[0], m.effort[0]) == ref[k], k
     assert ref[1][2] == MAX_TORQUE  # kp·0.8 = 0.16 N·m saturates
