@@ -1,6 +1,6 @@
 """Figures of stick–slip friction (spec §7) for docs/stick_slip.md (matplotlib, Agg).
 
-- `stick_slip_hold.png`: issue 22's held grip (config/friction/hold_table.yaml) after the torque drops,
+- `stick_slip_hold.png`: the held grip (config/friction/hold_table.yaml) after the torque drops,
   under stick–slip with μ_s = 2 and μ_s = 1 and under the regularized law with μ = 1: θ1 and grip force.
 - `stick_slip_sawtooth.png`: config/friction/sawtooth.yaml: θ1 (a staircase) and the friction torque
   on θ1 (a sawtooth) between ± the friction cones' capacity Σ μ_s F_n |j_k|.

@@ -30,7 +30,7 @@ WP_SCENES = ("paper_flexion", "toggle_passage", "free_swing", "bang_bang", "stif
 CONTACT_WP_SCENES = ("grasp_cylinder", "press_table")
 CONTACT_HARD_SCENES = ("grasp_impact", "grasp_rigid")
 CONTACT_SCENES = CONTACT_WP_SCENES + CONTACT_HARD_SCENES
-#: Issue 22's hard scenes (config/hard/, not shipped scenes): the elastic fast impact, the chatter on a tilted
+#: The hard contact scenes (config/hard/, not shipped scenes): the elastic fast impact, the chatter on a tilted
 #: wall, grasp and release, the table with friction, the near-rigid fast impact, the elastic stops. `auto`
 #: itself is run on them too (its error control is what they test).
 ISSUE_HARD_FOLDER = "hard"

@@ -49,8 +49,10 @@ class GripControllerNode(Node):
         self._clock_ns: int | None = None  # the newest /clock, ns
         self._sampled_ns: int | None = None  # /clock at the last sample, ns
         self._pub = self.create_publisher(Float64, "motor_torque", COMMAND_QOS)
-        self.create_subscription(Float64, GRIP_FORCE.topic, self._on_grip_force, SENSOR_QOS)
+        # the setpoint first: rclpy's executor serves ready subscriptions in creation order, so a
+        # setpoint and a sample waiting together are taken setpoint first (the task runner's order)
         self.create_subscription(Float64, "grip_setpoint", self._on_setpoint, COMMAND_QOS)
+        self.create_subscription(Float64, GRIP_FORCE.topic, self._on_grip_force, SENSOR_QOS)
         self.create_subscription(Clock, "/clock", self._on_clock, CLOCK_QOS)
         self.get_logger().info(
             f"grip-force PI: kp {s.kp:g} N·m/N, ki {s.ki:g} N·m/(N·s), |τ| ≤ {s.max_torque:g} N·m; closing "

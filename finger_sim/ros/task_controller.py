@@ -59,8 +59,10 @@ class TaskControllerNode(Node):
         self.samples = 0
         topic = TOPICS[commanded_input(factory)]
         self._pub = self.create_publisher(Float64, topic, COMMAND_QOS)
-        self.create_subscription(Float64, GRIP_FORCE.topic, self._on_grip_force, SENSOR_QOS)
+        # the setpoint first: rclpy's executor serves ready subscriptions in creation order, so a
+        # setpoint and a sample waiting together are taken setpoint first (the task runner's order)
         self.create_subscription(Float64, "grip_setpoint", self._on_setpoint, COMMAND_QOS)
+        self.create_subscription(Float64, GRIP_FORCE.topic, self._on_grip_force, SENSOR_QOS)
         self.get_logger().info(f"{spec} ({params}) every {self.sample_period:g} s, answering on {topic}")
 
     def _on_setpoint(self, msg: Float64) -> None:

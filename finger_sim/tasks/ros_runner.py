@@ -9,8 +9,8 @@ The runner starts, on the loopback interface and in the current ROS_DOMAIN_ID:
   advances its law by `sample_period` per sample, as the offline path does);
 - itself (first, then finger_node, then the controller once the node's grip_force is matched
   with the runner: the node's first state waits for a controller), an rclpy node that relays grip_force sample k to the controller, and before it, at a
-  setpoint change of the task, publishes the new setpoint on `grip_setpoint` and waits
-  SETPOINT_LEAD wall seconds, so that the controller has it before the sample it answers.
+  setpoint change of the task, publishes the new setpoint on `grip_setpoint` and waits until the
+  controller's reader acknowledged it, so that the controller has it before the sample it answers.
 
 finger_node steps k+1 only when the answer to state k has come, so the run is repeatable bit for
 bit. Timing: the answer to state k acts over the step k → k+1 (sample_steps 1, delay_steps 0,
@@ -57,8 +57,10 @@ from finger_sim.tip_force_profile import first_step, tip_force_switches
 RELAY_TOPIC = f"task_runner/{GRIP_FORCE.topic}"
 #: Where the controller's /clock goes (nothing publishes there: it counts samples instead).
 NO_CLOCK_TOPIC = "task_runner/no_clock"
-#: Wall seconds between a setpoint change and the sample that must see it (a local reliable
-#: message takes well under 1 ms; a loaded machine may delay it by far more).
+#: Wall seconds between a setpoint change and the sample that must see it, once the controller's
+#: reader acknowledged the setpoint: a margin only. The order does not rest on it: an acknowledged
+#: setpoint is waiting in the controller before the sample is sent, and the shipped controllers
+#: serve a setpoint before a sample that waits beside it (their subscriptions' creation order).
 SETPOINT_LEAD = 0.3
 #: Wall seconds finger_node waits for an answer before stepping on (never, for a live controller).
 LOCKSTEP_TIMEOUT = 60.0
@@ -207,11 +209,12 @@ class _Relay:
 
     def __init__(self, changes: Mapping[int, float], last: int) -> None:
         import rclpy
+        from rclpy.duration import Duration
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import QoSProfile
         from std_msgs.msg import Float64
 
-        self._rclpy, self._float = rclpy, Float64
+        self._rclpy, self._float, self._duration = rclpy, Float64, Duration
         self._changes, self._last = changes, last
         self._count = 0
         self._done = threading.Event()
@@ -251,8 +254,10 @@ class _Relay:
                 if time.monotonic() > deadline:
                     return  # wait() reports the stalled run
                 time.sleep(0.01)
-        if k in self._changes:
+        if k in self._changes:  # the controller holds the setpoint (acknowledged) before the sample goes
             self._setpoint.publish(self._float(data=self._changes[k]))
+            if not self._setpoint.wait_for_all_acked(self._duration(seconds=START_TIMEOUT)):
+                return  # wait() reports the stalled run
             time.sleep(SETPOINT_LEAD)
         self._relay.publish(msg)
         if k >= self._last:

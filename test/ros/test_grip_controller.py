@@ -4,7 +4,8 @@ References: the offline run (a Simulator of the same scene, its elements' output
 at every state) at the same sim times, read back from the node's log with rosbags; the moment
 of each contact force about finger_base's origin computed as r × F in finger_base from the
 element's contact points (spec §6: a model point (X, Y) is (X, 0, −Y)); the scene's own object
-geometry for the markers. Each DDS test has its own ROS_DOMAIN_ID and loopback discovery
+geometry for the markers; for the grip controller in the loop, the offline task path (`run_task`)
+with the same law at the lockstep timing, bit for bit. Each DDS test has its own ROS_DOMAIN_ID and loopback discovery
 (conftest.py), waits for conditions with deadlines, and stops what it started.
 """
 
@@ -23,16 +24,19 @@ rclpy = pytest.importorskip("rclpy")
 
 from geometry_msgs.msg import WrenchStamped  # noqa: E402
 from rosbags.highlevel import AnyReader  # noqa: E402
-from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Float64  # noqa: E402
 from std_srvs.srv import SetBool, Trigger  # noqa: E402
 from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
 
 from finger_sim import kinematics  # noqa: E402
 from finger_sim.ros import conversions  # noqa: E402
-from finger_sim.runtime.grip import KI, KP  # noqa: E402
+from finger_sim.runtime.grip import CLOSING_TORQUE, KI, KP  # noqa: E402
 from finger_sim.scene import load_scene, scene_from_dict  # noqa: E402
 from finger_sim.simulate import Simulator  # noqa: E402
+from finger_sim.tasks.controllers import grip_pi  # noqa: E402
+from finger_sim.tasks.ros_runner import lockstep_task, run_ros_task  # noqa: E402
+from finger_sim.tasks.runner import run_task  # noqa: E402
+from finger_sim.tasks.schema import Task, task_from_dict  # noqa: E402
 from ros_helpers import stamp  # noqa: E402
 
 NODE = "finger_sim.ros.node"
@@ -43,11 +47,11 @@ DT_NS = 1_000_000
 TOL = 1e-12
 PHALANGES = ("proximal", "distal")
 
-#: The stated closed-loop performance on grasp_cylinder (defaults, realtime_factor 1, 1 kHz):
+#: The stated closed-loop performance on grasp_cylinder (defaults, lockstep at 1 kHz):
 SETPOINT = 0.5  # N
 RISE_S = 0.6  # sim s from the first closing torque to 98 % of the setpoint (≈ 0.4 s offline)
 OVERSHOOT = 0.10  # grip force never above (1 + OVERSHOOT)·setpoint
-HOLD_FROM_S, HOLD_TO_S = 0.7, 1.2  # sim s after the first torque: the last 0.5 s of holding ...
+HOLD_FROM_S, OPEN_AT_S = 0.7, 1.2  # sim s: the last 0.5 s of holding, then the setpoint 0 ...
 HOLD_TOL = 0.02  # ... within 2 % of the setpoint
 OPEN_S = 0.5  # sim s after the setpoint 0: out of contact (grip force 0)
 
@@ -220,47 +224,42 @@ def test_node_contact_topics_match_the_offline_run(launcher, ros_client, tmp_pat
 
 
 # -- the grip controller in the loop ---------------------------------------------------------
-def test_grip_controller_closes_holds_and_opens(launcher, ros_client):
-    """finger_node (grasp_cylinder, torque from motor_torque, real time) + finger_grip_controller
-    with its defaults: 0.5 N within RISE_S, overshoot below OVERSHOOT, within HOLD_TOL over the
-    last 0.5 s; a setpoint of 0 opens the finger (grip force 0). The grip force is read from the
-    stamped wrenches: with μ = 0 each contact force is normal, so Σ|F| = Σ F_n."""
-    scene = load_scene(CUP)
-    assert scene.contact.friction == 0.0
-    launcher.node(NODE, dict(scene=str(CUP), realtime_factor=1.0, max_torque=0.1, marker_rate_hz=0.0, record=False))
-    launcher.node("finger_sim.ros.grip_controller", dict(setpoint=0.0), name="grip")
-    states = ros_client.collect(JointState, "/joint_states")
-    wrenches = {ph: ros_client.collect(WrenchStamped, f"/contact_wrench/{ph}") for ph in PHALANGES}
-    setpoint_pub = ros_client.publisher(Float64, "/grip_setpoint")
-    ros_client.wait_for(lambda: setpoint_pub.get_subscription_count(), "the controller's setpoint subscription")
-    ros_client.wait_for(lambda: states and all(wrenches.values()), "the node's states and wrenches")
+def close_hold_open_task() -> Task:
+    """grasp_cylinder with a setpoint of SETPOINT from t = 0 and 0 from OPEN_AT_S on."""
+    data = {"scene": str(CUP), "duration": OPEN_AT_S + OPEN_S + 0.1,
+            "setpoints": [{"t": 0.0, "value": SETPOINT}, {"t": OPEN_AT_S, "value": 0.0}]}
+    return task_from_dict(data, base=CONFIG, default_name="close_hold_open")
 
-    def first_torque(sign: float, value: float):
-        def sent():
-            setpoint_pub.publish(Float64(data=value))  # repeated until the node applies it
-            return next((m for m in states if sign * m.effort[0] > 0.0), None)
-        return stamp(ros_client.wait_for(sent, f"the controller's answer to a setpoint of {value} N"))
 
-    def grip_by_time(since_ns: int) -> dict[float, float]:
-        """Sim s after since_ns → Σ|F| over the phalanges, at the states both wrenches exist for."""
-        by_stamp = [{stamp(m): math.hypot(m.wrench.force.x, m.wrench.force.z) for m in wrenches[ph]} for ph in PHALANGES]
-        common = sorted(set(by_stamp[0]) & set(by_stamp[1]))
-        return {(t - since_ns) * 1e-9: by_stamp[0][t] + by_stamp[1][t] for t in common if t >= since_ns}
+def test_grip_controller_closes_holds_and_opens(ros_domain, tmp_path):
+    """finger_node (grasp_cylinder, torque from motor_torque, lockstep) + finger_grip_controller
+    with its defaults, through the task runner (the setpoints reach the controller before the
+    sample they apply to): every sample, command and state equals the offline run of the same law
+    at the lockstep timing (the answer to state k acts over step k → k+1), bit for bit. On that
+    run, which is now repeatable, the stated performance: 0.5 N within RISE_S, overshoot below
+    OVERSHOOT, within HOLD_TOL over the hold window; a setpoint of 0 opens the finger (grip force
+    0, then the torque 0). Not in real time: there the command lands on a step that depends on
+    scheduling, and the force with it."""
+    task = close_hold_open_task()
+    ros = run_ros_task(task, "finger_grip_controller", tmp_path / "ros", label="ros")
+    offline = run_task(lockstep_task(task), grip_pi, label="offline")
+    assert ros.samples.keys() == offline.samples.keys()
+    for name in offline.samples:
+        assert np.array_equal(ros.samples[name], offline.samples[name]), name
 
-    t0 = first_torque(+1.0, SETPOINT)
-    ros_client.wait_for(lambda: stamp(wrenches["distal"][-1]) >= t0 + HOLD_TO_S * 1e9, "the hold", timeout=30.0)
-    grip = grip_by_time(t0)
-    reached = min((t for t, g in grip.items() if g >= 0.98 * SETPOINT), default=math.inf)
-    hold = [g for t, g in grip.items() if HOLD_FROM_S <= t <= HOLD_TO_S]
-    onset = min(t for t, g in grip.items() if g > 0.0)
-    print(f"grip: onset at {onset:.3f} s, 98 % at {reached:.3f} s, peak {max(grip.values()):.4f} N, hold error "
-          f"{max(abs(g - SETPOINT) for g in hold):.2e} N (kp {KP}, ki {KI})")
+    t, grip, command = ros.samples["t"], ros.samples["grip_force"], ros.samples["command"]
+    first = np.flatnonzero(command > 0.0)[0]  # the controller's first closing torque
+    assert first == 0 and command[0] == CLOSING_TORQUE
+    opening = t >= OPEN_AT_S - 1e-12
+    closing = (~opening) & (t >= t[first])
+    reached = t[closing & (grip >= 0.98 * SETPOINT)][0] - t[first]
+    hold = grip[closing & (t - t[first] >= HOLD_FROM_S)]
+    print(f"grip: onset at {t[np.flatnonzero(grip > 0.0)[0]]:.3f} s, 98 % at {reached:.3f} s, peak "
+          f"{grip[closing].max():.4f} N, hold error {np.abs(hold - SETPOINT).max():.2e} N (kp {KP}, ki {KI})")
     assert reached <= RISE_S
-    assert max(grip.values()) < (1.0 + OVERSHOOT) * SETPOINT
-    assert len(hold) > 250 and max(abs(g - SETPOINT) for g in hold) < HOLD_TOL * SETPOINT
+    assert grip[closing].max() < (1.0 + OVERSHOOT) * SETPOINT
+    assert len(hold) > 250 and np.abs(hold - SETPOINT).max() < HOLD_TOL * SETPOINT
 
-    t1 = first_torque(-1.0, 0.0)
-    ros_client.wait_for(lambda: stamp(wrenches["distal"][-1]) >= t1 + OPEN_S * 1e9, "the opening", timeout=30.0)
-    opened = grip_by_time(t1)
-    assert max(g for t, g in opened.items() if t >= OPEN_S - 0.1) == 0.0
-    assert states[-1].effort[0] == 0.0  # the opening torque ended
+    assert command[opening][0] < 0.0  # the setpoint 0 is answered at once by the opening torque
+    assert not grip[t >= OPEN_AT_S + OPEN_S - 0.1].any()  # out of contact
+    assert command[-1] == 0.0  # the opening torque ended

@@ -1,6 +1,7 @@
 """finger_pd_controller: its control law, and the closed loop with finger_node over DDS.
 
-Reference for the loop: the static equilibrium of the PD law against the PIP spring on the
+References for the loop: the offline closed loop (a Simulator under the PD law, each answer
+acting over the next step, as in lockstep), bit for bit; the static equilibrium of the PD law against the PIP spring on the
 constraint manifold, kp·(θ* − θ) = kβ·dβ/dθ1 (spec §3, virtual work), solved with the core's
 closed-form kinematics. PD settles there, 5 mrad short of θ* = 0.8 rad with the defaults.
 """
@@ -15,22 +16,27 @@ from scipy.optimize import brentq
 
 rclpy = pytest.importorskip("rclpy")
 
+from rclpy.qos import QoSProfile  # noqa: E402
+from rosbags.highlevel import AnyReader  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
-from std_msgs.msg import Float64  # noqa: E402
 
 from finger_sim import kinematics  # noqa: E402
 from finger_sim.ros import conversions  # noqa: E402
 from finger_sim.ros.pd_controller import KD, KP, MAX_TORQUE, pd_torque  # noqa: E402
 from finger_sim.scene import load_scene  # noqa: E402
+from finger_sim.simulate import Simulator  # noqa: E402
 
 PAPER = Path(__file__).resolve().parents[2] / "config" / "paper_flexion.yaml"
 SETPOINT = 0.8  # rad
-#: The stated performance (spec finger, default gains, realtime_factor 1, loop delay of a few ms):
-SETTLE_S = 0.5  # sim s after the first torque ...
+#: The stated performance (spec finger, default gains, lockstep at 1 kHz: one step of loop delay):
+SETTLE_S = 0.5  # sim s after the first torque (state 0) ...
 TOL_EQ = 2e-3  # rad: ... θ1 stays this close to the PD/spring equilibrium ...
 TOL_SETPOINT = 0.01  # rad: ... and this close to the setpoint,
 OVERSHOOT = 0.03  # rad: never beyond the setpoint by more than this,
 WINDOW_S = 1.0  # sim s: checked up to here.
+DT_NS = 1_000_000  # the node's default physics rate, 1 kHz
+#: Generous: a loaded machine must never make the controller miss it (the run would differ).
+LOCKSTEP_TIMEOUT_S = 30.0
 
 
 def equilibrium(setpoint: float, kp: float) -> float:
@@ -60,28 +66,49 @@ def test_equilibrium_is_short_of_the_setpoint_by_the_spring():
     assert SETPOINT - 0.01 < eq < SETPOINT  # the spring holds it back, by a few mrad
 
 
+def offline_pd(steps: int) -> list[tuple[float, float, float]]:
+    """(θ1, θ1', applied torque) of states 0..steps: a Simulator of the node's scene (1 kHz) under
+    the PD law at the lockstep timing: the torque answering state k acts over step k → k+1."""
+    sim = Simulator(load_scene(PAPER).with_overrides(dt=DT_NS * 1e-9))
+    out, torque = [], 0.0
+    for k in range(steps + 1):
+        out.append((sim.q[0], sim.v[0], torque))
+        torque = pd_torque(SETPOINT, sim.q[0], sim.v[0], KP, KD, MAX_TORQUE)
+        sim.step(torque)
+    return out
+
+
 def test_pd_brings_the_mcp_to_the_setpoint(launcher, ros_client):
-    launcher.node("finger_sim.ros.node", dict(scene=str(PAPER), realtime_factor=1.0, command_timeout=0.5), name="finger_node")
-    launcher.node("finger_sim.ros.pd_controller", dict(setpoint=0.0), name="pd")
-    states = ros_client.collect(JointState, "/joint_states")
-    setpoint_pub = ros_client.publisher(Float64, "/mcp_setpoint")
-    ros_client.wait_for(lambda: setpoint_pub.get_subscription_count(), "the controller's setpoint subscription")
-    ros_client.wait_for(lambda: states, "the node's states")  # from here on we see every state
-    assert all(m.effort[0] == 0.0 for m in states)  # at rest, setpoint 0
+    """finger_node in lockstep (each state waits for the PD's answer) + finger_pd_controller with
+    the setpoint from its start: every state in the node's log equals the offline closed loop at
+    the same timing, bit for bit, and on that run the stated performance holds. Not in real time:
+    there the command lands on a step that depends on scheduling, and the trajectory with it."""
+    launcher.node("finger_sim.ros.pd_controller", dict(setpoint=SETPOINT), name="pd")
+    states = ros_client.collect(JointState, "/joint_states", QoSProfile(depth=10_000))
+    node = launcher.node("finger_sim.ros.node", dict(scene=str(PAPER), lockstep=True, lockstep_timeout=LOCKSTEP_TIMEOUT_S,
+                                                     realtime_factor=0.0, command_qos="reliable", marker_rate_hz=0.0,
+                                                     record_dir=str(launcher.tmp / "bags")), name="finger_node")
+    steps = round(WINDOW_S * 1e9 / DT_NS)
+    ros_client.wait_for(lambda: states and conversions.from_time(states[-1].header.stamp) >= steps * DT_NS,
+                        f"{steps} lockstep states", timeout=120.0)
+    assert node.stop() == 0, node.output()
 
-    def started():
-        setpoint_pub.publish(Float64(data=SETPOINT))  # repeated until the finger moves
-        return next((m for m in states if m.effort[0] > 0.0), None)
-
-    first = ros_client.wait_for(started, "the controller's first torque")
-    t0 = conversions.from_time(first.header.stamp) * 1e-9
-    assert first.effort[0] == MAX_TORQUE  # kp·0.8 = 0.16 N·m saturates
-    ros_client.wait_for(lambda: conversions.from_time(states[-1].header.stamp) * 1e-9 >= t0 + WINDOW_S,
-                        f"{WINDOW_S} s of closed loop", timeout=30.0)
+    # the node's log (rosbags) holds every state from the first: this client's subscription may
+    # have matched after the first states went out (the node waits for the controller, not for us)
+    (log,) = (launcher.tmp / "bags").glob("*.mcap")
+    with AnyReader([log]) as reader:
+        (conn,) = [c for c in reader.connections if c.topic == "/joint_states"]
+        logged = [reader.deserialize(raw, conn.msgtype) for _, _, raw in reader.messages(connections=[conn])]
+    by_step = {conversions.from_time(m.header.stamp) // DT_NS: m for m in logged}
+    assert sorted(by_step)[: steps + 1] == list(range(steps + 1))
+    ref = offline_pd(steps)
+    for k in range(steps + 1):
+        m = by_step[k]
+        assert (m.position[0], m.velocity[0], m.effort[0]) == ref[k], k
+    assert ref[1][2] == MAX_TORQUE  # kp·0.8 = 0.16 N·m saturates
 
     eq = equilibrium(SETPOINT, KP)
-    run = [(conversions.from_time(m.header.stamp) * 1e-9 - t0, m.position[0]) for m in states]
-    run = [(t, th) for t, th in run if 0.0 <= t <= WINDOW_S]
+    run = [(k * DT_NS * 1e-9, theta) for k, (theta, _, _) in enumerate(ref)]
     settled = [th for t, th in run if t >= SETTLE_S]
     assert len(settled) > 100
     assert max(abs(th - eq) for th in settled) < TOL_EQ
