@@ -103,8 +103,62 @@ class GripSettings:
         return cls(**v)  # type: ignore[arg-type]
 
 
+def pi_update(integral: float, error: float, dt: float, kp: float, ki: float, limit: float) -> tuple[float, float]:
+    """One PI sample: (the new integral I, the output u), N·m, for the error `error` (N) over `dt`
+    s: u = clamp(kp e + I, ±limit), I' = ki e, with clamping anti-windup (module docstring). The
+    one definition of the law: `PiLaw` calls it, and the compiled gain sweep compiles it
+    (`finger_sim.kernel.closed_loop`)."""
+    trial = integral + ki * error * dt
+    # The integral moves towards `trial`, but not past the value that puts the output on the
+    # limit the error pushes towards, and never further out once it is there (frozen).
+    if error > 0.0:
+        trial = min(trial, max(integral, limit - kp * error))
+    elif error < 0.0:
+        trial = max(trial, min(integral, -limit - kp * error))
+    integral = min(max(trial, -limit), limit)
+    u = kp * error + integral
+    return integral, min(max(u, -limit), limit)
+
+
+#: `Phase` as the numbers `grip_update` works on (the compiled sweep keeps them in arrays).
+IDLE, CLOSING, HOLDING, OPENING = 0, 1, 2, 3
+
+
+def grip_setpoint(phase: int, opening_left: float, value: float, opening_time: float) -> tuple[int, float]:
+    """The sequence's (phase, opening time left s) after a new setpoint `value` (N, ≥ 0)."""
+    if value > 0.0 and (phase == IDLE or phase == OPENING):
+        return CLOSING, opening_left
+    if value == 0.0 and (phase == CLOSING or phase == HOLDING):
+        return OPENING, opening_time
+    return phase, opening_left
+
+
+def grip_update(phase: int, integral: float, opening_left: float, setpoint: float, grip_force: float, dt: float,
+                kp: float, ki: float, max_torque: float, closing_torque: float, contact_threshold: float,
+                opening_torque: float) -> tuple[int, float, float, float]:
+    """One sample of the close / hold / open sequence: (phase, PI integral N·m, opening time left
+    s, motor torque N·m) answering `grip_force` (N), `dt` s after the last sample (at most
+    MAX_SAMPLE_GAP counts). The one definition: `GripController.update` calls it, and the compiled
+    gain sweep compiles it (`finger_sim.kernel.closed_loop`)."""
+    dt = min(dt, MAX_SAMPLE_GAP)
+    if phase == CLOSING and grip_force > contact_threshold:
+        phase = HOLDING
+        integral = min(max(closing_torque - kp * (setpoint - grip_force), -max_torque), max_torque)  # bumpless
+    if phase == CLOSING:
+        return phase, integral, opening_left, closing_torque
+    if phase == HOLDING:
+        integral, u = pi_update(integral, setpoint - grip_force, dt, kp, ki, max_torque)
+        return phase, integral, opening_left, u
+    if phase == OPENING:
+        opening_left -= dt
+        if opening_left > -0.5 * dt:  # the sample that ends the opening time still opens
+            return phase, integral, opening_left, -opening_torque
+        phase = IDLE
+    return phase, integral, opening_left, 0.0
+
+
 class PiLaw:
-    """u = clamp(kp e + I, ±limit), I' = ki e, with clamping anti-windup (module docstring)."""
+    """u = clamp(kp e + I, ±limit), I' = ki e, with clamping anti-windup (`pi_update`)."""
 
     def __init__(self, kp: float, ki: float, limit: float) -> None:
         self.kp, self.ki, self.limit = kp, ki, limit
@@ -116,20 +170,19 @@ class PiLaw:
 
     def update(self, error: float, dt: float) -> float:
         """The output (N·m) for the error `error` (N) over the last `dt` s."""
-        trial = self.integral + self.ki * error * dt
-        # The integral moves towards `trial`, but not past the value that puts the output on the
-        # limit the error pushes towards, and never further out once it is there (frozen).
-        if error > 0.0:
-            trial = min(trial, max(self.integral, self.limit - self.kp * error))
-        elif error < 0.0:
-            trial = max(trial, min(self.integral, -self.limit - self.kp * error))
-        self.reset(trial)
-        u = self.kp * error + self.integral
-        return min(max(u, -self.limit), self.limit)
+        self.integral, u = pi_update(self.integral, error, dt, self.kp, self.ki, self.limit)
+        return u
+
+
+#: Phase of each number of `grip_update`.
+_PHASES = {IDLE: Phase.IDLE, CLOSING: Phase.CLOSING, HOLDING: Phase.HOLDING, OPENING: Phase.OPENING}
+#: The number of each Phase (`grip_update`).
+PHASE_NUMBERS = {phase: number for number, phase in _PHASES.items()}
 
 
 class GripController:
-    """Close until contact, hold the grip force at the setpoint with PiLaw, open on 0 (module docstring)."""
+    """Close until contact, hold the grip force at the setpoint with the PI law, open on 0
+    (module docstring; the sequence is `grip_setpoint` and `grip_update`)."""
 
     def __init__(self, settings: GripSettings) -> None:
         self.settings = s = settings
@@ -145,26 +198,16 @@ class GripController:
         if not (math.isfinite(value) and value >= 0.0):
             raise ValueError(f"grip setpoint: expected a finite force ≥ 0 N, got {value!r}")
         self.setpoint = value
-        if value > 0.0 and self.phase in (Phase.IDLE, Phase.OPENING):
-            self.phase = Phase.CLOSING
-        elif value == 0.0 and self.phase in (Phase.CLOSING, Phase.HOLDING):
-            self.phase, self._opening_left = Phase.OPENING, self.settings.opening_time
+        phase, self._opening_left = grip_setpoint(PHASE_NUMBERS[self.phase], self._opening_left, value,
+                                                  self.settings.opening_time)
+        self.phase = _PHASES[phase]
 
     def update(self, grip_force: float, dt: float) -> float:
         """The motor torque (N·m) answering the grip force `grip_force` (N), `dt` s after the last
         sample (at most MAX_SAMPLE_GAP counts)."""
         s = self.settings
-        dt = min(dt, MAX_SAMPLE_GAP)
-        if self.phase is Phase.CLOSING and grip_force > s.contact_threshold:
-            self.phase = Phase.HOLDING
-            self.pi.reset(s.closing_torque - s.kp * (self.setpoint - grip_force))  # bumpless
-        if self.phase is Phase.CLOSING:
-            return s.closing_torque
-        if self.phase is Phase.HOLDING:
-            return self.pi.update(self.setpoint - grip_force, dt)
-        if self.phase is Phase.OPENING:
-            self._opening_left -= dt
-            if self._opening_left > -0.5 * dt:  # the sample that ends the opening time still opens
-                return -s.opening_torque
-            self.phase = Phase.IDLE
-        return 0.0
+        phase, self.pi.integral, self._opening_left, u = grip_update(
+            PHASE_NUMBERS[self.phase], self.pi.integral, self._opening_left, self.setpoint, grip_force, dt,
+            s.kp, s.ki, s.max_torque, s.closing_torque, s.contact_threshold, s.opening_torque)
+        self.phase = _PHASES[phase]
+        return u
