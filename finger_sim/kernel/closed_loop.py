@@ -12,7 +12,9 @@ it with the shipped grip PI (`grip_pi`), nothing per step in Python:
   these scenes, DOP853 (`integrators.dop853.DormandPrince853.step`: its internal solution
   continued while the command is unchanged, else restarted; `_advance`'s step-size control;
   the projected dense output at the step's end), on the compiled attempt it calls
-  (`numerics.dop853_attempt`);
+  (`numerics.dop853_attempt`); or, on a scene without contact (a row whose only object was
+  crushed, free space), the lean step `Simulator.step` takes there with auto's fixed-step method
+  (`numerics._profile_step` under the held command, tableau `tab`);
 - the grip force after the step (`Contact.outputs`' Σ F_n), measured at the next sample.
 
 The contact geometry here (`contact_states`) is `Contact._hits` with `gaps`, `gap_gradient` and
@@ -43,8 +45,9 @@ from numba import njit, prange  # noqa: E402  (after the cache folder is set)
 from finger_sim.effects.contact import MIN_DISTANCE  # noqa: E402
 from finger_sim.kernel.event_checks import EVENT_TOLERANCE, predicted_crossing  # noqa: E402
 from finger_sim.integrators import dop853  # noqa: E402
+from finger_sim.inputs import HELD_ARRAY  # noqa: E402
 from finger_sim.kernel.numerics import (ERROR_EXPONENT, JIT, LAW, MAX_FACTOR, MIN_FACTOR, OK, SAFETY,  # noqa: E402
-                                        _rhs, compiled, dop853_attempt, dop853_output)
+                                        _profile_step, _rhs, compiled, dop853_attempt, dop853_output)
 from finger_sim.runtime import grip  # noqa: E402
 
 #: A row's status after `run` (module docstring).
@@ -219,11 +222,19 @@ def _dop853_step(m, rtol, atol, t, dt, command, x, st, y, f, y_old, dense, kk, y
 
 
 @njit(**JIT)
-def _physics(m, o, depth, depths, rtol, atol, dt, k, command, x, st, y, f, y_old, dense, save, kk, y_new, taus,
-             out, ga, ra, gb, rb):
+def _physics(m, o, lean, tab, depth, depths, rtol, atol, dt, k, command, x, st, y, f, y_old, dense, save, kk, y_new,
+             taus, out, ga, ra, gb, rb):
     """Step k of one row under the held `command` (N·m) on x in place, as `Simulator.step` takes a
     step that holds no event; returns (taken, grip force after it, N). Not taken: x and the
-    internal solution are left as at the step's start, for the Simulator."""
+    internal solution are left as at the step's start, for the Simulator. lean: the row steps
+    with the fixed-step method of tableau `tab` (no contact, no internal solution)."""
+    if lean:
+        save[0, :6] = x
+        status, _ = _profile_step(m, tab, HELD_ARRAY, command, k, dt, x, kk, taus)
+        if status != OK:
+            x[:] = save[0, :6]
+            return False, 0.0
+        return True, 0.0
     t0, t1 = k * dt, (k + 1) * dt
     h = t1 - t0
     n = 0
@@ -251,13 +262,14 @@ def _physics(m, o, depth, depths, rtol, atol, dt, k, command, x, st, y, f, y_old
 
 
 @njit(**PARALLEL)
-def run(models, contact_at, depth, depths, break_min, rtol, atol, dt, sample_steps, delay_steps, set_k, set_v,
+def run(models, contact_at, lean, tab, depth, depths, break_min, rtol, atol, dt, sample_steps, delay_steps, set_k, set_v,
         gains, law, pend_k, pend_u, pend_n, command, states, grip_force, integ, ys, fs, y_olds, denses, steps, until,
         last, scene_rec, record):
     """Every row from steps[i] until its status (module docstring), in place.
 
     models: (nbatch, L) each row's flat model (zero-padded); contact_at[i]: where its contact
-    parameters start (−1: no contact); depth[i], depths[i]: whether it checks depth gaps ρ − δ,
+    parameters start (−1: no contact); lean[i]: the row steps with the fixed-step method of
+    tableau tab (`layout.tableau_array`), else with DOP853; depth[i], depths[i]: whether it checks depth gaps ρ − δ,
     and each candidate's ρ (m); break_min[i]: the smallest break force of its objects (N; inf:
     none watched); rtol, atol: DOP853's. dt s; sample_steps, delay_steps: the task's; set_k,
     set_v: the setpoint schedule (step, N). gains: (nbatch, len(GAINS)); law: (nbatch, 4) the
@@ -272,7 +284,7 @@ def run(models, contact_at, depth, depths, break_min, rtol, atol, dt, sample_ste
     status = np.empty(nbatch, dtype=np.int64)
     period = sample_steps * dt
     for i in prange(nbatch):
-        status[i] = _row(models[i], contact_at[i], depth[i], depths[i], break_min[i], rtol, atol, dt, sample_steps,
+        status[i] = _row(models[i], contact_at[i], lean[i], tab, depth[i], depths[i], break_min[i], rtol, atol, dt, sample_steps,
                          delay_steps, period, set_k, set_v, gains[i], law[i], pend_k[i], pend_u[i], pend_n, command,
                          states[i], grip_force, integ[i], ys[i], fs[i], y_olds[i], denses[i], steps, until[i], last,
                          scene_rec[i], record[i], i)
@@ -280,7 +292,7 @@ def run(models, contact_at, depth, depths, break_min, rtol, atol, dt, sample_ste
 
 
 @njit(**JIT)
-def _row(m, o, depth, depths, break_min, rtol, atol, dt, sample_steps, delay_steps, period, set_k, set_v, gains,
+def _row(m, o, lean, tab, depth, depths, break_min, rtol, atol, dt, sample_steps, delay_steps, period, set_k, set_v, gains,
          law, pend_k, pend_u, pend_n, command, x, grip_force, st, y, f, y_old, dense, steps, until, last, scene_rec,
          rec, i):
     """One row of `run`: its status."""
@@ -320,7 +332,7 @@ def _row(m, o, depth, depths, break_min, rtol, atol, dt, sample_steps, delay_ste
         r = rec[k]
         r[T], r[GRIP], r[SETPOINT], r[THETA1], r[THETA1_DOT] = k * dt, grip_force[i], setpoint, x[0], x[3]
         r[COMMAND], r[TIP_X], r[TIP_Y], r[CRUSHED] = command[i], scene_rec[0], scene_rec[1], scene_rec[2]
-        taken, force = _physics(m, o, depth, depths, rtol, atol, dt, k, command[i], x, st, y, f, y_old, dense, save,
+        taken, force = _physics(m, o, lean, tab, depth, depths, rtol, atol, dt, k, command[i], x, st, y, f, y_old, dense, save,
                                 kk, y_new, taus, out, ga, ra, gb, rb)
         if not taken:
             steps[i] = k

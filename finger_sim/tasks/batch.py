@@ -57,10 +57,12 @@ def batch_reason(task: Task, factory: Factory) -> str | None:
 
 def _sim_reason(sim: Simulator) -> str | None:
     integ = sim.integrator
-    if not isinstance(integ, DormandPrince853) or not integ.compiled or integ._drive is not None:  # noqa: SLF001
-        return f"the scene steps with {sim.method} on the {sim.kernel} kernel, not the compiled dop853"
     if sim._friction is not None or sim._timed:  # noqa: SLF001
         return "stick-slip friction or a moving object"
+    if sim.fast_stepper is not None:  # the lean path (no contact, no drive)
+        return None if _plan_parts(sim.fast_stepper.plan)[2].shape[1] > 0 else "the paper's Euler"
+    if not isinstance(integ, DormandPrince853) or not integ.compiled or integ._drive is not None:  # noqa: SLF001
+        return f"the scene steps with {sim.method} on the {sim.kernel} kernel, not the compiled dop853"
     contacts = [e for e in sim.system.elements if not e.smooth]
     if contacts and (len(contacts) > 1 or type(contacts[0]) is not Contact):
         return "a non-smooth element other than one contact"
@@ -85,6 +87,8 @@ def run_task_rows(task: Task, factory: Factory, columns: Sequence[tuple[str, Map
     ncand = max(1, max(len(r.depths) for r in rows))
     models = np.zeros((nrow, width))
     contact_at = np.full(nrow, -1, dtype=np.int64)
+    lean = np.zeros(nrow, dtype=np.bool_)
+    tab = np.zeros((3, 1))  # the lean rows' tableau, once one has it
     depth = np.zeros(nrow, dtype=np.bool_)
     depths = np.zeros((nrow, ncand))
     break_min = np.empty(nrow)
@@ -115,12 +119,14 @@ def run_task_rows(task: Task, factory: Factory, columns: Sequence[tuple[str, Map
         states[i] = (*sim.q, *sim.v)
         grip[i] = _outputs(sim).get("grip_force", 0.0)
         scene_rec[i, :2] = sim.scene.tip_force
-        row.load(i, models, contact_at, depth, depths, break_min, changes[i])
+        row.load(i, models, contact_at, lean, depth, depths, break_min, changes[i])
+        tab = _shared_tableau(tab, row)
         _read_back(sim, integ[i], ys[i], fs[i], y_olds[i], denses[i])
-    rtol, atol = rows[0].rtol, rows[0].atol
+    dop = next((r for r in rows if r.tab is None), None)
+    rtol, atol = (dop.rtol, dop.atol) if dop is not None else (0.0, 0.0)
     start = time.perf_counter()
     while True:
-        status = kl.run(models, contact_at, depth, depths, break_min, rtol, atol, dt, task.sample_steps,
+        status = kl.run(models, contact_at, lean, tab, depth, depths, break_min, rtol, atol, dt, task.sample_steps,
                         task.delay_steps, set_k, set_v, gains, law, pend_k, pend_u, pend_n, command, states, grip,
                         integ, ys, fs, y_olds, denses, steps, until, last, scene_rec, record)
         if (status == kl.DONE).all():
@@ -149,7 +155,9 @@ def run_task_rows(task: Task, factory: Factory, columns: Sequence[tuple[str, Map
             sim = ch.sim
             if sim is not rows[i].sim:  # a new scene: its model, and a fresh internal solution
                 rows[i] = _Row(sim)
-                rows[i].load(i, models, contact_at, depth, depths, break_min, ch)
+                models, depths = _fit(models, len(rows[i].model)), _fit(depths, len(rows[i].depths))
+                tab = _shared_tableau(tab, rows[i])
+                rows[i].load(i, models, contact_at, lean, depth, depths, break_min, ch)
             scene_rec[i, 2] = len(crushes[i])
             states[i] = (*sim.q, *sim.v)
             _read_back(sim, integ[i], ys[i], fs[i], y_olds[i], denses[i])
@@ -180,22 +188,25 @@ class _Row:
             raise ConfigError(f"scene '{sim.scene.name}'", "a scene the compiled gain sweep steps", reason)
         self.sim = sim
         integ = sim.integrator
-        self.model = integ._model  # noqa: SLF001
-        self.rtol, self.atol = integ.rtol, integ.atol
+        #: the lean path's tableau (a scene without contact), else None (DOP853)
+        self.tab: np.ndarray | None = None
+        if sim.fast_stepper is not None:
+            _, self.model, self.tab = _plan_parts(sim.fast_stepper.plan)
+        else:
+            assert isinstance(integ, DormandPrince853)
+            self.model = integ._model  # noqa: SLF001
+            self.rtol, self.atol = integ.rtol, integ.atol
         self.contact_at = _contact_offset(self.model)
         rho = dict(sim._depth_sources)  # noqa: SLF001 (gap position → ρ; the contact's gaps come first)
         count = len(sim._gaps) - len(rho)  # noqa: SLF001
         self.depths = np.array([rho.get(c, 0.0) for c in range(count)])
         self.depth = bool(rho)
 
-    def load(self, i: int, models: np.ndarray, contact_at: np.ndarray, depth: np.ndarray, depths: np.ndarray,
+    def load(self, i: int, models: np.ndarray, contact_at: np.ndarray, lean: np.ndarray, depth: np.ndarray, depths: np.ndarray,
              break_min: np.ndarray, changes: SceneChanges) -> None:
-        if len(self.model) > models.shape[1] or len(self.depths) > depths.shape[1]:
-            raise ConfigError(f"scene '{self.sim.scene.name}'", "a scene change that keeps the model's size",
-                              "a larger model")
         models[i] = 0.0
         models[i, : len(self.model)] = self.model
-        contact_at[i], depth[i] = self.contact_at, self.depth
+        contact_at[i], depth[i], lean[i] = self.contact_at, self.depth, self.tab is not None
         depths[i] = 0.0
         depths[i, : len(self.depths)] = self.depths
         forces = [o.properties.break_force for o in self.sim.scene.objects if o.properties.break_force is not None]
@@ -209,6 +220,29 @@ def _law(factory: Factory, period: float, params: Mapping[str, float]) -> tuple[
     except ParameterError as exc:
         raise ConfigError("controller parameter", "values within GRIP_PARAMETERS' ranges", str(exc)) from None
     return settings, GripController(settings)
+
+
+def _shared_tableau(tab: np.ndarray, row: _Row) -> np.ndarray:
+    """The lean rows' one tableau: `row`'s when it is the first lean row; ConfigError when two differ."""
+    if row.tab is None:
+        return tab
+    if not tab.any():
+        return np.ascontiguousarray(row.tab)
+    if tab.shape != row.tab.shape or not (tab == row.tab).all():
+        raise ConfigError(f"scene '{row.sim.scene.name}'", "one fixed-step method for every row without contact",
+                          row.sim.method)
+    return tab
+
+
+def _plan_parts(plan: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """(dt, model, tableau) of a step plan (`numerics.plan_parts`)."""
+    nm, rows, cols = int(plan[1]), int(plan[2]), int(plan[3])
+    return float(plan[0]), plan[4: 4 + nm], plan[4 + nm: 4 + nm + rows * cols].reshape(rows, cols)
+
+
+def _fit(arr: np.ndarray, width: int) -> np.ndarray:
+    """`arr` (rows × columns), zero-padded to at least `width` columns (a scene change that adds an element)."""
+    return arr if width <= arr.shape[1] else np.pad(arr, ((0, 0), (0, width - arr.shape[1])))
 
 
 def _contact_offset(model: np.ndarray) -> int:
@@ -233,8 +267,9 @@ def _hand_over(sim: Simulator, k: int, x: np.ndarray, st: np.ndarray, y: np.ndar
     from finger_sim.kernel import closed_loop as kl
 
     integ = sim.integrator
-    assert isinstance(integ, DormandPrince853)
     sim.step_index, sim.q, sim.v = k, tuple(x[:3].tolist()), tuple(x[3:].tolist())
+    if not isinstance(integ, DormandPrince853):  # the lean path keeps no state of its own
+        return
     integ._t, integ._h, integ._t_old, integ._h_old = (float(st[kl.I_T]), float(st[kl.I_H]), float(st[kl.I_T_OLD]),  # noqa: SLF001
                                                       float(st[kl.I_H_OLD]))
     integ._y, integ._y_old = y.copy(), y_old.copy()  # noqa: SLF001
@@ -258,7 +293,8 @@ def _read_back(sim: Simulator, st: np.ndarray, y: np.ndarray, f: np.ndarray, y_o
     from finger_sim.kernel import closed_loop as kl
 
     integ = sim.integrator
-    assert isinstance(integ, DormandPrince853)
+    if not isinstance(integ, DormandPrince853):
+        return
     st[kl.I_T], st[kl.I_H], st[kl.I_T_OLD], st[kl.I_H_OLD] = integ._t, integ._h, integ._t_old, integ._h_old  # noqa: SLF001
     y[:], f[:], y_old[:], dense[:] = integ._y, integ._f, integ._y_old, integ._dense  # noqa: SLF001
     held = sim._held  # noqa: SLF001
