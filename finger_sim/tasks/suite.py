@@ -9,7 +9,9 @@ through finger_node in lockstep (`finger_sim.tasks.ros_runner`; its --param valu
 node's parameters): an executable (a torque controller such as finger_grip_controller), or a
 `module:callable` run as a node by finger_task_controller (a voltage controller runs the drive tasks). `--vary` (repeatable) runs the first controller over
 the Cartesian product of the given parameter values (a gain sweep), each combination one more
-controller column, scored the same way. The exit status is 1 when any run fails a task.
+controller column, scored the same way; on the tasks the kernel steps, the shipped grip PI's
+columns run together in one compiled loop (`finger_sim.tasks.batch`, the same runs bit for bit).
+The exit status is 1 when any run fails a task.
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ from finger_sim.scene import safe_name
 from finger_sim.scene_paths import scene_dirs
 from finger_sim.scene_yaml import parse_scene_text
 from finger_sim.sweep import chunk_range, parse_chunk
-from finger_sim.tasks import report
+from finger_sim.tasks import batch, report
 from finger_sim.tasks.controllers import Factory, commanded_input, load_factory
 from finger_sim.tasks.ros_runner import run_ros_task
 from finger_sim.tasks.runner import TaskRun, run_task
@@ -109,20 +111,41 @@ def chunk_of(controllers: Sequence[ControllerSpec], chunk: str) -> list[Controll
 def run_suite(tasks: Sequence[Task], controllers: Sequence[ControllerSpec], workdir: Path | None = None) -> list[TaskRun]:
     """Every task against every controller that commands its input, task by task (a torque
     controller skips a drive task, a voltage controller the others); a ROS controller's files (scene, logs,
-    node output) go to `workdir`/ros/<task>_<label>/ (default: a temporary folder)."""
+    node output) go to `workdir`/ros/<task>_<label>/ (default: a temporary folder). Several columns
+    of the shipped grip PI (a gain sweep) on a task the kernel steps run together there
+    (`finger_sim.tasks.batch`: the same runs bit for bit); the others one by one."""
     runs = []
     with tempfile.TemporaryDirectory(prefix="finger_tasks_") as tmp:
         for task in tasks:
+            swept = _swept(task, controllers)
             for c in controllers:
                 if c.ros_executable is None:
                     assert c.factory is not None
                     if commanded_input(c.factory) != task.input:
+                        continue
+                    if c.label in swept:
+                        runs.append(swept[c.label])
                         continue
                     runs.append(run_task(task, c.factory, label=c.label, params=c.params))
                 elif task.input == (commanded_input(c.factory) if c.factory is not None else "torque"):
                     folder = (workdir or Path(tmp)) / "ros" / f"{task.name}_{safe_name(c.label)}"
                     runs.append(run_ros_task(task, c.ros_executable, folder, label=c.label, params=c.params))
     return runs
+
+
+def _swept(task: Task, controllers: Sequence[ControllerSpec]) -> dict[str, TaskRun]:
+    """The runs of `task` that the compiled gain sweep takes, by label: every factory with more than
+    one column (offline) whose task the kernel steps (`batch.batch_reason`)."""
+    groups: dict[Factory, list[ControllerSpec]] = {}
+    for c in controllers:
+        if c.ros_executable is None and c.factory is not None:
+            groups.setdefault(c.factory, []).append(c)
+    out: dict[str, TaskRun] = {}
+    for factory, columns in groups.items():
+        if len(columns) > 1 and batch.batch_reason(task, factory) is None:
+            runs = batch.run_task_rows(task, factory, [(c.label, c.params) for c in columns])
+            out.update({r.controller: r for r in runs})
+    return out
 
 
 def write_report(runs: Sequence[TaskRun], tasks: Sequence[Task], out: Path, *, figures: bool = True,
