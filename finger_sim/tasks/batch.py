@@ -17,6 +17,7 @@ object with its own stiffness, no moving object). Other tasks run `run_task` row
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Mapping, Sequence
@@ -31,6 +32,7 @@ from finger_sim.integrators.dop853 import DormandPrince853
 from finger_sim.kernel.layout import CONTACT, HEADER
 from finger_sim.runtime.grip import PHASE_NUMBERS, GripController, GripSettings
 from finger_sim.runtime.parameters import ParameterError
+from finger_sim.scene import Scene
 from finger_sim.scene_changes import SceneChanges
 from finger_sim.simulate import Simulator
 from finger_sim.tasks import controllers
@@ -55,6 +57,17 @@ def batch_reason(task: Task, factory: Factory) -> str | None:
     return _sim_reason(SceneChanges(task.scene).sim)
 
 
+def rows_reason(tasks: Sequence[Task], factory: Factory) -> str | None:
+    """`batch_reason` for rows that are `tasks` (one per row: the same script, each its own scene),
+    or why they cannot be rows of one sweep (their steps, dt or tip-force switches differ)."""
+    first = tasks[0].scene
+    if any((t.scene.dt, t.scene.step_count, t.scene.tip_force_profile) !=
+           (first.dt, first.step_count, first.tip_force_profile) for t in tasks):
+        return "the rows' scenes differ in dt, duration or tip-force profile"
+    return next((r for r in (batch_reason(t, factory) for t in {id(t.scene): t for t in tasks}.values())
+                 if r is not None), None)
+
+
 def _sim_reason(sim: Simulator) -> str | None:
     integ = sim.integrator
     if sim._friction is not None or sim._timed:  # noqa: SLF001
@@ -69,19 +82,25 @@ def _sim_reason(sim: Simulator) -> str | None:
     return None
 
 
-def run_task_rows(task: Task, factory: Factory, columns: Sequence[tuple[str, Mapping[str, float]]]) -> list[TaskRun]:
-    """The TaskRun of every (label, params) column of `factory` on `task` (module docstring).
-    ConfigError when `batch_reason` is not None, or names a column's bad parameter."""
-    reason = batch_reason(task, factory)
+def run_task_rows(task: Task, factory: Factory, columns: Sequence[tuple[str, Mapping[str, float]]],
+                  scenes: Sequence[Scene] | None = None) -> list[TaskRun]:
+    """The TaskRun of every (label, params) column of `factory` on `task` (module docstring); with
+    `scenes`, column i runs on scenes[i] instead of the task's (object parameters swept; the
+    same dt, duration and tip-force profile). ConfigError when `rows_reason` is not None, or
+    names a column's bad parameter."""
+    scenes = [task.scene] * len(columns) if scenes is None else list(scenes)
+    if len(scenes) != len(columns):
+        raise ConfigError("scenes", f"one per column ({len(columns)})", len(scenes))
+    reason = rows_reason([dataclasses.replace(task, scene=s) for s in scenes], factory)
     if reason is not None:
         raise ConfigError(f"task '{task.name}'", "a task the compiled gain sweep steps", reason)
     from finger_sim.kernel import closed_loop as kl
 
-    scene, dt, last = task.scene, task.scene.dt, task.scene.step_count
+    dt, last = task.scene.dt, task.scene.step_count
     period = task.sample_steps * dt
     laws = [_law(factory, period, params) for _, params in columns]
     nrow = len(columns)
-    changes = [SceneChanges(scene) for _ in range(nrow)]
+    changes = [SceneChanges(s) for s in scenes]
     rows = [_Row(c.sim) for c in changes]
     width = max(len(r.model) for r in rows)
     ncand = max(1, max(len(r.depths) for r in rows))

@@ -19,11 +19,13 @@ from finger_sim.errors import ConfigError
 from finger_sim.kernel import closed_loop
 from finger_sim.runtime import grip
 from finger_sim.simulate import Simulator
+from finger_sim.tasks import batch
 from finger_sim.tasks.batch import batch_reason, run_task_rows
 from finger_sim.tasks.controllers import grip_pi, grip_pi_aggressive, grip_voltage
 from finger_sim.tasks.report import to_json
 from finger_sim.tasks.runner import COLUMNS, run_task
 from finger_sim.tasks.schema import load_task
+from finger_sim.tasks.suite import parse_controllers, run_suite, with_scene_keys
 
 TASKS = Path(__file__).resolve().parents[2] / "config" / "tasks"
 #: A gain grid around the shipped PI (kp N·m/N, ki N·m/(N·s)): slow, shipped and overshooting on the soft side.
@@ -117,3 +119,26 @@ def test_tasks_the_kernel_cannot_step_say_why_and_the_suite_runs_them_one_by_one
     refs = [run_task(load_task(TASKS / f"{d['task']}.yaml"), grip_pi, label=d["controller"],
                      params={"ki": float(d["controller"][-2])}) for d in data]
     assert data == json.loads(to_json(refs))
+
+
+def test_object_parameters_swept_with_the_gains_equal_the_offline_runs():
+    """--vary scene.KEY: the egg's break force and the contact stiffness, swept with ki: each column
+    on its own scene, rows of one kernel loop, each equal to run_task on that scene."""
+    fragile, cup = load_task(TASKS / "fragile.yaml"), load_task(TASKS / "hold_cup.yaml")
+    specs = parse_controllers(["hot=finger_sim.tasks.controllers:grip_pi_aggressive"], [],
+                              ["scene.objects.0.break_force=0.65,0.9", "ki=4,20"])
+    assert [c.label for c in specs][:2] == ["hot[scene.objects.0.break_force=0.65,ki=4]",
+                                            "hot[scene.objects.0.break_force=0.65,ki=20]"]
+    stiff = parse_controllers(["pi=finger_sim.tasks.controllers:grip_pi"], [],
+                              ["scene.model.contact.stiffness=5e4,2e5", "kp=0.0025,0.01"])
+    for task, columns in ((fragile, specs), (cup, stiff)):
+        assert batch.rows_reason([with_scene_keys(task, c.scene_keys) for c in columns], columns[0].factory) is None
+        runs = run_suite([task], columns)
+        refs = [run_task(with_scene_keys(task, c.scene_keys), c.factory, label=c.label, params=c.params)
+                for c in columns]
+        for row, ref in zip(runs, refs, strict=True):
+            assert_same_run(row, ref)
+        if task is fragile:  # the stronger egg survives the hits that break the weaker one
+            assert [bool(r.crushes) for r in runs] == [True, True, False, False]
+    with pytest.raises(ConfigError, match="scene.objects.5"):
+        run_suite([fragile], parse_controllers([], [], ["scene.objects.5.break_force=1,2"]))
