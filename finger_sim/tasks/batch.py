@@ -64,8 +64,13 @@ def rows_reason(tasks: Sequence[Task], factory: Factory) -> str | None:
     if any((t.scene.dt, t.scene.step_count, t.scene.tip_force_profile) !=
            (first.dt, first.step_count, first.tip_force_profile) for t in tasks):
         return "the rows' scenes differ in dt, duration or tip-force profile"
-    return next((r for r in (batch_reason(t, factory) for t in {id(t.scene): t for t in tasks}.values())
-                 if r is not None), None)
+    distinct = list({id(t.scene): t for t in tasks}.values())
+    reason = next((r for r in (batch_reason(t, factory) for t in distinct) if r is not None), None)
+    if reason is None:
+        integrators = [SceneChanges(t.scene).sim.integrator for t in distinct]
+        if len({(i.rtol, i.atol) for i in integrators if isinstance(i, DormandPrince853)}) > 1:
+            return "the rows' scenes differ in DOP853's tolerances"
+    return reason
 
 
 def _sim_reason(sim: Simulator) -> str | None:

@@ -126,7 +126,7 @@ def test_object_parameters_swept_with_the_gains_equal_the_offline_runs():
     on its own scene, rows of one kernel loop, each equal to run_task on that scene."""
     fragile, cup = load_task(TASKS / "fragile.yaml"), load_task(TASKS / "hold_cup.yaml")
     specs = parse_controllers(["hot=finger_sim.tasks.controllers:grip_pi_aggressive"], [],
-                              ["scene.objects.0.break_force=0.65,0.9", "ki=4,20"])
+                              ["scene.objects.0.break_force=0.65,2.5", "ki=4,20"])
     assert [c.label for c in specs][:2] == ["hot[scene.objects.0.break_force=0.65,ki=4]",
                                             "hot[scene.objects.0.break_force=0.65,ki=20]"]
     stiff = parse_controllers(["pi=finger_sim.tasks.controllers:grip_pi"], [],
