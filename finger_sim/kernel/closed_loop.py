@@ -5,8 +5,8 @@ it with the shipped grip PI (`grip_pi`), nothing per step in Python:
 
 - the script: the setpoint schedule (set_k, set_v: step, N) in force at each step;
 - the controller: at every `sample_steps`-th step the law's state is advanced by the law itself,
-  compiled (`runtime.grip.grip_setpoint`, `grip_update`, `pi_update`: the plain functions that
-  `GripController` calls) on the grip force measured at the step's start; its command acts from
+  compiled (`grip_law.grip_setpoint`, `grip_update`, `pi_update`: the plain functions that
+  `runtime.grip.GripController` calls) on the grip force measured at the step's start; its command acts from
   `delay_steps` steps later and is held (a ring buffer of pending commands);
 - the step: what `Simulator.step` does under the held command with the method `auto` picks on
   these scenes, DOP853 (`integrators.dop853.DormandPrince853.step`: its internal solution
@@ -48,7 +48,7 @@ from finger_sim.integrators import dop853  # noqa: E402
 from finger_sim.inputs import HELD_ARRAY  # noqa: E402
 from finger_sim.kernel.numerics import (ERROR_EXPONENT, JIT, LAW, MAX_FACTOR, MIN_FACTOR, OK, SAFETY,  # noqa: E402
                                         _profile_step, _rhs, compiled, dop853_attempt, dop853_output)
-from finger_sim.runtime import grip  # noqa: E402
+from finger_sim import grip_law as grip  # noqa: E402
 
 #: A row's status after `run` (module docstring).
 DONE, EVENT, WATCH, PAUSE = 0, 1, 2, 3
@@ -77,7 +77,7 @@ MIN_STEP_ULPS = 10.0
 
 PARALLEL = {**JIT, "parallel": True}
 
-#: The laws compiled from their one definition (`finger_sim.runtime.grip`).
+#: The laws compiled from their one definition (`finger_sim.grip_law`).
 pi_update = njit(**LAW)(grip.pi_update)
 grip_setpoint = njit(**LAW)(grip.grip_setpoint)
 grip_update = compiled(grip.grip_update, pi_update=pi_update)

@@ -17,7 +17,7 @@ import pytest
 from finger_sim.cli import main
 from finger_sim.errors import ConfigError
 from finger_sim.kernel import closed_loop
-from finger_sim.runtime import grip
+from finger_sim import grip_law as grip
 from finger_sim.simulate import Simulator
 from finger_sim.tasks import batch
 from finger_sim.tasks.batch import batch_reason, run_task_rows
