@@ -540,7 +540,8 @@ def build_parser() -> argparse.ArgumentParser:
     tasks.add_argument("--param", action="append", default=[], metavar="LABEL.key=value",
                        help="a keyword argument of a controller's factory, e.g. grip_pi.kp=0.01")
     tasks.add_argument("--vary", action="append", default=[], metavar="key=v1,v2,...",
-                       help="run the first controller over the product of these parameter values (a gain sweep)")
+                       help="run the first controller over the product of these parameter values (a gain sweep); "
+                            "scene.KEY sets a dotted scene key of the tasks (e.g. scene.objects.0.break_force)")
     tasks.add_argument("--chunk", default="1/1", metavar="i/n",
                        help="run only the i-th of n equal slices of the controllers (as `sweep --chunk`); default 1/1")
     tasks.add_argument("--out", type=Path, default=Path("out/tasks"), help="folder for report.md, metrics.json, figures")

@@ -12,6 +12,7 @@ Prints one line: what was warmed and how long it took.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from pathlib import Path
 
@@ -33,6 +34,9 @@ def warm() -> list[str]:
     from finger_sim.rollouts import rollout
     from finger_sim.errors import StabilityError
     from finger_sim.simulate import Simulator, simulate
+    from finger_sim.tasks.batch import run_task_rows
+    from finger_sim.tasks.controllers import grip_pi
+    from finger_sim.tasks.schema import load_task
 
     done = []
     for name in SCENES:
@@ -53,7 +57,10 @@ def warm() -> list[str]:
     run_batch([paper.with_overrides(method="euler")])  # a row of the batch's event-checked loop (run_rows)
     rollout(paper, nstep=STEPS)
     rollout(paper, control=np.zeros((2, STEPS)))
-    return [*done, "batch", "rollout"]
+    hold = load_task(CONFIG / "tasks" / "hold_cup.yaml")
+    hold = dataclasses.replace(hold, scene=hold.scene.with_overrides(duration=STEPS * hold.scene.dt))
+    run_task_rows(hold, grip_pi, [("a", {}), ("b", {"ki": 2.0})])  # the gain sweep's closed loop
+    return [*done, "batch", "rollout", "task sweep"]
 
 
 def main() -> None:

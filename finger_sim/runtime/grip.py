@@ -26,6 +26,8 @@ from dataclasses import dataclass
 from enum import Enum
 from typing import Any
 
+from finger_sim.grip_law import (CLOSING, HOLDING, IDLE, MAX_SAMPLE_GAP, OPENING, grip_setpoint,  # noqa: F401
+                                 grip_update, pi_update)
 from finger_sim.runtime.parameters import Param, ParameterError, check_all
 
 #: Gains tuned on grasp_cylinder (the cup, k_c = 1e5 N/m^1.5, joint damping 0.005 N·m·s/rad).
@@ -53,9 +55,6 @@ OPENING_TIME = 0.2
 #: The time between two grip_force samples when no /clock tells it, s: finger_node's default 1 kHz.
 SAMPLE_PERIOD = 0.001
 
-#: A longer time between two samples (a stalled controller, a lost sample) counts as this, s:
-#: the integral must not jump (at contact, 20 ms at once is 0.04 N·m on top of the impact).
-MAX_SAMPLE_GAP = 0.005
 
 #: finger_grip_controller's parameters (read once at start).
 GRIP_PARAMETERS = (
@@ -104,7 +103,7 @@ class GripSettings:
 
 
 class PiLaw:
-    """u = clamp(kp e + I, ±limit), I' = ki e, with clamping anti-windup (module docstring)."""
+    """u = clamp(kp e + I, ±limit), I' = ki e, with clamping anti-windup (`pi_update`)."""
 
     def __init__(self, kp: float, ki: float, limit: float) -> None:
         self.kp, self.ki, self.limit = kp, ki, limit
@@ -116,20 +115,19 @@ class PiLaw:
 
     def update(self, error: float, dt: float) -> float:
         """The output (N·m) for the error `error` (N) over the last `dt` s."""
-        trial = self.integral + self.ki * error * dt
-        # The integral moves towards `trial`, but not past the value that puts the output on the
-        # limit the error pushes towards, and never further out once it is there (frozen).
-        if error > 0.0:
-            trial = min(trial, max(self.integral, self.limit - self.kp * error))
-        elif error < 0.0:
-            trial = max(trial, min(self.integral, -self.limit - self.kp * error))
-        self.reset(trial)
-        u = self.kp * error + self.integral
-        return min(max(u, -self.limit), self.limit)
+        self.integral, u = pi_update(self.integral, error, dt, self.kp, self.ki, self.limit)
+        return u
+
+
+#: Phase of each number of `grip_update`.
+_PHASES = {IDLE: Phase.IDLE, CLOSING: Phase.CLOSING, HOLDING: Phase.HOLDING, OPENING: Phase.OPENING}
+#: The number of each Phase (`grip_update`).
+PHASE_NUMBERS = {phase: number for number, phase in _PHASES.items()}
 
 
 class GripController:
-    """Close until contact, hold the grip force at the setpoint with PiLaw, open on 0 (module docstring)."""
+    """Close until contact, hold the grip force at the setpoint with the PI law, open on 0
+    (module docstring; the sequence is `grip_setpoint` and `grip_update`)."""
 
     def __init__(self, settings: GripSettings) -> None:
         self.settings = s = settings
@@ -145,26 +143,16 @@ class GripController:
         if not (math.isfinite(value) and value >= 0.0):
             raise ValueError(f"grip setpoint: expected a finite force ≥ 0 N, got {value!r}")
         self.setpoint = value
-        if value > 0.0 and self.phase in (Phase.IDLE, Phase.OPENING):
-            self.phase = Phase.CLOSING
-        elif value == 0.0 and self.phase in (Phase.CLOSING, Phase.HOLDING):
-            self.phase, self._opening_left = Phase.OPENING, self.settings.opening_time
+        phase, self._opening_left = grip_setpoint(PHASE_NUMBERS[self.phase], self._opening_left, value,
+                                                  self.settings.opening_time)
+        self.phase = _PHASES[phase]
 
     def update(self, grip_force: float, dt: float) -> float:
         """The motor torque (N·m) answering the grip force `grip_force` (N), `dt` s after the last
         sample (at most MAX_SAMPLE_GAP counts)."""
         s = self.settings
-        dt = min(dt, MAX_SAMPLE_GAP)
-        if self.phase is Phase.CLOSING and grip_force > s.contact_threshold:
-            self.phase = Phase.HOLDING
-            self.pi.reset(s.closing_torque - s.kp * (self.setpoint - grip_force))  # bumpless
-        if self.phase is Phase.CLOSING:
-            return s.closing_torque
-        if self.phase is Phase.HOLDING:
-            return self.pi.update(self.setpoint - grip_force, dt)
-        if self.phase is Phase.OPENING:
-            self._opening_left -= dt
-            if self._opening_left > -0.5 * dt:  # the sample that ends the opening time still opens
-                return -s.opening_torque
-            self.phase = Phase.IDLE
-        return 0.0
+        phase, self.pi.integral, self._opening_left, u = grip_update(
+            PHASE_NUMBERS[self.phase], self.pi.integral, self._opening_left, self.setpoint, grip_force, dt,
+            s.kp, s.ki, s.max_torque, s.closing_torque, s.contact_threshold, s.opening_torque)
+        self.phase = _PHASES[phase]
+        return u

@@ -9,11 +9,15 @@ through finger_node in lockstep (`finger_sim.tasks.ros_runner`; its --param valu
 node's parameters): an executable (a torque controller such as finger_grip_controller), or a
 `module:callable` run as a node by finger_task_controller (a voltage controller runs the drive tasks). `--vary` (repeatable) runs the first controller over
 the Cartesian product of the given parameter values (a gain sweep), each combination one more
-controller column, scored the same way. The exit status is 1 when any run fails a task.
+controller column, scored the same way; a key `scene.KEY` sets the dotted scene key KEY of every
+task instead (an object's parameter: `scene.objects.0.break_force`, `scene.model.contact.stiffness`); on the tasks the kernel steps, the shipped grip PI's
+columns run together in one compiled loop (`finger_sim.tasks.batch`, the same runs bit for bit).
+The exit status is 1 when any run fails a task.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import datetime
 import itertools
 import tempfile
@@ -22,15 +26,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from finger_sim.errors import ConfigError
-from finger_sim.scene import safe_name
+from finger_sim.scene import safe_name, scene_from_dict
 from finger_sim.scene_paths import scene_dirs
 from finger_sim.scene_yaml import parse_scene_text
-from finger_sim.sweep import chunk_range, parse_chunk
-from finger_sim.tasks import report
+from finger_sim.sweep import chunk_range, parse_chunk, set_key
+from finger_sim.tasks import batch, report
 from finger_sim.tasks.controllers import Factory, commanded_input, load_factory
 from finger_sim.tasks.ros_runner import run_ros_task
 from finger_sim.tasks.runner import TaskRun, run_task
 from finger_sim.tasks.schema import Task, load_task
+
+#: A --vary key with this prefix sets a scene key of the tasks, not a controller parameter.
+SCENE_PREFIX = "scene."
 
 #: The controllers a suite runs when none is named: the shipped PI and its overshooting variant.
 DEFAULT_CONTROLLERS = ("grip_pi=finger_sim.tasks.controllers:grip_pi",
@@ -46,6 +53,9 @@ class ControllerSpec:
     factory: Factory | None
     params: dict[str, float] = field(default_factory=dict)
     ros_executable: str | None = None  # a ROS 2 controller node instead of a factory
+    #: dotted scene keys (as `sweep --vary` takes them, without the SCENE_PREFIX) → values set in
+    #: every task's scene for this column (an object's break_force, the contact stiffness, ...)
+    scene_keys: dict[str, float] = field(default_factory=dict)
 
 
 def installed_tasks() -> list[Path]:
@@ -90,10 +100,16 @@ def parse_controllers(specs: Sequence[str], params: Sequence[str], vary: Sequenc
         for item in vary:
             name, sep, values = item.partition("=")
             if not (sep and name and values):
-                raise ConfigError("--vary", "key=v1,v2,... (a parameter of the first controller)", item)
+                raise ConfigError("--vary", "key=v1,v2,... (a parameter of the first controller, or scene.KEY: "
+                                  "a dotted key of the tasks' scenes)", item)
             axes.append([(name, _number(v, f"--vary {name}")) for v in values.split(",")])
+        if base.ros_executable is not None and any(name.startswith(SCENE_PREFIX) for name, _ in itertools.chain(*axes)):
+            raise ConfigError("--vary", "controller parameters only with a ROS controller", "a scene. key")
         out = [ControllerSpec(base.label + "[" + ",".join(f"{k}={v:g}" for k, v in combo) + "]", base.factory,
-                              {**base.params, **dict(combo)}, base.ros_executable) for combo in itertools.product(*axes)]
+                              {**base.params, **{k: v for k, v in combo if not k.startswith(SCENE_PREFIX)}},
+                              base.ros_executable,
+                              {k.removeprefix(SCENE_PREFIX): v for k, v in combo if k.startswith(SCENE_PREFIX)})
+               for combo in itertools.product(*axes)]
     return out
 
 
@@ -109,20 +125,58 @@ def chunk_of(controllers: Sequence[ControllerSpec], chunk: str) -> list[Controll
 def run_suite(tasks: Sequence[Task], controllers: Sequence[ControllerSpec], workdir: Path | None = None) -> list[TaskRun]:
     """Every task against every controller that commands its input, task by task (a torque
     controller skips a drive task, a voltage controller the others); a ROS controller's files (scene, logs,
-    node output) go to `workdir`/ros/<task>_<label>/ (default: a temporary folder)."""
+    node output) go to `workdir`/ros/<task>_<label>/ (default: a temporary folder). Several columns
+    of the shipped grip PI (a gain sweep) on a task the kernel steps run together there
+    (`finger_sim.tasks.batch`: the same runs bit for bit); the others one by one."""
     runs = []
     with tempfile.TemporaryDirectory(prefix="finger_tasks_") as tmp:
         for task in tasks:
+            swept = _swept(task, controllers)
             for c in controllers:
                 if c.ros_executable is None:
                     assert c.factory is not None
                     if commanded_input(c.factory) != task.input:
                         continue
-                    runs.append(run_task(task, c.factory, label=c.label, params=c.params))
+                    if c.label in swept:
+                        runs.append(swept[c.label])
+                        continue
+                    runs.append(run_task(with_scene_keys(task, c.scene_keys), c.factory, label=c.label,
+                                         params=c.params))
                 elif task.input == (commanded_input(c.factory) if c.factory is not None else "torque"):
                     folder = (workdir or Path(tmp)) / "ros" / f"{task.name}_{safe_name(c.label)}"
                     runs.append(run_ros_task(task, c.ros_executable, folder, label=c.label, params=c.params))
     return runs
+
+
+def _swept(task: Task, controllers: Sequence[ControllerSpec]) -> dict[str, TaskRun]:
+    """The runs of `task` that the compiled gain sweep takes, by label: every factory with more than
+    one column (offline) whose task the kernel steps (`batch.batch_reason`)."""
+    groups: dict[Factory, list[ControllerSpec]] = {}
+    for c in controllers:
+        if c.ros_executable is None and c.factory is not None:
+            groups.setdefault(c.factory, []).append(c)
+    out: dict[str, TaskRun] = {}
+    for factory, columns in groups.items():
+        tasks = [with_scene_keys(task, c.scene_keys) for c in columns]
+        if len(columns) > 1 and batch.rows_reason(tasks, factory) is None:
+            runs = batch.run_task_rows(task, factory, [(c.label, c.params) for c in columns],
+                                       scenes=[t.scene for t in tasks])
+            out.update({r.controller: r for r in runs})
+    return out
+
+
+def with_scene_keys(task: Task, keys: dict[str, float]) -> Task:
+    """`task` with the dotted scene keys set in its scene (`sweep.set_key`; ConfigError names a bad one)."""
+    if not keys:
+        return task
+    data = task.scene.to_dict()
+    try:
+        for key, value in keys.items():
+            set_key(data, key, value)
+        return dataclasses.replace(task, scene=scene_from_dict(data))
+    except ConfigError as exc:
+        raise ConfigError(f"--vary {SCENE_PREFIX}{exc.key.removeprefix('--vary ')} (task '{task.name}')", exc.allowed,
+                          exc.got) from None
 
 
 def write_report(runs: Sequence[TaskRun], tasks: Sequence[Task], out: Path, *, figures: bool = True,

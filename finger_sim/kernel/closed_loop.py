@@ -1,0 +1,346 @@
+"""The grip PI's closed loop in the kernel: many runs of one task (gains, settings) in one call.
+
+`run` steps every row i of a task from steps[i] on, as `finger_sim.tasks.runner.run_task` steps
+it with the shipped grip PI (`grip_pi`), nothing per step in Python:
+
+- the script: the setpoint schedule (set_k, set_v: step, N) in force at each step;
+- the controller: at every `sample_steps`-th step the law's state is advanced by the law itself,
+  compiled (`grip_law.grip_setpoint`, `grip_update`, `pi_update`: the plain functions that
+  `runtime.grip.GripController` calls) on the grip force measured at the step's start; its command acts from
+  `delay_steps` steps later and is held (a ring buffer of pending commands);
+- the step: what `Simulator.step` does under the held command with the method `auto` picks on
+  these scenes, DOP853 (`integrators.dop853.DormandPrince853.step`: its internal solution
+  continued while the command is unchanged, else restarted; `_advance`'s step-size control;
+  the projected dense output at the step's end), on the compiled attempt it calls
+  (`numerics.dop853_attempt`); or, on a scene without contact (a row whose only object was
+  crushed, free space), the lean step `Simulator.step` takes there with auto's fixed-step method
+  (`numerics._profile_step` under the held command, tableau `tab`);
+- the grip force after the step (`Contact.outputs`' Σ F_n), measured at the next sample.
+
+The contact geometry here (`contact_states`) is `Contact._hits` with `gaps`, `gap_gradient` and
+`_forces` in their order and arithmetic (sqrt, not hypot), so every decision the Simulator takes
+on the gaps (whether a step may hold a crossing) is taken here on the same numbers. The internal
+solution's state is kept per row (`INTEGRATOR`, and y, f, y_old, dense), handed to the row's
+Simulator and read back from it around every step that Python takes (`finger_sim.tasks.batch`).
+
+A row stops and hands over to Python (its status) where the Simulator or the scene must act:
+EVENT, before a step that may hold a contact onset or release or a depth crossing, that fails,
+or that needs DOP853's first internal step (the Simulator locates, raises or starts; the row's
+pre-step part, sample and record, is done; its state and internal solution are those before the step); WATCH,
+after a step whose grip force exceeds the row's smallest break force (the crush rule decides);
+PAUSE, at until[i] (a tip-force switch: the scene changes); DONE, at the last step.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from finger_sim.kernel import use_writable_cache
+
+use_writable_cache()  # before numba reads NUMBA_CACHE_DIR
+from numba import njit, prange  # noqa: E402  (after the cache folder is set)
+
+from finger_sim.effects.contact import MIN_DISTANCE  # noqa: E402
+from finger_sim.kernel.event_checks import EVENT_TOLERANCE, predicted_crossing  # noqa: E402
+from finger_sim.integrators import dop853  # noqa: E402
+from finger_sim.inputs import HELD_ARRAY  # noqa: E402
+from finger_sim.kernel.numerics import (ERROR_EXPONENT, JIT, LAW, MAX_FACTOR, MIN_FACTOR, OK, SAFETY,  # noqa: E402
+                                        _profile_step, _rhs, compiled, dop853_attempt, dop853_output)
+from finger_sim import grip_law as grip  # noqa: E402
+
+#: A row's status after `run` (module docstring).
+DONE, EVENT, WATCH, PAUSE = 0, 1, 2, 3
+#: The columns of `run`'s record, as `finger_sim.tasks.runner.COLUMNS`.
+T, GRIP, SETPOINT, THETA1, THETA1_DOT, COMMAND, TIP_X, TIP_Y, CRUSHED = range(9)
+#: The controller settings per row, in this order (GripSettings' names).
+GAINS = ("kp", "ki", "max_torque", "closing_torque", "contact_threshold", "opening_torque", "opening_time")
+#: The controller state per row, in this order: phase (grip.IDLE …), integral N·m, opening time
+#: left s, the law's setpoint N.
+PHASE, INTEGRAL, OPENING_LEFT, LAW_SETPOINT = range(4)
+
+#: DOP853's internal solution per row, these scalars in this order: its time, next step, the last
+#: accepted step's start and length (s), the held command it was computed under (N·m; NaN: none,
+#: restart), whether the last output is the row's state (1/0) and its time (s), and whether the
+#: solution's origin is the row's state (1/0: `DormandPrince853.step`'s first branch).
+INTEGRATOR = ("t", "h", "t_old", "h_old", "value", "continues", "last_t", "origin")
+I_T, I_H, I_T_OLD, I_H_OLD, I_VALUE, I_CONTINUES, I_LAST_T, I_ORIGIN = range(len(INTEGRATOR))
+#: A row's DOP853 continues its last output within this fraction of a step (`DormandPrince853.step`).
+LAST_OUTPUT_SLACK = 1e-9
+#: scipy's DOP853 coefficients, as `DormandPrince853` passes them.
+A, B, C, E3, E5, D = dop853._A, dop853._B, dop853._C, dop853._E3, dop853._E5, dop853._D
+N_NODES, N_STAGES = len(dop853._NODES), dop853._N_STAGES
+MAX_ATTEMPTS, MAX_STEP = dop853.MAX_ATTEMPTS, dop853.MAX_STEP
+#: An internal step below this many ulps of t fails (`DormandPrince853._advance`).
+MIN_STEP_ULPS = 10.0
+
+PARALLEL = {**JIT, "parallel": True}
+
+#: The laws compiled from their one definition (`finger_sim.grip_law`).
+pi_update = njit(**LAW)(grip.pi_update)
+grip_setpoint = njit(**LAW)(grip.grip_setpoint)
+grip_update = compiled(grip.grip_update, pi_update=pi_update)
+
+
+@njit(**JIT)
+def contact_states(m, o, x, gaps, rates):
+    """Every contact candidate's gap −δ (m) and rate (m/s) at the state x (q, q') into gaps and
+    rates, as the Simulator reads them (`Contact.gaps`; ∂gap/∂q · q' from `Contact.gap_gradient`);
+    returns (count, grip force Σ F_n over the candidates in contact, N: `Contact.outputs`).
+    o: where the contact element's parameters start in the model m (`Contact.kernel_params`)."""
+    r1, l3, alpha = m[o], m[o + 1], m[o + 2]
+    k, e, dd = m[o + 3], m[o + 4], m[o + 5]
+    n_prox, n_dist, n_ends, n_tips = int(m[o + 8]), int(m[o + 9]), int(m[o + 10]), int(m[o + 11])
+    q0, q1, q2, v0, v1, v2 = x[0], x[1], x[2], x[3], x[4], x[5]
+    j = o + 12
+    c1, s1 = math.cos(q0), math.sin(q0)
+    bx, by = r1 * c1, r1 * s1
+    psi = q2 + alpha
+    ux, uy = math.cos(psi), math.sin(psi)
+    grip_force = 0.0
+    i = 0
+    for kind in range(4):
+        count = n_prox if kind == 0 else (n_dist if kind == 1 else (n_ends if kind == 2 else n_tips))
+        for _ in range(count):
+            if kind == 0:  # a circle on the proximal phalanx: p = s B
+                cx, cy, rad = m[j], m[j + 1], m[j + 2]
+                j += 3
+                s = (cx * bx + cy * by) / (r1 * r1)
+                s = 0.0 if s < 0.0 else (1.0 if s > 1.0 else s)
+                px, py = s * bx, s * by
+                dx, dy = px - cx, py - cy
+                dist = math.sqrt(dx * dx + dy * dy)
+                d = rad - dist
+                if dist > MIN_DISTANCE:
+                    nx, ny = dx / dist, dy / dist
+                else:
+                    nx, ny = -s1, c1
+                j1x, j1y, j3x, j3y = -s * by, s * bx, 0.0, 0.0
+            elif kind == 1:  # a circle on the distal phalanx: p = B + ℓ e(ψ)
+                cx, cy, rad = m[j], m[j + 1], m[j + 2]
+                j += 4
+                dx, dy = cx - bx, cy - by
+                ell = dx * ux + dy * uy
+                ell = 0.0 if ell < 0.0 else (l3 if ell > l3 else ell)
+                px, py = bx + ell * ux, by + ell * uy
+                dx, dy = px - cx, py - cy
+                dist = math.sqrt(dx * dx + dy * dy)
+                d = rad - dist
+                if dist > MIN_DISTANCE:
+                    nx, ny = dx / dist, dy / dist
+                else:
+                    nx, ny = -uy, ux
+                j1x, j1y, j3x, j3y = -by, bx, -ell * uy, ell * ux
+            elif kind == 2:  # a plane against the joint B
+                ox, oy, nx, ny, rho = m[j], m[j + 1], m[j + 2], m[j + 3], m[j + 4]
+                j += 5
+                d = rho - (nx * (bx - ox) + ny * (by - oy))
+                j1x, j1y, j3x, j3y = -by, bx, 0.0, 0.0
+            else:  # a plane against the fingertip
+                ox, oy, nx, ny, rho = m[j], m[j + 1], m[j + 2], m[j + 3], m[j + 4]
+                j += 6
+                px, py = bx + l3 * ux, by + l3 * uy
+                d = rho - (nx * (px - ox) + ny * (py - oy))
+                j1x, j1y, j3x, j3y = -by, bx, -l3 * uy, l3 * ux
+            gaps[i] = -d
+            g0, g1, g2 = nx * j1x + ny * j1y, 0.0, nx * j3x + ny * j3y
+            rates[i] = g0 * v0 + g1 * v1 + g2 * v2
+            if d > 0.0:
+                vx, vy = j1x * v0 + j3x * v2, j1y * v0 + j3y * v2
+                fn = k * d**e * (1.0 - dd * (nx * vx + ny * vy))
+                grip_force += fn if fn > 0.0 else 0.0
+            i += 1
+    return i, grip_force
+
+
+@njit(**JIT)
+def may_cross(g0, r0, g1, r1, h):
+    """Whether the Simulator looks for a crossing of a gap (g0, r0) → (g1, r1) over a step of h s
+    and may find one (`Simulator._first_crossing` and `_bracket`'s first tests): then the step is
+    the Simulator's to take."""
+    if min(g0, g1) > h * (abs(r0) + abs(r1)):
+        return False
+    closed = g0 < -EVENT_TOLERANCE
+    if (g1 < -EVENT_TOLERANCE) != closed:
+        return True
+    return predicted_crossing(g0, r0, g1, r1, h, closed) is not None
+
+
+@njit(**JIT)
+def _advance(m, rtol, atol, st, y, f, y_old, dense, kk, y_new, taus):
+    """One accepted internal step from st[I_T]: `DormandPrince853._advance`. False if it fails."""
+    t, h = st[I_T], st[I_H]
+    rejected = False
+    for _ in range(MAX_ATTEMPTS):
+        if h < MIN_STEP_ULPS * abs(np.nextafter(t, np.inf) - t):
+            return False
+        norm = dop853_attempt(m, A, B, C, E3, E5, D, t, y, f, h, taus, rtol, atol, kk, y_new, dense)
+        if norm < 1.0:
+            factor = MAX_FACTOR if norm == 0.0 else min(MAX_FACTOR, SAFETY * norm**ERROR_EXPONENT)
+            st[I_T_OLD], st[I_H_OLD] = t, h
+            y_old[:] = y
+            y[:] = y_new
+            f[:] = kk[N_STAGES]
+            st[I_T] = t + h
+            st[I_H] = min(MAX_STEP, h * (min(1.0, factor) if rejected else factor))
+            return True
+        h *= max(MIN_FACTOR, SAFETY * norm**ERROR_EXPONENT) if math.isfinite(norm) else MIN_FACTOR
+        rejected = True
+    return False
+
+
+@njit(**JIT)
+def _dop853_step(m, rtol, atol, t, dt, command, x, st, y, f, y_old, dense, kk, y_new, taus, out):
+    """`DormandPrince853.step(t, q, q', dt, held command)` on x = (q, q') in place. False where
+    Python must take it (its first internal step, a failure); st, y, f, y_old, dense may then
+    have moved: the caller restores them."""
+    target = t + dt
+    same = st[I_VALUE] == command  # the Simulator's HeldTorque is the same object iff the value is
+    if same and st[I_ORIGIN] == 1.0 and target >= t:
+        pass
+    elif same and st[I_CONTINUES] == 1.0 and abs(st[I_LAST_T] - t) <= LAST_OUTPUT_SLACK * dt and target >= st[I_T_OLD]:
+        pass
+    else:  # `_restart`
+        st[I_VALUE] = command
+        st[I_T] = st[I_T_OLD] = t
+        y[:] = x
+        _rhs(m, t, y, command, f)
+        if st[I_H] <= 0.0:
+            return False
+    for c in range(N_NODES):
+        taus[c] = command
+    while st[I_T] < target:
+        if not _advance(m, rtol, atol, st, y, f, y_old, dense, kk, y_new, taus):
+            return False
+    status, _, _ = dop853_output(m, st[I_T_OLD], st[I_H_OLD], y_old, dense, target, out)
+    if status != OK:
+        return False
+    x[:] = out
+    st[I_CONTINUES], st[I_LAST_T], st[I_ORIGIN] = 1.0, target, 0.0
+    return True
+
+
+@njit(**JIT)
+def _physics(m, o, lean, tab, depth, depths, rtol, atol, dt, k, command, x, st, y, f, y_old, dense, save, kk, y_new,
+             taus, out, ga, ra, gb, rb):
+    """Step k of one row under the held `command` (N·m) on x in place, as `Simulator.step` takes a
+    step that holds no event; returns (taken, grip force after it, N). Not taken: x and the
+    internal solution are left as at the step's start, for the Simulator. lean: the row steps
+    with the fixed-step method of tableau `tab` (no contact, no internal solution)."""
+    if lean:
+        save[0, :6] = x
+        status, _ = _profile_step(m, tab, HELD_ARRAY, command, k, dt, x, kk, taus)
+        if status != OK:
+            x[:] = save[0, :6]
+            return False, 0.0
+        return True, 0.0
+    t0, t1 = k * dt, (k + 1) * dt
+    h = t1 - t0
+    n = 0
+    if o >= 0:
+        n, _ = contact_states(m, o, x, ga, ra)
+    save[0, :6] = x
+    save[1, :8] = st
+    save[2, :6], save[3, :6], save[4, :6] = y, f, y_old
+    save[5:12, :6] = dense
+    taken = _dop853_step(m, rtol, atol, t0, h, command, x, st, y, f, y_old, dense, kk, y_new, taus, out)
+    grip_force = 0.0
+    if taken and o >= 0:
+        _, grip_force = contact_states(m, o, x, gb, rb)
+        for c in range(n):
+            if may_cross(ga[c], ra[c], gb[c], rb[c], h) or \
+                    (depth and may_cross(ga[c] + depths[c], ra[c], gb[c] + depths[c], rb[c], h)):
+                taken = False
+                break
+    if not taken:
+        x[:] = save[0, :6]
+        st[:] = save[1, :8]
+        y[:], f[:], y_old[:] = save[2, :6], save[3, :6], save[4, :6]
+        dense[:] = save[5:12, :6]
+    return taken, grip_force
+
+
+@njit(**PARALLEL)
+def run(models, contact_at, lean, tab, depth, depths, break_min, rtol, atol, dt, sample_steps, delay_steps, set_k, set_v,
+        gains, law, pend_k, pend_u, pend_n, command, states, grip_force, integ, ys, fs, y_olds, denses, steps, until,
+        last, scene_rec, record):
+    """Every row from steps[i] until its status (module docstring), in place.
+
+    models: (nbatch, L) each row's flat model (zero-padded); contact_at[i]: where its contact
+    parameters start (−1: no contact); lean[i]: the row steps with the fixed-step method of
+    tableau tab (`layout.tableau_array`), else with DOP853; depth[i], depths[i]: whether it checks depth gaps ρ − δ,
+    and each candidate's ρ (m); break_min[i]: the smallest break force of its objects (N; inf:
+    none watched); rtol, atol: DOP853's. dt s; sample_steps, delay_steps: the task's; set_k,
+    set_v: the setpoint schedule (step, N). gains: (nbatch, len(GAINS)); law: (nbatch, 4) the
+    law's state (PHASE …); pend_k, pend_u, pend_n: each row's pending commands (step they act
+    from, N·m), oldest first, and their count; command[i]: the held command; states: (nbatch, 6)
+    (q, q'); grip_force[i]: at the state; integ, ys, fs, y_olds, denses: each row's DOP853
+    internal solution (INTEGRATOR; 6, 6, 6, 7 × 6); steps[i]: the step to take next; until[i],
+    last: where to pause and end. scene_rec: (nbatch, 3) tip force x, y (N) and crushes so far,
+    recorded as they are; record: (nbatch, last + 1, 9) the run's samples. Returns each row's status.
+    """
+    nbatch = states.shape[0]
+    status = np.empty(nbatch, dtype=np.int64)
+    period = sample_steps * dt
+    for i in prange(nbatch):
+        status[i] = _row(models[i], contact_at[i], lean[i], tab, depth[i], depths[i], break_min[i], rtol, atol, dt, sample_steps,
+                         delay_steps, period, set_k, set_v, gains[i], law[i], pend_k[i], pend_u[i], pend_n, command,
+                         states[i], grip_force, integ[i], ys[i], fs[i], y_olds[i], denses[i], steps, until[i], last,
+                         scene_rec[i], record[i], i)
+    return status
+
+
+@njit(**JIT)
+def _row(m, o, lean, tab, depth, depths, break_min, rtol, atol, dt, sample_steps, delay_steps, period, set_k, set_v, gains,
+         law, pend_k, pend_u, pend_n, command, x, grip_force, st, y, f, y_old, dense, steps, until, last, scene_rec,
+         rec, i):
+    """One row of `run`: its status."""
+    kk, y_new, taus, out = np.empty((16, 6)), np.empty(6), np.empty(N_NODES), np.empty(6)
+    save = np.empty((12, 8))
+    cand = max(depths.shape[0], 1)
+    ga, ra, gb, rb = np.empty(cand), np.empty(cand), np.empty(cand), np.empty(cand)
+    kp, ki, max_torque, closing, threshold, opening, opening_time = (gains[0], gains[1], gains[2], gains[3],
+                                                                     gains[4], gains[5], gains[6])
+    k = steps[i]
+    while k < last:
+        if k == until:
+            steps[i] = k
+            return PAUSE
+        setpoint = 0.0
+        for n in range(set_k.shape[0]):  # the schedule's value in force at step k
+            if set_k[n] <= k:
+                setpoint = set_v[n]
+        if k % sample_steps == 0:
+            if setpoint != law[LAW_SETPOINT]:
+                phase, left = grip_setpoint(int(law[PHASE]), law[OPENING_LEFT], setpoint, opening_time)
+                law[PHASE], law[OPENING_LEFT], law[LAW_SETPOINT] = phase, left, setpoint
+            phase, integral, left, u = grip_update(int(law[PHASE]), law[INTEGRAL], law[OPENING_LEFT],
+                                                   law[LAW_SETPOINT], grip_force[i], period, kp, ki, max_torque,
+                                                   closing, threshold, opening)
+            law[PHASE], law[INTEGRAL], law[OPENING_LEFT] = phase, integral, left
+            pend_k[pend_n[i]], pend_u[pend_n[i]] = k + delay_steps, u
+            pend_n[i] += 1
+        due = 0
+        while due < pend_n[i] and pend_k[due] <= k:
+            command[i] = pend_u[due]
+            due += 1
+        if due:
+            for n in range(due, pend_n[i]):
+                pend_k[n - due], pend_u[n - due] = pend_k[n], pend_u[n]
+            pend_n[i] -= due
+        r = rec[k]
+        r[T], r[GRIP], r[SETPOINT], r[THETA1], r[THETA1_DOT] = k * dt, grip_force[i], setpoint, x[0], x[3]
+        r[COMMAND], r[TIP_X], r[TIP_Y], r[CRUSHED] = command[i], scene_rec[0], scene_rec[1], scene_rec[2]
+        taken, force = _physics(m, o, lean, tab, depth, depths, rtol, atol, dt, k, command[i], x, st, y, f, y_old, dense, save,
+                                kk, y_new, taus, out, ga, ra, gb, rb)
+        if not taken:
+            steps[i] = k
+            return EVENT
+        grip_force[i] = force
+        k += 1
+        if force > break_min:
+            steps[i] = k
+            return WATCH
+    steps[i] = k
+    return DONE
