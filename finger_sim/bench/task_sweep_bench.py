@@ -27,6 +27,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from finger_sim.effects.contact_outputs import GRIP_FORCE
 from finger_sim.tasks.batch import batch_reason
 from finger_sim.tasks.controllers import grip_pi
 from finger_sim.tasks.runner import TaskRun, run_task
@@ -61,7 +62,7 @@ def compare(name: str, tasks: Sequence[Task], specs: Sequence[ControllerSpec], r
     """Time both ways `repeats` times interleaved; print each repetition, the medians and ratios."""
     steps = sum(t.scene.step_count for t in tasks) * len(specs)
     loop_runs, sweep_runs = by_loop(tasks, specs), by_sweep(tasks, specs)  # warm-up (numba's cache, set-ups)
-    same = all(a.scores == b.scores and np.array_equal(a.samples["grip_force"], b.samples["grip_force"])
+    same = all(a.scores == b.scores and np.array_equal(a.samples[GRIP_FORCE.name], b.samples[GRIP_FORCE.name])
                for a, b in zip(loop_runs, sweep_runs, strict=True))
     print(f"\n{name}: {len(tasks)} task(s) × {len(specs)} gain pairs = {len(loop_runs)} runs, "
           f"{steps} finger-steps; sweep equals loop: {same}")

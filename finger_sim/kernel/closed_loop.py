@@ -92,7 +92,7 @@ def contact_states(m, o, x, gaps, rates):
     r1, l3, alpha = m[o], m[o + 1], m[o + 2]
     k, e, dd = m[o + 3], m[o + 4], m[o + 5]
     n_prox, n_dist, n_ends, n_tips = int(m[o + 8]), int(m[o + 9]), int(m[o + 10]), int(m[o + 11])
-    q0, q1, q2, v0, v1, v2 = x[0], x[1], x[2], x[3], x[4], x[5]
+    q0, q2, v0, v1, v2 = x[0], x[2], x[3], x[4], x[5]
     j = o + 12
     c1, s1 = math.cos(q0), math.sin(q0)
     bx, by = r1 * c1, r1 * s1

@@ -25,6 +25,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from finger_sim.effects.contact import Contact
+from finger_sim.effects.contact_outputs import GRIP_FORCE
 from finger_sim.errors import ConfigError, SimulationDiverged
 from finger_sim.grasp_objects import Crush
 from finger_sim.integrators.base import HeldTorque
@@ -141,7 +142,7 @@ def run_task_rows(task: Task, factory: Factory, columns: Sequence[tuple[str, Map
     for i, row in enumerate(rows):
         sim = changes[i].sim
         states[i] = (*sim.q, *sim.v)
-        grip[i] = _outputs(sim).get("grip_force", 0.0)
+        grip[i] = _outputs(sim).get(GRIP_FORCE.name, 0.0)
         scene_rec[i, :2] = sim.scene.tip_force
         row.load(i, models, contact_at, lean, depth, depths, break_min, changes[i])
         tab = _shared_tableau(tab, row)
@@ -170,7 +171,7 @@ def run_task_rows(task: Task, factory: Factory, columns: Sequence[tuple[str, Map
                 except SimulationDiverged:  # run_task's rule: the run stops, the task fails
                     stopped[i], ends[i], steps[i], until[i] = True, k, last, last
                     continue
-                grip[i] = _outputs(sim, float(command[i])).get("grip_force", 0.0)
+                grip[i] = _outputs(sim, float(command[i])).get(GRIP_FORCE.name, 0.0)
                 crushes[i] += ch.after_step()
                 steps[i] = k + 1
             else:  # WATCH: the crush rule on the state after the step
@@ -194,7 +195,7 @@ def run_task_rows(task: Task, factory: Factory, columns: Sequence[tuple[str, Map
             record[i, n] = (n * dt, grip[i], set_v[set_k <= n - 1][-1], states[i, 0], states[i, 3], command[i],
                             scene_rec[i, 0], scene_rec[i, 1], scene_rec[i, 2])
         samples = {name: np.ascontiguousarray(record[i, : n + 1, c]) for c, name in enumerate(COLUMNS)}
-        scores = task_scores(samples["t"], samples["grip_force"], grid, task.hold_after, bool(crushes[i]),
+        scores = task_scores(samples["t"], samples[GRIP_FORCE.name], grid, task.hold_after, bool(crushes[i]),
                              outputs={}, torque=(samples["command"], samples["theta1"]))
         passed = judge(scores, task.limits)
         if stopped[i]:
