@@ -126,10 +126,11 @@ def test_bad_arguments_name_the_argument_expected_and_got(kwargs, message):
     assert message in str(err.value)
 
 
-def test_lockstep_tiles_equal_simulate_bit_for_bit():
+def test_lockstep_tiles_equal_simulate_within_tolerance():
     # more rows than two lock-step tiles, every compiled law (spring, damping, gravity, tip force),
     # a sine input, and two element layouts (damping 0 drops the damper): each row is its
-    # scene's `simulate`, to the last bit
+    # scene's `simulate` within 1e-12 rad. Not bit for bit: the tiles take their sines and
+    # cosines from glibc's vector library (within 4 ulp, `kernel.vector_trig`), `simulate` from libm
     from finger_sim.kernel.rollout_loop import TILE
 
     base = {"model.gravity": [0.0, -9.81], "model.tip_force": [0.2, -0.1],
@@ -143,8 +144,12 @@ def test_lockstep_tiles_equal_simulate_bit_for_bit():
         ref = simulate(_scene("paper_flexion", **base, **{"model.damping": float(damping[i]),
                                                           "initial.theta1": start[i, 0],
                                                           "initial.theta1_dot": start[i, 1], "duration": 0.2}))
-        np.testing.assert_array_equal(res.q[i], ref.q, err_msg=f"row {i}")
-        np.testing.assert_array_equal(res.v[i], ref.v, err_msg=f"row {i}")
+        np.testing.assert_allclose(res.q[i], ref.q, rtol=0, atol=TOLERANCE, err_msg=f"row {i}")
+        # rates to 1e-12 of the run's largest (row 0, undamped, swings at 17 rad/s: a last-bit
+        # difference that moves the projection's stop by one Newton iteration, ~1e-14 rad, is
+        # carried at that speed)
+        rate_scale = max(1.0, float(np.abs(ref.v).max()))
+        np.testing.assert_allclose(res.v[i], ref.v, rtol=0, atol=TOLERANCE * rate_scale, err_msg=f"row {i}")
 
 
 def test_a_row_diverging_in_a_lockstep_tile_raises_what_the_simulator_raises():
