@@ -32,7 +32,7 @@ use_writable_cache()  # before numba reads NUMBA_CACHE_DIR
 from numba import njit, prange  # noqa: E402  (after the cache folder is set)
 
 from finger_sim.inputs import CONSTANT, HELD, RAMP, SINE  # noqa: E402
-from finger_sim.kernel.event_checks import kink, residual, stop_closed  # noqa: E402
+from finger_sim.kernel.event_checks import RATE_STEP, kink, residual, stop_closed  # noqa: E402
 from finger_sim.kernel.layout import DAMPING, GRAVITY, HEADER, NO_FORCE, SPRING, TIP_FORCE  # noqa: E402
 from finger_sim.kernel.numerics import (NON_FINITE, NOT_CONVERGED, OK, STATE_NON_FINITE, _profile_step,  # noqa: E402
                                         plan_parts, torque_at)
@@ -132,14 +132,19 @@ def _row(plan, prof, stop, limits, gaps, depth, x, step, last, max_res, traj, re
     s = tab.shape[1]
     work, taus = np.empty((max(s, 1), 6)), np.empty(max(s, 1))
     start = np.empty(6)
-    before, after, shifted, rates = np.empty(gaps), np.empty(gaps), np.empty(gaps), np.empty(gaps)
+    before, after, shifted = np.empty(gaps), np.empty(gaps), np.empty(gaps)
+    rates, rates_after = np.empty(gaps), np.empty(gaps)
+    known_eps = 0.0  # the rate step over which `before` and `rates` hold this step's start (0: not known)
     while step < last:
         start[:] = x
         code, _ = _profile_step(m, tab, prof, 0.0, step, dt, x, work, taus)
+        h = (step + 1) * dt - step * dt
         if code != OK or (stop and stop_closed(x, limits)) or \
-                (gaps > 0 and kink(m, start, x, (step + 1) * dt - step * dt, before, after, shifted, rates, depth)):
+                (gaps > 0 and kink(m, start, x, h, before, after, shifted, rates, rates_after, depth, known_eps)):
             x[:] = start
             return EVENT, step, max_res
+        if gaps > 0:  # this step's end is the next one's start
+            before, after, rates, rates_after, known_eps = after, before, rates_after, rates, RATE_STEP * h
         step += 1
         r = residual(m, x)
         if r > max_res:

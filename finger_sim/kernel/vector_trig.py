@@ -67,15 +67,22 @@ def _sincos_lanes(typingctx, src, sines, cosines, start):  # type: ignore[no-unt
 
 
 @njit(cache=True, nogil=True, inline="always")
-def sincos_row(src, sines, cosines, n):  # type: ignore[no-untyped-def]
-    """sines[:n], cosines[:n] = sin, cos of src[:n]; LANES at a time where the host allows (module docstring).
-
-    src, sines, cosines: contiguous float64 rows, rad."""
+def _vector_sincos_row(src, sines, cosines, n):  # type: ignore[no-untyped-def]
     i = 0
-    if LANES > 0:
-        while i + LANES <= n:
-            _sincos_lanes(src, sines, cosines, i)
-            i += LANES
+    while i + LANES <= n:
+        _sincos_lanes(src, sines, cosines, i)
+        i += LANES
     while i < n:
         sines[i], cosines[i] = math.sin(src[i]), math.cos(src[i])
         i += 1
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _scalar_sincos_row(src, sines, cosines, n):  # type: ignore[no-untyped-def]
+    for i in range(n):
+        sines[i], cosines[i] = math.sin(src[i]), math.cos(src[i])
+
+
+#: sines[:n], cosines[:n] = sin, cos of src[:n] (contiguous float64 rows, rad); LANES at a time
+#: where the host allows (module docstring), else libm's.
+sincos_row = _vector_sincos_row if LANES > 0 else _scalar_sincos_row
