@@ -36,7 +36,7 @@ from finger_sim.kernel.event_checks import RATE_STEP, kink, residual, stop_close
 from finger_sim.kernel.layout import DAMPING, GRAVITY, HEADER, NO_FORCE, SPRING, TIP_FORCE  # noqa: E402
 from finger_sim.kernel.numerics import (NON_FINITE, NOT_CONVERGED, OK, STATE_NON_FINITE, _profile_step,  # noqa: E402
                                         plan_parts, torque_at)
-from finger_sim.kernel.vector_trig import sincos_row  # noqa: E402
+from finger_sim.kernel.vector_trig import LANES, sincos_row  # noqa: E402
 from finger_sim.projection import ACCEPTED_RESIDUAL_FACTOR, MAX_ITERATIONS, POSITION_TOLERANCE  # noqa: E402
 
 #: A row's status after `run_rows`: reached its last step, or stopped before a step that its
@@ -177,14 +177,15 @@ def _tile(dt, tab, models, profiles, control, q, v, status, reached, lo, hi):
     held_input = control.shape[1] > 0
     m = np.ascontiguousarray(models[:, lo:hi])
     prof = np.ascontiguousarray(profiles[:, lo:hi].T)  # a row per finger, as `torque_at` reads it
-    x = np.empty((6, n))
-    y = np.empty((6, n))
+    width = max(n, LANES)  # `sincos_row` reads and writes a row of fewer than LANES fingers up to LANES
+    x = np.zeros((6, width))
+    y = np.zeros((6, width))
     kk = np.empty((s, 6, n))
     taus = np.empty((s, n))
     force = np.empty((3, n))
     grad = np.empty((6, n))
     resid = np.empty((2, n))
-    trig = np.empty((TRIG_ROWS, n))
+    trig = np.zeros((TRIG_ROWS, width))
     done = np.empty(n, dtype=np.bool_)
     alive = np.ones(n, dtype=np.bool_)
     code = np.full(n, OK)

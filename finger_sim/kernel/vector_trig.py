@@ -5,7 +5,7 @@ numba vectorises `math.sin` only with Intel's SVML, which the llvmlite wheels he
 switch is not in llvmlite's build, so a loop of `math.sin` calls libm once per angle. glibc
 ships the vector forms as libmvec (`_ZGVeN8v_sin`: 8 doubles in a zmm register with AVX-512,
 `_ZGVdN4v_sin`: 4 in a ymm with AVX2; x86_64 vector function ABI). `sincos_row` calls them
-through a numba intrinsic, LANES angles per call, and libm for the rest of the row.
+through a numba intrinsic, LANES angles per call, every angle of the row in the vector form.
 
 libmvec's sin and cos are within 4 ulp (glibc's manual), not correctly rounded as libm's are:
 a result differs from the scalar one in the last bits (≤ 1e-15 rad per evaluation). Where
@@ -68,13 +68,13 @@ def _sincos_lanes(typingctx, src, sines, cosines, start):  # type: ignore[no-unt
 
 @njit(cache=True, nogil=True, inline="always")
 def _vector_sincos_row(src, sines, cosines, n):  # type: ignore[no-untyped-def]
+    # every angle goes through the vector form, the last group overlapping the one before (or
+    # reading the padding of a row shorter than LANES): an angle's sine is the same bits
+    # whatever its position in the row and the row's length (a sweep's chunks equal the whole)
     i = 0
-    while i + LANES <= n:
-        _sincos_lanes(src, sines, cosines, i)
-        i += LANES
     while i < n:
-        sines[i], cosines[i] = math.sin(src[i]), math.cos(src[i])
-        i += 1
+        _sincos_lanes(src, sines, cosines, min(i, n - LANES) if n >= LANES else 0)
+        i += LANES
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -83,6 +83,7 @@ def _scalar_sincos_row(src, sines, cosines, n):  # type: ignore[no-untyped-def]
         sines[i], cosines[i] = math.sin(src[i]), math.cos(src[i])
 
 
-#: sines[:n], cosines[:n] = sin, cos of src[:n] (contiguous float64 rows, rad); LANES at a time
-#: where the host allows (module docstring), else libm's.
+#: sines[:n], cosines[:n] = sin, cos of src[:n] (contiguous float64 rows, rad), LANES at a time
+#: where the host allows (module docstring), else libm's. The rows must be at least max(n, LANES)
+#: long: a row shorter than LANES is read and written up to LANES (its padding).
 sincos_row = _vector_sincos_row if LANES > 0 else _scalar_sincos_row
