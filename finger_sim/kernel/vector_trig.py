@@ -19,11 +19,14 @@ from __future__ import annotations
 import ctypes.util
 import math
 
-import llvmlite.binding as llvm
-from llvmlite import ir
-from numba import config, njit, types
-from numba.core import cgutils
-from numba.extending import intrinsic
+from finger_sim.kernel import use_writable_cache
+
+use_writable_cache()  # before numba reads NUMBA_CACHE_DIR
+import llvmlite.binding as llvm  # noqa: E402  (after the cache folder is set)
+from llvmlite import ir  # noqa: E402
+from numba import config, njit, types  # noqa: E402
+from numba.core import cgutils  # noqa: E402
+from numba.extending import intrinsic  # noqa: E402
 
 #: glibc's vector sin/cos by register width: (lanes, CPU feature, symbol prefix) (x86_64 vector ABI).
 VARIANTS = ((8, "avx512f", "_ZGVeN8v_"), (4, "avx2", "_ZGVdN4v_"))

@@ -154,7 +154,7 @@ def test_lockstep_tiles_equal_simulate_within_tolerance():
 
 def test_a_row_diverging_in_a_lockstep_tile_raises_what_the_simulator_raises():
     # row 65 (the second tile) is driven to divergence from step 20: the rollout names the row
-    # and reports the Simulator's own failure (the same state and time)
+    # and reports the Simulator's own failure (the same kind and time)
     from finger_sim.errors import SimulationDiverged
 
     control = np.full((70, 50), 0.002)
@@ -165,4 +165,7 @@ def test_a_row_diverging_in_a_lockstep_tile_raises_what_the_simulator_raises():
             sim.step(float(value))
     with pytest.raises(SimulationDiverged, match="row 65: ") as got:
         rollout(CONFIG / "paper_flexion.yaml", control=control)
-    assert got.value.reason == f"row 65: {ref.value.reason}" and got.value.t == ref.value.t
+    # the same failure at the same step; the diverged state itself (|q| ~ 1e89, sines of such
+    # angles) is not compared: the tile's vector sines differ from libm's there
+    assert got.value.reason.split(": q = ")[0] == f"row 65: {ref.value.reason}".split(": q = ")[0]
+    assert "non-finite" in ref.value.reason and got.value.t == ref.value.t
