@@ -8,7 +8,7 @@ ships the vector forms as libmvec (`_ZGVeN8v_sin`: 8 doubles in a zmm register w
 through a numba intrinsic, LANES angles per call, every angle of the row in the vector form.
 
 libmvec's sin and cos are within 4 ulp (glibc's manual), not correctly rounded as libm's are:
-a result differs from the scalar one in the last bits (≤ 1e-15 rad per evaluation). Where
+a result differs from the scalar one in the last bits (under 1e-15). Where
 libmvec or the instruction set is missing, or numba compiles for a named CPU rather than this
 host (NUMBA_CPU_NAME, whose register use the ABI cannot rely on), LANES is 0 and `sincos_row`
 is the scalar loop.
