@@ -79,35 +79,49 @@ def contact_gaps(m, o, q0, q2, gap):
 
 
 @njit(**SERIAL)
-def kink(m, xa, xb, h, ga, gb, shifted, rates_a, depth):
+def kink(m, xa, xb, h, ga, gb, shifted, rates_a, rates_b, depth, known_eps):
     """Whether a step of length h (s) from state xa to xb may hold a contact event that the
     Simulator would split it at: a contact gap of model m is closed at one end and open at the
     other, or `simulate._predicted_crossing` (the Simulator's own test, from the gaps and their
     rates at both ends) predicts a crossing inside it; the same for the depth gap depth − δ
     (`depth_guard`: depth is the thinner phalanx's radius ρ, m, so the Simulator sees every
-    candidate that may reach its own). ga, gb, shifted, rates_a: scratch arrays (one per
-    candidate). The rates are forward differences along q' over RATE_STEP·h."""
+    candidate that may reach its own). The rates are forward differences along q' over
+    eps = RATE_STEP·h. ga, gb, shifted, rates_a, rates_b: arrays of one entry per candidate.
+
+    When known_eps == eps, ga and rates_a already hold xa's gaps and its rates over eps (the
+    previous step's end, xb and rates_b of the last call that found no event): they are not
+    evaluated again, which halves the gap evaluations of a run of steps and changes no bit.
+    After a call that returns False, gb and rates_b hold xb's gaps and rates."""
     o = HEADER + 1
     eps = RATE_STEP * h
+    start_known = known_eps == eps
+    base = 0
     for _ in range(int(m[HEADER])):
         code, n = int(m[o]), int(m[o + 1])
         o += 2
         if code == CONTACT:
-            count = contact_gaps(m, o, xa[0], xa[2], ga)
-            contact_gaps(m, o, xb[0], xb[2], gb)
+            a, b, sh = ga[base:], gb[base:], shifted[base:]
+            if start_known:
+                count = contact_gaps(m, o, xb[0], xb[2], b)
+            else:
+                count = contact_gaps(m, o, xa[0], xa[2], a)
+                contact_gaps(m, o, xb[0], xb[2], b)
             for c in range(count):
-                if (ga[c] < -EVENT_TOLERANCE) != (gb[c] < -EVENT_TOLERANCE) or gb[c] + depth < -EVENT_TOLERANCE:
+                if (a[c] < -EVENT_TOLERANCE) != (b[c] < -EVENT_TOLERANCE) or b[c] + depth < -EVENT_TOLERANCE:
                     return True
-            contact_gaps(m, o, xa[0] + eps * xa[3], xa[2] + eps * xa[5], shifted)
+            if not start_known:
+                contact_gaps(m, o, xa[0] + eps * xa[3], xa[2] + eps * xa[5], sh)
+                for c in range(count):
+                    rates_a[base + c] = (sh[c] - a[c]) / eps  # the start's rate
+            contact_gaps(m, o, xb[0] + eps * xb[3], xb[2] + eps * xb[5], sh)
             for c in range(count):
-                rates_a[c] = (shifted[c] - ga[c]) / eps  # the start's rate
-            contact_gaps(m, o, xb[0] + eps * xb[3], xb[2] + eps * xb[5], shifted)
-            for c in range(count):
-                rate_b = (shifted[c] - gb[c]) / eps
-                if predicted_crossing(ga[c], rates_a[c], gb[c], rate_b, h, ga[c] < -EVENT_TOLERANCE) is not None:
+                rate_b = (sh[c] - b[c]) / eps
+                rates_b[base + c] = rate_b
+                if predicted_crossing(a[c], rates_a[base + c], b[c], rate_b, h, a[c] < -EVENT_TOLERANCE) is not None:
                     return True
-                if predicted_crossing(ga[c] + depth, rates_a[c], gb[c] + depth, rate_b, h, False) is not None:
+                if predicted_crossing(a[c] + depth, rates_a[base + c], b[c] + depth, rate_b, h, False) is not None:
                     return True
+            base += count
         o += n
     return False
 

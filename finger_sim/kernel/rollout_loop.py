@@ -32,10 +32,11 @@ use_writable_cache()  # before numba reads NUMBA_CACHE_DIR
 from numba import njit, prange  # noqa: E402  (after the cache folder is set)
 
 from finger_sim.inputs import CONSTANT, HELD, RAMP, SINE  # noqa: E402
-from finger_sim.kernel.event_checks import kink, residual, stop_closed  # noqa: E402
+from finger_sim.kernel.event_checks import RATE_STEP, kink, residual, stop_closed  # noqa: E402
 from finger_sim.kernel.layout import DAMPING, GRAVITY, HEADER, NO_FORCE, SPRING, TIP_FORCE  # noqa: E402
 from finger_sim.kernel.numerics import (NON_FINITE, NOT_CONVERGED, OK, STATE_NON_FINITE, _profile_step,  # noqa: E402
                                         plan_parts, torque_at)
+from finger_sim.kernel.vector_trig import LANES, sincos_row  # noqa: E402
 from finger_sim.projection import ACCEPTED_RESIDUAL_FACTOR, MAX_ITERATIONS, POSITION_TOLERANCE  # noqa: E402
 
 #: A row's status after `run_rows`: reached its last step, or stopped before a step that its
@@ -51,6 +52,9 @@ TILE = 64
 LOCKSTEP_CODES = (NO_FORCE, SPRING, DAMPING, GRAVITY, TIP_FORCE)
 #: Input kinds with no switch inside a step: rows under them can step in lock-step.
 SMOOTH_INPUTS = (HELD, CONSTANT, RAMP, SINE)
+#: Rows of a tile's trig work array: sin, cos of θ1, θ2, θ3 and of u = θ1 − θ3 − α, then u.
+S1, C1, S2, C2, S3, C3, SU, CU, U = range(9)
+TRIG_ROWS = 9
 
 
 def lockstep_layout(model: np.ndarray, tab: np.ndarray, prof: np.ndarray) -> tuple | None:
@@ -128,14 +132,19 @@ def _row(plan, prof, stop, limits, gaps, depth, x, step, last, max_res, traj, re
     s = tab.shape[1]
     work, taus = np.empty((max(s, 1), 6)), np.empty(max(s, 1))
     start = np.empty(6)
-    before, after, shifted, rates = np.empty(gaps), np.empty(gaps), np.empty(gaps), np.empty(gaps)
+    before, after, shifted = np.empty(gaps), np.empty(gaps), np.empty(gaps)
+    rates, rates_after = np.empty(gaps), np.empty(gaps)
+    known_eps = 0.0  # the rate step over which `before` and `rates` hold this step's start (0: not known)
     while step < last:
         start[:] = x
         code, _ = _profile_step(m, tab, prof, 0.0, step, dt, x, work, taus)
+        h = (step + 1) * dt - step * dt
         if code != OK or (stop and stop_closed(x, limits)) or \
-                (gaps > 0 and kink(m, start, x, (step + 1) * dt - step * dt, before, after, shifted, rates, depth)):
+                (gaps > 0 and kink(m, start, x, h, before, after, shifted, rates, rates_after, depth, known_eps)):
             x[:] = start
             return EVENT, step, max_res
+        if gaps > 0:  # this step's end is the next one's start
+            before, after, rates, rates_after, known_eps = after, before, rates_after, rates, RATE_STEP * h
         step += 1
         r = residual(m, x)
         if r > max_res:
@@ -168,13 +177,15 @@ def _tile(dt, tab, models, profiles, control, q, v, status, reached, lo, hi):
     held_input = control.shape[1] > 0
     m = np.ascontiguousarray(models[:, lo:hi])
     prof = np.ascontiguousarray(profiles[:, lo:hi].T)  # a row per finger, as `torque_at` reads it
-    x = np.empty((6, n))
-    y = np.empty((6, n))
+    width = max(n, LANES)  # `sincos_row` reads and writes a row of fewer than LANES fingers up to LANES
+    x = np.zeros((6, width))
+    y = np.zeros((6, width))
     kk = np.empty((s, 6, n))
     taus = np.empty((s, n))
     force = np.empty((3, n))
     grad = np.empty((6, n))
     resid = np.empty((2, n))
+    trig = np.zeros((TRIG_ROWS, width))
     done = np.empty(n, dtype=np.bool_)
     alive = np.ones(n, dtype=np.bool_)
     code = np.full(n, OK)
@@ -204,7 +215,7 @@ def _tile(dt, tab, models, profiles, control, q, v, status, reached, lo, hi):
             for c in range(3):
                 for f in range(n):
                     kk[i, c, f] = y[3 + c, f]
-            _accelerations(m, y, taus[int(tab[s + 2, i])], force, kk[i], n)
+            _accelerations(m, y, taus[int(tab[s + 2, i])], force, kk[i], trig, n)
         for j in range(s):
             b = tab[s, j]
             if b != 0.0:
@@ -212,7 +223,7 @@ def _tile(dt, tab, models, profiles, control, q, v, status, reached, lo, hi):
                 for c in range(6):
                     for f in range(n):
                         x[c, f] += hb * kk[j, c, f]
-        _project(m, x, grad, resid, done, code, n)
+        _project(m, x, grad, resid, trig, done, code, n)
         for f in range(n):
             if code[f] == OK and not math.isfinite(x[0, f] + x[1, f] + x[2, f] + x[3, f] + x[4, f] + x[5, f]):
                 code[f] = STATE_NON_FINITE
@@ -226,9 +237,11 @@ def _tile(dt, tab, models, profiles, control, q, v, status, reached, lo, hi):
 
 
 @njit(**SERIAL)
-def _accelerations(m, y, tau, force, out, n):
+def _accelerations(m, y, tau, force, out, trig, n):
     """q'' of every finger at stage state y (6 × n) into out[3:6] (6 × n): `numerics.accelerations`
-    with `generalized_force`, the same operations in the same order, a loop over fingers each."""
+    with `generalized_force`, the same operations in the same order, a loop over fingers each,
+    the sines and cosines of θ1, θ2, θ3 and θ1 − θ3 − α a row at a time (`sincos_row`; trig:
+    TRIG_ROWS × n work)."""
     for f in range(n):
         force[0, f], force[1, f], force[2, f] = tau[f], 0.0, 0.0
     o = HEADER + 1
@@ -269,13 +282,14 @@ def _accelerations(m, y, tau, force, out, n):
                 force[2, f] += 0.0
         o += size
     for f in range(n):
-        q0, q1, q2, v0, v1, v2 = y[0, f], y[1, f], y[2, f], y[3, f], y[4, f], y[5, f]
-        m11, m22, m33, cc, r1, r2, r3, alpha = m[0, f], m[1, f], m[2, f], m[3, f], m[4, f], m[5, f], m[6, f], m[7, f]
-        s1, c1 = math.sin(q0), math.cos(q0)
-        s2, c2 = math.sin(q1), math.cos(q1)
-        s3, c3 = math.sin(q2), math.cos(q2)
-        u = q0 - q2 - alpha
-        su, cu = math.sin(u), math.cos(u)
+        trig[U, f] = y[0, f] - y[2, f] - m[7, f]
+    _sincos_angles(y, trig, n)
+    sincos_row(trig[U], trig[SU], trig[CU], n)
+    for f in range(n):
+        v0, v1, v2 = y[3, f], y[4, f], y[5, f]
+        m11, m22, m33, cc, r1, r2, r3 = m[0, f], m[1, f], m[2, f], m[3, f], m[4, f], m[5, f], m[6, f]
+        s1, c1, s2, c2, s3, c3 = trig[S1, f], trig[C1, f], trig[S2, f], trig[C2, f], trig[S3, f], trig[C3, f]
+        su, cu = trig[SU, f], trig[CU, f]
         f1 = force[0, f] - cc * su * v2 * v2
         f2 = force[1, f]
         f3 = force[2, f] + cc * su * v0 * v0
@@ -304,7 +318,15 @@ def _accelerations(m, y, tau, force, out, n):
 
 
 @njit(**SERIAL)
-def _project(m, x, grad, resid, done, code, n):
+def _sincos_angles(x, trig, n):
+    """trig[S1 … C3] = sin, cos of θ1, θ2, θ3 (x's rows 0-2) of every finger."""
+    sincos_row(x[0], trig[S1], trig[C1], n)
+    sincos_row(x[1], trig[S2], trig[C2], n)
+    sincos_row(x[2], trig[S3], trig[C3], n)
+
+
+@njit(**SERIAL)
+def _project(m, x, grad, resid, trig, done, code, n):
     """`numerics.project` of every finger's x (6 × n, in place) into code[f]: Newton on Φ = 0
     until each finger's |Φ|₁ ≤ POSITION_TOLERANCE (a converged finger is left alone while the
     others iterate), then the rates onto Φ_q q' = 0 with that finger's last gradient."""
@@ -312,12 +334,13 @@ def _project(m, x, grad, resid, done, code, n):
         done[f] = False
     left = n
     for _ in range(MAX_ITERATIONS):
+        _sincos_angles(x, trig, n)  # every finger's, converged or not: a row at a time is cheaper
         for f in range(n):
             if done[f]:
                 continue
             r1, r2, r3, k1, k2 = m[4, f], m[5, f], m[6, f], m[8, f], m[9, f]
             t1, t2, t3 = x[0, f], x[1, f], x[2, f]
-            s1, c1, s2, c2, s3, c3 = math.sin(t1), math.cos(t1), math.sin(t2), math.cos(t2), math.sin(t3), math.cos(t3)
+            s1, c1, s2, c2, s3, c3 = trig[S1, f], trig[C1, f], trig[S2, f], trig[C2, f], trig[S3, f], trig[C3, f]
             f1 = r1 * c1 + k1 - r2 * c2 - r3 * c3
             f2 = r1 * s1 + k2 - r2 * s2 - r3 * s3
             g11, g12, g13 = -r1 * s1, r2 * s2, r3 * s3

@@ -126,10 +126,11 @@ def test_bad_arguments_name_the_argument_expected_and_got(kwargs, message):
     assert message in str(err.value)
 
 
-def test_lockstep_tiles_equal_simulate_bit_for_bit():
+def test_lockstep_tiles_equal_simulate_within_tolerance():
     # more rows than two lock-step tiles, every compiled law (spring, damping, gravity, tip force),
     # a sine input, and two element layouts (damping 0 drops the damper): each row is its
-    # scene's `simulate`, to the last bit
+    # scene's `simulate` within 1e-12 rad. Not bit for bit: the tiles take their sines and
+    # cosines from glibc's vector library (within 4 ulp, `kernel.vector_trig`), `simulate` from libm
     from finger_sim.kernel.rollout_loop import TILE
 
     base = {"model.gravity": [0.0, -9.81], "model.tip_force": [0.2, -0.1],
@@ -143,13 +144,17 @@ def test_lockstep_tiles_equal_simulate_bit_for_bit():
         ref = simulate(_scene("paper_flexion", **base, **{"model.damping": float(damping[i]),
                                                           "initial.theta1": start[i, 0],
                                                           "initial.theta1_dot": start[i, 1], "duration": 0.2}))
-        np.testing.assert_array_equal(res.q[i], ref.q, err_msg=f"row {i}")
-        np.testing.assert_array_equal(res.v[i], ref.v, err_msg=f"row {i}")
+        np.testing.assert_allclose(res.q[i], ref.q, rtol=0, atol=TOLERANCE, err_msg=f"row {i}")
+        # rates to 1e-12 of the run's largest (row 0, undamped, swings at 17 rad/s: a last-bit
+        # difference that moves the projection's stop by one Newton iteration, ~1e-14 rad, is
+        # carried at that speed)
+        rate_scale = max(1.0, float(np.abs(ref.v).max()))
+        np.testing.assert_allclose(res.v[i], ref.v, rtol=0, atol=TOLERANCE * rate_scale, err_msg=f"row {i}")
 
 
 def test_a_row_diverging_in_a_lockstep_tile_raises_what_the_simulator_raises():
     # row 65 (the second tile) is driven to divergence from step 20: the rollout names the row
-    # and reports the Simulator's own failure (the same state and time)
+    # and reports the Simulator's own failure (the same kind and time)
     from finger_sim.errors import SimulationDiverged
 
     control = np.full((70, 50), 0.002)
@@ -160,4 +165,7 @@ def test_a_row_diverging_in_a_lockstep_tile_raises_what_the_simulator_raises():
             sim.step(float(value))
     with pytest.raises(SimulationDiverged, match="row 65: ") as got:
         rollout(CONFIG / "paper_flexion.yaml", control=control)
-    assert got.value.reason == f"row 65: {ref.value.reason}" and got.value.t == ref.value.t
+    # the same failure at the same step; the diverged state itself (|q| ~ 1e89, sines of such
+    # angles) is not compared: the tile's vector sines differ from libm's there
+    assert got.value.reason.split(": q = ")[0] == f"row 65: {ref.value.reason}".split(": q = ")[0]
+    assert "non-finite" in ref.value.reason and got.value.t == ref.value.t
