@@ -195,10 +195,12 @@ def inductive_rates(m, t, q0, q1, q2, v0, v1, v2, u, i):
 
 
 @njit(**JIT)
-def inductive_stage_rates(m, t, x0, x1, x2, w0, w1, w2, c6, u, k, i):
-    """Stage i's (q'', i') at (t, q, q', current c6) under u (V) into k[i, 3:7] (`numerics.stage_rates`
-    with the current, `inductive_rates`)."""
-    k[i, 3], k[i, 4], k[i, 5], k[i, 6] = inductive_rates(m, t, x0, x1, x2, w0, w1, w2, u, c6)
+def inductive_stage_rates(m, t, u, y):
+    """A stage's derivative in place: y = (q, q', i) at t (s) under u (V) becomes (q', q'', i')
+    (`numerics.stage_rates` with the current, `inductive_rates`)."""
+    x0, x1, x2, w0, w1, w2, c6 = y[0], y[1], y[2], y[3], y[4], y[5], y[6]
+    y[0], y[1], y[2] = w0, w1, w2
+    y[3], y[4], y[5], y[6] = inductive_rates(m, t, x0, x1, x2, w0, w1, w2, u, c6)
 
 
 #: `numerics.rk_step` on x = (q, q', i) in place (`InductiveRungeKutta._substep`): the same code, its
