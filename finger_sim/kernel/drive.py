@@ -4,8 +4,6 @@ The law is compiled from its one definition (`finger_sim.actuators.drive`'s plai
 step functions are numerics' own (`euler_step`, `rk_step`, `rk_step_tuple`) compiled a second time
 with `accelerations` bound to `driven_accelerations`: the same code object under other globals,
 so nothing is copied, and a scene without a drive compiles and runs exactly what it did before.
-With L > 0 the step is `rk_step` once more, its stages' derivatives carrying the current
-(`inductive_stage_rates`).
 The drive's block ends the model (`Drive.kernel_block`; its first slot is the mesh mode, kept
 current by `Drive.mirror`).
 """
@@ -100,21 +98,19 @@ def drive_guards(m, t, q0, q1, q2, v0, v1, v2, u, direction):
     return s * v0, (s if m[o] == DRIVE else -s) * tau_g, limit
 
 
-def _rebound(dispatcher: Any, prefix: str = "driven_", **names: Callable) -> Any:
+def _rebound(dispatcher: Any, **names: Callable) -> Any:
     """numerics' compiled function `dispatcher` compiled again with some of its globals rebound
-    (`names`), under its own name, `prefix` + its name (numba's disk cache keys on the name: no clash
-    with the original)."""
+    (`names`), under its own name (numba's disk cache keys on the name: no clash with the original)."""
     py = dispatcher.py_func
-    name = prefix + py.__name__
+    name = "driven_" + py.__name__
     code = py.__code__.replace(co_name=name, co_qualname=name)
     function = types.FunctionType(code, {**vars(numerics), **names}, name, py.__defaults__, py.__closure__)
-    function.__qualname__, function.__doc__ = name, f"{py.__doc__} With {', '.join(names)} rebound (the drive's)."
+    function.__qualname__, function.__doc__ = name, f"{py.__doc__} With the drive (`driven_accelerations`)."
     return njit(**JIT)(function)
 
 
 driven_euler_step = _rebound(numerics.euler_step, accelerations=driven_accelerations)
-driven_stage_rates = _rebound(numerics.stage_rates, accelerations=driven_accelerations)
-driven_rk_step = _rebound(numerics.rk_step, stage_rates=driven_stage_rates)
+driven_rk_step = _rebound(numerics.rk_step, accelerations=driven_accelerations)
 driven_rk_step_tuple = _rebound(numerics.rk_step_tuple, euler_step=driven_euler_step, rk_step=driven_rk_step)
 driven_profile_step = _rebound(numerics._profile_step, euler_step=driven_euler_step, rk_step=driven_rk_step)
 
@@ -195,17 +191,32 @@ def inductive_rates(m, t, q0, q1, q2, v0, v1, v2, u, i):
 
 
 @njit(**JIT)
-def inductive_stage_rates(m, t, u, y):
-    """A stage's derivative in place: y = (q, q', i) at t (s) under u (V) becomes (q', q'', i')
-    (`numerics.stage_rates` with the current, `inductive_rates`)."""
-    x0, x1, x2, w0, w1, w2, c6 = y[0], y[1], y[2], y[3], y[4], y[5], y[6]
-    y[0], y[1], y[2] = w0, w1, w2
-    y[3], y[4], y[5], y[6] = inductive_rates(m, t, x0, x1, x2, w0, w1, w2, u, c6)
-
-
-#: `numerics.rk_step` on x = (q, q', i) in place (`InductiveRungeKutta._substep`): the same code, its
-#: stages' derivatives from `inductive_stage_rates`. Status.
-inductive_rk_step = _rebound(numerics.rk_step, "inductive_", stage_rates=inductive_stage_rates)
+def inductive_rk_step(m, tab, t, x, h, taus, k):
+    """`numerics.rk_step` on x = (q, q', i) in place (`InductiveRungeKutta._substep`). Status."""
+    s = tab.shape[1]
+    for r in range(s):
+        x0, x1, x2, w0, w1, w2, c6 = x[0], x[1], x[2], x[3], x[4], x[5], x[6]
+        for j in range(r):
+            a = tab[r, j]
+            if a != 0.0:
+                ha = h * a
+                x0 += ha * k[j, 0]
+                x1 += ha * k[j, 1]
+                x2 += ha * k[j, 2]
+                w0 += ha * k[j, 3]
+                w1 += ha * k[j, 4]
+                w2 += ha * k[j, 5]
+                c6 += ha * k[j, 6]
+        k[r, 0], k[r, 1], k[r, 2] = w0, w1, w2
+        tau = taus[int(tab[s + 2, r])]
+        k[r, 3], k[r, 4], k[r, 5], k[r, 6] = inductive_rates(m, t + tab[s + 1, r] * h, x0, x1, x2, w0, w1, w2, tau, c6)
+    for j in range(s):
+        b = tab[s, j]
+        if b != 0.0:
+            hb = h * b
+            for c in range(7):
+                x[c] += hb * k[j, c]
+    return project(m, x)
 
 
 @njit(**JIT)

@@ -233,41 +233,34 @@ def euler_step(m, t, x, h, tau):
 
 
 @njit(**JIT)
-def stage_rates(m, t, tau, y):
-    """A stage's derivative in place: y = (q, q') at t (s) under τ (N·m) becomes (q', q'')."""
-    x0, x1, x2, w0, w1, w2 = y[0], y[1], y[2], y[3], y[4], y[5]
-    y[0], y[1], y[2] = w0, w1, w2
-    y[3], y[4], y[5] = accelerations(m, t, x0, x1, x2, w0, w1, w2, tau)
-
-
-@njit(**JIT)
 def rk_step(m, tab, t, x, h, taus, k):
-    """One projected explicit RK step on x = (q, q', then any actuator state) in place:
-    `ExplicitRungeKutta.step`.
+    """One projected explicit RK step on x = (q, q') in place: `ExplicitRungeKutta.step`.
 
     tab: (s + 3) × s tableau (A, B, C rows, then each stage's node index; `layout.tableau_array`);
-    taus: the input at each distinct node time t + c h (N·m; V for a drive); k: s × len(x) work
-    array, row i stage i's state and then, in place, its derivative (`stage_rates`; with the drive's
-    current, `kernel.drive.inductive_rk_step`). Zero tableau entries are skipped, as in Python.
+    taus: τ at each distinct node time t + c h (N·m); k: s × 6 work array of stage derivatives.
+    Zero tableau entries are skipped, as in Python.
     """
     s = tab.shape[1]
-    n = x.shape[0]
     for i in range(s):
-        y = k[i]
-        for c in range(n):
-            y[c] = x[c]
+        x0, x1, x2, w0, w1, w2 = x[0], x[1], x[2], x[3], x[4], x[5]
         for j in range(i):
             a = tab[i, j]
             if a != 0.0:
                 ha = h * a
-                for c in range(n):
-                    y[c] += ha * k[j, c]
-        stage_rates(m, t + tab[s + 1, i] * h, taus[int(tab[s + 2, i])], y)
+                x0 += ha * k[j, 0]
+                x1 += ha * k[j, 1]
+                x2 += ha * k[j, 2]
+                w0 += ha * k[j, 3]
+                w1 += ha * k[j, 4]
+                w2 += ha * k[j, 5]
+        k[i, 0], k[i, 1], k[i, 2] = w0, w1, w2
+        tau = taus[int(tab[s + 2, i])]
+        k[i, 3], k[i, 4], k[i, 5] = accelerations(m, t + tab[s + 1, i] * h, x0, x1, x2, w0, w1, w2, tau)
     for j in range(s):
         b = tab[s, j]
         if b != 0.0:
             hb = h * b
-            for c in range(n):
+            for c in range(6):
                 x[c] += hb * k[j, c]
     return project(m, x)
 
