@@ -64,7 +64,7 @@ def first_crossing(sim: Simulator, t: float, q: Vec3, v: Vec3, t1: float, q1: Ve
             continue  # open at both ends, and too far for `predicted_crossing` to see a crossing between
         found = bracket(sim, gap, t, q, v, torque, (t, g0, r0), (t1, g1, r1, q1, v1), BRACKET_DEPTH)
         if found is not None:
-            crossing = locate_gap(sim, gap, t, q, v, (t, g0), found, torque)
+            crossing = sim._locate(gap, t, q, v, (t, g0), found, torque)  # `locate_gap`
             if first is None or crossing.t < first.t:
                 first = crossing
     if first is not None and isinstance(first.gap.element, DepthLimit):  # a phalanx axis reached an object

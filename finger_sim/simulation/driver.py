@@ -91,8 +91,10 @@ class Simulator:
         self.integrator: Integrator = self._integrator_cls(self.system, **self._options)
         self.step_index = 0
         self.q, self.v = self.scene.initial_state()
-        self._resting: Gap | None = None  # the closed impact gap the finger rests on (a stop)
-        self._gap_cache: tuple[Vec3, Vec3, list[tuple[float, float]], float] | None = None  # `_gap_states`' last
+        #: the stop's rest mode (`effects.stops.JointStops.rests`): the closed impact gap rested on, or None
+        self._resting: Gap | None = None
+        #: `crossings.gap_states`' last (q, q', gaps and rates, t)
+        self._gap_cache: tuple[Vec3, Vec3, list[tuple[float, float]], float] | None = None
         #: the motor torque at the end of the last step (N·m): what a JointState effort reports
         #: (with a drive: the voltage command, V)
         self.torque = self.scene.torque(0.0)
@@ -213,6 +215,11 @@ class Simulator:
                         torque: TorqueFn) -> Crossing | None:
         """The earliest gap crossing of the step (t, q, q') → (t1, q1, q1'), located; None if none."""
         return crossings.first_crossing(self, t, q, v, t1, q1, v1, torque)
+
+    def _locate(self, gap: Gap, t: float, q: Vec3, v: Vec3, lo: tuple[float, float],
+                hi: tuple[float, float, Vec3, Vec3], torque: TorqueFn) -> Crossing:
+        """Where in (lo, hi] of the step from (t, q, q') the gap crosses (`crossings.locate_gap`)."""
+        return crossings.locate_gap(self, gap, t, q, v, lo, hi, torque)
 
     def _impact(self, crossing: Crossing, torque: TorqueFn) -> Vec3:
         """q' just after the impact of a located crossing; zero when it starts the rest on the stop."""
