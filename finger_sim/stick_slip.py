@@ -39,6 +39,7 @@ from finger_sim.effects.friction_modes import LOCKED, SLIDING, STICK_SLIP, Stick
 from finger_sim.errors import SimulationDiverged
 from finger_sim.integrators.base import TorqueFn
 from finger_sim.kinematics import Vec3
+from finger_sim.simulation.locate import illinois
 
 if TYPE_CHECKING:
     from finger_sim.dynamics import FingerSystem
@@ -292,23 +293,11 @@ def _turn_event(sim: Simulator, friction: StickSlipContact, t: float, q: Vec3, v
     gb = s_dir * v1[0]
     if gb >= -GUARD_TOLERANCE:
         return None
-    a, ga = t, max(s_dir * v[0], 0.0)
-    b, qb, vb = t1, q1, v1
-    keep = 0
-    for _ in range(MAX_LOCATE_ITERATIONS):
-        if b - a <= LOCATE_TOLERANCE * (t1 - t):
-            break
-        s = b - gb * (b - a) / (gb - ga) if gb != ga else 0.5 * (a + b)
-        if not a < s < b:
-            s = 0.5 * (a + b)
+
+    def at(s: float) -> tuple[float, tuple[Vec3, Vec3]]:
         qs, vs = sim._step(t, q, v, s - t, torque)
-        gs = s_dir * vs[0]
-        if gs < 0.0:
-            b, gb, qb, vb = s, gs, qs, vs
-            ga = ga / 2 if keep == 1 else ga
-            keep = 1
-        else:
-            a, ga = s, gs
-            gb = gb / 2 if keep == -1 else gb
-            keep = -1
+        return s_dir * vs[0], (qs, vs)
+
+    b, (qb, vb) = illinois(at, lambda g: g < 0.0, t, max(s_dir * v[0], 0.0), t1, gb, (q1, v1),
+                           width=LOCATE_TOLERANCE * (t1 - t), iterations=MAX_LOCATE_ITERATIONS)
     return b, qb, vb

@@ -22,13 +22,15 @@ from scipy.optimize import brentq
 
 from finger_sim.actuators.drive import BACK, DRIVE, STUCK, ZERO, DrivenSystem, holding_margin
 from finger_sim.actuators.stepping import (FLANK, GAUSS_NODES, GAUSS_WEIGHTS, GUARD_TOLERANCE, LIMIT, LOCATE_TOLERANCE,
-                                           MAX_EVENTS_PER_STEP, MAX_LOCATE_ITERATIONS, TURN, EnergyLedger)
+                                           MAX_EVENTS_PER_STEP, MAX_LOCATE_ITERATIONS, TURN, EnergyLedger,
+                                           crossing_test)
 from finger_sim.errors import SimulationDiverged
 from finger_sim.integrators.base import TorqueFn
 from finger_sim.kinematics import Vec3
+from finger_sim.simulation.locate import illinois
 
 if TYPE_CHECKING:
-    from finger_sim.simulate import Simulator
+    from finger_sim.simulation.driver import Simulator
 
 #: (q, q', i) at a time: rad, rad/s, A.
 Trial = Callable[[float, Vec3, Vec3, float, float], tuple[Vec3, Vec3, float]]
@@ -207,30 +209,17 @@ def _first_event(system: DrivenSystem, t: float, x0: tuple[Vec3, Vec3, float], t
 
 def _locate(system: DrivenSystem, k: int, t: float, x0: tuple[Vec3, Vec3, float], t1: float, ga: float,
             hi: tuple[float, Vec3, Vec3, float], u_fn: TorqueFn, trial: Trial) -> _Event:
-    """Where guard k crosses in (t, t1]: Illinois regula falsi on the step's length (`stepping._locate`).
+    """Where guard k crosses in (t, t1]: Illinois regula falsi on the step's length (`locate.illinois`).
     Returns the bracket's far side (the guard crossed)."""
-    a, b = t, t1
-    gb, qb, vb, ib = hi
-    side = ga < 0.0
-    keep = 0
-    for _ in range(MAX_LOCATE_ITERATIONS):
-        if b - a <= LOCATE_TOLERANCE * (t1 - t):
-            break
-        s = b - gb * (b - a) / (gb - ga) if gb != ga else 0.5 * (a + b)
-        if not a < s < b:
-            s = 0.5 * (a + b)
-        qs, vs, i_s = trial(t, *x0, s)
-        gs = _guards(system, s, qs, vs, i_s, u_fn(s))[k]
-        crossed = gs < 0.0 if k != LIMIT else (gs < 0.0) != side
-        if crossed:
-            b, gb, qb, vb, ib = s, gs, qs, vs, i_s
-            ga = ga / 2 if keep == 1 else ga
-            keep = 1
-        else:
-            a, ga = s, gs
-            gb = gb / 2 if keep == -1 else gb
-            keep = -1
-    return _Event(b, qb, vb, ib, k)
+    gb, *far = hi
+
+    def at(s: float) -> tuple[float, tuple[Vec3, Vec3, float]]:
+        x = trial(t, *x0, s)
+        return _guards(system, s, *x, u_fn(s))[k], x
+
+    s, (qs, vs, i_s) = illinois(at, crossing_test(k, ga), t, ga, t1, gb, tuple(far),
+                                width=LOCATE_TOLERANCE * (t1 - t), iterations=MAX_LOCATE_ITERATIONS)
+    return _Event(s, qs, vs, i_s, k)
 
 
 def _rest(sim: Simulator, t: float, t1: float, q: Vec3, i: float, u_fn: TorqueFn) -> tuple[float, float, bool]:

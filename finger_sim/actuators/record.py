@@ -14,7 +14,7 @@ from finger_sim.actuators.drive import DrivenSystem
 from finger_sim.actuators.stepping import EnergyLedger
 
 if TYPE_CHECKING:
-    from finger_sim.simulate import Simulator
+    from finger_sim.simulation.driver import Simulator
 
 
 def outputs_now(sim: Simulator) -> list[float]:

@@ -31,9 +31,10 @@ from finger_sim.actuators.drive import BACK, DRIVE, STUCK, ZERO, DrivenSystem, h
 from finger_sim.errors import ConfigError, SimulationDiverged
 from finger_sim.integrators.base import TorqueFn
 from finger_sim.kinematics import Vec3
+from finger_sim.simulation.locate import illinois
 
 if TYPE_CHECKING:
-    from finger_sim.simulate import Simulator
+    from finger_sim.simulation.driver import Simulator
 
 #: A one-sided guard (turn, flank) counts as crossed below −GUARD_TOLERANCE (rad/s, N·m).
 GUARD_TOLERANCE = 1e-12
@@ -292,33 +293,26 @@ def _first_event(sim: Simulator, system: DrivenSystem, t: float, q: Vec3, v: Vec
 
 def _locate(sim: Simulator, system: DrivenSystem, k: int, t: float, q: Vec3, v: Vec3, t1: float, ga: float,
             hi: tuple[float, Vec3, Vec3], u_fn: TorqueFn) -> _Event:
-    """Where guard k crosses in (t, t1]: Illinois regula falsi on the step's length. Returns the
-    bracket's far side (the guard crossed), so that the rest of the step does not see it again."""
-    a, b = t, t1
+    """Where guard k crosses in (t, t1]: Illinois regula falsi on the step's length (`locate.illinois`).
+    Returns the bracket's far side (the guard crossed), so that the rest of the step does not see it again."""
     gb, qb, vb = hi
-    side = ga < 0.0
-    keep = 0
-    for _ in range(MAX_LOCATE_ITERATIONS):
-        if b - a <= LOCATE_TOLERANCE * (t1 - t):
-            break
-        s = b - gb * (b - a) / (gb - ga) if gb != ga else 0.5 * (a + b)
-        if not a < s < b:
-            s = 0.5 * (a + b)
+
+    def at(s: float) -> tuple[float, tuple[Vec3, Vec3]]:
         qs, vs = sim._step(t, q, v, s - t, u_fn)
-        gs = _guards(system, s, qs, vs, u_fn(s))[k]
-        if k != LIMIT:
-            crossed = gs < 0.0
-        else:
-            crossed = (gs < 0.0) != side
-        if crossed:
-            b, gb, qb, vb = s, gs, qs, vs
-            ga = ga / 2 if keep == 1 else ga
-            keep = 1
-        else:
-            a, ga = s, gs
-            gb = gb / 2 if keep == -1 else gb
-            keep = -1
-    return _Event(b, qb, vb, k)
+        return _guards(system, s, qs, vs, u_fn(s))[k], (qs, vs)
+
+    s, (qs, vs) = illinois(at, crossing_test(k, ga), t, ga, t1, gb, (qb, vb),
+                           width=LOCATE_TOLERANCE * (t1 - t), iterations=MAX_LOCATE_ITERATIONS)
+    return _Event(s, qs, vs, k)
+
+
+def crossing_test(k: int, ga: float) -> Callable[[float], bool]:
+    """Whether guard k's value has crossed: a one-sided guard (turn, flank) below 0, the limit to the
+    other side than its start value ga."""
+    if k != LIMIT:
+        return lambda g: g < 0.0
+    side = ga < 0.0
+    return lambda g: (g < 0.0) != side
 
 
 def _release_time(system: DrivenSystem, t: float, t1: float, q: Vec3, u_fn: TorqueFn) -> float | None:

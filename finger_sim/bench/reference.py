@@ -201,7 +201,7 @@ def solve(scene: Scene, *, method: str, rtol: float) -> Solution:
         pieces.append(_Piece(t, t_hit, sol.sol, ()))
         y = sol.y[:, -1].tolist()
         t = t_hit
-        if sol.status == 1:  # a stop was reached: the impact rule of Simulator._impact
+        if sol.status == 1:  # a stop was reached: the impact rule of simulation.impact.impact
             side = +1 if sol.t_events[0].size else -1
             qs = (y[0], y[1], y[2])
             e = scene.restitution

@@ -2,7 +2,7 @@
 
     python -m finger_sim.bench.setup_bench [--repeats 200]
 
-- `Simulator(scene)` of a scene seen before (its set-up kept: `simulate._setup`) against one
+- `Simulator(scene)` of a scene seen before (its set-up kept: `simulation.setup.setup_for`) against one
   never seen (a new spring stiffness each time: method choice, fastest mode, stability check,
   compiled plan), per shipped scene; medians, µs of CPU.
 - `import finger_sim.simulate` in a fresh interpreter, and the same followed by

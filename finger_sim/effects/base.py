@@ -74,7 +74,9 @@ class ForceElement(Protocol):
         the crossing only makes Q change non-smoothly (a kink: contact onset or release).
 
         The Simulator locates every crossing inside a step and ends the step there; only an
-        impact changes the velocity.
+        impact changes the velocity. An element with impacts also declares its rest mode:
+        `rests(index, q, v_plus, a_free, dt)` and `release_time(index, t, t1, q, free_acceleration)`
+        (`effects.stops.JointStops`).
         """
         ...
 

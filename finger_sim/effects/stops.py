@@ -3,11 +3,16 @@
 No force: a stop acts only when θ1 reaches a limit. Its two gaps (θ1 − lower, upper − θ1)
 are event functions; the Simulator locates their crossing inside a step and applies the
 impact there (q' → −e q', or rest on the stop). Spec §3.
+
+The stop owns one discrete mode, resting: after an impact that would bring the finger back
+within a step (`rests`) q stays fixed and q' = 0 until the free acceleration pulls it off the
+stop (`release_time`, the mode's guard). The mode's value, the gap rested on, is kept by each
+Simulator (`Simulator._resting`): one scene's Simulators share this frozen element.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
@@ -18,6 +23,10 @@ if TYPE_CHECKING:
     from finger_sim.scene import Scene
 
 ZERO: Vec3 = (0.0, 0.0, 0.0)
+#: The release from a stop is located to this fraction of the step.
+RELEASE_TOLERANCE = 1e-12
+#: brentq's relative tolerance on the release time: four units in the last place.
+RELEASE_RTOL = 4 * 2.0**-52
 #: ∂gap/∂q of the lower gap θ1 − lower and of the upper gap upper − θ1.
 _GRADIENTS: tuple[Vec3, Vec3] = ((1.0, 0.0, 0.0), (-1.0, 0.0, 0.0))
 
@@ -58,6 +67,35 @@ class JointStops:
 
     def outputs(self, t: float, q: Vec3, v: Vec3) -> Mapping[str, float]:
         return NO_OUTPUTS
+
+    # -- the resting mode -----------------------------------------------------------------
+    def rests(self, index: int, q: Vec3, v_plus: Vec3, a_free: Vec3, dt: float) -> bool:
+        """Whether the finger, leaving gap `index` at q with q' = v_plus (rad/s) after an impact, rests
+        on it instead: its free acceleration a_free (rad/s², at q' = 0) closes the gap fast enough to
+        bring it back within a step of dt (s)."""
+        n = _GRADIENTS[index]
+        closing = n[0] * a_free[0] + n[1] * a_free[1] + n[2] * a_free[2]  # d²gap/dt² at rest
+        rate = n[0] * v_plus[0] + n[1] * v_plus[1] + n[2] * v_plus[2]
+        return closing < 0.0 and abs(rate) <= abs(closing) * dt
+
+    def release_time(self, index: int, t: float, t1: float, q: Vec3,
+                     free_acceleration: Callable[[float], Vec3]) -> float | None:
+        """When in [t, t1] (s) the finger resting on gap `index` at q leaves it; None if it stays
+        throughout. At rest q is fixed and q' = 0, so the free acceleration (rad/s², a function of the
+        time alone) decides: the release is the root of its component into the gap, found by brentq."""
+        n = _GRADIENTS[index]
+
+        def push(s: float) -> float:
+            a = free_acceleration(s)
+            return -(n[0] * a[0] + n[1] * a[1] + n[2] * a[2])
+
+        if push(t) <= 0.0:
+            return t
+        if push(t1) > 0.0:
+            return None
+        from scipy.optimize import brentq  # here: a release from a stop is rare, scipy.optimize costs ≈ 0.15 s to import
+
+        return brentq(push, t, t1, xtol=RELEASE_TOLERANCE * (t1 - t), rtol=RELEASE_RTOL)
 
     @property
     def mcp_range(self) -> tuple[float, float]:

@@ -57,7 +57,7 @@ FALLBACK_CACHE_DIR = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache
 
 
 #: The package's folders whose modules the kernel compiles from (besides the top-level modules).
-COMPILED_FOLDERS = ("kernel", "effects", "integrators", "actuators")
+COMPILED_FOLDERS = ("kernel", "effects", "integrators", "actuators", "simulation")
 
 
 @functools.cache

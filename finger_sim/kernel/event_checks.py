@@ -2,7 +2,7 @@
 
 A finger stepped in the kernel (`kernel.rollout_loop.run_rows`) has its step checked after it
 is taken: a stop closed, a contact gap opened or closed, or the Simulator predicts a crossing
-inside the step (`simulate._predicted_crossing`, compiled here: the same function). Such a step
+inside the step (`simulation.locate.predicted_crossing`, compiled here: the same function). Such a step
 is taken back and handed to the finger's `Simulator`, which locates the event exactly as it
 always does. |Φ| is tracked here too (`residual`), for a batch's max_constraint_residual.
 """
@@ -16,18 +16,18 @@ from finger_sim.kernel import use_writable_cache
 use_writable_cache()  # before numba reads NUMBA_CACHE_DIR
 from numba import njit  # noqa: E402  (after the cache folder is set)
 
-from finger_sim import simulate  # noqa: E402
+from finger_sim.simulation import locate  # noqa: E402
 from finger_sim.kernel.layout import CONTACT, HEADER  # noqa: E402
 
-#: `simulate.EVENT_TOLERANCE`: a gap counts as closed below −EVENT_TOLERANCE.
-EVENT_TOLERANCE = simulate.EVENT_TOLERANCE
+#: `locate.EVENT_TOLERANCE`: a gap counts as closed below −EVENT_TOLERANCE.
+EVENT_TOLERANCE = locate.EVENT_TOLERANCE
 #: A gap's rate is the forward difference of the gap along q' over this fraction of the step.
 RATE_STEP = 1e-4
 
 SERIAL = {"cache": True, "nogil": True, "error_model": "numpy"}
 
 #: The Simulator's prediction of a crossing inside a step, compiled (the same function).
-predicted_crossing = njit(**SERIAL)(simulate._predicted_crossing)
+predicted_crossing = njit(**SERIAL)(locate.predicted_crossing)
 
 
 @njit(**SERIAL)
@@ -82,7 +82,7 @@ def contact_gaps(m, o, q0, q2, gap):
 def kink(m, xa, xb, h, ga, gb, shifted, rates_a, rates_b, depth, known_eps):
     """Whether a step of length h (s) from state xa to xb may hold a contact event that the
     Simulator would split it at: a contact gap of model m is closed at one end and open at the
-    other, or `simulate._predicted_crossing` (the Simulator's own test, from the gaps and their
+    other, or `locate.predicted_crossing` (the Simulator's own test, from the gaps and their
     rates at both ends) predicts a crossing inside it; the same for the depth gap depth − δ
     (`depth_guard`: depth is the thinner phalanx's radius ρ, m, so the Simulator sees every
     candidate that may reach its own). The rates are forward differences along q' over

@@ -20,7 +20,7 @@ PACKAGE = Path(finger_sim.__file__).parent
 
 #: Rooms from low to high. A module not named here is in the core if it sits at the top level or
 #: in a core folder; every other folder is a room of its own name.
-CORE_FOLDERS = ("effects", "integrators", "actuators")
+CORE_FOLDERS = ("effects", "integrators", "actuators", "simulation")
 FRONT_ENDS = ("rollouts", "sweep", "sweep_plan", "cluster", "sample", "csv_columns", "streaming")
 RECORDS = ("run_log", "run_log_checks")  # the bridge from the core to the MCAP library
 #: The one module of runtime/ that records: it assembles the MCAP log, the rest of runtime/ imports no MCAP.

@@ -1,0 +1,173 @@
+"""The gap events of a Simulator's non-smooth force elements: a stop impact, a contact onset or release.
+
+Every gap of every non-smooth element (`ForceElement.gaps`) is an event function. A step whose
+ends, or whose predicted path (`locate.predicted_crossing`), show a gap crossing is searched for it
+(`bracket`), and the crossing located by Illinois regula falsi on the gap (`locate_gap`); the
+Simulator ends the step there. The functions read the Simulator's set-up (`_gaps`, `_gap_elements`,
+`_depth_sources`, `_timed`) and take its trial steps (`Simulator._step`).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, NamedTuple
+
+from finger_sim.depth_guard import DepthLimit
+from finger_sim.effects import ForceElement
+from finger_sim.integrators import TorqueFn
+from finger_sim.kinematics import Vec3
+from finger_sim.simulation.locate import EVENT_TOLERANCE, illinois_update, predicted_crossing
+
+if TYPE_CHECKING:
+    from finger_sim.simulation.driver import Simulator
+
+#: Regula-falsi iterations allowed to locate one crossing.
+MAX_LOCATE_ITERATIONS = 60
+#: How deep `bracket` refines a predicted crossing inside a step that its check did not confirm
+#: (each level probes both halves: at most 2^depth − 1 extra integrator steps).
+BRACKET_DEPTH = 3
+
+
+class Gap(NamedTuple):
+    """One event function of a non-smooth element: gap `index` of `element`, and the restitution
+    of its impact (None: crossing it is a kink only)."""
+
+    element: ForceElement
+    index: int
+    restitution: float | None
+
+
+class Crossing(NamedTuple):
+    """A located crossing: where the sub-step ends (t, q, q') and the gap that crossed."""
+
+    t: float
+    q: Vec3
+    v: Vec3
+    gap: Gap
+
+
+def first_crossing(sim: Simulator, t: float, q: Vec3, v: Vec3, t1: float, q1: Vec3, v1: Vec3,
+                   torque: TorqueFn) -> Crossing | None:
+    """The earliest gap crossing in (t, t1] of the step (t, q, q') → (t1, q1, q1'), or None.
+
+    A gap crosses when it is closed at one end of the step and open at the other (an impact
+    gap, a stop, counts as open at the start: the step starts off it), or when it closes and
+    opens again inside the step, which the ends alone do not show (a contact shorter than
+    a step): `bracket` looks for that between the ends.
+    """
+    first: Crossing | None = None
+    start, end = gap_states(sim, t, q, v), gap_states(sim, t1, q1, v1)
+    h = t1 - t
+    for gap, (g0, r0), (g1, r1) in zip(sim._gaps, start, end):
+        if gap.restitution is not None:
+            g0 = max(g0, 0.0)  # an impact gap: the step starts on the open side
+        if min(g0, g1) > h * (abs(r0) + abs(r1)):
+            continue  # open at both ends, and too far for `predicted_crossing` to see a crossing between
+        found = bracket(sim, gap, t, q, v, torque, (t, g0, r0), (t1, g1, r1, q1, v1), BRACKET_DEPTH)
+        if found is not None:
+            crossing = sim._locate(gap, t, q, v, (t, g0), found, torque)  # `locate_gap`
+            if first is None or crossing.t < first.t:
+                first = crossing
+    if first is not None and isinstance(first.gap.element, DepthLimit):  # a phalanx axis reached an object
+        raise first.gap.element.crossed(first.gap.index, first.t, first.q, first.v, sim.method)
+    return first
+
+
+def gap_states(sim: Simulator, t: float, q: Vec3, v: Vec3) -> list[tuple[float, float]]:
+    """(gap, gap') of every gap at (t, q, q') in `_gaps` order: gap' = ∂gap/∂q · q' (+ ∂gap/∂t
+    for a moving object). The last state asked is kept: a step's end is the next one's start."""
+    cached = sim._gap_cache
+    if cached is not None and cached[0] is q and cached[1] is v and (not sim._timed or cached[3] == t):
+        return cached[2]
+    out = []
+    for element, indices in sim._gap_elements:
+        if element in sim._timed:
+            values, rates = element.gaps_at(t, q), element.gap_rates(t, q, v)
+            out.extend((values[i], rates[i]) for i in indices)
+            continue
+        values = element.gaps(q)
+        for i in indices:
+            n = element.gap_gradient(i, q)
+            out.append((values[i], n[0] * v[0] + n[1] * v[1] + n[2] * v[2]))
+    out.extend((out[p][0] + rho, out[p][1]) for p, rho in sim._depth_sources)  # ρ − δ, at the rate of −δ
+    sim._gap_cache = (q, v, out, t)
+    return out
+
+
+def bracket(sim: Simulator, gap: Gap, t: float, q: Vec3, v: Vec3, torque: TorqueFn,
+            lo: tuple[float, float, float], hi: tuple[float, float, float, Vec3, Vec3],
+            depth: int) -> tuple[float, float, Vec3, Vec3] | None:
+    """(s, gap, q, q') at a time s in (lo, hi] where the gap is on the other side than at lo,
+    or None. lo = (s, gap, gap'), hi = (s, gap, gap', q, q'): states of the step from
+    (t, q, q'), so the state at s is one step from t.
+
+    Either hi is across already, or the gap crosses and comes back inside: predicted by
+    `predicted_crossing` from the ends' values and rates, then checked by stepping to the
+    predicted time; a check that finds no crossing checks the cubic's extremum too (the start's
+    rate falls short of a convex gap's crossing, e.g. an axis passing a circle), then refines on
+    both halves, `depth` deep.
+    """
+    sa, ga, ra = lo
+    sb, gb, rb, qb, vb = hi
+    closed = ga < -EVENT_TOLERANCE
+    if (gb < -EVENT_TOLERANCE) != closed:
+        return sb, gb, qb, vb
+    x = predicted_crossing(ga, ra, gb, rb, sb - sa, closed)
+    if x is None or depth == 0:
+        return None
+    s = sa + x * (sb - sa)
+    qs, vs = sim._step(t, q, v, s - t, torque)
+    gs, rs = gap_states(sim, s, qs, vs)[sim._gaps.index(gap)]
+    mid = (s, gs, rs, qs, vs)
+    if (gs < -EVENT_TOLERANCE) != closed:
+        return s, gs, qs, vs
+    extremum = predicted_crossing(ga, ra, gb, rb, sb - sa, closed, False)
+    if extremum is not None and extremum > x:
+        s2 = sa + extremum * (sb - sa)
+        q2, v2 = sim._step(t, q, v, s2 - t, torque)
+        g2, _ = gap_states(sim, s2, q2, v2)[sim._gaps.index(gap)]
+        if (g2 < -EVENT_TOLERANCE) != closed:
+            return s2, g2, q2, v2
+    return (bracket(sim, gap, t, q, v, torque, lo, mid, depth - 1)
+            or bracket(sim, gap, t, q, v, torque, (s, gs, rs), hi, depth - 1))
+
+
+def locate_gap(sim: Simulator, gap: Gap, t: float, q: Vec3, v: Vec3, lo: tuple[float, float],
+               hi: tuple[float, float, Vec3, Vec3], torque: TorqueFn) -> Crossing:
+    """Where in (lo, hi] the gap crosses zero: Illinois regula falsi on g(s) = gap(q(s)),
+    q(s) the step from (t, q, q') to s. lo = (s, gap), hi = (s, gap, q, q') (`bracket`).
+
+    An impact is applied at the located point (|g| ≤ EVENT_TOLERANCE); a kink's step ends
+    on its far side, so that the rest of the step does not see the crossing again. The bracket's
+    update is `locate.illinois_update`; unlike `locate.illinois`, this loop stops on the gap's value
+    (or a trial outside the bracket, without bisecting) and keeps the last trial: an impact needs
+    the point on the gap.
+    """
+    step, element, index = sim._step, gap.element, gap.index
+    timed = element in sim._timed
+
+    def gap_at(s: float, qs: Vec3) -> float:
+        return element.gaps_at(s, qs)[index] if timed else element.gaps(qs)[index]
+
+    def at(s: float) -> tuple[float, Vec3, Vec3]:
+        qs, vs = step(t, q, v, s - t, torque)
+        return gap_at(s, qs), qs, vs
+
+    # g(a) and g(b) lie on opposite sides.
+    a, ga = lo
+    b, gb, qb, vb = hi
+    s, gs, qs, vs = b, gb, qb, vb
+    keep = 0
+    for _ in range(MAX_LOCATE_ITERATIONS):
+        s = b - gb * (b - a) / (gb - ga)
+        # A step that starts on the gap (g(t) = 0) crosses at t itself: stepping a
+        # zero-length interval would divide by zero in rattle and fail in scipy.
+        gs, qs, vs = at(s) if s > t else (gap_at(t, q), q, v)
+        if abs(gs) <= EVENT_TOLERANCE or s <= a or s >= b:
+            break
+        across = (gs > 0) == (gb > 0)
+        if across:
+            qb, vb = qs, vs
+        a, ga, b, gb, keep = illinois_update(a, ga, b, gb, keep, s, gs, across)
+    if gap.restitution is None and (gs < -EVENT_TOLERANCE) != (gap_at(b, qb) < -EVENT_TOLERANCE):
+        return Crossing(b, qb, vb, gap)  # the kink's far side
+    return Crossing(s, qs, vs, gap)

@@ -1,0 +1,230 @@
+"""The Simulator: fixed-rate stepping of a scene on its time grid, split at breakpoints and events.
+
+`Simulator` advances exactly dt per step (t = n·dt, never accumulated), whatever the integrator,
+so the node and offline runs share one path and the same torques at the same steps give
+bit-identical states. A torque profile's breakpoints cut the step into smooth segments; the
+events of the non-smooth force elements (a stop impact, a contact onset) are located inside a
+segment (`simulation.crossings`) and the segment is split there; a stop's impact may start its
+rest mode (`simulation.impact`). A drive's mesh modes and stick–slip friction step their own
+events (`actuators.stepping`, `stick_slip`) with the same pieces.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+from finger_sim import stick_slip
+from finger_sim.actuators import stepping as drive_stepping
+from finger_sim.effects import EFFECTS
+from finger_sim.errors import SimulationDiverged
+from finger_sim.inputs import BREAK_EPS, HELD_ARRAY, Profile
+from finger_sim.integrators import HeldTorque, Integrator, TorqueFn
+from finger_sim.kinematics import Vec3
+from finger_sim.projection import OK as FAST_OK
+from finger_sim.scene import Scene
+from finger_sim.simulation import crossings, impact
+from finger_sim.simulation.crossings import Crossing, Gap
+from finger_sim.simulation.setup import hashable, setup_for
+from finger_sim.stepper_slot import BREAKPOINT
+from finger_sim.tip_force_profile import refuse_profile
+
+#: Events (impacts, kinks) allowed within one step before the run is declared chattering.
+MAX_EVENTS_PER_STEP = 8
+#: A step is split into substeps (auto on a contact scene) when a contact gap, moving at its
+#: start rate, would close within this many step lengths: margin for the acceleration towards it.
+NEAR_CONTACT = 2.0
+ZERO: Vec3 = (0.0, 0.0, 0.0)
+
+
+class State(NamedTuple):
+    """Time (s), q = (θ1, θ2, θ3) (rad) and q' (rad/s)."""
+
+    t: float
+    q: Vec3
+    v: Vec3
+
+
+#: State(t, q, v) without the NamedTuple's Python-level __new__ (0.3 µs of a 2 µs step).
+_new_state = tuple.__new__
+
+
+class Simulator:
+    """Steps one scene at its fixed dt. Torque is the scene's profile, or a held value per step."""
+
+    def __init__(self, scene: Scene, *, kernel: str = "auto") -> None:
+        """kernel: "auto" (compiled where numba and the scene allow), "compiled", "python", or a
+        kernel name recorded by an earlier run; `self.kernel` names the one that runs. The set-up
+        (system, method choice, stability check, compiled plan) is kept per scene (`setup_for`)."""
+        refuse_profile(scene, "simulate or rollout")
+        self.scene = scene
+        # the registered effects are part of the key: a plug-in registered later builds another system
+        effects = tuple(EFFECTS.values())
+        # a drive holds its mesh mode: each Simulator of a drive scene builds its own system
+        cached = hashable(scene) and scene.drive is None and not stick_slip.in_scene(scene)  # nor a friction mode
+        setup = setup_for(scene, kernel, effects) if cached else setup_for.__wrapped__(scene, kernel, effects)
+        self.system, self.dt, self.method, self.method_reason = setup.system, scene.dt, setup.method, setup.reason
+        #: steps in contact (or closing a contact within the step) are split in this many (auto only)
+        self.substeps = setup.substeps
+        #: keyword options of the integrator (auto's error-controlled method: its tolerances)
+        self._options = setup.options
+        #: the drive (spec §8) whose mesh modes this Simulator steps, or None (an ideal torque source)
+        self._drive = getattr(self.system, "drive", None)
+        #: the stick–slip contact (spec §7) whose friction modes this Simulator steps, or None
+        self._friction = stick_slip.element(self.system)
+        self._method_cls, self._integrator_cls, self.kernel = setup.method_cls, setup.integrator_cls, setup.kernel
+        self._gaps, self._kinks, self._gap_elements = setup.gaps, setup.kinks, setup.gap_elements
+        #: the depth gaps (`DepthLimit`, last in `_gaps`): (position of the contact gap in `_gaps`, ρ) each
+        self._depth_sources = setup.depth_sources
+        #: elements whose gaps move with time too (contact with a moving object): asked at (t, q)
+        self._timed = frozenset(g.element for g in self._gaps if getattr(g.element, "time_varying", False))
+        self.reset()
+        #: the lean compiled path of `step` (a compiled fixed-step method on a smooth scene), else None
+        self.fast_stepper = setup.fast_stepper
+        #: what `step`'s lean path calls: the fast stepper, or a drive scene's (`actuators.stepping.fast_stepper`)
+        self._lean = self.fast_stepper if self._drive is None else drive_stepping.fast_stepper(self)
+
+    def reset(self) -> None:
+        """Back to the scene's initial state at t = 0."""
+        # A fresh integrator: a warm start kept from the last run (adaptive's step size,
+        # rattle's Jacobian) would make the rerun differ in the last bits.
+        self.integrator: Integrator = self._integrator_cls(self.system, **self._options)
+        self.step_index = 0
+        self.q, self.v = self.scene.initial_state()
+        #: the stop's rest mode (`effects.stops.JointStops.rests`): the closed impact gap rested on, or None
+        self._resting: Gap | None = None
+        #: `crossings.gap_states`' last (q, q', gaps and rates, t)
+        self._gap_cache: tuple[Vec3, Vec3, list[tuple[float, float]], float] | None = None
+        #: the motor torque at the end of the last step (N·m): what a JointState effort reports
+        #: (with a drive: the voltage command, V)
+        self.torque = self.scene.torque(0.0)
+        if self._drive is not None:
+            drive_stepping.start(self)
+        if self._friction is not None:
+            stick_slip.start(self)
+        self.impacts = 0
+        self._held: tuple[float, TorqueFn] | None = None  # the held torque (N·m) and its function
+
+    @property
+    def time(self) -> float:
+        """Sim time of the current state, s: step_index·dt."""
+        return self.step_index * self.dt
+
+    @property
+    def state(self) -> State:
+        return State(self.time, self.q, self.v)
+
+    @property
+    def error_estimate(self) -> float:
+        """The integrator's estimate of the global θ error at the current state (rad): an
+        error-controlled method's sum of local error estimates (`DormandPrince853.error_estimate`);
+        NaN for a fixed-step method, which does not estimate its error."""
+        estimate = getattr(self.integrator, "error_estimate", None)
+        return math.nan if estimate is None else estimate(self.q)
+
+    def step(self, torque: Profile | float | None = None) -> State:
+        """Advance one dt under `torque`: the scene's profile if None, a profile, or a held value (N·m)."""
+        fast = self._lean
+        if fast is not None and not isinstance(torque, Profile):
+            # one kernel call: the compiled profile (or the held value) and the step, same numbers
+            prof, held = (fast.profile, 0.0) if torque is None else (HELD_ARRAY, float(torque))
+            if prof is not None:
+                k = self.step_index
+                status, q, v, end = fast.call(fast.plan, prof, held, k, self.q, self.v)
+                if status == FAST_OK:
+                    self.q, self.v, self.torque, self.step_index = q, v, end, k + 1
+                    return _new_state(State, ((k + 1) * self.dt, q, v))
+                if status != BREAKPOINT:  # else a switch inside the step: split it below
+                    fast.fail(status, k, self.q)
+        profile = self.scene.torque if torque is None else torque
+        t0, t1 = self.step_index * self.dt, (self.step_index + 1) * self.dt
+        if isinstance(profile, Profile):
+            eps = BREAK_EPS * self.dt
+            cuts = [b for b in profile.breakpoints(t0, t1) if t0 + eps < b < t1 - eps]
+            edges = [t0, *cuts, t1]
+            for a, b in zip(edges, edges[1:]):
+                segment = profile.on_segment(a, b)
+                self._advance(a, b, segment)
+            self.torque = segment(t1)
+        else:
+            value = self.torque = float(profile)
+            if self._held is None or self._held[0] != value:
+                # one function object per held value: an error-controlled method continues its internal
+                # solution from step to step while the value is held (it restarts for a new function);
+                # a HeldTorque, whose `value` tells it that τ is the same at every stage
+                self._held = (value, HeldTorque(value))
+            self._advance(t0, t1, self._held[1])
+        if not math.isfinite(sum(self.q) + sum(self.v)):  # a NaN or inf anywhere makes the sum non-finite
+            raise SimulationDiverged(f"non-finite state (step {self.step_index + 1})", method=self.method, t=t1, dt=self.dt)
+        self.step_index += 1
+        return self.state
+
+    # -- internals ---------------------------------------------------------------------
+    def _advance(self, t0: float, t1: float, torque: TorqueFn) -> None:
+        """Integrate [t0, t1] under a smooth torque, splitting it at every event on the way."""
+        if self._friction is not None:  # with a drive too: the mesh and the friction share one lock
+            stick_slip.advance(self, t0, t1, torque)
+            return
+        if self._drive is not None:
+            drive_stepping.advance(self, t0, t1, torque)
+            return
+        if not self._gaps:
+            self.q, self.v = self.integrator.step(t0, self.q, self.v, t1 - t0, torque)
+            return
+        t, q, v = t0, self.q, self.v
+        for _ in range(MAX_EVENTS_PER_STEP):
+            if self._resting is not None:
+                release = self._release_time(self._resting, t, t1, q, torque)
+                if release is None:  # held on the stop for the whole segment
+                    self.q, self.v = q, ZERO
+                    return
+                t, v, self._resting = release, ZERO, None
+            q1, v1 = self._step(t, q, v, t1 - t, torque)
+            crossing = self._first_crossing(t, q, v, t1, q1, v1, torque)
+            if crossing is None:
+                self.q, self.v = q1, v1
+                return
+            t, q, v = crossing.t, crossing.q, crossing.v
+            if crossing.gap.restitution is not None:
+                v = self._impact(crossing, torque)
+            if t >= t1:  # the crossing ends the segment: a zero-length step would divide by zero (rattle)
+                self.q, self.v = q, v
+                return
+        raise SimulationDiverged(f"more than {MAX_EVENTS_PER_STEP} events (stop impacts, contact changes) in one step",
+                                 method=self.method, t=t0, dt=self.dt)
+
+    def _step(self, t: float, q: Vec3, v: Vec3, h: float, torque: TorqueFn) -> tuple[Vec3, Vec3]:
+        """One integrator step of length h, split in `substeps` equal ones when a contact gap is
+        closed at its start or closes within it (gap + NEAR_CONTACT·h·gap' < 0)."""
+        for gap in self._kinks:
+            if gap.element in self._timed:
+                g, rate = gap.element.gaps_at(t, q)[gap.index], gap.element.gap_rates(t, q, v)[gap.index]
+            else:
+                g = gap.element.gaps(q)[gap.index]
+                n = gap.element.gap_gradient(gap.index, q)
+                rate = n[0] * v[0] + n[1] * v[1] + n[2] * v[2]
+            if g + NEAR_CONTACT * h * min(0.0, rate) < 0.0:
+                m = self.substeps
+                for k in range(m):
+                    q, v = self.integrator.step(t + h * k / m, q, v, h / m, torque)
+                return q, v
+        return self.integrator.step(t, q, v, h, torque)
+
+    # -- events (`simulation.crossings`, `simulation.impact`), also taken by the drive and stick–slip steps
+    def _first_crossing(self, t: float, q: Vec3, v: Vec3, t1: float, q1: Vec3, v1: Vec3,
+                        torque: TorqueFn) -> Crossing | None:
+        """The earliest gap crossing of the step (t, q, q') → (t1, q1, q1'), located; None if none."""
+        return crossings.first_crossing(self, t, q, v, t1, q1, v1, torque)
+
+    def _locate(self, gap: Gap, t: float, q: Vec3, v: Vec3, lo: tuple[float, float],
+                hi: tuple[float, float, Vec3, Vec3], torque: TorqueFn) -> Crossing:
+        """Where in (lo, hi] of the step from (t, q, q') the gap crosses (`crossings.locate_gap`)."""
+        return crossings.locate_gap(self, gap, t, q, v, lo, hi, torque)
+
+    def _impact(self, crossing: Crossing, torque: TorqueFn) -> Vec3:
+        """q' just after the impact of a located crossing; zero when it starts the rest on the stop."""
+        return impact.impact(self, crossing, torque)
+
+    def _release_time(self, gap: Gap, t: float, t1: float, q: Vec3, torque: TorqueFn) -> float | None:
+        """When in [t, t1] the finger resting on a closed gap leaves it; None if it stays throughout."""
+        return impact.release_time(self, gap, t, t1, q, torque)

@@ -1,0 +1,85 @@
+"""Event location inside a step: the crossing predicted from a step's ends, and Illinois regula falsi.
+
+Both are plain functions of floats and callables: the Simulator's gap events, the drive's mesh
+guards (`actuators.stepping`, `actuators.inductive_stepping`) and the stick–slip turn all locate
+their crossings with them; the compiled event checks compile `predicted_crossing` itself
+(`kernel.event_checks`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import TypeVar
+
+#: A gap crossing (a stop) is located to this tolerance on the gap (rad for the MCP stops);
+#: a gap counts as closed below −EVENT_TOLERANCE.
+EVENT_TOLERANCE = 1e-12
+
+#: What a trial step returns besides the guard's value: the state at the trial time (opaque here).
+Payload = TypeVar("Payload")
+
+
+def illinois(at: Callable[[float], tuple[float, Payload]], crossed: Callable[[float], bool], a: float, ga: float,
+             b: float, gb: float, far: Payload, *, width: float, iterations: int) -> tuple[float, Payload]:
+    """Where a guard g(s) crosses in (a, b]: Illinois regula falsi on the time s (s).
+
+    ga = g(a) on the near side, gb = g(b) across (`crossed(gb)`), `far` the state at b;
+    at(s) → (g(s), state at s) takes a trial step. The bracket shrinks until it is at most `width`
+    long (s) or `iterations` trials are spent; a trial outside the open bracket (or a flat secant)
+    bisects. Returns (s, state) at the bracket's far side, where the guard has crossed, so that the
+    rest of the step does not see the crossing again.
+    """
+    keep = 0
+    for _ in range(iterations):
+        if b - a <= width:
+            break
+        s = b - gb * (b - a) / (gb - ga) if gb != ga else 0.5 * (a + b)
+        if not a < s < b:
+            s = 0.5 * (a + b)
+        gs, state = at(s)
+        across = crossed(gs)
+        if across:
+            far = state
+        a, ga, b, gb, keep = illinois_update(a, ga, b, gb, keep, s, gs, across)
+    return b, far
+
+
+def illinois_update(a: float, ga: float, b: float, gb: float, keep: int, s: float, gs: float,
+                    across: bool) -> tuple[float, float, float, float, int]:
+    """The bracket [a, b] (g(a) = ga on the near side, g(b) = gb across) after a trial g(s) = gs,
+    `across` or not, and `keep`: which end was kept last (1: a, −1: b, 0: none). Illinois: an end
+    kept twice in a row has its value halved, so that the secant does not stall on a convex guard."""
+    if across:
+        return a, ga / 2 if keep == 1 else ga, s, gs, 1
+    return s, gs, b, gb / 2 if keep == -1 else gb, -1
+
+
+def predicted_crossing(ga: float, ra: float, gb: float, rb: float, h: float, closed: bool,
+                       start_rate: bool = True) -> float | None:
+    """Where (a fraction x of h, in (0, 1)) a gap that is on the same side at both ends of an
+    interval of length h (s) may cross and come back inside it; None if nothing suggests so.
+
+    ga, gb: the gap at the ends; ra, rb: its rates (gap units/s); closed: the side at both
+    ends (below −EVENT_TOLERANCE). Two predictions, the earlier one counts (start_rate False:
+    the second only):
+    - the start's rate: ga + x h ra reaches zero at x < 1 (the start state is the trustworthy
+      one: a step straddling a whole contact bounces in its stages and ends on the open side);
+    - the cubic Hermite interpolant of (gap, rate) at both ends has an extremum across the
+      side's bound at x (the contact, or the release, lies wholly inside the interval).
+    """
+    sign = 1.0 if closed else -1.0  # the direction that crosses
+    best = None
+    if start_rate and sign * ra > 0.0 and sign * (ga + h * ra) > -sign * EVENT_TOLERANCE:
+        best = min(1.0, max(0.0, -ga / (h * ra)))
+    # H(x) = ((a x + b) x + c) x + ga; H'(x) = 3a x² + 2b x + c
+    a = 2.0 * (ga - gb) + h * (ra + rb)
+    b = 3.0 * (gb - ga) - h * (2.0 * ra + rb)
+    c = h * ra
+    disc = b * b - 3.0 * a * c
+    if disc >= 0.0:
+        root = -(b + math.copysign(math.sqrt(disc), b))  # the stable quadratic formula
+        for x in ((root / (3.0 * a)) if a != 0.0 else 2.0, (c / root) if root != 0.0 else 2.0):
+            if 0.0 < x < 1.0 and ((((a * x + b) * x + c) * x + ga) < -EVENT_TOLERANCE) != closed:
+                best = x if best is None else min(best, x)
+    return best if best is not None and 0.0 < best < 1.0 else None
