@@ -23,7 +23,7 @@ setup(
     ],
     package_data={PACKAGE: ["py.typed", "data/*.json", "view/*.html", "view/*.js", "view/*.css", "view/vendor/*"]},
     python_requires=">=3.10",
-    install_requires=["numpy", "scipy", "pyyaml", "matplotlib", "tqdm", "mcap>=1.5", "mcap-ros2-support>=0.6", "rosbags>=0.10", "numba",
+    install_requires=["numpy", "scipy", "pyyaml", "matplotlib", "tqdm", "mcap>=1.5,<2", "mcap-ros2-support>=0.6", "rosbags>=0.10", "numba",
                       "plotly>=7,<8", "SALib", "pydantic>=2"],
     extras_require={
         # ROS 2 Jazzy's Python stack from PyPI, for machines without a ROS install.
