@@ -12,7 +12,6 @@ References, none of them finger_sim's code:
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 import pytest
