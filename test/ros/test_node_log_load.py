@@ -7,6 +7,7 @@ file is read up to its last whole chunk) and by rosbags (an independent reader).
 
 from __future__ import annotations
 
+import os
 import signal
 import time
 from pathlib import Path
@@ -23,6 +24,7 @@ from finger_sim.cli import EXIT_INCOMPLETE  # noqa: E402
 from finger_sim.log import RECORDING_STATUS  # noqa: E402
 from finger_sim.log.reader import LogReader  # noqa: E402
 from finger_sim.ros import conversions  # noqa: E402
+from conftest import wait_until  # noqa: E402
 from helpers import NODE, child_pids, run_cli, wait_until_gone  # noqa: E402
 
 CONFIG = Path(__file__).resolve().parents[2] / "config"
@@ -112,12 +114,19 @@ def test_as_fast_as_possible_the_log_keeps_every_message(launcher, tmp_path):
 
 
 def test_a_real_time_run_that_drops_says_so_in_its_log(launcher, tmp_path):
-    """realtime_factor 1 with the same small queue: messages are dropped, and the log says how
+    """realtime_factor 1 with the same small queue and a recorder slowed on purpose (its writer
+    process stopped until the node reports dropping): messages are dropped, and the log says how
     many (its 'recording' record, written at close); `info` shows it; `export` and `resim` refuse
     the log (exit 7) unless --accept-incomplete."""
-    steps = 1000
+    steps = 3000
     node = launcher.node(NODE, dict(scene=str(scene_file(tmp_path, steps / 1000)), torque_source="scene",
                                     realtime_factor=1.0, record_queue_size=SMALL_QUEUE))
+    writer = wait_until(lambda: child_pids(node.pid), 60.0, "the log's writer process")[0]
+    os.kill(writer, signal.SIGSTOP)  # a writer that cannot keep up: the pipe fills, then the queue
+    try:
+        wait_until(lambda: "dropping messages" in node.output(), 60.0, "the node's report of dropped messages")
+    finally:
+        os.kill(writer, signal.SIGCONT)
     assert node.wait(120.0) == 0, node.output()
     path = the_log(tmp_path / "bags")
     log = read_rosbags(path)
