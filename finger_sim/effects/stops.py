@@ -4,8 +4,8 @@ No force: a stop acts only when θ1 reaches a limit. Its two gaps (θ1 − lower
 are event functions; the Simulator locates their crossing inside a step and applies the
 impact there (q' → −e q', or rest on the stop). Spec §3.
 
-The stop owns one discrete mode, resting: after an impact that would bring the finger back
-within a step (`rests`) q stays fixed and q' = 0 until the free acceleration pulls it off the
+The stop owns one discrete mode, resting: after an impact whose rebound would rise
+no higher than REST_HEIGHT (`rests`) q stays fixed and q' = 0 until the free acceleration pulls it off the
 stop (`release_time`, the mode's guard). The mode's value, the gap rested on, is kept by each
 Simulator (`Simulator._resting`): one scene's Simulators share this frozen element.
 """
