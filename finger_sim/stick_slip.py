@@ -55,7 +55,7 @@ LOCATE_TOLERANCE = 1e-13
 MAX_LOCATE_ITERATIONS = 100
 #: Events (turns, breakaways, impacts, contact changes) allowed within one step before it is
 #: declared chattering.
-MAX_EVENTS_PER_STEP = 16
+MAX_EVENTS_PER_STEP = 64  # room for a stop's Zeno series down to its rest (effects.stops.REST_HEIGHT)
 #: auto's method on a stick–slip scene (`auto_method`): our error-controlled DOP853, restarted at every
 #: friction mode change (`StickSlipContact.law_state`).
 AUTO_METHOD = "dop853"

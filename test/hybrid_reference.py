@@ -5,9 +5,9 @@ dense 5×5 KKT solve), the contact law is spec §7 written again (capsule axes, 
 force, regularized Coulomb friction, J_pᵀF with the material point's Jacobian written by hand), and
 the MCP stops are spec §3's impacts v⁺ = −e v⁻. scipy's solve_ivp (DOP853 at rtol 1e-11) integrates
 each smooth piece and stops at every torque switch, contact onset or release (a zero of δ) and stop
-impact (solve_ivp events), where it restarts. A finger whose rebound off a stop would come back
-within `rest_dt` rests on the stop until the free acceleration stops pushing into it: the rest
-convention of the stepping code (a rebound shorter than one step), the one thing taken from it.
+impact (solve_ivp events), where it restarts. A finger whose rebound off a stop would rise no
+higher than `rest_height` rests on the stop until the free acceleration stops pushing into it: the
+rest convention of the stepping code (a cut of the impacts' Zeno series), the one thing taken from it.
 
 An object may carry its own `stiffness` and `damping` (spec §7's k_c, d_c for that object) and a
 prescribed `motion` (push or vibration, the scene schema's): its centre or point then moves by
@@ -146,7 +146,7 @@ class HybridReference:
         return out
 
 
-def solve(data: dict, *, rest_dt: float = 1e-3) -> HybridReference:
+def solve(data: dict, *, rest_height: float = 1e-11) -> HybridReference:
     """The reference of a scene mapping as written in config/ (the keys its hard scenes use)."""
     model = data.get("model", {})
     fx = ref.Effects(k=model.get("spring_stiffness", ref.K_PAPER), c=model.get("damping", 0.0),
@@ -218,7 +218,7 @@ def solve(data: dict, *, rest_dt: float = 1e-3) -> HybridReference:
                 out.impacts += 1
                 v_plus = -e_stop * y[3:]
                 closing = -push(t, y[:3], stop_side)  # θ1'' of the free finger at rest, away from the stop > 0
-                if (closing < 0.0 and abs(v_plus[0]) <= abs(closing) * rest_dt) or (closing == 0.0 and v_plus[0] == 0.0):
+                if (closing < 0.0 and v_plus[0] ** 2 <= 2.0 * rest_height * abs(closing)) or (closing == 0.0 and v_plus[0] == 0.0):
                     # at rest: pushed into the stop, or on it with nothing pushing (then held until a push leaves)
                     y[3:] = 0.0
                     resting = True

@@ -42,7 +42,7 @@ GUARD_TOLERANCE = 1e-12
 LOCATE_TOLERANCE = 1e-13
 MAX_LOCATE_ITERATIONS = 100
 #: Events (mode changes, kinks, impacts) allowed within one step before it is declared chattering.
-MAX_EVENTS_PER_STEP = 16
+MAX_EVENTS_PER_STEP = 64  # room for a stop's Zeno series down to its rest (effects.stops.REST_HEIGHT)
 #: 3-point Gauss–Legendre nodes and weights on [0, 1] (exact for polynomials of degree 5).
 GAUSS_NODES = (0.5 - math.sqrt(15.0) / 10.0, 0.5, 0.5 + math.sqrt(15.0) / 10.0)
 GAUSS_WEIGHTS = (5.0 / 18.0, 8.0 / 18.0, 5.0 / 18.0)

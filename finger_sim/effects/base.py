@@ -75,7 +75,7 @@ class ForceElement(Protocol):
 
         The Simulator locates every crossing inside a step and ends the step there; only an
         impact changes the velocity. An element with impacts also declares its rest mode:
-        `rests(index, q, v_plus, a_free, dt)` and `release_time(index, t, t1, q, free_acceleration)`
+        `rests(index, q, v_plus, a_free)` and `release_time(index, t, t1, q, free_acceleration)`
         (`effects.stops.JointStops`).
         """
         ...

@@ -4,8 +4,8 @@ No force: a stop acts only when θ1 reaches a limit. Its two gaps (θ1 − lower
 are event functions; the Simulator locates their crossing inside a step and applies the
 impact there (q' → −e q', or rest on the stop). Spec §3.
 
-The stop owns one discrete mode, resting: after an impact that would bring the finger back
-within a step (`rests`) q stays fixed and q' = 0 until the free acceleration pulls it off the
+The stop owns one discrete mode, resting: after an impact whose rebound would rise
+no higher than REST_HEIGHT (`rests`) q stays fixed and q' = 0 until the free acceleration pulls it off the
 stop (`release_time`, the mode's guard). The mode's value, the gap rested on, is kept by each
 Simulator (`Simulator._resting`): one scene's Simulators share this frozen element.
 """
@@ -23,6 +23,12 @@ if TYPE_CHECKING:
     from finger_sim.scene import Scene
 
 ZERO: Vec3 = (0.0, 0.0, 0.0)
+#: The finger rests on a stop after an impact whose rebound would rise no higher than this (rad): the
+#: rest cuts the rest of the impacts' Zeno series (heights × e² each), so θ departs from the model's
+#: (spec §3: impacts alone) by at most this much, 10× below the smallest `integrator.tolerance`, and the
+#: rule does not depend on the step (a rest after a rebound shorter than a step made θ depend on dt
+#: by ≈ |θ1''| dt²/2: 1.5e-4 rad at 1 ms on config/hard/grasp_release.yaml).
+REST_HEIGHT = 1e-11
 #: The release from a stop is located to this fraction of the step.
 RELEASE_TOLERANCE = 1e-12
 #: brentq's relative tolerance on the release time: four units in the last place.
@@ -69,14 +75,14 @@ class JointStops:
         return NO_OUTPUTS
 
     # -- the resting mode -----------------------------------------------------------------
-    def rests(self, index: int, q: Vec3, v_plus: Vec3, a_free: Vec3, dt: float) -> bool:
+    def rests(self, index: int, q: Vec3, v_plus: Vec3, a_free: Vec3) -> bool:
         """Whether the finger, leaving gap `index` at q with q' = v_plus (rad/s) after an impact, rests
-        on it instead: its free acceleration a_free (rad/s², at q' = 0) closes the gap fast enough to
-        bring it back within a step of dt (s)."""
+        on it instead: its free acceleration a_free (rad/s², at q' = 0) closes the gap and the rebound
+        would rise no higher than REST_HEIGHT (rad)."""
         n = _GRADIENTS[index]
         closing = n[0] * a_free[0] + n[1] * a_free[1] + n[2] * a_free[2]  # d²gap/dt² at rest
         rate = n[0] * v_plus[0] + n[1] * v_plus[1] + n[2] * v_plus[2]
-        return closing < 0.0 and abs(rate) <= abs(closing) * dt
+        return closing < 0.0 and rate * rate <= 2.0 * REST_HEIGHT * -closing
 
     def release_time(self, index: int, t: float, t1: float, q: Vec3,
                      free_acceleration: Callable[[float], Vec3]) -> float | None:

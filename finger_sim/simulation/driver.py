@@ -29,8 +29,9 @@ from finger_sim.simulation.setup import hashable, setup_for
 from finger_sim.stepper_slot import BREAKPOINT
 from finger_sim.tip_force_profile import refuse_profile
 
-#: Events (impacts, kinks) allowed within one step before the run is declared chattering.
-MAX_EVENTS_PER_STEP = 8
+#: Events (impacts, kinks) allowed within one step before the run is declared chattering: room for
+#: a stop's Zeno series down to its rest (`effects.stops.REST_HEIGHT`; e = 0.3 from 1e-2 rad: 10 impacts).
+MAX_EVENTS_PER_STEP = 64
 #: A step is split into substeps (auto on a contact scene) when a contact gap, moving at its
 #: start rate, would close within this many step lengths: margin for the acceleration towards it.
 NEAR_CONTACT = 2.0

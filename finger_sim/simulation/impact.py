@@ -31,7 +31,7 @@ def impact(sim: Simulator, crossing: Crossing, torque: TorqueFn) -> Vec3:
     e = gap.restitution
     v_plus = (-e * vs[0], -e * vs[1], -e * vs[2])
     a_free, _ = sim.system.accelerations(s, qs, ZERO, torque(s))
-    if gap.element.rests(gap.index, qs, v_plus, a_free, sim.dt):  # type: ignore[attr-defined]
+    if gap.element.rests(gap.index, qs, v_plus, a_free):  # type: ignore[attr-defined]
         sim._resting = gap
         return ZERO
     return v_plus
