@@ -22,8 +22,9 @@ payload reaches `chunk_size`, after `idle_flush_s` wall seconds without messages
 has been open for `chunk_wall_s` wall seconds whatever arrives: a paused sim whose log time stands
 still while diagnostics and commands keep coming loses at most that much wall time to a kill -9. Closing uses `mcap.writer.Writer.flush()` (mcap >= 1.5); the
 Writer's own size trigger is set out of reach so that every chunk boundary goes through it. A
-`kill -9` of the caller loses what it had not handed over yet (at most handover_s) and the
-summary: the writer process (in its own session, so a signal to the caller's process group does
+`kill -9` of the caller loses what it had not handed over yet (at most handover_s while the
+writer keeps up; a starved writer leaves more in the caller's buffer, what the pipe cannot hold)
+and the summary: the writer process (in its own session, so a signal to the caller's process group does
 not reach it) sees its input end, writes the open chunk and exits. The prefix stays readable by
 linear readers (mcap's StreamReader, finger_sim.log.reader).
 
