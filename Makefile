@@ -29,7 +29,10 @@ run: $(STAMP)
 	log=$$(ls -t bags/paper_flexion_*.mcap | head -n 1) && $(VENV)/bin/finger-sim view "$$log" -o out/paper_flexion.html && \
 	echo "viewer of this run: file://$(CURDIR)/out/paper_flexion.html (open it in a browser)"
 
+# The numba cache is keyed by the compiled sources: after an edit it is warmed again (well under a
+# second when nothing changed), so that the suite's cache test sees what a fresh install leaves.
 test: $(STAMP) browser
+	$(PY) -m finger_sim.kernel.warm
 	$(VENV)/bin/pytest -q
 
 # The viewer's browser tests drive Debian's Chromium (test/view/test_view_browser.py): installed here
