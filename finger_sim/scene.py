@@ -55,7 +55,8 @@ from finger_sim.actuators.drive import Drive, DriveParams, DrivenSystem, drive_f
 from finger_sim.dynamics import FingerSystem
 from finger_sim.errors import ConfigError
 from finger_sim.effects import ForceElement, build_elements, declared_parameters
-from finger_sim.effects.friction_modes import STICK_SLIP, FrictionLaw, friction_law_from_dict, split_friction_keys
+from finger_sim.effects.friction_modes import (FRICTION_KEYS, STICK_SLIP, FrictionLaw, friction_law_from_dict,
+                                               split_friction_keys)
 from finger_sim.effects.contact_geometry import (
     PHALANX_RADII,
     Circle,
@@ -348,7 +349,7 @@ def _effect_value(model: dict[str, Any], key: str) -> Any:
 
 def _contact(value: Any) -> ContactParams:
     """`model.contact` (spec §7 defaults), bounded by the MAX_CONTACT_* constants."""
-    params = contact_params_from_dict(split_friction_keys(value)[0])
+    params = contact_params_from_dict(split_friction_keys(value)[0], also=FRICTION_KEYS)
     key = "model.contact."
     number(params.stiffness, key + "stiffness", maximum=MAX_CONTACT_STIFFNESS)
     number(params.exponent, key + "exponent", maximum=MAX_CONTACT_EXPONENT)

@@ -265,16 +265,17 @@ def objects_from_list(value: Any, key: str = "objects") -> tuple[SceneObject, ..
     return tuple(out)
 
 
-def contact_params_from_dict(value: Any, key: str = "model.contact") -> ContactParams:
-    """Validate `model.contact` (None = the spec's defaults); keys as in ContactParams."""
+def contact_params_from_dict(value: Any, key: str = "model.contact", also: tuple[str, ...] = ()) -> ContactParams:
+    """Validate `model.contact` (None = the spec's defaults); keys as in ContactParams. `also`: the keys of the
+    same mapping that the caller has taken out and reads itself (named with the allowed keys in an error)."""
     if value is None:
         return ContactParams()
     allowed = {f.name for f in fields(ContactParams)}
     if not isinstance(value, dict):
-        raise ConfigError(key, f"a mapping with the keys {sorted(allowed)}", value)
+        raise ConfigError(key, f"a mapping with the keys {sorted(allowed | set(also))}", value)
     unknown = sorted(set(value) - allowed, key=str)  # YAML keys may be ints, None, ...: sorted as text
     if unknown:
-        raise ConfigError(key, f"only the keys {sorted(allowed)}", unknown[0])
+        raise ConfigError(key, f"only the keys {sorted(allowed | set(also))}", unknown[0])
     try:
         return ContactParams(**value)
     except ConfigError as exc:

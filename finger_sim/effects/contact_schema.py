@@ -48,9 +48,10 @@ class ContactLaw(_Closed):
     friction_model: Literal[FRICTION_MODELS] = Field(  # type: ignore[valid-type]
         REGULARIZED, description="regularized (tanh) or stick_slip (exact locked and sliding modes)")
     static_friction: bounded("static coefficient μ_s, ≥ friction (stick_slip only; default: friction)", minimum=0.0,
-                             maximum=MAX_STATIC_FRICTION, default=None)
+                             maximum=MAX_STATIC_FRICTION, default=None, nullable=True)
     stribeck_velocity: bounded("Stribeck velocity v_st (m/s, stick_slip only; default: none)",
-                               minimum=MIN_STRIBECK_VELOCITY, maximum=MAX_STRIBECK_VELOCITY, default=None)
+                               minimum=MIN_STRIBECK_VELOCITY, maximum=MAX_STRIBECK_VELOCITY, default=None,
+                               nullable=True)
 
 
 Extent = pair_of("", MAX_EXTENT)
@@ -85,12 +86,12 @@ class _Object(_Closed):
 
     name: _Name
     stiffness: bounded("its own contact stiffness k_c (N/m^e), instead of model.contact's", minimum=0.0,
-                       maximum=MAX_CONTACT_STIFFNESS, strict=True, default=None)
+                       maximum=MAX_CONTACT_STIFFNESS, strict=True, default=None, nullable=True)
     damping: bounded("its own Hunt–Crossley damping d_c (s/m), instead of model.contact's", minimum=0.0,
-                     maximum=MAX_CONTACT_DAMPING, default=None)
+                     maximum=MAX_CONTACT_DAMPING, default=None, nullable=True)
     break_force: bounded("normal force (N) beyond which it is crushed (default: unbreakable)", minimum=0.0,
-                         strict=True, default=None)
-    motion: Motion | None = Field(None, description="a prescribed motion (default: fixed in finger_base)")
+                         strict=True, default=None, nullable=True)
+    motion: Motion = Field(None, description="a prescribed motion (default: fixed in finger_base; no null)")
 
 
 class CircleObject(_Object):

@@ -58,10 +58,14 @@ def vector(default: tuple[float, float], unit: str, description: str, *, bound: 
 
 
 def bounded(description: str, *, minimum: float | None = None, maximum: float | None = None, strict: bool = False,
-            default: Any = ...) -> Any:
+            default: Any = ..., nullable: bool = False) -> Any:
     """The pydantic type of a finite float in [minimum, maximum] ((minimum, maximum] if strict), as the
-    loader's `scene_yaml.number` bounds it; `default` omitted: a required key."""
+    loader's `scene_yaml.number` bounds it; `default` omitted: a required key. `nullable`: an explicit
+    null is accepted too, for a key the loader reads as unset when null."""
     low = {"gt" if strict else "ge": minimum} if minimum is not None else {}
+    if nullable:
+        value = Annotated[float, Field(le=maximum, allow_inf_nan=False, **low)]
+        return Annotated[value | None, Field(default=default, description=description)]
     return Annotated[float, Field(default=default, le=maximum, description=description, allow_inf_nan=False, **low)]
 
 

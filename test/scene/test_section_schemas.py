@@ -132,12 +132,27 @@ def test_every_shipped_task_validates(tasks: jsonschema.Draft202012Validator, pa
      "input.tip_force[0].force[1]: expected a number with magnitude ≤ 1000, got 2000.0"),
     ("model.geometry.r9", 1.0,
      "model.geometry: expected only the keys ['L3', 'm1', 'm2', 'm3', 'r1', 'r2', 'r3', 'r4', 'theta4'], got 'r9'"),
+    ("model.contact.static_frction", 0.5,  # every key of model.contact is named, the friction law's too
+     "model.contact: expected only the keys ['damping', 'exponent', 'friction', 'friction_model', 'slip_velocity', "
+     "'static_friction', 'stiffness', 'stribeck_velocity'], got 'static_frction'"),
+    ("objects.0.motion", None,
+     "objects[0].motion: expected a mapping {type: push|vibration, direction, ...}, got None"),
 ])
 def test_a_wrong_section_value_is_refused_by_both_in_one_line(scenes: jsonschema.Draft202012Validator, path: str,
                                                               value: Any, message: str) -> None:
     data = put({"model": {"drive": {}} if path.startswith("model.drive") else {}, "objects": [CUP]}, path, value)
     assert list(scenes.iter_errors(data)) != []
     assert refusal(scene_from_dict, data) == message
+
+
+@pytest.mark.parametrize("path", ["model.contact.static_friction", "model.contact.stribeck_velocity",
+                                  "objects.0.stiffness", "objects.0.damping", "objects.0.break_force"])
+def test_an_explicit_null_the_loader_reads_as_unset_is_taken_by_both(scenes: jsonschema.Draft202012Validator,
+                                                                      path: str) -> None:
+    unset = {"model": {"contact": {"friction_model": "stick_slip"}}, "objects": [CUP]}
+    data = put(unset, path, None)
+    assert [e.message for e in scenes.iter_errors(data)] == []
+    assert scene_from_dict(data) == scene_from_dict(unset)
 
 
 @pytest.mark.parametrize("key, value, message", [
