@@ -395,7 +395,7 @@ def test_no_objects_means_no_contact_element_and_the_spec_defaults():
         ({"model": {"contact": {"stiffness": 1e300}}}, "model.contact.stiffness: expected a number ≤ 1e+12, got 1e+300"),
         ({"model": {"contact": {"exponent": 1e300}}}, "model.contact.exponent: expected a number ≤ 4, got 1e+300"),
         ({"model": {"contact": {"slip_velocity": 1e-300}}}, "model.contact.slip_velocity: expected a number ≥ 1e-09, got 1e-300"),
-        ({"model": {"contact": {"stifness": 1.0}}}, "model.contact: expected only the keys ['damping', 'exponent', 'friction', 'slip_velocity', 'stiffness'], got 'stifness'"),
+        ({"model": {"contact": {"stifness": 1.0}}}, "model.contact: expected only the keys ['damping', 'exponent', 'friction', 'friction_model', 'slip_velocity', 'static_friction', 'stiffness', 'stribeck_velocity'], got 'stifness'"),
         ({"model": {"phalanx_radius": [0.008]}}, "model.phalanx_radius: expected [proximal, distal] capsule radii (m), got [0.008]"),
         ({"model": {"phalanx_radius": [0.008, -0.007]}}, "model.phalanx_radius[1]: expected a finite radius > 0 (m), got -0.007"),
     ],
