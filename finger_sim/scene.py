@@ -285,7 +285,7 @@ def scene_from_dict(data: Any, *, default_name: str = "scene") -> Scene:
         restitution=_effect_value(model, "restitution"),
         phalanx_radius=_phalanx_radius(model.get("phalanx_radius")),
         contact=_contact(model.get("contact")),
-        friction_law=_friction_law(model.get("contact"), drive, data.get("objects")),
+        friction_law=_friction_law(model.get("contact"), data.get("objects")),
         objects=_objects(data.get("objects")),
         drive=drive,
         torque=(profile_from_dict(inp[input_key], f"input.{input_key}") if input_key in inp
@@ -358,7 +358,7 @@ def _contact(value: Any) -> ContactParams:
     return params
 
 
-def _friction_law(value: Any, drive: Any, objects: Any) -> FrictionLaw:
+def _friction_law(value: Any, objects: Any) -> FrictionLaw:
     """The friction law's keys of `model.contact` (`effects.friction_modes`); stick_slip is refused with a
     moving object, which its modes do not cover yet."""
     law = friction_law_from_dict(split_friction_keys(value)[1], _contact(value).friction)
