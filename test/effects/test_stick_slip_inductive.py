@@ -35,7 +35,7 @@ def test_a_self_locking_inductive_drive_holds_the_grip_while_the_current_decays_
     inductance, drop = 0.02, 0.4
     d = data({"friction": 0.1}, {"type": "step", "before": 2.0, "after": 0.0, "at": drop}, 0.8,
              {"inductance": inductance})
-    traj = simulate(scene_from_dict(d))
+    traj = simulate(scene_from_dict(d), kernel="python")  # the compiled inductive stick–slip step compiles for minutes
     assert traj.method == "rk4"
     lock_row, mode = mode_changes(traj)[-1]
     assert mode == 1.0 and traj.t[lock_row] < drop
@@ -65,7 +65,7 @@ def test_a_backdrivable_inductive_drive_and_the_friction_break_free_one_l_over_r
     u0, slope, eta_f, eta_b, inductance = 2.0, -2.0, BACKDRIVABLE["efficiency"], BACKDRIVABLE["backward_efficiency"], 0.08
     d = data({"friction": 0.1, "static_friction": 0.2}, {"type": "ramp", "offset": u0, "slope": slope}, 0.9,
              BACKDRIVABLE | {"inductance": inductance})
-    traj = simulate(scene_from_dict(d))
+    traj = simulate(scene_from_dict(d), kernel="python")  # the compiled inductive stick–slip step compiles for minutes
     changes = mode_changes(traj)
     lock = next(k for k, (row, mode) in enumerate(changes) if mode == 1.0 and traj.t[row] > 0.1)
     lock_row, (break_row, mode) = changes[lock][0], changes[lock + 1]
@@ -104,7 +104,7 @@ def test_energy_never_rises_with_the_voltage_off_and_an_inductive_winding(drive)
     inductance = 0.02
     d = data({"friction": 0.3, "static_friction": 0.5}, {"type": "constant", "value": 0.0}, 0.5,
              drive | {"inductance": inductance}, initial={"theta1": 0.286, "theta1_dot": 3.0})
-    traj = simulate(scene_from_dict(d))
+    traj = simulate(scene_from_dict(d), kernel="python")  # the compiled inductive stick–slip step compiles for minutes
     i = traj.outputs["motor_current"]
     h = traj.energy + 0.5 * J_M * (N * traj.v[:, 0]) ** 2 + 0.5 * inductance * i**2
     assert np.diff(h).max() <= 1e-12
