@@ -286,7 +286,7 @@ def scene_from_dict(data: Any, *, default_name: str = "scene") -> Scene:
         restitution=_effect_value(model, "restitution"),
         phalanx_radius=_phalanx_radius(model.get("phalanx_radius")),
         contact=_contact(model.get("contact")),
-        friction_law=_friction_law(model.get("contact"), drive, data.get("objects")),
+        friction_law=_friction_law(model.get("contact"), data.get("objects")),
         objects=_objects(data.get("objects")),
         drive=drive,
         torque=(profile_from_dict(inp[input_key], f"input.{input_key}") if input_key in inp
@@ -359,18 +359,15 @@ def _contact(value: Any) -> ContactParams:
     return params
 
 
-def _friction_law(value: Any, drive: Any, objects: Any) -> FrictionLaw:
+def _friction_law(value: Any, objects: Any) -> FrictionLaw:
     """The friction law's keys of `model.contact` (`effects.friction_modes`); stick_slip is refused with a
-    moving object or a drive with inductance (L > 0), which its modes do not cover yet."""
+    moving object, which its modes do not cover yet."""
     law = friction_law_from_dict(split_friction_keys(value)[1], _contact(value).friction)
     if law.model == STICK_SLIP:
         moving = isinstance(objects, list) and any(isinstance(o, dict) and "motion" in o for o in objects)
         if moving:
             raise ConfigError("model.contact.friction_model", "regularized with a moving object"
                               f" ({STICK_SLIP} covers fixed objects only)", STICK_SLIP)
-        if drive is not None and drive.inductance > 0.0:
-            raise ConfigError("model.drive.inductance", f"0 with friction_model: {STICK_SLIP} (its modes take the "
-                              "current as following the voltage at once)", drive.inductance)
     return law
 
 

@@ -17,11 +17,12 @@ With a drive (§8, L = 0) the linkage locks as one: the friction cones and the s
 of that set: the margin is the mesh's `holding_margin` plus the cones' capacity. Locked, the mesh is
 `stuck` and the friction `locked`; moving, the mesh rolls (its flank and current-limit guards located
 as `finger_sim.actuators.stepping` does) and the friction slides, both towards the same direction. It
-breaks free towards sgn(N τ_a − τ_h) (−sgn τ_h without a drive).
+breaks free towards sgn(N τ_a − τ_h) (−sgn τ_h without a drive). With L > 0 the current is a state and
+`actuators.inductive_stepping` steps the same shared lock (its stuck margin a guard of the step).
 
 A stop impact reverses θ1' (the sliding direction follows); at rest on a stop the stop holds the
-load and the friction is idle; leaving the stop is a turning point. Objects that move and a drive
-with inductance are refused by the scene (`finger_sim.scene`): neither is in this law yet.
+load and the friction is idle; leaving the stop is a turning point. Objects that move are refused by the scene
+(`finger_sim.scene`): they are not in this law yet.
 """
 
 from __future__ import annotations
@@ -106,6 +107,10 @@ def start(sim: Simulator) -> None:
     """The friction mode of the scene's initial state: at rest, the holding test; moving, sliding."""
     friction = sim._friction
     friction.holds.clear()
+    if sim._drive is not None and sim._drive.inductive:  # its mode was set with the mesh's (`inductive_stepping.start`)
+        if sim.v[0] == 0.0:
+            friction.remember(0.0, sim.q)
+        return
     if sim.v[0] == 0.0:
         sim.v = _turn(sim, friction, 0.0, sim.q, sim.scene.torque)
         friction.remember(0.0, sim.q)
@@ -119,6 +124,11 @@ def advance(sim: Simulator, t0: float, t1: float, torque: TorqueFn) -> None:
     contact onsets) on the way."""
     friction: StickSlipContact = sim._friction
     drive = sim._drive
+    if drive is not None and drive.inductive:  # the current is a state: the mesh's stepper takes the friction too
+        from finger_sim.actuators import inductive_stepping
+
+        inductive_stepping.advance(sim, t0, t1, torque)
+        return
     ledger = None if drive is None else drive.ledger
     t, q, v = t0, sim.q, sim.v
     for _ in range(MAX_EVENTS_PER_STEP):

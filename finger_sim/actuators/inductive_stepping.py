@@ -9,6 +9,12 @@ The same events as with L = 0 (spec §8), on the state (q, q', i):
 A rest on a stop holds q and q' = 0 while the current goes on (its release by brentq on the free
 acceleration at the current then). Every trial step starts from a state with its own current
 (`InductiveRungeKutta.current_of`).
+
+With stick–slip friction at the contacts (spec §7) the linkage locks as one, as with L = 0
+(`finger_sim.stick_slip`): the stuck mesh and the friction cones share τ_h, so the holding margin is the
+mesh's plus the cones' capacity Σ μ_s F_n,k |j_k| (τ_h taken with the friction left out); stuck means
+friction `locked`, rolling means friction `sliding` the same way; an ideal gear gets the stuck mode too,
+held by the friction alone.
 """
 
 from __future__ import annotations
@@ -24,6 +30,7 @@ from finger_sim.actuators.drive import BACK, DRIVE, STUCK, ZERO, DrivenSystem, h
 from finger_sim.actuators.stepping import (FLANK, GAUSS_NODES, GAUSS_WEIGHTS, GUARD_TOLERANCE, LIMIT, LOCATE_TOLERANCE,
                                            MAX_EVENTS_PER_STEP, MAX_LOCATE_ITERATIONS, TURN, EnergyLedger,
                                            crossing_test)
+from finger_sim.effects.friction_modes import LOCKED, SLIDING, StickSlipContact
 from finger_sim.errors import SimulationDiverged
 from finger_sim.integrators.base import TorqueFn
 from finger_sim.kinematics import Vec3
@@ -69,6 +76,7 @@ def advance(sim: Simulator, t0: float, t1: float, u_fn: TorqueFn) -> None:
         qs, vs = sim._step(s0, q0, v0, s - s0, u_fn)
         return qs, vs, integ.current_of(qs, vs)  # type: ignore[attr-defined]
 
+    friction = _friction(system)
     t, q, v, i = t0, sim.q, sim.v, drive.i
     for _ in range(MAX_EVENTS_PER_STEP):
         if drive.mode == STUCK and _margin(system, t, q, i) < 0.0:
@@ -77,11 +85,11 @@ def advance(sim: Simulator, t0: float, t1: float, u_fn: TorqueFn) -> None:
         if sim._resting is not None and drive.mode != STUCK:  # at rest on a stop: the current goes on
             t, i, released = _rest(sim, t, t1, q, i, u_fn)
             if not released:
-                _commit(sim, q, ZERO, i)
+                _commit(sim, t1, q, ZERO, i)
                 return
             v = _turn(system, t, q, u_fn(t), i)
             if t >= t1:
-                _commit(sim, q, v, i)
+                _commit(sim, t1, q, v, i)
                 return
             if drive.mode == STUCK:
                 continue
@@ -101,6 +109,8 @@ def advance(sim: Simulator, t0: float, t1: float, u_fn: TorqueFn) -> None:
             # back on the stop at once after an impact that left it at rest: the current (not the
             # voltage) sets the push, and it turns into the stop within the step: the finger rests
             sim._resting = crossing.gap
+            if friction is not None:  # idle while the stop holds the load
+                friction.mode, friction.hold = LOCKED, 0.0
             continue
         t, q, v, i = end, qe, ve, ie
         if crossing is not None:
@@ -114,6 +124,10 @@ def advance(sim: Simulator, t0: float, t1: float, u_fn: TorqueFn) -> None:
                     v = _turn(system, t, q, u_fn(t), i)
                     if drive.mode == STUCK:
                         sim._resting = None
+                    elif friction is not None:  # idle while the stop holds the load
+                        friction.mode, friction.hold = LOCKED, 0.0
+                elif friction is not None and v[0] != 0.0:  # the impact reversed the motion: slide on that way
+                    _roll(system, t, q, v, u_fn(t), math.copysign(1.0, v[0]), i)
         elif event is not None:
             u = u_fn(t)
             if event.guard == TURN and drive.mode == STUCK:  # the holding margin crossed: break free
@@ -126,35 +140,67 @@ def advance(sim: Simulator, t0: float, t1: float, u_fn: TorqueFn) -> None:
             elif abs(i) >= p.current_limit:  # the limit starts to act: i = ±i_max exactly from here
                 i = math.copysign(p.current_limit, i)
         else:
-            _commit(sim, q1, v1, i1)
+            _commit(sim, t1, q1, v1, i1)
             return
         if t >= t1:
-            _commit(sim, q, v, i)
+            _commit(sim, t1, q, v, i)
             return
     raise SimulationDiverged(f"more than {MAX_EVENTS_PER_STEP} events (mesh modes, current limit, stops, contact) in "
                              "one step", method=sim.method, t=t0, dt=sim.dt)
 
 
-def _commit(sim: Simulator, q: Vec3, v: Vec3, i: float) -> None:
+def _commit(sim: Simulator, t: float, q: Vec3, v: Vec3, i: float) -> None:
+    """The Simulator's state at t (s) is (q, q', i); at rest, a stick–slip element remembers its mode there."""
     sim.q, sim.v = q, v
     sim.system.drive.i = i
     sim.integrator.begin(q, v, i)  # type: ignore[attr-defined]
+    friction = _friction(sim.system)  # type: ignore[arg-type]
+    if friction is not None and v[0] == 0.0:  # at rest the mode is not a function of the state
+        if friction.mode == LOCKED and sim._resting is None:
+            friction.hold = _holding(sim.system, t, q)  # type: ignore[arg-type]
+        friction.remember(t, q)
 
 
 # -- modes --------------------------------------------------------------------------------
+def _friction(system: DrivenSystem) -> StickSlipContact | None:
+    """The system's stick–slip contact element (spec §7), or None."""
+    return next((e for e in system.elements if isinstance(e, StickSlipContact)), None)
+
+
+def _holding(system: DrivenSystem, t: float, q: Vec3) -> float:
+    """τ_h, N·m, at rest at q: the torque on θ1 that keeps θ1'' = 0, a stick–slip friction left out (its
+    locked law: normal forces only)."""
+    friction = _friction(system)
+    if friction is None:
+        return system.holding_torque(t, q, ZERO)
+    mode = friction.mode
+    friction.mode = LOCKED
+    try:
+        return system.holding_torque(t, q, ZERO)
+    finally:
+        friction.mode = mode
+
+
 def _margin(system: DrivenSystem, t: float, q: Vec3, i: float) -> float:
-    """The stuck mesh's holding margin (`holding_margin`) at rest at q with τ_a = k_t i."""
+    """The stuck mesh's holding margin (`holding_margin`) at rest at q with τ_a = k_t i, plus a stick–slip
+    friction's capacity Σ μ_s F_n,k |j_k| (the two share the load, §7)."""
     p = system.drive.params
-    return holding_margin(system.holding_torque(t, q, ZERO), p.torque_constant * i, p.gear_ratio, p.efficiency,
-                          p.backward_efficiency)
+    friction = _friction(system)
+    capacity = 0.0 if friction is None else friction.capacity(q)
+    return capacity + holding_margin(_holding(system, t, q), p.torque_constant * i, p.gear_ratio, p.efficiency,
+                                     p.backward_efficiency)
 
 
 def _turn(system: DrivenSystem, t: float, q: Vec3, u: float, i: float) -> Vec3:
-    """At θ1' = 0: stick if the mesh holds τ_h under τ_a = k_t i, else roll towards sgn(N τ_a − τ_h)."""
-    if system.drive.params.ideal:
+    """At θ1' = 0: stick if the mesh (and a stick–slip friction) hold τ_h under τ_a = k_t i, else roll
+    towards sgn(N τ_a − τ_h)."""
+    friction = _friction(system)
+    if system.drive.params.ideal and friction is None:
         return ZERO
     if _margin(system, t, q, i) >= 0.0:
         system.drive.mode = STUCK
+        if friction is not None:
+            friction.mode, friction.direction, friction.hold = LOCKED, 0.0, _holding(system, t, q)
         return ZERO
     _roll(system, t, q, ZERO, u, _break_direction(system, t, q, i), i)
     return ZERO
@@ -163,14 +209,18 @@ def _turn(system: DrivenSystem, t: float, q: Vec3, u: float, i: float) -> Vec3:
 def _break_direction(system: DrivenSystem, t: float, q: Vec3, i: float) -> float:
     """sgn(N k_t i − τ_h) at rest (§8)."""
     p = system.drive.params
-    excess = p.gear_ratio * p.torque_constant * i - system.holding_torque(t, q, ZERO)
+    excess = p.gear_ratio * p.torque_constant * i - _holding(system, t, q)
     return 1.0 if excess >= 0.0 else -1.0
 
 
 def _roll(system: DrivenSystem, t: float, q: Vec3, v: Vec3, u: float, direction: float, i: float) -> None:
-    """Enter the rolling flank whose solution meets its sign condition along `direction` (`stepping._roll`)."""
+    """Enter the rolling flank whose solution meets its sign condition along `direction` (`stepping._roll`);
+    a stick–slip friction slides that way (its kinetic friction applied before the flank is chosen)."""
     drive = system.drive
     drive.direction = direction
+    friction = _friction(system)
+    if friction is not None:
+        friction.mode, friction.direction = SLIDING, direction
     if drive.params.ideal:
         drive.mode = DRIVE
         return
@@ -184,8 +234,8 @@ def _guards(system: DrivenSystem, t: float, q: Vec3, v: Vec3, i: float, u: float
     limit = drive.limit_guard(u, i, v[0])
     if drive.mode == STUCK:
         return _margin(system, t, q, i), math.inf, limit
-    if drive.params.ideal:
-        return math.inf, math.inf, limit
+    if drive.params.ideal:  # no flanks; a stick–slip friction's turn is still a guard
+        return (math.inf if _friction(system) is None else drive.direction * v[0]), math.inf, limit
     tau_g = system.mesh(t, q, v, u, drive.mode, i)[0]
     s = drive.direction
     return s * v[0], (s if drive.mode == DRIVE else -s) * tau_g, limit

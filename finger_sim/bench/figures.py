@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -43,8 +45,9 @@ def write_figure(name: str, runs: Sequence[Run], ref: Reference, out: Path) -> s
         handles.append(line)
     for target in an.TARGETS:
         ax_err.axhline(target, color="grey", lw=0.7, alpha=0.6)
-    floor = ax_err.axhspan(PLOT_FLOOR, max(ref.check_difference, PLOT_FLOOR), color="grey", alpha=0.15, label="reference floor")
-    handles.append(floor)
+    if math.isfinite(ref.floor):  # none is claimed where the check cannot follow the scene
+        handles.append(ax_err.axhspan(PLOT_FLOOR, max(ref.floor, PLOT_FLOOR), color="grey", alpha=0.15,
+                                      label="reference floor"))
     ax_err.set_ylabel("max |θ − θ_ref| (rad)")
     ax_phi.set_ylabel("max |Φ| (m): loop violation")
     for ax in (ax_err, ax_phi):

@@ -165,7 +165,10 @@ def render_scene(scene: Scene, ref: Reference, figure: str, rows: list[Run]) -> 
         "",
         f"{scene.description} — {scene.duration:g} s simulated.",
         f"Reference: {sol.method} rtol {sol.rtol:g} ({f'{sol.nfev} evaluations, ' if sol.nfev else ''}{sol.cpu_time:.2f} s); check: "
-        f"{chk.method} rtol {chk.rtol:g}; reference floor {ref.check_difference:.1e} rad.",
+        f"{chk.method} rtol {chk.rtol:g}; " + (f"reference floor {ref.floor:.1e} rad." if math.isfinite(ref.floor) else
+                                              f"it differs by {ref.check_difference:.1e} rad (it has no contact or rest "
+                                              "events and follows another path through the impacts), so no reference "
+                                              "floor is claimed."),
         "",
         f"![{scene.name}]({figure})",
         "",

@@ -39,7 +39,7 @@ class Measurements:
     info: RunInfo
 
     def tables(self) -> Tables:
-        return build_tables(self.scenes, {name: ref.check_difference for name, ref in self.refs.items()}, self.runs)
+        return build_tables(self.scenes, {name: ref.floor for name, ref in self.refs.items()}, self.runs)
 
 
 def measure(*, quick: bool, argv: list[str]) -> Measurements:

@@ -65,7 +65,8 @@ def setup_for(scene: Scene, kernel: str, effects: tuple[Effect, ...]) -> Setup:
     method = scene.method
     substeps = 1
     options: dict[str, float] = {}
-    if method == AUTO and not stick_slip.in_scene(scene):  # stick–slip: see below
+    inductive = getattr(system, "drive", None) is not None and system.drive.inductive
+    if method == AUTO and (inductive or not stick_slip.in_scene(scene)):  # stick–slip: see below
         method, reason = choose_method(scene)
         if (method == ERROR_CONTROLLED and getattr(system, "drive", None) is None
                 and stepper_slot.kernel().model_array(system) is None):
@@ -74,7 +75,7 @@ def setup_for(scene: Scene, kernel: str, effects: tuple[Effect, ...]) -> Setup:
         method, reason = drive_stepping.drive_method(method, reason, scene.method == AUTO,
                                                      lambda name: stable_under_auto(scene, system, name),
                                                      system.drive.inductive)
-    if scene.method == AUTO and stick_slip.in_scene(scene):  # dop853, restarted at every friction mode change
+    if scene.method == AUTO and stick_slip.in_scene(scene) and not inductive:  # dop853, restarted at every mode change
         method, reason, options, substeps = stick_slip.auto_method(scene)
     elif scene.method == AUTO:
         options = integrator_options(scene, method)

@@ -16,7 +16,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from finger_sim.errors import ConfigError
 from finger_sim.scene import scene_from_dict
 from finger_sim.simulate import simulate
 from test_stick_slip import DT, TABLE, mode_changes, row_after, statics
@@ -102,14 +101,6 @@ def test_energy_never_rises_with_the_voltage_off(drive):
         lock_row, mode = mode_changes(traj)[-1]
         assert mode == 1.0 and (traj.q[lock_row:] == traj.q[lock_row]).all()
         assert traj.outputs["grip_force"][-1] > 0.5
-
-
-def test_stick_slip_with_an_inductive_drive_is_refused_in_one_line():
-    d = data({"friction": 0.5}, {"type": "constant", "value": 1.0}, 0.1, {"inductance": 1e-3})
-    with pytest.raises(ConfigError) as err:
-        scene_from_dict(d)
-    message = str(err.value)
-    assert message.startswith("model.drive.inductance:") and "stick_slip" in message and "\n" not in message
 
 
 def test_the_compiled_law_with_a_drive_steps_as_the_python_law():

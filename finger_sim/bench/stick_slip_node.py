@@ -1,0 +1,83 @@
+"""finger_node at 1 kHz, realtime_factor 1, on a stick–slip scene and on its regularized twin, side by side.
+
+    python -m finger_sim.bench.stick_slip_node [--duration 20] [--rounds 2] [--domain-id 80]
+
+The scene is hold_table (config/friction) under a periodic torque, so that the finger keeps sliding,
+locking and breaking free for as long as the node runs: 0.03 ± 0.05 N·m at 1 Hz with μ_k = 0.3 and μ_s = 0.4
+(the lock holds while the torque is near its mean and breaks at the extremes). Its twin is the same scene with the
+regularized law (same μ_k). Each round runs stick–slip then regularized (A B A B), each node measured
+`--duration` s after its warm-up by `node_bench.measure_window` (the node's own /diagnostics windows:
+sim s per wall s; CPU s per sim s of the node process; dropped steps), recording off. Prints a
+Markdown table of medians over the rounds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import tempfile
+from datetime import datetime, timezone
+from pathlib import Path
+
+import yaml
+
+from finger_sim.bench.node_bench import measure_window
+from finger_sim.bench.processes import ros_env
+from finger_sim.bench.plan import config_dir
+
+#: The periodic torque that keeps the held finger sliding and locking, N·m and Hz.
+TORQUE = {"type": "sine", "offset": 0.03, "amplitude": 0.05, "frequency": 1.0}
+#: μ_k and μ_s low enough that the lock breaks at the torque's extremes.
+FRICTION = {"friction": 0.3, "static_friction": 0.4}
+FRICTION_LAW_KEYS = ("friction_model", "static_friction", "stribeck_velocity")
+
+
+def scenes(folder: Path) -> dict[str, Path]:
+    """'stick_slip' and 'regularized' → a YAML file of the periodic hold_table scene in `folder`."""
+    data = yaml.safe_load((config_dir() / "friction" / "hold_table.yaml").read_text())
+    data["input"] = {"torque": TORQUE}
+    data["model"]["contact"].update(FRICTION)
+    data["duration"] = 3600.0
+    regularized = {**data, "model": {**data["model"], "contact": {
+        k: v for k, v in data["model"]["contact"].items() if k not in FRICTION_LAW_KEYS}}}
+    out = {}
+    for name, d in (("stick_slip", data), ("regularized", regularized)):
+        out[name] = folder / f"hold_sine_{name}.yaml"
+        out[name].write_text(yaml.safe_dump(d))
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--duration", type=float, default=20.0, help="measured s per node run")
+    parser.add_argument("--rounds", type=int, default=2)
+    parser.add_argument("--domain-id", type=int, default=80)
+    args = parser.parse_args(argv)
+    rows: dict[str, list] = {}
+    with tempfile.TemporaryDirectory(prefix="stick_slip_node_") as tmp:
+        folder = Path(tmp)
+        files = scenes(folder)
+        env = ros_env(args.domain_id)
+        for r in range(args.rounds):
+            for name, path in files.items():
+                print(f"stick_slip_node: {name} round {r}", file=sys.stderr, flush=True)
+                params = dict(scene=str(path), torque_source="scene", physics_rate_hz=1000.0, publish_rate_hz=0.0,
+                              realtime_factor=1.0, record=False)
+                rows.setdefault(name, []).append(measure_window(params, args.duration, args.domain_id, folder, env,
+                                                                f"{name}_{r}"))
+    when = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    print(f"{when}; {args.rounds} rounds of {args.duration:g} s, medians\n")
+    print("| law | real-time factor: median of 1 s windows | lowest window | CPU s per sim s | dropped steps |")
+    print("|---|---|---|---|---|")
+    base = statistics.median(w.cpu_per_sim_s for w in rows["regularized"])
+    for name, runs in rows.items():
+        rtf = [x for w in runs for x in w.rtf]
+        cpu = statistics.median(w.cpu_per_sim_s for w in runs)
+        print(f"| {name} | {statistics.median(rtf):.4f} | {min(rtf):.4f} | {cpu:.3f} ({cpu / base:.2f}×) | "
+              f"{sum(w.dropped_steps for w in runs)} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
