@@ -200,7 +200,7 @@ def _law(kind, feedback, scale, g, s, t, setpoint, signals, period):
             s[INTEGRAL], s[IN_BAND], locked, touched, s[SINCE] = current_setpoint_state(t)
         else:
             s[INTEGRAL], s[IN_BAND], locked, touched, s[SINCE] = voltage_setpoint(t, s[TOUCHED] != 0.0)
-        s[LOCKED], s[TOUCHED] = float(locked), float(touched)
+        s[LOCKED], s[TOUCHED] = 1.0 if locked else 0.0, 1.0 if touched else 0.0
     value = signals[0] if feedback == FEEDBACK_GRIP else signals[1]
     if kind == LAW_CURRENT:
         integral, in_band, locked, touched, u = current_update(
@@ -210,7 +210,8 @@ def _law(kind, feedback, scale, g, s, t, setpoint, signals, period):
         integral, in_band, locked, touched, u = voltage_update(
             s[INTEGRAL], s[IN_BAND], s[LOCKED] != 0.0, s[TOUCHED] != 0.0, s[SINCE], t, setpoint, scale * value, period,
             g[0], g[1], g[2], g[3], g[4], g[5], g[6], g[7], g[8])
-    s[INTEGRAL], s[IN_BAND], s[LOCKED], s[TOUCHED] = integral, in_band, float(locked), float(touched)
+    s[INTEGRAL], s[IN_BAND] = integral, in_band
+    s[LOCKED], s[TOUCHED] = 1.0 if locked else 0.0, 1.0 if touched else 0.0
     return u
 
 
