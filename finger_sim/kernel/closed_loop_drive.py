@@ -29,7 +29,6 @@ the Simulator's own. Status codes as `closed_loop` (DONE, EVENT, WATCH, PAUSE).
 
 from __future__ import annotations
 
-import math
 import types
 from collections.abc import Callable
 from typing import Any
