@@ -49,6 +49,10 @@ GRIP_FACTORIES = {controllers.grip_pi: {}, controllers.grip_pi_aggressive: contr
 
 def batch_reason(task: Task, factory: Factory) -> str | None:
     """Why `run_task_rows` cannot step `task` against `factory`'s controllers, or None when it can."""
+    from finger_sim.tasks import batch_drive  # the drive controllers' sweep (it imports this module)
+
+    if factory in batch_drive.DRIVE_FACTORIES:
+        return batch_drive.batch_reason(task, factory)
     if factory not in GRIP_FACTORIES:
         return "the controller is not the shipped grip PI"
     if task.input != "torque" or task.scene.drive is not None:
@@ -93,7 +97,11 @@ def run_task_rows(task: Task, factory: Factory, columns: Sequence[tuple[str, Map
     """The TaskRun of every (label, params) column of `factory` on `task` (module docstring); with
     `scenes`, column i runs on scenes[i] instead of the task's (object parameters swept; the
     same dt, duration and tip-force profile). ConfigError when `rows_reason` is not None, or
-    names a column's bad parameter."""
+    names a column's bad parameter. A shipped drive controller's columns: `batch_drive.run_task_rows`."""
+    from finger_sim.tasks import batch_drive
+
+    if factory in batch_drive.DRIVE_FACTORIES:
+        return batch_drive.run_task_rows(task, factory, columns, scenes)
     scenes = [task.scene] * len(columns) if scenes is None else list(scenes)
     if len(scenes) != len(columns):
         raise ConfigError("scenes", f"one per column ({len(columns)})", len(scenes))

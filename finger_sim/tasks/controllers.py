@@ -24,6 +24,7 @@ import math
 from collections.abc import Callable, Mapping
 from typing import Any, Protocol
 
+from finger_sim import drive_grip_law as drive_law
 from finger_sim.effects.contact_outputs import GRIP_FORCE
 from finger_sim.errors import ConfigError
 from finger_sim.runtime.grip import GripController, GripSettings
@@ -89,6 +90,9 @@ def grip_pi_aggressive(sample_period: float, **params: float) -> Controller:
 #: contact threshold (N) and the opening voltage (V) and time (s) on a setpoint of 0.
 GRIP_VOLTAGE = {"closing_voltage": 2.0, "kp": 1.0, "ki": 20.0, "max_voltage": 6.0, "lock_band": 0.05,
                 "lock_after": 0.05, "contact_threshold": 0.01, "opening_voltage": 2.0, "opening_time": 0.2}
+#: grip_voltage's settings in the order `drive_grip_law.voltage_update` takes them.
+VOLTAGE_LAW = ("closing_voltage", "kp", "ki", "max_voltage", "lock_band", "lock_after", "contact_threshold",
+               "opening_voltage", "opening_time")
 
 
 def grip_voltage(sample_period: float, feedback: str = GRIP_FORCE.name, force_per_unit: float = 1.0,
@@ -109,30 +113,20 @@ def grip_voltage(sample_period: float, feedback: str = GRIP_FORCE.name, force_pe
     if unknown:
         raise ConfigError("controller parameter", f"one of {sorted(GRIP_VOLTAGE)}", sorted(unknown))
     p = {**GRIP_VOLTAGE, **params}
-    state = {"setpoint": 0.0, "integral": 0.0, "in_band": 0.0, "locked": False, "since": 0.0, "touched": False}
+    state = {"setpoint": 0.0, "law": (0.0, 0.0, False, False, 0.0)}  # law: (integral, in_band, locked, touched, since)
+    gains = tuple(p[name] for name in VOLTAGE_LAW)
 
     def control(t: float, setpoint: float, measured: Mapping[str, float]) -> float:
         if setpoint != state["setpoint"]:
-            state.update(setpoint=setpoint, integral=0.0, in_band=0.0, locked=False, since=t)
+            state["setpoint"], state["law"] = setpoint, drive_law.voltage_setpoint(t, state["law"][3])
         if feedback not in measured:
             raise ConfigError("controller parameter feedback", f"one of the measured signals {sorted(measured)}", feedback)
-        force = force_per_unit * measured[feedback]
-        if setpoint == 0.0:
-            return -p["opening_voltage"] if t - state["since"] < p["opening_time"] and t > 0.0 else 0.0
-        if state["locked"]:
-            return 0.0
-        if not state["touched"]:
-            state["touched"] = force > p["contact_threshold"]
-            if not state["touched"]:
-                return p["closing_voltage"]
-        error = setpoint - force
-        state["integral"] += error * sample_period
-        state["in_band"] = state["in_band"] + sample_period if abs(error) <= p["lock_band"] * setpoint else 0.0
-        if state["in_band"] >= p["lock_after"]:
-            state["locked"] = True
-            return 0.0
-        u = p["closing_voltage"] + p["kp"] * error + p["ki"] * state["integral"]
-        return min(max(u, -p["max_voltage"]), p["max_voltage"])
+        integral, in_band, locked, touched, since = state["law"]
+        integral, in_band, locked, touched, u = drive_law.voltage_update(
+            integral, in_band, locked, touched, since, t, setpoint, force_per_unit * measured[feedback], sample_period,
+            *gains)
+        state["law"] = (integral, in_band, locked, touched, since)
+        return u
 
     return control
 

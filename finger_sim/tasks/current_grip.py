@@ -33,6 +33,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 
+from finger_sim import drive_grip_law as drive_law
 from finger_sim.actuators.drive_outputs import MOTOR_CURRENT
 from finger_sim.errors import ConfigError
 from finger_sim.tasks.controllers import Controller
@@ -53,6 +54,9 @@ GRIP_CURRENT = {
     "opening_voltage": 2.0,  # V
     "opening_time": 0.2,  # s
 }
+#: grip_current's settings in the order `drive_grip_law.current_update` takes them (after the current).
+CURRENT_LAW = ("closing_voltage", "contact_current", "inrush_time", "kp", "ki", "max_voltage", "lock_band",
+               "lock_after", "opening_voltage", "opening_time")
 
 
 def current_setpoint(force: float, p: Mapping[str, float]) -> float:
@@ -71,34 +75,20 @@ def grip_current(sample_period: float, feedback: str = MOTOR_CURRENT.name, **par
     for name in ("torque_per_ampere", "lever", "contact_current"):
         if not (p[name] > 0.0 and math.isfinite(p[name])):
             raise ConfigError(f"controller parameter {name}", "a finite number > 0", p[name])
-    state = {"setpoint": 0.0, "target": 0.0, "integral": 0.0, "in_band": 0.0, "locked": False, "since": 0.0,
-             "touched": False}
+    state = {"setpoint": 0.0, "target": 0.0, "law": (0.0, 0.0, False, False, 0.0)}  # law: (integral, in_band, locked, touched, since)
+    gains = tuple(p[name] for name in CURRENT_LAW)
 
     def control(t: float, setpoint: float, measured: Mapping[str, float]) -> float:
         if setpoint != state["setpoint"]:
-            state.update(setpoint=setpoint, target=current_setpoint(setpoint, p), integral=0.0, in_band=0.0,
-                         locked=False, since=t, touched=False)
+            state.update(setpoint=setpoint, target=current_setpoint(setpoint, p), law=drive_law.current_setpoint_state(t))
         if feedback not in measured:
             raise ConfigError("controller parameter feedback", f"one of the measured signals {sorted(measured)}", feedback)
-        current = measured[feedback]
-        if setpoint == 0.0:
-            return -p["opening_voltage"] if t - state["since"] < p["opening_time"] and t > 0.0 else 0.0
-        if state["locked"]:
-            return 0.0
-        if not state["touched"]:
-            state["touched"] = t - state["since"] >= p["inrush_time"] and current >= p["contact_current"]
-            if not state["touched"]:
-                return p["closing_voltage"]
-        target = state["target"]
-        error = target - current
-        state["in_band"] = state["in_band"] + sample_period if abs(error) <= p["lock_band"] * target else 0.0
-        if state["in_band"] >= p["lock_after"]:
-            state["locked"] = True
-            return 0.0
-        u = p["closing_voltage"] + p["kp"] * error + p["ki"] * (state["integral"] + error * sample_period)
-        if abs(u) < p["max_voltage"]:  # conditional integration: no wind-up while the voltage saturates
-            state["integral"] += error * sample_period
-        return min(max(u, -p["max_voltage"]), p["max_voltage"])
+        integral, in_band, locked, touched, since = state["law"]
+        integral, in_band, locked, touched, u = drive_law.current_update(
+            integral, in_band, locked, touched, since, t, setpoint, state["target"], measured[feedback], sample_period,
+            *gains)
+        state["law"] = (integral, in_band, locked, touched, since)
+        return u
 
     return control
 
