@@ -82,19 +82,24 @@ switches_inside = compiled(inputs.switches_inside, **_PROFILE_LAWS)
 
 # -- the contact candidates' geometry (`Contact._hits`), shared by the force, the closed loop and the event checks
 @njit(**LAW)
+def _circle_depth(px, py, cx, cy, rad, fx, fy):
+    """(δ = rad − |p − c| m, n_c = (p − c)/|p − c|) of a phalanx's closest point p to a circle's centre c;
+    n_c = (fx, fy), the phalanx's own normal, where p is on c."""
+    dx, dy = px - cx, py - cy
+    dist = math.sqrt(dx * dx + dy * dy)  # not hypot: CPython's and libm's differ in the last bit
+    if dist > MIN_DISTANCE:
+        return rad - dist, dx / dist, dy / dist
+    return rad - dist, fx, fy
+
+
+@njit(**LAW)
 def proximal_circle(cx, cy, rad, r1, bx, by, s1, c1):
     """A circle (centre c, radius ρ1 + R: rad, m) and the proximal phalanx A→B (B = r1 e(θ1) = (bx, by),
     (s1, c1) = sin, cos θ1): (δ m, n_c, j1 = ∂p/∂θ1, j3 = ∂p/∂θ3 m/rad) at its closest point p = s B."""
     s = (cx * bx + cy * by) / (r1 * r1)
     s = 0.0 if s < 0.0 else (1.0 if s > 1.0 else s)
-    px, py = s * bx, s * by
-    dx, dy = px - cx, py - cy
-    dist = math.sqrt(dx * dx + dy * dy)  # not hypot: CPython's and libm's differ in the last bit
-    if dist > MIN_DISTANCE:
-        nx, ny = dx / dist, dy / dist
-    else:
-        nx, ny = -s1, c1
-    return rad - dist, nx, ny, -s * by, s * bx, 0.0, 0.0
+    delta, nx, ny = _circle_depth(s * bx, s * by, cx, cy, rad, -s1, c1)
+    return delta, nx, ny, -s * by, s * bx, 0.0, 0.0
 
 
 @njit(**LAW)
@@ -104,14 +109,8 @@ def distal_circle(cx, cy, rad, l3, bx, by, ux, uy):
     dx, dy = cx - bx, cy - by
     ell = dx * ux + dy * uy
     ell = 0.0 if ell < 0.0 else (l3 if ell > l3 else ell)
-    px, py = bx + ell * ux, by + ell * uy
-    dx, dy = px - cx, py - cy
-    dist = math.sqrt(dx * dx + dy * dy)  # not hypot: CPython's and libm's differ in the last bit
-    if dist > MIN_DISTANCE:
-        nx, ny = dx / dist, dy / dist
-    else:
-        nx, ny = -uy, ux
-    return rad - dist, nx, ny, -by, bx, -ell * uy, ell * ux
+    delta, nx, ny = _circle_depth(bx + ell * ux, by + ell * uy, cx, cy, rad, -uy, ux)
+    return delta, nx, ny, -by, bx, -ell * uy, ell * ux
 
 
 @njit(**LAW)
