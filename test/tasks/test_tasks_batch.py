@@ -106,7 +106,8 @@ def test_an_object_with_its_own_contact_law_equals_the_offline_runs(name, monkey
     for row, ref in zip(rows, refs, strict=True):
         assert_same_run(row, ref)
     assert len({r.scores["hold_rms"] for r in rows}) == len(columns)
-    assert count[0] <= 8 * len(columns)  # the kernel took the steps, Python a few around the onset
+    # the kernel took the steps; Python the first, and those around an onset or release (a rigid cup's bounces)
+    assert count[0] <= 0.02 * task.scene.step_count * len(columns)
 
 
 def test_the_compiled_law_is_the_python_law_bit_for_bit():
