@@ -72,7 +72,7 @@ IMPLICIT_CONTACT_MODE_DT = 0.5
 ERROR_CONTROLLED = "dop853"
 #: Added to auto's reason where an element has no compiled form: the error-controlled path evaluates its stages
 #: in Python (`DormandPrince853.compiled`), the same promise at several times the CPU.
-PYTHON_STAGES_NOTE = ("; an element without a compiled form (an object's own contact law or motion): its stages run "
+PYTHON_STAGES_NOTE = ("; an element without a compiled form (objects' different contact laws, a motion): its stages run "
                       "in Python, several times slower")
 #: Its rtol = atol per unit of the promised global tolerance. The global error is the sum of the local
 #: errors along the run (hundreds of internal steps, each error-controlled) plus event location; measured

@@ -1,7 +1,7 @@
 """A gain sweep of the grip PI over the task suite: the per-row loop against the compiled sweep, side by side.
 
     python -m finger_sim.bench.task_sweep_bench [--kp 0.0025,0.005,0.01] [--ki 2,4,8] [--repeats 5]
-                                                [--grid 64] [--suite]
+                                                [--grid 64] [--workloads kernel,grid,suite,rest]
 
 Workloads, each timed both ways, interleaved (A B A B …) so that outside load hits both alike:
 
@@ -11,8 +11,12 @@ Workloads, each timed both ways, interleaved (A B A B …) so that outside load 
   per-row path; **sweep**, `run_suite`, which steps each task's columns together
   (`finger_sim.tasks.batch`);
 - **grid**: `hold_cup` against `grid` gain pairs (a square kp × ki grid);
-- with --suite, **suite**: every torque task, the others (objects with their own contact law, a
-  moving object: Python stages) run by the loop in both ways.
+- **suite**: every torque task without a drive that the kernel steps, against the grid's gain
+  pairs: the suite-wide gain sweep;
+- **rest**: the torque tasks without a drive that the kernel does not step (a moving object:
+  Python stages), against the grid's gain pairs: both ways run them row by row.
+
+The default workloads are kernel and grid.
 
 Figures: process CPU (every thread) and wall time of each repetition, their medians, and the
 ratio sweep / loop per repetition (median). Both ways must give the same scores (checked).
@@ -36,6 +40,8 @@ from finger_sim.tasks.suite import ControllerSpec, installed_tasks, run_suite
 
 #: The grid workload's task.
 GRID_TASK = "hold_cup"
+#: The workloads `--workloads` may name (module docstring).
+WORKLOADS = ("kernel", "grid", "suite", "rest")
 
 
 def columns(kps: Sequence[float], kis: Sequence[float]) -> list[ControllerSpec]:
@@ -87,17 +93,25 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--ki", default="2,4,8", help="ki values, N·m per N·s")
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--grid", type=int, default=64, help="gain pairs of the grid workload (a square number)")
-    parser.add_argument("--suite", action="store_true", help="time the whole torque suite too (slow)")
+    parser.add_argument("--workloads", default="kernel,grid", help="of kernel, grid, suite, rest (module docstring)")
     args = parser.parse_args(argv)
+    workloads = set(args.workloads.split(","))
+    if not workloads <= set(WORKLOADS):
+        parser.error(f"--workloads: only {', '.join(WORKLOADS)}, got {args.workloads}")
     kps = [float(v) for v in args.kp.split(",")]
     kis = [float(v) for v in args.ki.split(",")]
     tasks = [t for t in (load_task(p) for p in installed_tasks()) if t.input == "torque"]
-    compare("kernel tasks", [t for t in tasks if batch_reason(t, grip_pi) is None], columns(kps, kis), args.repeats)
+    kernel = [t for t in tasks if batch_reason(t, grip_pi) is None]
     side = round(args.grid ** 0.5)
     grid = columns(np.linspace(0.0025, 0.01, side).tolist(), np.linspace(2.0, 8.0, side).tolist())
-    compare("grid", [t for t in tasks if t.name == GRID_TASK], grid, args.repeats)
-    if args.suite:
-        compare("suite", tasks, columns(kps, kis), args.repeats)
+    if "kernel" in workloads:
+        compare("kernel tasks", kernel, columns(kps, kis), args.repeats)
+    if "grid" in workloads:
+        compare("grid", [t for t in tasks if t.name == GRID_TASK], grid, args.repeats)
+    if "suite" in workloads:
+        compare("suite", [t for t in kernel if t.scene.drive is None], grid, args.repeats)
+    if "rest" in workloads:
+        compare("rest", [t for t in tasks if t.scene.drive is None and t not in kernel], grid, args.repeats)
 
 
 if __name__ == "__main__":

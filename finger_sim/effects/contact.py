@@ -100,14 +100,17 @@ class Contact:
         self._k, self._e, self._d = contact.stiffness, contact.exponent, contact.damping
         self._mu, self._vs = contact.friction, contact.slip_velocity
         # Each object's k_c and d_c: its own (`ObjectProperties`) or the scene's. The compiled
-        # law has one k_c and d_c, so a scene where an object sets its own steps in Python.
+        # law has one k_c and d_c: the objects' one law when they all share it (e.g. a single soft
+        # or rigid object), else the scene steps in Python.
         self._obj_k = tuple(self._k if o.properties.stiffness is None else o.properties.stiffness for o in self.objects)
         self._obj_d = tuple(self._d if o.properties.damping is None else o.properties.damping for o in self.objects)
+        laws = set(zip(self._obj_k, self._obj_d))
+        self._kernel_k, self._kernel_d = next(iter(laws)) if len(laws) == 1 else (self._k, self._d)
         # Objects with a prescribed motion (`ObjectMotion`): the gaps, V_c and the force depend
         # on t too (`gaps_at`, `gap_rates`, `potential_at`), and the Simulator asks for those.
         self._motions = tuple(o.properties.motion for o in self.objects)
         self.time_varying = any(m is not None for m in self._motions)
-        if any(k != self._k for k in self._obj_k) or any(d != self._d for d in self._obj_d) or self.time_varying:
+        if len(laws) > 1 or self.time_varying:
             self.kernel_code = None  # type: ignore[misc]  # no compiled form: see kernel.layout
         # Stiffness and damping of the contact law at DESIGN_FORCE: δ_d = (F_d / k)^(1/e),
         # the stiffest object's.
@@ -143,9 +146,9 @@ class Contact:
         self._tips = tuple(tips)
 
     def kernel_params(self) -> tuple[float, ...]:
-        """(r1, L3, α, k, e, d, μ, v_s, counts of the four candidate kinds, then the candidates):
-        what `finger_sim.kernel.numerics` reads to compute `force`."""
-        out = [self._r1, self._l3, self.alpha, self._k, self._e, self._d, self._mu, self._vs,
+        """(r1, L3, α, k, e, d (the objects' one law), μ, v_s, counts of the four candidate kinds, then
+        the candidates): what `finger_sim.kernel.numerics` reads to compute `force`."""
+        out = [self._r1, self._l3, self.alpha, self._kernel_k, self._e, self._kernel_d, self._mu, self._vs,
                len(self._prox_circles), len(self._dist_circles), len(self._ends), len(self._tips)]
         for _, cx, cy, rad in self._prox_circles:
             out += [cx, cy, rad]

@@ -13,7 +13,7 @@ event's trial step, a held command) restarts it from the given state. The step-s
 control, error norm and dense output are scipy's DOP853 (scipy/integrate/_ivp/rk.py,
 after Hairer, Nørsett & Wanner, *Solving ODEs I*, §II.10), with scipy's coefficients.
 
-A system with a force element that has no compiled form (an object with its own contact law, a
+A system with a force element that has no compiled form (objects with different contact laws, a
 moving object) is stepped the same way with its stages evaluated in Python (`_python_attempt`, the
 same arithmetic as `numerics.dop853_attempt` on `FingerSystem.accelerations`): slower, just as
 error-controlled.

@@ -17,9 +17,10 @@ it with the shipped grip PI (`grip_pi`), nothing per step in Python:
   (`numerics._profile_step` under the held command, tableau `tab`);
 - the grip force after the step (`Contact.outputs`' Σ F_n), measured at the next sample.
 
-The contact geometry here (`contact_states`) is `Contact._hits` with `gaps`, `gap_gradient` and
-`_forces` in their order and arithmetic (sqrt, not hypot), so every decision the Simulator takes
-on the gaps (whether a step may hold a crossing) is taken here on the same numbers. The internal
+The contact geometry here (`contact_states`) is the force's own (`numerics.proximal_circle` …):
+`Contact._hits` with `gaps`, `gap_gradient` and `_forces` in their order and arithmetic (sqrt, not
+hypot), so every decision the Simulator takes on the gaps (whether a step may hold a crossing) is
+taken here on the same numbers. The internal
 solution's state is kept per row (`INTEGRATOR`, and y, f, y_old, dense), handed to the row's
 Simulator and read back from it around every step that Python takes (`finger_sim.tasks.batch`).
 
@@ -42,12 +43,12 @@ from finger_sim.kernel import use_writable_cache
 use_writable_cache()  # before numba reads NUMBA_CACHE_DIR
 from numba import njit, prange  # noqa: E402  (after the cache folder is set)
 
-from finger_sim.effects.contact import MIN_DISTANCE  # noqa: E402
 from finger_sim.kernel.event_checks import EVENT_TOLERANCE, predicted_crossing  # noqa: E402
 from finger_sim.integrators import dop853  # noqa: E402
 from finger_sim.inputs import HELD_ARRAY  # noqa: E402
 from finger_sim.kernel.numerics import (ERROR_EXPONENT, JIT, LAW, MAX_FACTOR, MIN_FACTOR, OK, SAFETY,  # noqa: E402
-                                        _profile_step, _rhs, compiled, dop853_attempt, dop853_output)
+                                        _profile_step, _rhs, compiled, distal_circle, dop853_attempt, dop853_output,
+                                        joint_plane, proximal_circle, tip_plane)
 from finger_sim import grip_law as grip  # noqa: E402
 
 #: A row's status after `run` (module docstring).
@@ -104,45 +105,18 @@ def contact_states(m, o, x, gaps, rates):
         count = n_prox if kind == 0 else (n_dist if kind == 1 else (n_ends if kind == 2 else n_tips))
         for _ in range(count):
             if kind == 0:  # a circle on the proximal phalanx: p = s B
-                cx, cy, rad = m[j], m[j + 1], m[j + 2]
+                d, nx, ny, j1x, j1y, j3x, j3y = proximal_circle(m[j], m[j + 1], m[j + 2], r1, bx, by, s1, c1)
                 j += 3
-                s = (cx * bx + cy * by) / (r1 * r1)
-                s = 0.0 if s < 0.0 else (1.0 if s > 1.0 else s)
-                px, py = s * bx, s * by
-                dx, dy = px - cx, py - cy
-                dist = math.sqrt(dx * dx + dy * dy)
-                d = rad - dist
-                if dist > MIN_DISTANCE:
-                    nx, ny = dx / dist, dy / dist
-                else:
-                    nx, ny = -s1, c1
-                j1x, j1y, j3x, j3y = -s * by, s * bx, 0.0, 0.0
             elif kind == 1:  # a circle on the distal phalanx: p = B + ℓ e(ψ)
-                cx, cy, rad = m[j], m[j + 1], m[j + 2]
+                d, nx, ny, j1x, j1y, j3x, j3y = distal_circle(m[j], m[j + 1], m[j + 2], l3, bx, by, ux, uy)
                 j += 4
-                dx, dy = cx - bx, cy - by
-                ell = dx * ux + dy * uy
-                ell = 0.0 if ell < 0.0 else (l3 if ell > l3 else ell)
-                px, py = bx + ell * ux, by + ell * uy
-                dx, dy = px - cx, py - cy
-                dist = math.sqrt(dx * dx + dy * dy)
-                d = rad - dist
-                if dist > MIN_DISTANCE:
-                    nx, ny = dx / dist, dy / dist
-                else:
-                    nx, ny = -uy, ux
-                j1x, j1y, j3x, j3y = -by, bx, -ell * uy, ell * ux
             elif kind == 2:  # a plane against the joint B
-                ox, oy, nx, ny, rho = m[j], m[j + 1], m[j + 2], m[j + 3], m[j + 4]
+                d, nx, ny, j1x, j1y, j3x, j3y = joint_plane(m[j], m[j + 1], m[j + 2], m[j + 3], m[j + 4], bx, by)
                 j += 5
-                d = rho - (nx * (bx - ox) + ny * (by - oy))
-                j1x, j1y, j3x, j3y = -by, bx, 0.0, 0.0
             else:  # a plane against the fingertip
-                ox, oy, nx, ny, rho = m[j], m[j + 1], m[j + 2], m[j + 3], m[j + 4]
+                d, nx, ny, j1x, j1y, j3x, j3y = tip_plane(m[j], m[j + 1], m[j + 2], m[j + 3], m[j + 4], l3, bx, by,
+                                                          ux, uy)
                 j += 6
-                px, py = bx + l3 * ux, by + l3 * uy
-                d = rho - (nx * (px - ox) + ny * (py - oy))
-                j1x, j1y, j3x, j3y = -by, bx, -l3 * uy, l3 * ux
             gaps[i] = -d
             g0, g1, g2 = nx * j1x + ny * j1y, 0.0, nx * j3x + ny * j3y
             rates[i] = g0 * v0 + g1 * v1 + g2 * v2

@@ -18,6 +18,7 @@ from numba import njit  # noqa: E402  (after the cache folder is set)
 
 from finger_sim.simulation import locate  # noqa: E402
 from finger_sim.kernel.layout import CONTACT, HEADER  # noqa: E402
+from finger_sim.kernel.numerics import distal_circle, joint_plane, proximal_circle, tip_plane  # noqa: E402
 
 #: `locate.EVENT_TOLERANCE`: a gap counts as closed below −EVENT_TOLERANCE.
 EVENT_TOLERANCE = locate.EVENT_TOLERANCE
@@ -39,7 +40,8 @@ def stop_closed(x, limits):
 @njit(**SERIAL)
 def contact_gaps(m, o, q0, q2, gap):
     """Each contact candidate's gap −δ (m) into `gap`: `Contact.gaps`, in its order and with its
-    arithmetic (`Contact._hits`, every candidate); returns their count."""
+    arithmetic (`Contact._hits`, every candidate: the force's geometry, `numerics.proximal_circle` …);
+    returns their count."""
     r1, l3, alpha = m[o], m[o + 1], m[o + 2]
     n_prox, n_dist, n_ends, n_tips = int(m[o + 8]), int(m[o + 9]), int(m[o + 10]), int(m[o + 11])
     j = o + 12
@@ -47,33 +49,22 @@ def contact_gaps(m, o, q0, q2, gap):
     bx, by = r1 * c1, r1 * s1
     i = 0
     for _ in range(n_prox):
-        cx, cy, rad = m[j], m[j + 1], m[j + 2]
+        gap[i] = -proximal_circle(m[j], m[j + 1], m[j + 2], r1, bx, by, s1, c1)[0]
         j += 3
-        s = (cx * bx + cy * by) / (r1 * r1)
-        s = 0.0 if s < 0.0 else (1.0 if s > 1.0 else s)
-        gap[i] = -(rad - math.hypot(s * bx - cx, s * by - cy))
         i += 1
     psi = q2 + alpha
     ux, uy = math.cos(psi), math.sin(psi)
     for _ in range(n_dist):
-        cx, cy, rad = m[j], m[j + 1], m[j + 2]
+        gap[i] = -distal_circle(m[j], m[j + 1], m[j + 2], l3, bx, by, ux, uy)[0]
         j += 4
-        dx, dy = cx - bx, cy - by
-        ell = dx * ux + dy * uy
-        ell = 0.0 if ell < 0.0 else (l3 if ell > l3 else ell)
-        px, py = bx + ell * ux, by + ell * uy
-        gap[i] = -(rad - math.hypot(px - cx, py - cy))
         i += 1
     for _ in range(n_ends):
-        ox, oy, nx, ny, rho = m[j], m[j + 1], m[j + 2], m[j + 3], m[j + 4]
+        gap[i] = -joint_plane(m[j], m[j + 1], m[j + 2], m[j + 3], m[j + 4], bx, by)[0]
         j += 5
-        gap[i] = -(rho - (nx * (bx - ox) + ny * (by - oy)))
         i += 1
     for _ in range(n_tips):
-        ox, oy, nx, ny, rho = m[j], m[j + 1], m[j + 2], m[j + 3], m[j + 4]
+        gap[i] = -tip_plane(m[j], m[j + 1], m[j + 2], m[j + 3], m[j + 4], l3, bx, by, ux, uy)[0]
         j += 6
-        px, py = bx + l3 * ux, by + l3 * uy
-        gap[i] = -(rho - (nx * (px - ox) + ny * (py - oy)))
         i += 1
     return i
 

@@ -80,6 +80,52 @@ torque_at = compiled(inputs.torque_at, **_PROFILE_LAWS)
 switches_inside = compiled(inputs.switches_inside, **_PROFILE_LAWS)
 
 
+# -- the contact candidates' geometry (`Contact._hits`), shared by the force, the closed loop and the event checks
+@njit(**LAW)
+def _circle_depth(px, py, cx, cy, rad, fx, fy):
+    """(δ = rad − |p − c| m, n_c = (p − c)/|p − c|) of a phalanx's closest point p to a circle's centre c;
+    n_c = (fx, fy), the phalanx's own normal, where p is on c."""
+    dx, dy = px - cx, py - cy
+    dist = math.sqrt(dx * dx + dy * dy)  # not hypot: CPython's and libm's differ in the last bit
+    if dist > MIN_DISTANCE:
+        return rad - dist, dx / dist, dy / dist
+    return rad - dist, fx, fy
+
+
+@njit(**LAW)
+def proximal_circle(cx, cy, rad, r1, bx, by, s1, c1):
+    """A circle (centre c, radius ρ1 + R: rad, m) and the proximal phalanx A→B (B = r1 e(θ1) = (bx, by),
+    (s1, c1) = sin, cos θ1): (δ m, n_c, j1 = ∂p/∂θ1, j3 = ∂p/∂θ3 m/rad) at its closest point p = s B."""
+    s = (cx * bx + cy * by) / (r1 * r1)
+    s = 0.0 if s < 0.0 else (1.0 if s > 1.0 else s)
+    delta, nx, ny = _circle_depth(s * bx, s * by, cx, cy, rad, -s1, c1)
+    return delta, nx, ny, -s * by, s * bx, 0.0, 0.0
+
+
+@njit(**LAW)
+def distal_circle(cx, cy, rad, l3, bx, by, ux, uy):
+    """A circle (rad = ρ3 + R) and the distal phalanx B → B + L3 e(ψ) ((ux, uy) = e(ψ)): as
+    `proximal_circle`, at p = B + ℓ e(ψ)."""
+    dx, dy = cx - bx, cy - by
+    ell = dx * ux + dy * uy
+    ell = 0.0 if ell < 0.0 else (l3 if ell > l3 else ell)
+    delta, nx, ny = _circle_depth(bx + ell * ux, by + ell * uy, cx, cy, rad, -uy, ux)
+    return delta, nx, ny, -by, bx, -ell * uy, ell * ux
+
+
+@njit(**LAW)
+def joint_plane(ox, oy, nx, ny, rho, bx, by):
+    """A plane (point o, outward normal n) and the joint B (radius rho): as `proximal_circle`."""
+    return rho - (nx * (bx - ox) + ny * (by - oy)), nx, ny, -by, bx, 0.0, 0.0
+
+
+@njit(**LAW)
+def tip_plane(ox, oy, nx, ny, rho, l3, bx, by, ux, uy):
+    """A plane and the fingertip B + L3 e(ψ): as `proximal_circle`."""
+    px, py = bx + l3 * ux, by + l3 * uy
+    return rho - (nx * (px - ox) + ny * (py - oy)), nx, ny, -by, bx, -l3 * uy, l3 * ux
+
+
 @njit(**JIT)
 def _contact(m, o, q0, q2, v0, v2, slide, direction, mu_k, mu_s, v_st, n3):
     """Contact's (Q1, Q3): `finger_sim.effects.contact.Contact.force`, same order of terms. `slide`: the
@@ -94,20 +140,10 @@ def _contact(m, o, q0, q2, v0, v2, slide, direction, mu_k, mu_s, v_st, n3):
     out1 = 0.0
     out3 = 0.0
     for _ in range(n_prox):
-        cx, cy, rad = m[j], m[j + 1], m[j + 2]
+        delta, nx, ny, j1x, j1y, j3x, j3y = proximal_circle(m[j], m[j + 1], m[j + 2], r1, bx, by, s1, c1)
         j += 3
-        s = (cx * bx + cy * by) / (r1 * r1)
-        s = 0.0 if s < 0.0 else (1.0 if s > 1.0 else s)
-        px, py = s * bx, s * by
-        dx, dy = px - cx, py - cy
-        dist = math.sqrt(dx * dx + dy * dy)  # not hypot: CPython's and libm's differ in the last bit
-        delta = rad - dist
         if delta > 0.0:
-            if dist > MIN_DISTANCE:
-                nx, ny = dx / dist, dy / dist
-            else:
-                nx, ny = -s1, c1
-            f1, f3 = _contact_force(delta, nx, ny, -s * by, s * bx, 0.0, 0.0, v0, v2, k, e, d, mu, vs,
+            f1, f3 = _contact_force(delta, nx, ny, j1x, j1y, j3x, j3y, v0, v2, k, e, d, mu, vs,
                                      slide, direction, mu_k, mu_s, v_st, n3)
             out1 += f1
             out3 += f3
@@ -122,27 +158,17 @@ def _contact(m, o, q0, q2, v0, v2, slide, direction, mu_k, mu_s, v_st, n3):
         if not have_u:
             psi = q2 + alpha
             ux, uy, have_u = math.cos(psi), math.sin(psi), True
-        ell = dx * ux + dy * uy
-        ell = 0.0 if ell < 0.0 else (l3 if ell > l3 else ell)
-        px, py = bx + ell * ux, by + ell * uy
-        dx, dy = px - cx, py - cy
-        dist = math.sqrt(dx * dx + dy * dy)  # not hypot: CPython's and libm's differ in the last bit
-        delta = rad - dist
+        delta, nx, ny, j1x, j1y, j3x, j3y = distal_circle(cx, cy, rad, l3, bx, by, ux, uy)
         if delta > 0.0:
-            if dist > MIN_DISTANCE:
-                nx, ny = dx / dist, dy / dist
-            else:
-                nx, ny = -uy, ux
-            f1, f3 = _contact_force(delta, nx, ny, -by, bx, -ell * uy, ell * ux, v0, v2, k, e, d, mu, vs,
+            f1, f3 = _contact_force(delta, nx, ny, j1x, j1y, j3x, j3y, v0, v2, k, e, d, mu, vs,
                                      slide, direction, mu_k, mu_s, v_st, n3)
             out1 += f1
             out3 += f3
     for _ in range(n_ends):
-        ox, oy, nx, ny, rho = m[j], m[j + 1], m[j + 2], m[j + 3], m[j + 4]
+        delta, nx, ny, j1x, j1y, j3x, j3y = joint_plane(m[j], m[j + 1], m[j + 2], m[j + 3], m[j + 4], bx, by)
         j += 5
-        delta = rho - (nx * (bx - ox) + ny * (by - oy))
         if delta > 0.0:
-            f1, f3 = _contact_force(delta, nx, ny, -by, bx, 0.0, 0.0, v0, v2, k, e, d, mu, vs,
+            f1, f3 = _contact_force(delta, nx, ny, j1x, j1y, j3x, j3y, v0, v2, k, e, d, mu, vs,
                                      slide, direction, mu_k, mu_s, v_st, n3)
             out1 += f1
             out3 += f3
@@ -155,10 +181,9 @@ def _contact(m, o, q0, q2, v0, v2, slide, direction, mu_k, mu_s, v_st, n3):
         if not have_u:
             psi = q2 + alpha
             ux, uy, have_u = math.cos(psi), math.sin(psi), True
-        px, py = bx + l3 * ux, by + l3 * uy
-        delta = rho - (nx * (px - ox) + ny * (py - oy))
+        delta, nx, ny, j1x, j1y, j3x, j3y = tip_plane(ox, oy, nx, ny, rho, l3, bx, by, ux, uy)
         if delta > 0.0:
-            f1, f3 = _contact_force(delta, nx, ny, -by, bx, -l3 * uy, l3 * ux, v0, v2, k, e, d, mu, vs,
+            f1, f3 = _contact_force(delta, nx, ny, j1x, j1y, j3x, j3y, v0, v2, k, e, d, mu, vs,
                                      slide, direction, mu_k, mu_s, v_st, n3)
             out1 += f1
             out3 += f3

@@ -27,10 +27,11 @@ ESTIMATE_FACTOR = 10.0
 
 
 def own_law() -> dict:
-    """The elastic impact of config/hard/, the ball with its own stiffness and damping (the scene's
-    contact law says otherwise): no compiled form."""
+    """The elastic impact of config/hard/, the ball with its own stiffness and damping, a second ball
+    (out of reach) with the scene's law: two laws, no compiled form (the compiled law has one)."""
     data = yaml.safe_load((HARD / "elastic_impact.yaml").read_text(encoding="utf-8"))
     data["objects"][0].update(stiffness=3.0e5, damping=0.3)
+    data["objects"].append({"name": "far_ball", "type": "circle", "center": [-0.2, -0.2], "radius": 0.01})
     data["duration"] = 0.1
     return data
 
