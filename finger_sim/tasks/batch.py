@@ -12,7 +12,9 @@ solution handed over and read back, so those steps are the offline path's own.
 What it takes (`batch_reason` says why not): the shipped grip PI (`grip_pi`,
 `grip_pi_aggressive`) on a torque task without sensors whose scene steps with the compiled
 DOP853 (what `auto` picks on the contact scenes) and a contact law with a compiled form (one
-law for all objects, its own or the scene's; no moving object). Other tasks run `run_task` row by row.
+law for all objects, its own or the scene's; no moving object). The drive tasks' controllers
+(`grip_voltage`, `grip_current`) go through `finger_sim.tasks.batch_drive`. Other tasks run
+`run_task` row by row.
 """
 
 from __future__ import annotations
