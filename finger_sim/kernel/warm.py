@@ -6,7 +6,8 @@ The Makefile's install step runs it, so `make run` (the node's compiled step) an
 `simulate`, `sweep` or `rollout` load the cache (well under a second) instead of compiling
 (6-25 s). numba keys its cache by each function's argument types, so the warm-up makes the
 same calls, with the same types, as those paths do: a short run of each shipped kind of scene
-(smooth, with a stop, with contact; rk6, dop853) on the compiled kernel, a batch and a rollout.
+(smooth, with a stop, with contact; rk6, dop853) on the compiled kernel, a batch, a rollout and
+the task sweeps' closed loops (grip PI, and the drive's grip_current and grip_voltage).
 Prints one line: what was warmed and how long it took.
 """
 
@@ -35,7 +36,8 @@ def warm() -> list[str]:
     from finger_sim.errors import StabilityError
     from finger_sim.simulate import Simulator, simulate
     from finger_sim.tasks.batch import run_task_rows
-    from finger_sim.tasks.controllers import grip_pi
+    from finger_sim.tasks.controllers import grip_pi, grip_voltage
+    from finger_sim.tasks.current_grip import grip_current
     from finger_sim.tasks.schema import load_task
 
     done = []
@@ -60,7 +62,11 @@ def warm() -> list[str]:
     hold = load_task(CONFIG / "tasks" / "hold_cup.yaml")
     hold = dataclasses.replace(hold, scene=hold.scene.with_overrides(duration=STEPS * hold.scene.dt))
     run_task_rows(hold, grip_pi, [("a", {}), ("b", {"ki": 2.0})])  # the gain sweep's closed loop
-    return [*done, "batch", "rollout", "task sweep"]
+    for name, factory in (("hold_current", grip_current), ("hold_voltage_off", grip_voltage)):
+        task = load_task(CONFIG / "tasks" / f"{name}.yaml")
+        task = dataclasses.replace(task, scene=task.scene.with_overrides(duration=STEPS * task.scene.dt))
+        run_task_rows(task, factory, [("a", {}), ("b", {"ki": 2.0})])  # the drive tasks' closed loop
+    return [*done, "batch", "rollout", "task sweep", "drive task sweep"]
 
 
 def main() -> None:
