@@ -53,6 +53,10 @@ class CompiledKernel(Protocol):
         """The compiled numerics (DOP853's attempt, dense output and right-hand side)."""
         ...
 
+    def compiled_gap_screen(self) -> ModuleType:
+        """The compiled step-end gap check (`screen`: whether a step may hold a gap crossing)."""
+        ...
+
     def compiled_inductive(self) -> type:
         """The compiled Runge–Kutta class of an inductive drive (`actuators.inductive`'s twin)."""
         ...

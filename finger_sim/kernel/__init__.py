@@ -197,6 +197,13 @@ def compiled_drive() -> "ModuleType":
     return compiled
 
 
+def compiled_gap_screen() -> "ModuleType":
+    """The compiled step-end gap check (`kernel.gap_screen`)."""
+    from finger_sim.kernel import gap_screen as compiled
+
+    return compiled
+
+
 def compiled_inductive() -> type:
     """The inductive drive's compiled Runge–Kutta class (`kernel.inductive`)."""
     from finger_sim.kernel.inductive import CompiledInductiveRungeKutta

@@ -52,8 +52,12 @@ def first_crossing(sim: Simulator, t: float, q: Vec3, v: Vec3, t1: float, q1: Ve
     A gap crosses when it is closed at one end of the step and open at the other (an impact
     gap, a stop, counts as open at the start: the step starts off it), or when it closes and
     opens again inside the step, which the ends alone do not show (a contact shorter than
-    a step): `bracket` looks for that between the ends.
+    a step): `bracket` looks for that between the ends. A step that the compiled check clears
+    (`Simulator._gap_screen`, the same numbers and tests) returns None at once.
     """
+    screen = sim._gap_screen
+    if screen is not None and screen.clear(t, q, v, t1, q1, v1):
+        return None
     first: Crossing | None = None
     start, end = gap_states(sim, t, q, v), gap_states(sim, t1, q1, v1)
     h = t1 - t

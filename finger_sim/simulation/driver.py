@@ -23,7 +23,7 @@ from finger_sim.integrators import HeldTorque, Integrator, TorqueFn
 from finger_sim.kinematics import Vec3
 from finger_sim.projection import OK as FAST_OK
 from finger_sim.scene import Scene
-from finger_sim.simulation import crossings, impact
+from finger_sim.simulation import crossings, gap_screen, impact
 from finger_sim.simulation.crossings import Crossing, Gap
 from finger_sim.simulation.setup import hashable, setup_for
 from finger_sim.stepper_slot import BREAKPOINT
@@ -79,6 +79,8 @@ class Simulator:
         self._depth_sources = setup.depth_sources
         #: elements whose gaps move with time too (contact with a moving object): asked at (t, q)
         self._timed = frozenset(g.element for g in self._gaps if getattr(g.element, "time_varying", False))
+        #: the compiled check of a step's end gaps (`simulation.gap_screen`), or None: the Python check alone
+        self._gap_screen = gap_screen.for_simulator(self)
         self.reset()
         #: the lean compiled path of `step` (a compiled fixed-step method on a smooth scene), else None
         self.fast_stepper = setup.fast_stepper
@@ -96,6 +98,8 @@ class Simulator:
         self._resting: Gap | None = None
         #: `crossings.gap_states`' last (q, q', gaps and rates, t)
         self._gap_cache: tuple[Vec3, Vec3, list[tuple[float, float]], float] | None = None
+        if self._gap_screen is not None:
+            self._gap_screen.reset()
         #: the motor torque at the end of the last step (N·m): what a JointState effort reports
         #: (with a drive: the voltage command, V)
         self.torque = self.scene.torque(0.0)

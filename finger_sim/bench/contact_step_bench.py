@@ -1,0 +1,70 @@
+"""A contact step with and without the compiled gap check, side by side in one process.
+
+`python -m finger_sim.bench.contact_step_bench [--repeats N]`: `method: auto` at 1 kHz through
+`Simulator.step` (the node's path) on each shipped contact scene, once with the compiled step-end
+gap check (`simulation.gap_screen`) and once with it switched off (the Python check alone, main's
+path before it), and the free paper_flexion; CPU per step (`time.process_time`), every variant
+timed in turn within each repeat after one warm-up round; medians, and ratios to the free step.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+from collections.abc import Sequence
+
+from finger_sim.bench.plan import CONTACT_SCENES, config_dir
+from finger_sim.scene import load_scene
+from finger_sim.simulate import Simulator
+
+#: The free-space scene a contact step is compared with.
+FREE_SCENE = "paper_flexion"
+#: Timing repeats (median).
+REPEATS = 5
+
+
+def measure(repeats: int) -> dict[tuple[str, str], float]:
+    """Median µs per step of (scene, variant): variant "free", "dop853" (the free scene), "python check"
+    or "compiled check"."""
+    folder = config_dir()
+    free = load_scene(folder / f"{FREE_SCENE}.yaml")
+    # the free scene under auto (its lean compiled step), and under dop853: the contact path's floor, no gaps
+    sims = {(FREE_SCENE, "free"): Simulator(free), (FREE_SCENE, "dop853"): Simulator(free.with_overrides(method="dop853"))}
+    for name in CONTACT_SCENES:
+        scene = load_scene(folder / f"{name}.yaml")
+        off = Simulator(scene)
+        off._gap_screen = None  # the Python check alone
+        sims[name, "python check"], sims[name, "compiled check"] = off, Simulator(scene)
+    samples: dict[tuple[str, str], list[float]] = {key: [] for key in sims}
+    for k in range(repeats + 1):  # the first round warms up
+        for key, sim in sims.items():
+            sim.reset()
+            n, step = sim.scene.step_count, sim.step
+            start = time.process_time()
+            for _ in range(n):
+                step()
+            if k:
+                samples[key].append(1e6 * (time.process_time() - start) / n)
+    return {key: statistics.median(values) for key, values in samples.items()}
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m finger_sim.bench.contact_step_bench", description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=REPEATS)
+    args = parser.parse_args(argv)
+    medians = measure(args.repeats)
+    free = medians[FREE_SCENE, "free"]
+    floor = medians[FREE_SCENE, "dop853"]
+    print(f"free {FREE_SCENE}: {free:.2f} µs/step under auto, {floor:.2f} µs/step ({floor / free:.2f}×) "
+          f"under dop853 (median of {args.repeats})")
+    print("| scene | Python check µs/step | compiled check µs/step | × free, before | × free, after | after / before |")
+    print("|---|---:|---:|---:|---:|---:|")
+    for name in CONTACT_SCENES:
+        old, new = medians[name, "python check"], medians[name, "compiled check"]
+        print(f"| {name} | {old:.1f} | {new:.1f} | {old / free:.2f}× | {new / free:.2f}× | {new / old:.2f} |")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

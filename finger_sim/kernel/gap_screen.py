@@ -1,0 +1,87 @@
+"""The Simulator's gap check of a step, compiled: the common step, with no crossing, in one call.
+
+`simulation.crossings.first_crossing` asks, for every gap of the scene's non-smooth elements, its
+value and rate at both ends of the step, and looks for a crossing where a gap is not clearly open
+at both ends. `screen` takes the same numbers (the contact's from `closed_loop.contact_states`,
+`Contact._hits` in its order and arithmetic; the stops' θ1 − lower, upper − θ1; the depth gaps
+ρ − δ) and the same tests (`closed_loop.may_cross`: the skip test of `first_crossing`, then
+`crossings.bracket`'s side test and `locate.predicted_crossing`), so when it finds nothing the
+Python check would have found nothing either; otherwise the Python check runs as it always did.
+
+The gap plan (`simulation.gap_screen.plan_for`) is one float64 array:
+
+    [n_gaps, n_groups, then per group: kind, n_params, its params,
+     n_depth, then per depth gap: (position of its contact gap, ρ), then n_gaps impact flags (1/0)]
+
+kind STOPS: (lower, upper), rad; kind CONTACT: `Contact.kernel_params()`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from finger_sim.kernel import use_writable_cache
+
+use_writable_cache()  # before numba reads NUMBA_CACHE_DIR
+from numba import njit  # noqa: E402  (after the cache folder is set)
+
+from finger_sim.kernel.closed_loop import contact_states, may_cross  # noqa: E402
+from finger_sim.kernel.numerics import JIT  # noqa: E402
+
+#: The kinds of a gap plan's groups (module docstring).
+STOPS, CONTACT = 1, 2
+
+
+@njit(**JIT)
+def gap_states(plan, x, gaps, rates):
+    """Every gap (in the Simulator's `_gaps` order) and its rate at the state x = (q, q') into
+    gaps and rates: `crossings.gap_states`' numbers."""
+    groups = int(plan[1])
+    o = 2
+    i = 0
+    for _ in range(groups):
+        kind, n = int(plan[o]), int(plan[o + 1])
+        o += 2
+        if kind == STOPS:
+            gaps[i], gaps[i + 1] = x[0] - plan[o], plan[o + 1] - x[0]
+            # ∂gap/∂q · q' with ∂gap/∂q = (±1, 0, 0), in `crossings.gap_states`' order of terms
+            rates[i] = 1.0 * x[3] + 0.0 * x[4] + 0.0 * x[5]
+            rates[i + 1] = -1.0 * x[3] + 0.0 * x[4] + 0.0 * x[5]
+            i += 2
+        else:
+            count, _ = contact_states(plan, o, x, gaps[i:], rates[i:])
+            i += count
+        o += n
+    depth = int(plan[o])
+    o += 1
+    for _ in range(depth):
+        p, rho = int(plan[o]), plan[o + 1]
+        o += 2
+        gaps[i], rates[i] = gaps[p] + rho, rates[p]  # ρ − δ, at the rate of −δ
+        i += 1
+
+
+@njit(**JIT)
+def screen(plan, work, a, known, h, q, v, q1, v1):
+    """Whether the step (q, q') → (q1, q1') of length h (s) needs the Simulator's gap check: some
+    gap is not clearly open at both ends and may cross inside (`closed_loop.may_cross`).
+
+    work: 4 × n_gaps; rows a, a + 1 (a = 0 or 2) hold the start's gaps and rates when `known`
+    (else they are computed here), rows 2 − a, 3 − a receive the end's: the next step's start.
+    """
+    n = int(plan[0])
+    b = 2 - a
+    x = np.empty(6)
+    if not known:
+        x[0], x[1], x[2], x[3], x[4], x[5] = q[0], q[1], q[2], v[0], v[1], v[2]
+        gap_states(plan, x, work[a], work[a + 1])
+    x[0], x[1], x[2], x[3], x[4], x[5] = q1[0], q1[1], q1[2], v1[0], v1[1], v1[2]
+    gap_states(plan, x, work[b], work[b + 1])
+    flags = plan.shape[0] - n
+    for i in range(n):
+        g0 = work[a, i]
+        if plan[flags + i] != 0.0 and 0.0 > g0:  # an impact gap: the step starts on the open side
+            g0 = 0.0
+        if may_cross(g0, work[a + 1, i], work[b, i], work[b + 1, i], h):
+            return True
+    return False
