@@ -36,6 +36,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--report", default="performance_hard.md", help="file name of the report under --out")
     parser.add_argument("--quick", action="store_true", help="the bench's reduced grids")
     parser.add_argument("--repeats", type=int, default=REPEATS, help="timing repeats per run (median)")
+    parser.add_argument("--rtols", type=float, nargs="+", help="scipy's rtol grid (default: the bench's)")
     args = parser.parse_args(argv)
     started, load0, wall0 = datetime.now(timezone.utc), os.getloadavg(), time.perf_counter()
     sections: list[str] = []
@@ -46,7 +47,8 @@ def main(argv: list[str] | None = None) -> None:
         scene = load_scene(scene_file(name))
         ref = build_reference(scene, quick=args.quick, spacing=SPACING)
         runs = []
-        for task in tasks({name: scene}, {name: ref}, quick=args.quick, repeats=args.repeats):
+        for task in tasks({name: scene}, {name: ref}, quick=args.quick, repeats=args.repeats,
+                          rtols=tuple(args.rtols) if args.rtols else None):
             print(task.label, file=sys.stderr, flush=True)
             runs.append(task.call())
         figure = write_figure(name, runs, ref, args.out)

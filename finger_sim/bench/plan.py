@@ -150,9 +150,10 @@ def _accepts(scene: Scene, dt: float) -> bool:
     return True
 
 
-def tasks(scenes: dict[str, Scene], refs: dict[str, Reference], *, quick: bool, repeats: int = REPEATS) -> list[Task]:
+def tasks(scenes: dict[str, Scene], refs: dict[str, Reference], *, quick: bool, repeats: int = REPEATS,
+          rtols: tuple[float, ...] | None = None) -> list[Task]:
     """The measurements, in the order they run: per scene the project's methods, then scipy and MuJoCo
-    (each timed `repeats` times, the median kept)."""
+    (each timed `repeats` times, the median kept); rtols: scipy's grid instead of QUICK_RTOL / FULL_RTOL."""
     out: list[Task] = []
     kw = {"spacing": SPACING, "repeats": repeats}
     for name, scene in scenes.items():
@@ -165,7 +166,7 @@ def tasks(scenes: dict[str, Scene], refs: dict[str, Reference], *, quick: bool, 
         if name not in SHIPPED_SCENES:
             continue
         for method in SCIPY_METHODS:
-            for rtol in QUICK_RTOL if quick else FULL_RTOL:
+            for rtol in rtols or (QUICK_RTOL if quick else FULL_RTOL):
                 out.append(Task(f"{name} scipy {method} rtol={rtol:g}", lambda s=scene, m=method, t=rtol, r=ref: run_scipy(s, m, t, r, **kw)))
         if name == NUMPY_RHS_SCENE:
             for rtol in QUICK_RTOL if quick else FULL_RTOL[1::2]:
