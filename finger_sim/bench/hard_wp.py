@@ -37,6 +37,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--quick", action="store_true", help="the bench's reduced grids")
     parser.add_argument("--repeats", type=int, default=REPEATS, help="timing repeats per run (median)")
     parser.add_argument("--rtols", type=float, nargs="+", help="scipy's rtol grid (default: the bench's)")
+    parser.add_argument("--only", nargs="+", metavar="TEXT",
+                        help="run only the measurements whose label (as printed) contains one of these")
     args = parser.parse_args(argv)
     started, load0, wall0 = datetime.now(timezone.utc), os.getloadavg(), time.perf_counter()
     sections: list[str] = []
@@ -49,6 +51,8 @@ def main(argv: list[str] | None = None) -> None:
         runs = []
         for task in tasks({name: scene}, {name: ref}, quick=args.quick, repeats=args.repeats,
                           rtols=tuple(args.rtols) if args.rtols else None):
+            if args.only and not any(text in task.label for text in args.only):
+                continue
             print(task.label, file=sys.stderr, flush=True)
             runs.append(task.call())
         figure = write_figure(name, runs, ref, args.out)
