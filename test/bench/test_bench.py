@@ -151,8 +151,9 @@ def test_every_peer_has_rows(bench, scene):
     assert any(r.ok for r in scipy_rows)
     if scene not in WP_SCENES:  # stops or contact: solve_ivp restarted at every located event
         tight = next(r for r in scipy_rows if r.method == "scipy DOP853" and r.value == min(QUICK_RTOL))
-        # against the reference (the Simulator's own event location on contact scenes): the same path
-        assert tight.ok and "event" in tight.note and tight.error < 1e-6, tight
+        # against the reference (the Simulator's own event location on contact scenes): the same path, events
+        # located by solve_ivp instead (measured 1e-8 to 3e-8 rad at rtol 1e-8, docs/work_precision_goal.md)
+        assert tight.ok and "event" in tight.note and tight.error < 1e-7, tight
         return
     mj = [r for r in rows if r.family == FAMILY_MUJOCO]
     assert {r.method for r in mj} == {f"MuJoCo {i} {s}" for i in MUJOCO_INTEGRATORS for s in MUJOCO_SETTINGS}
