@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 from finger_sim.auto import Row, Table
 from finger_sim.bench.plan import KINDS, RATES
-from finger_sim.bench.runners import FAMILY_MUJOCO, FAMILY_PROJECT, FAMILY_SCIPY, Run
+from finger_sim.bench.runners import AUTO, FAMILY_MUJOCO, FAMILY_PROJECT, FAMILY_SCIPY, Run
 
 #: Not recommended, whatever they measure: the error-controlled methods. `adaptive` restarts
 #: scipy's DOP853 at every step (0.2-60 ms per step); `dop853` takes as many internal steps as
@@ -102,6 +102,7 @@ def candidates(runs: Sequence[Run], kind: str, rate: int) -> list[Candidate]:
         if (
             r.family == FAMILY_PROJECT
             and r.method not in NOT_RECOMMENDED
+            and r.method != AUTO  # the table's user (run on every scene for the goal at its error), not a candidate
             and r.scene in scenes
             and math.isclose(r.value, dt, rel_tol=1e-9)
         ):
