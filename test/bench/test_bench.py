@@ -455,6 +455,7 @@ def test_recommendation_takes_the_worst_scene_of_a_kind_and_the_cheapest_method(
         runs.append(fake("rk4", 1.0, 1e-7 if scene != "toggle_passage" else 1e-5, scene=scene, steps=1000))
         runs.append(fake("rk6", 2.0, 1e-8, scene=scene, steps=1000))
         runs.append(fake("adaptive", 0.1, 1e-14, scene=scene, steps=1000))  # never recommended
+        runs.append(fake(AUTO, 0.1, 1e-14, scene=scene, steps=1000))  # the table's user, not a candidate
     cands = an.candidates(runs, "smooth", 1000)
     assert [c.method for c in cands] == ["rk4", "rk6"]
     assert cands[0].worst_error == 1e-5 and cands[0].us_per_step == pytest.approx(1000.0)
