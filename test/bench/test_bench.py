@@ -121,7 +121,9 @@ def test_every_run_is_in_its_scene_table_once_and_rendered_as_one_row(bench):
 @pytest.mark.parametrize("scene", [s for s in ALL_SCENES if s not in CONTACT_SCENES + ISSUE_HARD_SCENES])
 @pytest.mark.slow
 def test_every_project_method_has_rows_with_finite_numbers(bench, scene):
-    rows = [r for r in bench[2].scenes[scene] if r.family == FAMILY_PROJECT]
+    every = [r for r in bench[2].scenes[scene] if r.family == FAMILY_PROJECT]
+    assert {r.method for r in every} == set(project_methods()) | {AUTO}  # auto itself runs on every scene
+    rows = [r for r in every if r.method != AUTO]
     assert {r.method for r in rows} == set(project_methods()) == set(METHODS)
     for r in rows:
         assert r.status in ("ok", "refused", "diverged"), r
