@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 from finger_sim.auto import Row, Table
 from finger_sim.bench.plan import KINDS, RATES
-from finger_sim.bench.runners import FAMILY_MUJOCO, FAMILY_PROJECT, FAMILY_SCIPY, Run
+from finger_sim.bench.runners import AUTO, FAMILY_MUJOCO, FAMILY_PROJECT, FAMILY_SCIPY, Run
 
 #: Not recommended, whatever they measure: the error-controlled methods. `adaptive` restarts
 #: scipy's DOP853 at every step (0.2-60 ms per step); `dop853` takes as many internal steps as
@@ -102,6 +102,7 @@ def candidates(runs: Sequence[Run], kind: str, rate: int) -> list[Candidate]:
         if (
             r.family == FAMILY_PROJECT
             and r.method not in NOT_RECOMMENDED
+            and r.method != AUTO  # the table's user (run on every scene for the goal at its error), not a candidate
             and r.scene in scenes
             and math.isclose(r.value, dt, rel_tol=1e-9)
         ):
@@ -208,6 +209,56 @@ def compare_scipy(runs: Sequence[Run], scene: str, *, max_dt: float | None = Non
     ours, ours_m = _best_cost(_project(runs, scene, max_dt), SCIPY_TARGET)
     cost, method = _best_cost(theirs, SCIPY_TARGET)
     return ScipyComparison(scene, ours, ours_m, cost, method)
+
+
+#: `auto` is compared with scipy at the error it delivers at this dt (s): the shipped scenes' own step.
+AUTO_DT = 1e-3
+
+
+@dataclass(frozen=True)
+class AutoScipyComparison:
+    """`auto` at AUTO_DT on one scene against the CPU scipy's best method and the project's cheapest run need
+    for the same error: auto's own, or the reference floor where auto is below it (`at`). CPU in s, errors in rad."""
+
+    scene: str
+    pick: str  # what auto ran
+    error: float  # auto's error
+    at: float  # the error compared at: max(error, the reference floor)
+    auto_cpu: float
+    cheapest: float  # the project's cheapest run (any method, any step) to `at`
+    cheapest_method: str
+    scipy: float  # scipy's best to `at`; where no scipy run reaches it, its most accurate run's CPU
+    scipy_method: str
+    scipy_reaches: bool  # False: scipy's most accurate run is less accurate than `at`, the ratio a lower bound
+
+    @property
+    def ratio(self) -> float:
+        """scipy's best CPU over auto's."""
+        return self.scipy / self.auto_cpu if 0 < self.auto_cpu < math.inf and self.scipy < math.inf else math.nan
+
+    @property
+    def cheapest_ratio(self) -> float:
+        """scipy's best CPU over the project's cheapest."""
+        return self.scipy / self.cheapest if 0 < self.cheapest < math.inf and self.scipy < math.inf else math.nan
+
+
+def compare_auto(runs: Sequence[Run], scene: str, floor: float, *, auto_label: str = "auto") -> AutoScipyComparison | None:
+    """`auto`'s run at AUTO_DT on `scene` against scipy's best and the project's cheapest at its error; None
+    when auto's run or every scipy run is missing or failed. floor: the scene's reference floor, rad."""
+    mine = next((r for r in runs if r.scene == scene and r.family == FAMILY_PROJECT and r.method == auto_label
+                 and math.isclose(r.value, AUTO_DT) and r.ok), None)
+    theirs = [r for r in runs if r.scene == scene and r.family == FAMILY_SCIPY and "numpy" not in r.method and r.ok]
+    if mine is None or not theirs:
+        return None
+    at = max(mine.error, floor)
+    cheapest, cheapest_method = _best_cost(_project(runs, scene, None), at)
+    cost, method = _best_cost(theirs, at)
+    reaches = math.isfinite(cost)
+    if not reaches:  # a lower bound: the CPU of scipy's most accurate run, still short of `at`
+        best = min(theirs, key=lambda r: (r.error, r.cpu))
+        cost, method = best.cpu, best.method
+    return AutoScipyComparison(scene, mine.note, mine.error, at, mine.cpu, cheapest, cheapest_method, cost, method,
+                               reaches)
 
 
 @dataclass(frozen=True)

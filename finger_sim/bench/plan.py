@@ -24,9 +24,9 @@ from finger_sim.scene import Scene
 #: Scenes with a work-precision figure (peers included), then the scenes measured for the
 #: recommendation and hard cases only.
 WP_SCENES = ("paper_flexion", "toggle_passage", "free_swing", "bang_bang", "stiff_spring")
-#: Contact scenes (objects, spec §7) with a work-precision figure and the MuJoCo contact peer
-#: (no scipy rows: a plain solve_ivp script does not locate contact onsets), then the contact
-#: hard cases: the impact onto the cup and the near-rigid cup.
+#: Contact scenes (objects, spec §7) with a work-precision figure and the MuJoCo contact peer, then the contact
+#: hard cases: the impact onto the cup and the near-rigid cup. Their scipy rows are solve_ivp restarted at every
+#: located event (`runners.run_scipy`).
 CONTACT_WP_SCENES = ("grasp_cylinder", "press_table")
 CONTACT_HARD_SCENES = ("grasp_impact", "grasp_rigid")
 CONTACT_SCENES = CONTACT_WP_SCENES + CONTACT_HARD_SCENES
@@ -35,7 +35,9 @@ CONTACT_SCENES = CONTACT_WP_SCENES + CONTACT_HARD_SCENES
 #: itself is run on them too (its error control is what they test).
 ISSUE_HARD_FOLDER = "hard"
 ISSUE_HARD_SCENES = ("elastic_impact", "chatter_wall", "grasp_release", "friction_table", "rigid_fast", "stops_elastic")
-ALL_SCENES = WP_SCENES + ("paper_to_stop",) + CONTACT_SCENES + ISSUE_HARD_SCENES
+#: The shipped bench scenes (config/): each has scipy rows and `auto` itself run, for the goal table at auto's error.
+SHIPPED_SCENES = WP_SCENES + ("paper_to_stop",) + CONTACT_SCENES
+ALL_SCENES = SHIPPED_SCENES + ISSUE_HARD_SCENES
 #: Scene kinds of the recommendation table and the scenes measured for each (the same
 #: kinds `finger_sim.auto.scene_kind` recognizes in a scene).
 KINDS: dict[str, tuple[str, ...]] = {
@@ -115,8 +117,8 @@ def dt_grid(method: str, *, quick: bool) -> tuple[float, ...]:
 
 
 def scene_methods(name: str) -> list[str]:
-    """The project's methods run on a scene: every one, and AUTO itself on a contact or issue-22 hard scene."""
-    return project_methods() + ([AUTO] if name in CONTACT_SCENES + ISSUE_HARD_SCENES else [])
+    """The project's methods run on a scene: every one, and AUTO itself."""
+    return project_methods() + [AUTO]
 
 
 def scene_file(name: str) -> Path:
@@ -148,9 +150,10 @@ def _accepts(scene: Scene, dt: float) -> bool:
     return True
 
 
-def tasks(scenes: dict[str, Scene], refs: dict[str, Reference], *, quick: bool, repeats: int = REPEATS) -> list[Task]:
+def tasks(scenes: dict[str, Scene], refs: dict[str, Reference], *, quick: bool, repeats: int = REPEATS,
+          rtols: tuple[float, ...] | None = None) -> list[Task]:
     """The measurements, in the order they run: per scene the project's methods, then scipy and MuJoCo
-    (each timed `repeats` times, the median kept)."""
+    (each timed `repeats` times, the median kept); rtols: scipy's grid instead of QUICK_RTOL / FULL_RTOL."""
     out: list[Task] = []
     kw = {"spacing": SPACING, "repeats": repeats}
     for name, scene in scenes.items():
@@ -160,10 +163,10 @@ def tasks(scenes: dict[str, Scene], refs: dict[str, Reference], *, quick: bool, 
                 out.append(Task(f"{name} {method} dt={dt:g}", lambda s=scene, m=method, d=dt, r=ref: run_method(s, m, d, r, **kw)))
         if name in CONTACT_WP_SCENES:
             out += mujoco_tasks(name, scene, ref, quick=quick)
-        if name not in WP_SCENES:
+        if name not in SHIPPED_SCENES:
             continue
         for method in SCIPY_METHODS:
-            for rtol in QUICK_RTOL if quick else FULL_RTOL:
+            for rtol in rtols or (QUICK_RTOL if quick else FULL_RTOL):
                 out.append(Task(f"{name} scipy {method} rtol={rtol:g}", lambda s=scene, m=method, t=rtol, r=ref: run_scipy(s, m, t, r, **kw)))
         if name == NUMPY_RHS_SCENE:
             for rtol in QUICK_RTOL if quick else FULL_RTOL[1::2]:
@@ -173,5 +176,6 @@ def tasks(scenes: dict[str, Scene], refs: dict[str, Reference], *, quick: bool, 
                         lambda s=scene, t=rtol, r=ref: run_scipy(s, NUMPY_RHS_METHOD, t, r, rhs="numpy", **kw),
                     )
                 )
-        out += mujoco_tasks(name, scene, ref, quick=quick)
+        if name in WP_SCENES:
+            out += mujoco_tasks(name, scene, ref, quick=quick)
     return out

@@ -17,12 +17,15 @@ A scene with objects (contact, spec §7) has a force that is not smooth at conta
 release (F_n ∝ δ^e). Its reference is the `adaptive` method (scipy DOP853 at rtol 1e-12)
 stepped through `finger_sim.simulate.Simulator`, which locates every onset and release inside
 the step and restarts the solver there, tabulated on the sample grid (`GridSolution`). Its
-check is the plain piecewise solve above (Radau, LSODA when stiff), whose step-size control
-alone has to get through the kinks: a second method that shares nothing with the first but
-the right-hand side. Where it cannot get through them (a check difference above
-MAX_CHECK_DIFFERENCE: grasp_release's 86 impacts and rests) it is reported as such and no reference
-floor is claimed (`Reference.floor` is NaN); that scene's reference is then checked only by the
-tests' independent one (test/hybrid_reference.py, test/core/test_rest_is_step_independent.py).
+check is the piecewise solve above (Radau, LSODA when stiff), which locates each onset and
+release as a solve_ivp event on the contact element's gaps and restarts there, as it does at a
+stop (test/hybrid_reference.py's scheme): a second method that shares nothing with the first
+but the right-hand side and the gap functions. The same `solve` is the bench's scipy row on a
+scene with events (`runners.run_scipy`): what a solve_ivp script that handles the events costs.
+Where the check still cannot follow the scene (a check difference above MAX_CHECK_DIFFERENCE) it
+is reported as such and no reference floor is claimed (`Reference.floor` is NaN); that scene's
+reference is then checked only by the tests' independent one (test/hybrid_reference.py,
+test/core/test_rest_is_step_independent.py).
 """
 
 from __future__ import annotations
@@ -62,11 +65,16 @@ STIFF_REFERENCE = 1e3
 #: to find where it stops pushing into the stop (then located by brentq): the release.
 CONTACT_PROBES = 17
 #: A check further from the reference than this (rad, 100× auto's default promise) is not a bound on the
-#: reference's error: the plain solve has no contact or rest events, and on a scene with many impacts
-#: (grasp_release: 86, measured 4.7 rad apart) it follows another path. No floor is claimed there.
+#: reference's error: it follows another path (grasp_release's 86 impacts and rests, 4.7 rad apart
+#: before the check located contact events). No floor is claimed there.
 MAX_CHECK_DIFFERENCE = 1e-4
 #: Times closer than this (s) to a piece's end count as on it.
 TIME_EPS = 1e-12
+#: A contact gap this close to zero (m) counts as on it when choosing its side at a restart: the side is then
+#: the one the gap moves to (its rate), so the event just located is not found again at the restart.
+ON_GAP = 1e-13
+#: Most restarts at contact onsets and releases before the solve gives up (a chattering contact).
+MAX_RESTARTS = 100_000
 
 ZERO = (0.0, 0.0, 0.0)
 
@@ -90,6 +98,7 @@ class Solution:
     pieces: tuple[_Piece, ...]
     cpu_time: float  # s, process time of the solve
     nfev: int
+    steps: int = 0  # accepted steps of every piece
 
     def states(self, times: Sequence[float]) -> np.ndarray:
         """(N, 6) array of (θ1, θ2, θ3, θ1', θ2', θ3') at `times` (s, within the run)."""
@@ -159,8 +168,35 @@ def sample_times(duration: float, spacing: float) -> np.ndarray:
     return np.arange(n + 1) * spacing
 
 
-def solve(scene: Scene, *, method: str, rtol: float) -> Solution:
-    """`scene` by scipy `method` at `rtol` (atol = ATOL_PER_RTOL·rtol), piece by piece."""
+def _kink_events(system, t: float, y: Sequence[float]) -> list[Callable[[float, np.ndarray], float]]:  # type: ignore[no-untyped-def]
+    """Terminal solve_ivp events at the contact onsets and releases (the gaps of every element whose crossing is
+    a kink, `impact(i)` None) of a piece starting at (t, y): side·gap, crossing from the side the gap is on now
+    (or moves to, when it is within ON_GAP of zero), as test/hybrid_reference.py does."""
+    q, v = (y[0], y[1], y[2]), (y[3], y[4], y[5])
+    events = []
+    for element in system.elements:
+        if element.smooth:
+            continue
+        gaps_at = getattr(element, "gaps_at", None)
+        gap_of = (lambda s, z, g=gaps_at: g(s, (z[0], z[1], z[2]))) if gaps_at else \
+            (lambda s, z, e=element: e.gaps((z[0], z[1], z[2])))
+        now = gap_of(t, y)
+        rates = element.gap_rates(t, q, v) if hasattr(element, "gap_rates") else (1.0,) * len(now)
+        for i, gap in enumerate(now):
+            if element.impact(i) is not None:
+                continue  # a stop: an impact, handled by the stop events
+            side = math.copysign(1.0, gap if abs(gap) > ON_GAP else (rates[i] or 1.0))
+            event = (lambda s, z, i=i, side=side, g=gap_of: side * g(s, z)[i])
+            event.terminal, event.direction = True, -1.0  # type: ignore[attr-defined]
+            events.append(event)
+    return events
+
+
+def solve(scene: Scene, *, method: str, rtol: float,
+          wrap: Callable[[Callable[..., list[float]]], Callable[..., list[float]]] = lambda f: f) -> Solution:
+    """`scene` by scipy `method` at `rtol` (atol = ATOL_PER_RTOL·rtol), piece by piece: restarted at every
+    torque switch, stop impact, contact onset and release. `wrap` wraps each piece's right-hand side (the
+    bench's evaluation counter)."""
     system = scene.build_system()
     acc = system.accelerations
     profile = scene.torque
@@ -172,7 +208,7 @@ def solve(scene: Scene, *, method: str, rtol: float) -> Solution:
     limits = scene.mcp_limits
     contact = 0
     pieces: list[_Piece] = []
-    nfev = 0
+    nfev = steps = restarts = 0
     start = time.process_time()
     while t < duration - TIME_EPS:
         end = next((b for b in cuts if b > t + TIME_EPS), duration)
@@ -195,7 +231,7 @@ def solve(scene: Scene, *, method: str, rtol: float) -> Solution:
                 pieces.append(_Piece(t, release, None, tuple(y)))
             t, contact = release, 0
 
-        rhs = functools.partial(system.rhs, torque=torque)
+        rhs = wrap(functools.partial(system.rhs, torque=torque))
         events = []
         if limits is not None:
             upper = lambda s, z: z[0] - limits[1]  # noqa: E731
@@ -203,6 +239,8 @@ def solve(scene: Scene, *, method: str, rtol: float) -> Solution:
             upper.terminal, upper.direction = True, 1.0  # type: ignore[attr-defined]
             lower.terminal, lower.direction = True, -1.0  # type: ignore[attr-defined]
             events = [upper, lower]
+        stops = len(events)
+        events += _kink_events(system, t, y)
         sol = solve_ivp(
             rhs, (t, end), y, method=method, rtol=rtol, atol=ATOL_PER_RTOL * rtol, dense_output=True,
             events=events or None,
@@ -210,11 +248,16 @@ def solve(scene: Scene, *, method: str, rtol: float) -> Solution:
         if not sol.success:
             raise SimulationDiverged(f"reference {method} on {scene.name}: {sol.message} at t = {sol.t[-1]:.6f} s")
         nfev += sol.nfev
+        steps += sol.t.size - 1
         t_hit = float(sol.t[-1])
         pieces.append(_Piece(t, t_hit, sol.sol, ()))
         y = sol.y[:, -1].tolist()
         t = t_hit
-        if sol.status == 1:  # a stop was reached: the impact rule of simulation.impact.impact
+        restarts += sol.status == 1
+        if restarts > MAX_RESTARTS:
+            raise SimulationDiverged(f"reference {method} on {scene.name}: more than {MAX_RESTARTS} contact events")
+        if sol.status == 1 and any(sol.t_events[k].size for k in range(stops)):
+            # a stop was reached: the impact rule of simulation.impact.impact (a contact event: restart only)
             side = +1 if sol.t_events[0].size else -1
             qs = (y[0], y[1], y[2])
             e = scene.restitution
@@ -223,7 +266,7 @@ def solve(scene: Scene, *, method: str, rtol: float) -> Solution:
             if a_free * side > 0.0 and v_plus[0] == 0.0:
                 contact = side
             y = [*qs, *v_plus]
-    return Solution(method, rtol, tuple(pieces), time.process_time() - start, nfev)
+    return Solution(method, rtol, tuple(pieces), time.process_time() - start, nfev, steps)
 
 
 def is_stiff(scene: Scene) -> bool:

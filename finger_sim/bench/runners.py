@@ -27,12 +27,13 @@ from scipy.integrate import solve_ivp
 
 from finger_sim.effects.contact_outputs import GRIP_FORCE
 from finger_sim import kinematics
-from finger_sim.bench.reference import Reference, sample_times
+from finger_sim.bench.reference import Reference, sample_times, solve
 from finger_sim.effects.contact import build_contact
 from finger_sim.errors import FingerSimError, SimulationDiverged, StabilityError
 from finger_sim.inputs import Constant
 from finger_sim.scene import Scene
 from finger_sim.simulate import Simulator
+from finger_sim import stick_slip
 
 #: Runs whose first repeat takes longer than this (s of CPU) are not repeated.
 LONG_RUN_SECONDS = 2.0
@@ -265,9 +266,8 @@ def run_scipy(
     """
     label = f"scipy {method}" + (" (numpy RHS)" if rhs == "numpy" else "")
     run = Run(scene.name, FAMILY_SCIPY, label, "rtol", rtol, scene.duration)
-    if scene.mcp_limits is not None:
-        run.status, run.note = SKIPPED, "joint stops need event handling a plain solve_ivp script does not have"
-        return run
+    if scene.mcp_limits is not None or scene.objects:
+        return _run_scipy_events(run, scene, method, rtol, reference, spacing=spacing, repeats=repeats)
     make = (scalar_rhs if rhs == "scalar" else numpy_rhs)(scene)
     profile = scene.torque
     edges = [0.0, *profile.breakpoints(0.0, scene.duration), scene.duration]
@@ -324,6 +324,53 @@ def run_scipy(
         return run
     run.cpu, run.repeats, run.steps, run.nfev = cpu, done, steps, nfev
     _fill_accuracy(run, scene, reference, times, y[:3].T, y[3:].T)
+    return run
+
+
+def _counted() -> tuple[list[int], Callable]:  # type: ignore[type-arg]
+    """(counter, wrap): wrap(fn) counts fn's calls in counter[0] and gives the run up past MAX_SCIPY_EVALUATIONS."""
+    count = [0]
+
+    def wrap(fn):  # type: ignore[no-untyped-def]
+        def wrapped(t, y):  # type: ignore[no-untyped-def]
+            count[0] += 1
+            if count[0] > MAX_SCIPY_EVALUATIONS:
+                raise _GaveUp
+            return fn(t, y)
+
+        return wrapped
+
+    return count, wrap
+
+
+def _run_scipy_events(run: Run, scene: Scene, method: str, rtol: float, reference: Reference, *, spacing: float,
+                      repeats: int) -> Run:
+    """A scene with events (stops, contact): solve_ivp restarted at every located stop impact, contact onset and
+    release (`reference.solve`, the bench's own piecewise solver), its dense output sampled on the grid."""
+    if stick_slip.in_scene(scene):
+        run.status, run.note = SKIPPED, "stick–slip friction's locked mode is not in the piecewise solve"
+        return run
+    grid = sample_times(scene.duration, spacing)
+    count, wrap = _counted()
+
+    def solve_all() -> tuple[np.ndarray, int, int]:
+        count[0] = 0
+        sol = solve(scene, method=method, rtol=rtol, wrap=wrap)
+        return sol.states(grid), sol.steps, count[0]
+
+    try:
+        (y, steps, nfev), cpu, done = _timed(solve_all, repeats)  # type: ignore[misc]
+    except _GaveUp:
+        run.status, run.note = GAVE_UP, f"more than {MAX_SCIPY_EVALUATIONS:,} evaluations"
+        return run
+    except (SimulationDiverged, ZeroDivisionError, OverflowError, ValueError, np.linalg.LinAlgError) as exc:
+        run.status, run.note = DIVERGED, f"{type(exc).__name__}: {exc}"[:160]
+        return run
+    run.cpu, run.repeats, run.steps, run.nfev = cpu, done, steps, nfev
+    run.note = "restarted at every located event"
+    _fill_accuracy(run, scene, reference, grid, y[:, :3], y[:, 3:])
+    if run.ok and scene.objects:
+        fill_grip(run, grid, grip_forces(scene, grid, y[:, :3], y[:, 3:]))
     return run
 
 

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 from finger_sim import auto
 from finger_sim.bench import analysis as an
-from finger_sim.bench.plan import HARD_SCENES, KINDS, NUMPY_RHS_SCENE, RATES, SPACING, project_methods
+from finger_sim.bench.plan import HARD_SCENES, KINDS, NUMPY_RHS_SCENE, RATES, SHIPPED_SCENES, SPACING, project_methods
 from finger_sim.bench.runners import AUTO, FAMILY_MUJOCO, FAMILY_PROJECT, FAMILY_SCIPY, Run
 from finger_sim.integrators import METHODS
 from finger_sim.scene import Scene
@@ -168,9 +168,17 @@ class ScipyGoalRow:
 
 
 def scipy_goal(runs: Sequence[Run]) -> list[ScipyGoalRow]:
+    """Goal 2 at SCIPY_TARGET on every shipped scene with scipy rows."""
     return [
-        ScipyGoalRow(name, an.compare_scipy(runs, name), an.compare_scipy(runs, name, max_dt=SPACING)) for name in KINDS["smooth"]
+        ScipyGoalRow(name, an.compare_scipy(runs, name), an.compare_scipy(runs, name, max_dt=SPACING))
+        for name in SHIPPED_SCENES if any(r.scene == name and r.family == FAMILY_SCIPY for r in runs)
     ]
+
+
+def auto_goal(runs: Sequence[Run], floors: dict[str, float]) -> list[an.AutoScipyComparison]:
+    """Goal 2 at auto's own error, on every shipped scene measured (`analysis.compare_auto`)."""
+    out = [an.compare_auto(runs, name, floors[name]) for name in SHIPPED_SCENES if name in floors]
+    return [c for c in out if c is not None]
 
 
 def mujoco_verdict(c: an.MujocoComparison) -> str:
@@ -189,6 +197,7 @@ class Tables:
     scenes: dict[str, list[Run]]  # scene → its work-precision rows
     realtime: RealtimeGoal
     scipy: list[ScipyGoalRow]
+    auto_scipy: list[an.AutoScipyComparison]  # auto at its own error against scipy, every shipped scene
     naive_scipy: an.ScipyComparison  # scipy on the naive numpy RHS against the project's best
     mujoco: dict[str, list[an.MujocoComparison]]  # smooth scene → its tight MuJoCo runs compared
     hard: list[HardRow]
@@ -208,6 +217,7 @@ def build_tables(scenes: dict[str, Scene], floors: dict[str, float], runs: Seque
         scenes={name: scene_rows(runs, name) for name in scenes},
         realtime=realtime_goal(scenes, runs),
         scipy=scipy_goal(runs),
+        auto_scipy=auto_goal(runs, floors),
         naive_scipy=an.compare_scipy(runs, NUMPY_RHS_SCENE, numpy_rhs=True),
         mujoco={name: an.compare_mujoco(runs, name, floors[name]) for name in KINDS["smooth"]},
         hard=hard_rows(scenes, runs),
