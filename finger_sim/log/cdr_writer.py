@@ -135,3 +135,114 @@ def string_cdr(value: str) -> bytes:
     """std_msgs/msg/String: the length with its NUL, the UTF-8 bytes, the NUL."""
     data = value.encode()
     return _ENCAPSULATION + _LENGTH.pack(len(data) + 1) + data + b"\0"
+
+
+class _Layout:
+    """One message's bytes as one `struct` format: constants packed as given, float64 slots filled per call."""
+
+    def __init__(self) -> None:
+        self.format = "<"
+        self.args: list[object] = []
+        self.offset = 0  # from the end of the encapsulation header
+        self.slots: list[int] = []  # indexes into args of the float64 filled per call
+        self.stamps: list[int] = []  # indexes into args of the stamps' sec (nanosec follows)
+
+    def _put(self, code: str, size: int, value: object) -> int:
+        pad = -self.offset % size
+        self.format += (f"{pad}x" if pad else "") + code
+        self.offset += pad + size
+        self.args.append(value)
+        return len(self.args) - 1
+
+    def i32(self, value: int) -> None:
+        self._put("i", 4, value)
+
+    def u32(self, value: int) -> None:
+        self._put("I", 4, value)
+
+    def f32(self, value: float) -> None:
+        self._put("f", 4, value)
+
+    def f64(self, value: float) -> None:
+        self._put("d", 8, value)
+
+    def slot(self) -> None:
+        self.slots.append(self._put("d", 8, 0.0))
+
+    def boolean(self, value: bool) -> None:
+        self._put("?", 1, value)
+
+    def string(self, text: str) -> None:
+        raw = text.encode() + b"\x00"
+        self.u32(len(raw))
+        self.format += f"{len(raw)}s"
+        self.offset += len(raw)
+        self.args.append(raw)
+
+    def stamp(self) -> None:
+        self.stamps.append(self._put("i", 4, 0))
+        self.u32(0)
+
+
+class MarkerArrayCdr:
+    """visualization_msgs/msg/MarkerArray (Jazzy's Marker) with every field fixed as in `template`
+    (a MarkerArray, e.g. finger_sim.ros.conversions.markers at any state) except the markers'
+    header stamps, pose positions and points: those come with each call, as floats in marker
+    order, each marker's pose.position (x, y, z) then its points' (x, y, z). Textures, meshes,
+    per-point colours and UV coordinates must be empty (ValueError otherwise)."""
+
+    def __init__(self, template: object) -> None:
+        lay = _Layout()
+        markers = template.markers  # type: ignore[attr-defined]
+        lay.u32(len(markers))
+        for m in markers:
+            if m.colors or m.uv_coordinates or m.texture.data or m.mesh_file.data:
+                raise ValueError(f"marker {m.ns}/{m.id}: per-point colours, UV coordinates, a texture or a mesh")
+            lay.stamp()
+            lay.string(m.header.frame_id)
+            lay.string(m.ns)
+            for value in (m.id, m.type, m.action):
+                lay.i32(value)
+            for _ in range(3):  # pose.position
+                lay.slot()
+            o, s, c = m.pose.orientation, m.scale, m.color
+            for value in (o.x, o.y, o.z, o.w, s.x, s.y, s.z):
+                lay.f64(value)
+            for value in (c.r, c.g, c.b, c.a):
+                lay.f32(value)
+            lay.i32(m.lifetime.sec)
+            lay.u32(m.lifetime.nanosec)
+            lay.boolean(m.frame_locked)
+            lay.u32(len(m.points))
+            for _ in range(3 * len(m.points)):
+                lay.slot()
+            lay.u32(0)  # colors
+            lay.string(m.texture_resource)
+            lay.i32(m.texture.header.stamp.sec)
+            lay.u32(m.texture.header.stamp.nanosec)
+            lay.string(m.texture.header.frame_id)
+            lay.string(m.texture.format)
+            lay.u32(0)  # texture.data
+            lay.u32(0)  # uv_coordinates
+            lay.string(m.text)
+            lay.string(m.mesh_resource)
+            lay.string(m.mesh_file.filename)
+            lay.u32(0)  # mesh_file.data
+            lay.boolean(m.mesh_use_embedded_materials)
+        self._struct = struct.Struct(lay.format)
+        self._args = lay.args
+        self._slots = lay.slots
+        self._stamps = lay.stamps
+        self.count = len(lay.slots)
+
+    def __call__(self, stamp_ns: int, values: Sequence[float]) -> bytes:
+        """The CDR bytes stamped `stamp_ns` with `values` (self.count floats); ValueError if fewer or more."""
+        if len(values) != self.count:
+            raise ValueError(f"expected {self.count} marker coordinates, got {len(values)}")
+        args = self._args
+        sec, nanosec = divmod(stamp_ns, NS_PER_S)
+        for i in self._stamps:
+            args[i], args[i + 1] = sec, nanosec
+        for i, value in zip(self._slots, values):
+            args[i] = value
+        return _ENCAPSULATION + self._struct.pack(*args)

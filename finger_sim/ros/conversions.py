@@ -211,6 +211,29 @@ def markers(frames: FingerFrames, q: Vec3, stamp_ns: int) -> MarkerArray:
     return out
 
 
+def marker_values(frames: FingerFrames, q: Vec3) -> list[float]:
+    """What moves in `markers(frames, q, ·)`, in its order: each marker's pose.position (x, y, z)
+    then its points' (x, y, z), m; the floats of finger_sim.log.cdr_writer.MarkerArrayCdr."""
+    pts = kinematics.points(frames.params, q, frames.alpha)
+    values: list[float] = []
+    for _, names in LINKS:
+        values += (0.0, 0.0, 0.0)  # a line strip's pose: the origin
+        for n in names:
+            values += to_base(*pts[n])
+    values += to_base(*pts["tip"])
+    for obj in frames.objects:
+        values += to_base(*_object_pose(obj)[0])
+    return values
+
+
+def _object_pose(obj: SceneObject) -> tuple[tuple[float, float], tuple[float, float, float, float]]:
+    """An object marker's centre in the model plane (m) and orientation (w, x, y, z) (`object_marker`)."""
+    if isinstance(obj, Circle):
+        return obj.center, CYLINDER_ALONG_Y
+    (ox, oy), (nx, ny) = obj.point, obj.normal
+    return (ox - 0.5 * PLANE_THICKNESS * nx, oy - 0.5 * PLANE_THICKNESS * ny), about_y(math.atan2(ny, nx))
+
+
 def object_marker(frames: FingerFrames, stamp: Time, marker_id: int, obj: SceneObject) -> Marker:
     """A circle as a cylinder along y (diameter 2R, OBJECT_DEPTH long) at its centre; a plane as a
     PLANE_THICKNESS slab whose face lies on the plane, on the side of −normal: the cube's x along
@@ -219,13 +242,10 @@ def object_marker(frames: FingerFrames, stamp: Time, marker_id: int, obj: SceneO
         m = _marker(frames, stamp, marker_id, obj.name, Marker.CYLINDER, ns=frames.prefix + obj.name)
         m.scale.x = m.scale.y = 2.0 * obj.radius
         m.scale.z = OBJECT_DEPTH
-        center, orientation = obj.center, CYLINDER_ALONG_Y
     else:
         m = _marker(frames, stamp, marker_id, obj.name, Marker.CUBE, ns=frames.prefix + obj.name)
         m.scale.x, m.scale.y, m.scale.z = PLANE_THICKNESS, OBJECT_DEPTH, PLANE_WIDTH
-        (ox, oy), (nx, ny) = obj.point, obj.normal
-        center = (ox - 0.5 * PLANE_THICKNESS * nx, oy - 0.5 * PLANE_THICKNESS * ny)
-        orientation = about_y(math.atan2(ny, nx))
+    center, orientation = _object_pose(obj)
     p, o = m.pose.position, m.pose.orientation
     p.x, p.y, p.z = to_base(*center)
     o.w, o.x, o.y, o.z = orientation

@@ -15,7 +15,7 @@ from finger_sim import joints, kinematics
 from finger_sim.actuators.drive_outputs import MESH_TORQUE
 from finger_sim.grasp_objects import Crush
 from finger_sim.kinematics import Vec3
-from finger_sim.log.cdr_writer import JointStateCdr, PoseStampedCdr
+from finger_sim.log.cdr_writer import JointStateCdr, MarkerArrayCdr, PoseStampedCdr
 from finger_sim.ros import conversions, motor
 from finger_sim.ros.interfaces import Endpoint
 from finger_sim.run_log import CommandEvent
@@ -73,6 +73,7 @@ class Finger:
         # the hot messages as CDR bytes, laid out once (finger_sim.log.cdr_writer)
         self._joints_cdr = JointStateCdr(self.frames.base_frame, self.frames.joint_names)
         self._pose_cdr = PoseStampedCdr(self.frames.base_frame)
+        self._markers_cdr = MarkerArrayCdr(conversions.markers(self.frames, self.sim.q, 0))
         #: the positions, velocities and efforts of the last published joint states (`publish_state`)
         self.joint_values: tuple[Vec3, Vec3, Vec3] = ((0.0,) * 3,) * 3
         self.outputs: dict[str, Endpoint] = {}  # this finger's publishers by OUTPUTS key (`connect`)
@@ -155,4 +156,4 @@ class Finger:
                 for key, msg in contact.messages(*self.sim.state, stamp):
                     publish(self.outputs[key], msg)
         if markers and self.markers_out is not None:
-            publish(self.markers_out, conversions.markers(self.frames, q, stamp))
+            publish(self.markers_out, self._markers_cdr(stamp, conversions.marker_values(self.frames, q)))

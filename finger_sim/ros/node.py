@@ -71,7 +71,7 @@ from finger_sim.log.cdr_writer import clock_cdr
 from finger_sim.ros import conversions, parameters
 from finger_sim.ros.finger import Finger
 from finger_sim.runtime.drive_commands import input_refusal
-from finger_sim.ros.interfaces import COMMAND_INPUTS, OUTPUTS, Endpoint, InputSpec, OutputSpec, command_qos, finger_topic
+from finger_sim.ros.interfaces import COMMAND_INPUTS, OUTPUTS, Endpoint, InputSpec, OutputSpec, command_qos, finger_topic, raw_sender
 from finger_sim.run_log import CommandEvent
 from finger_sim.runtime.diagnostics import Level
 from finger_sim.runtime.hand_config import FingerSpec
@@ -160,7 +160,7 @@ class SteppingNode(Node, SteppingSession):
         incompatible QoS still gets its own warning."""
         pub = self.create_publisher(spec.msg_type, topic, spec.qos,
                                     event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
-        return Endpoint(pub, pub.topic_name, spec.msg_type, spec.recorded, spec.acked)
+        return Endpoint(pub, pub.topic_name, spec.msg_type, spec.recorded, spec.acked, raw_sender(pub))
 
     def _subscribe(self, finger: Finger, spec: InputSpec, qos: QoSProfile) -> Endpoint:
         endpoint: list[Endpoint] = []
@@ -279,11 +279,16 @@ class SteppingNode(Node, SteppingSession):
         CDR bytes are published and logged: a Python encoder costs ~30 µs a message, which
         at 1 kHz doubled the node's CPU (docs/recording_performance.md).
         """
+        if type(msg) is bytes:  # the hot topics come as CDR bytes: sent as they are (interfaces.raw_sender)
+            out.send(msg)  # type: ignore[misc]  # a publisher's endpoint
+            if self.recorder is not None and out.recorded:
+                self.recorder.write(out.topic, msg, self.stamp_ns)
+            return
         if self.recorder is None or not out.recorded:
             out.handle.publish(msg)
             return
-        data = msg if type(msg) is bytes else serialize_message(msg)  # the hot topics come as CDR bytes
-        out.handle.publish(data)
+        data = serialize_message(msg)
+        out.send(data)  # type: ignore[misc]
         self.recorder.write(out.topic, data, self.stamp_ns)
 
     def _record(self, endpoint: Endpoint, msg: Any) -> None:

@@ -6,6 +6,7 @@ nanoseconds. Each decoded field must equal the one written, bit for bit."""
 
 from __future__ import annotations
 
+import functools
 import struct
 
 import pytest
@@ -75,3 +76,50 @@ def test_clock_and_float64_round_trip(stamp, value):
     number = float64_cdr(value)
     for msg in (deserialize_message(number, Float64), STORE.deserialize_cdr(number, "std_msgs/msg/Float64")):
         assert bits([msg.data]) == bits([value])
+
+
+MARKER_SCENES = (("paper_flexion", ""), ("grasp_cylinder", "f1_"), ("press_table", "index_"))  # no object, a circle, a plane
+angles = st.floats(-4.0, 4.0)
+
+
+@pytest.mark.parametrize(("scene", "prefix"), MARKER_SCENES)
+@given(q=st.tuples(angles, angles, angles), stamp=stamps)
+def test_marker_array_equals_rclpys(scene, prefix, q, stamp):
+    """The node's markers (MarkerArrayCdr fed conversions.marker_values) decode, in rclpy and in
+    rosbags, to what rclpy's serializer makes of conversions.markers: every field. (rclpy's own
+    bytes cannot be compared: its alignment padding is uninitialised memory, different each call.)"""
+    from visualization_msgs.msg import MarkerArray
+
+    from finger_sim.log.cdr_writer import MarkerArrayCdr
+    from finger_sim.ros import conversions
+    from finger_sim.ros.node_command import plain
+    from rclpy.serialization import serialize_message
+
+    frames = _frames(scene, prefix)
+    raw = MarkerArrayCdr(conversions.markers(frames, (0.1, 0.2, 0.3), 0))(stamp, conversions.marker_values(frames, q))
+    reference = serialize_message(conversions.markers(frames, q, stamp))
+    assert len(raw) == len(reference)
+    assert plain(deserialize_message(raw, MarkerArray)) == plain(deserialize_message(reference, MarkerArray))
+    kind = "visualization_msgs/msg/MarkerArray"
+    # rosbags writes zeros where rclpy pads: its bytes of either decoding are ours
+    assert raw == STORE.serialize_cdr(STORE.deserialize_cdr(raw, kind), kind)
+    assert raw == STORE.serialize_cdr(STORE.deserialize_cdr(reference, kind), kind)
+
+
+@functools.cache
+def _frames(scene: str, prefix: str):
+    from finger_sim.ros import conversions
+    from finger_sim.scene import load_scene
+    from finger_sim.scene_paths import resolve_scene
+    from finger_sim.simulate import Simulator
+
+    return conversions.FingerFrames.from_system(Simulator(load_scene(resolve_scene(scene))).system, prefix)
+
+
+def test_marker_array_refuses_a_wrong_count():
+    from finger_sim.log.cdr_writer import MarkerArrayCdr
+    from finger_sim.ros import conversions
+
+    frames = _frames("paper_flexion", "")
+    with pytest.raises(ValueError, match="expected 42 marker coordinates, got 2"):
+        MarkerArrayCdr(conversions.markers(frames, (0.1, 0.2, 0.3), 0))(0, [1.0, 2.0])
