@@ -140,8 +140,9 @@ class RosProcess:
         return self.proc.poll() is None
 
     def output(self) -> str:
-        """What the process wrote to stdout (and stderr, unless kept apart)."""
-        self._log.flush()
+        """What the process wrote to stdout (and stderr, unless kept apart); also after stop()."""
+        if not self._log.closed:
+            self._log.flush()
         return self.log_path.read_text(errors="replace")
 
     def errors(self) -> str:

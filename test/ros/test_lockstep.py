@@ -9,6 +9,7 @@ diagnostics the node reports about them. Logs are read by rosbags (an independen
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 
@@ -35,6 +36,10 @@ BURN = "import time\nend = time.monotonic() + 300\nwhile time.monotonic() < end:
 RELIABLE = QoSProfile(depth=1000)
 
 
+def namespace(tag: str) -> str:
+    return f"/lockstep_{os.getpid()}_{tag}"
+
+
 def read_log(folder: Path) -> list[tuple[str, object]]:
     """(topic, message) of the one log in `folder`, by rosbags."""
     from rosbags.highlevel import AnyReader
@@ -48,8 +53,9 @@ def stamp_ns(msg) -> int:
     return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
 
 
-def states_of(log: list[tuple[str, object]]) -> list[tuple[int, tuple, tuple, tuple]]:
-    return [(stamp_ns(m), tuple(m.position), tuple(m.velocity), tuple(m.effort)) for t, m in log if t == "/joint_states"]
+def states_of(log: list[tuple[str, object]], ns: str) -> list[tuple[int, tuple, tuple, tuple]]:
+    return [(stamp_ns(m), tuple(m.position), tuple(m.velocity), tuple(m.effort)) for t, m in log
+            if t == f"{ns}/joint_states"]
 
 
 def last_values(log: list[tuple[str, object]]) -> dict[str, str]:
@@ -58,26 +64,29 @@ def last_values(log: list[tuple[str, object]]) -> dict[str, str]:
 
 
 def closed_loop_run(launcher, ros_client, tag: str) -> list[tuple[str, object]]:
-    """The PD controller and a lockstep node until STEPS states went out; the node's log."""
-    launcher.node(PD, dict(setpoint=SETPOINT), name=f"pd_{tag}")
+    """The PD controller and a lockstep node until STEPS states went out; the node's log.
+
+    Both run in a namespace of their own (this test process's id and `tag`), so that no other
+    node on the DDS domain (another checkout's run, the other run here) can answer or be counted."""
+    ns = namespace(tag)
+    remap = ["-r", f"__ns:={ns}"]
+    launcher.node(PD, dict(setpoint=SETPOINT), name=f"pd_{tag}", ros_args=remap)
     node = launcher.node(NODE, dict(lockstep=True, lockstep_timeout=LOCKSTEP_TIMEOUT_S, realtime_factor=0.0,
                                     command_qos="reliable", record_dir=f"bags_{tag}", marker_rate_hz=0.0),
-                         name=f"node_{tag}")
-    states = ros_client.collect(JointState, "/joint_states", RELIABLE)
+                         name=f"node_{tag}", ros_args=remap)
+    states = ros_client.collect(JointState, f"{ns}/joint_states", RELIABLE)
     ros_client.wait_for(lambda: states and stamp_ns(states[-1]) >= STEPS * DT_NS, f"{STEPS} lockstep states", 120.0)
-    assert node.stop() == 0, node.output()
+    status = node.stop()
+    assert status == 0, f"exit status {status}:\n{node.output()}"
     return read_log(launcher.tmp / f"bags_{tag}")
 
 
 def test_two_lockstep_runs_of_the_pd_controller_are_identical_under_load(launcher, ros_client):
     launcher.start([sys.executable, "-c", BURN], "burn")
     first = closed_loop_run(launcher, ros_client, "a")
-    for proc in launcher.processes:  # the first run's controller must not answer the second's states
-        if "pd_a" in str(proc.log_path):
-            proc.stop()
     second = closed_loop_run(launcher, ros_client, "b")
 
-    a, b = states_of(first), states_of(second)
+    a, b = states_of(first, namespace("a")), states_of(second, namespace("b"))
     assert len(a) > STEPS and len(b) > STEPS
     assert [s[0] for s in a[:STEPS]] == [n * DT_NS for n in range(STEPS)]  # every step, each state once
     assert a[:STEPS] == b[:STEPS]  # bit for bit
@@ -85,7 +94,7 @@ def test_two_lockstep_runs_of_the_pd_controller_are_identical_under_load(launche
     # k+1 is the PD law of state k
     for (_, pos, vel, _), (_, _, _, effort) in zip(a[:STEPS], a[1:STEPS]):
         assert effort[0] == pd_torque(SETPOINT, pos[0], vel[0], KP, KD, MAX_TORQUE)
-    assert len([m for t, m in first if t == "/motor_torque"]) >= STEPS
+    assert len([m for t, m in first if t == f"{namespace('a')}/motor_torque"]) >= STEPS
     assert last_values(first)["lockstep_timeouts"] == "0"
 
 
@@ -138,7 +147,8 @@ def test_a_lockstep_hand_waits_for_every_fingers_controller(launcher, ros_client
     steps = 200
     ros_client.wait_for(lambda: all(s and stamp_ns(s[-1]) >= steps * DT_NS for s in states.values()),
                         f"{steps} lockstep states of every finger", 120.0)
-    assert node.stop() == 0, node.output()
+    status = node.stop()
+    assert status == 0, f"exit status {status}:\n{node.output()}"
     for name, setpoint in fingers.items():
         by_step = {stamp_ns(m) // DT_NS: m for m in states[name]}
         # the node waits for the controllers, not for this client: its first states may go out before
