@@ -74,6 +74,19 @@ def rows_reason(tasks: Sequence[Task], factory: Factory) -> str | None:
     return reason
 
 
+def row_scenes(task: Task, factory: Factory, columns: Sequence[tuple[str, Mapping[str, float]]],
+               scenes: Sequence[Scene] | None) -> list[Scene]:
+    """Each column's scene (`scenes`, else the task's); ConfigError when they are not one per column
+    or `rows_reason` says why they cannot be rows of one compiled sweep."""
+    scenes = [task.scene] * len(columns) if scenes is None else list(scenes)
+    if len(scenes) != len(columns):
+        raise ConfigError("scenes", f"one per column ({len(columns)})", len(scenes))
+    reason = rows_reason([dataclasses.replace(task, scene=s) for s in scenes], factory)
+    if reason is not None:
+        raise ConfigError(f"task '{task.name}'", "a task the compiled gain sweep steps", reason)
+    return scenes
+
+
 def _sim_reason(sim: Simulator) -> str | None:
     integ = sim.integrator
     if sim._friction is not None or sim._timed:  # noqa: SLF001
@@ -98,12 +111,7 @@ def run_task_rows(task: Task, factory: Factory, columns: Sequence[tuple[str, Map
 
     if factory in batch_drive.DRIVE_FACTORIES:
         return batch_drive.run_task_rows(task, factory, columns, scenes)
-    scenes = [task.scene] * len(columns) if scenes is None else list(scenes)
-    if len(scenes) != len(columns):
-        raise ConfigError("scenes", f"one per column ({len(columns)})", len(scenes))
-    reason = rows_reason([dataclasses.replace(task, scene=s) for s in scenes], factory)
-    if reason is not None:
-        raise ConfigError(f"task '{task.name}'", "a task the compiled gain sweep steps", reason)
+    scenes = row_scenes(task, factory, columns, scenes)
     from finger_sim.kernel import closed_loop as kl
 
     laws = [_law(factory, task.sample_steps * task.scene.dt, params) for _, params in columns]

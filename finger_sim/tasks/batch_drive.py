@@ -19,7 +19,6 @@ on the drive tasks). A controller fed a sensor's reading (`finger_sim.sensors`) 
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 
@@ -145,14 +144,10 @@ def run_task_rows(task: Task, factory: Factory, columns: Sequence[tuple[str, Map
     """The TaskRun of every (label, params) column of `factory` on the drive task `task` (module
     docstring); with `scenes`, column i runs on scenes[i] (the same dt, duration and tip-force
     profile). ConfigError when `rows_reason` is not None, or names a column's bad parameter."""
-    scenes = [task.scene] * len(columns) if scenes is None else list(scenes)
-    if len(scenes) != len(columns):
-        raise ConfigError("scenes", f"one per column ({len(columns)})", len(scenes))
-    reason = rows_reason([dataclasses.replace(task, scene=s) for s in scenes], factory)
-    if reason is not None:
-        raise ConfigError(f"task '{task.name}'", "a task the compiled gain sweep steps", reason)
     from finger_sim.kernel import closed_loop_drive as kd
+    from finger_sim.tasks.batch import row_scenes
 
+    scenes = row_scenes(task, factory, columns, scenes)
     laws = [_law_row(factory, task.sample_steps * task.scene.dt, params) for _, params in columns]
     kind = np.array([law[0] for law in laws], dtype=np.int64)
     feedback = np.array([law[1] for law in laws], dtype=np.int64)
