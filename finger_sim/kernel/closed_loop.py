@@ -22,7 +22,7 @@ The contact geometry here (`contact_states`) is the force's own (`numerics.proxi
 hypot), so every decision the Simulator takes on the gaps (whether a step may hold a crossing) is
 taken here on the same numbers. The internal
 solution's state is kept per row (`INTEGRATOR`, and y, f, y_old, dense), handed to the row's
-Simulator and read back from it around every step that Python takes (`finger_sim.tasks.batch`).
+Simulator and read back from it around every step that Python takes (`finger_sim.tasks.batch_rows`).
 
 A row stops and hands over to Python (its status) where the Simulator or the scene must act:
 EVENT, before a step that may hold a contact onset or release or a depth crossing, that fails,
@@ -55,6 +55,7 @@ from finger_sim import grip_law as grip  # noqa: E402
 DONE, EVENT, WATCH, PAUSE = 0, 1, 2, 3
 #: The columns of `run`'s record, as `finger_sim.tasks.runner.COLUMNS`.
 T, GRIP, SETPOINT, THETA1, THETA1_DOT, COMMAND, TIP_X, TIP_Y, CRUSHED = range(9)
+N_RECORD = 9
 #: The controller settings per row, in this order (GripSettings' names).
 GAINS = ("kp", "ki", "max_torque", "closing_torque", "contact_threshold", "opening_torque", "opening_time")
 #: The controller state per row, in this order: phase (grip.IDLE …), integral N·m, opening time
@@ -196,6 +197,70 @@ def _dop853_step(m, rtol, atol, t, dt, command, x, st, y, f, y_old, dense, kk, y
 
 
 @njit(**JIT)
+def save_solution(save, x, st, y, f, y_old, dense):
+    """A row's state x and DOP853 internal solution (st, y, f, y_old, dense) into save (12 × 8)."""
+    save[0, :6] = x
+    save[1, :8] = st
+    save[2, :6], save[3, :6], save[4, :6] = y, f, y_old
+    save[5:12, :6] = dense
+
+
+@njit(**JIT)
+def restore_solution(save, x, st, y, f, y_old, dense):
+    """`save_solution` undone: a step not taken leaves the row as at its start, for the Simulator."""
+    x[:] = save[0, :6]
+    st[:] = save[1, :8]
+    y[:], f[:], y_old[:] = save[2, :6], save[3, :6], save[4, :6]
+    dense[:] = save[5:12, :6]
+
+
+@njit(**JIT)
+def setpoint_at(set_k, set_v, k):
+    """The setpoint schedule's value in force at step k (N; 0 before its first step)."""
+    setpoint = 0.0
+    for n in range(set_k.shape[0]):
+        if set_k[n] <= k:
+            setpoint = set_v[n]
+    return setpoint
+
+
+@njit(**JIT)
+def hold_command(pend_k, pend_u, pend_n, command, i, k, acts_from, u, sampled):
+    """Row i at step k: when `sampled`, the law's command u queued to act from step acts_from; then
+    every pending command due by k taken in turn, the last held in command[i] (zero-order hold)."""
+    if sampled:
+        pend_k[pend_n[i]], pend_u[pend_n[i]] = acts_from, u
+        pend_n[i] += 1
+    due = 0
+    while due < pend_n[i] and pend_k[due] <= k:
+        command[i] = pend_u[due]
+        due += 1
+    if due:
+        for n in range(due, pend_n[i]):
+            pend_k[n - due], pend_u[n - due] = pend_k[n], pend_u[n]
+        pend_n[i] -= due
+
+
+@njit(**JIT)
+def record_sample(r, k, dt, force, setpoint, x, command, scene_rec):
+    """The sample of step k (the record's first N_RECORD columns, T …) into r."""
+    r[T], r[GRIP], r[SETPOINT], r[THETA1], r[THETA1_DOT] = k * dt, force, setpoint, x[0], x[3]
+    r[COMMAND], r[TIP_X], r[TIP_Y], r[CRUSHED] = command, scene_rec[0], scene_rec[1], scene_rec[2]
+
+
+@njit(**JIT)
+def _grip_law(law, setpoint, force, period, gains):
+    """The grip PI at a sample: its command (N·m) on the measured grip force (N); law (PHASE …) in place."""
+    if setpoint != law[LAW_SETPOINT]:
+        phase, left = grip_setpoint(int(law[PHASE]), law[OPENING_LEFT], setpoint, gains[6])
+        law[PHASE], law[OPENING_LEFT], law[LAW_SETPOINT] = phase, left, setpoint
+    phase, integral, left, u = grip_update(int(law[PHASE]), law[INTEGRAL], law[OPENING_LEFT], law[LAW_SETPOINT], force,
+                                           period, gains[0], gains[1], gains[2], gains[3], gains[4], gains[5])
+    law[PHASE], law[INTEGRAL], law[OPENING_LEFT] = phase, integral, left
+    return u
+
+
+@njit(**JIT)
 def _physics(m, o, lean, tab, depth, depths, rtol, atol, dt, k, command, x, st, y, f, y_old, dense, save, kk, y_new,
              taus, out, ga, ra, gb, rb):
     """Step k of one row under the held `command` (N·m) on x in place, as `Simulator.step` takes a
@@ -214,10 +279,7 @@ def _physics(m, o, lean, tab, depth, depths, rtol, atol, dt, k, command, x, st, 
     n = 0
     if o >= 0:
         n, _ = contact_states(m, o, x, ga, ra)
-    save[0, :6] = x
-    save[1, :8] = st
-    save[2, :6], save[3, :6], save[4, :6] = y, f, y_old
-    save[5:12, :6] = dense
+    save_solution(save, x, st, y, f, y_old, dense)
     taken = _dop853_step(m, rtol, atol, t0, h, command, x, st, y, f, y_old, dense, kk, y_new, taus, out)
     grip_force = 0.0
     if taken and o >= 0:
@@ -228,10 +290,7 @@ def _physics(m, o, lean, tab, depth, depths, rtol, atol, dt, k, command, x, st, 
                 taken = False
                 break
     if not taken:
-        x[:] = save[0, :6]
-        st[:] = save[1, :8]
-        y[:], f[:], y_old[:] = save[2, :6], save[3, :6], save[4, :6]
-        dense[:] = save[5:12, :6]
+        restore_solution(save, x, st, y, f, y_old, dense)
     return taken, grip_force
 
 
@@ -274,38 +333,16 @@ def _row(m, o, lean, tab, depth, depths, break_min, rtol, atol, dt, sample_steps
     save = np.empty((12, 8))
     cand = max(depths.shape[0], 1)
     ga, ra, gb, rb = np.empty(cand), np.empty(cand), np.empty(cand), np.empty(cand)
-    kp, ki, max_torque, closing, threshold, opening, opening_time = (gains[0], gains[1], gains[2], gains[3],
-                                                                     gains[4], gains[5], gains[6])
     k = steps[i]
     while k < last:
         if k == until:
             steps[i] = k
             return PAUSE
-        setpoint = 0.0
-        for n in range(set_k.shape[0]):  # the schedule's value in force at step k
-            if set_k[n] <= k:
-                setpoint = set_v[n]
-        if k % sample_steps == 0:
-            if setpoint != law[LAW_SETPOINT]:
-                phase, left = grip_setpoint(int(law[PHASE]), law[OPENING_LEFT], setpoint, opening_time)
-                law[PHASE], law[OPENING_LEFT], law[LAW_SETPOINT] = phase, left, setpoint
-            phase, integral, left, u = grip_update(int(law[PHASE]), law[INTEGRAL], law[OPENING_LEFT],
-                                                   law[LAW_SETPOINT], grip_force[i], period, kp, ki, max_torque,
-                                                   closing, threshold, opening)
-            law[PHASE], law[INTEGRAL], law[OPENING_LEFT] = phase, integral, left
-            pend_k[pend_n[i]], pend_u[pend_n[i]] = k + delay_steps, u
-            pend_n[i] += 1
-        due = 0
-        while due < pend_n[i] and pend_k[due] <= k:
-            command[i] = pend_u[due]
-            due += 1
-        if due:
-            for n in range(due, pend_n[i]):
-                pend_k[n - due], pend_u[n - due] = pend_k[n], pend_u[n]
-            pend_n[i] -= due
-        r = rec[k]
-        r[T], r[GRIP], r[SETPOINT], r[THETA1], r[THETA1_DOT] = k * dt, grip_force[i], setpoint, x[0], x[3]
-        r[COMMAND], r[TIP_X], r[TIP_Y], r[CRUSHED] = command[i], scene_rec[0], scene_rec[1], scene_rec[2]
+        setpoint = setpoint_at(set_k, set_v, k)
+        sampled = k % sample_steps == 0
+        u = _grip_law(law, setpoint, grip_force[i], period, gains) if sampled else 0.0
+        hold_command(pend_k, pend_u, pend_n, command, i, k, k + delay_steps, u, sampled)
+        record_sample(rec[k], k, dt, grip_force[i], setpoint, x, command[i], scene_rec)
         taken, force = _physics(m, o, lean, tab, depth, depths, rtol, atol, dt, k, command[i], x, st, y, f, y_old, dense, save,
                                 kk, y_new, taus, out, ga, ra, gb, rb)
         if not taken:

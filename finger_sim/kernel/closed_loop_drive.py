@@ -49,8 +49,8 @@ from finger_sim.kernel.numerics import JIT, LAW, generalized_force, solved_accel
 
 DONE, EVENT, WATCH, PAUSE = kl.DONE, kl.EVENT, kl.WATCH, kl.PAUSE
 #: The columns of `run`'s record: `closed_loop`'s, then the drive's (`tasks.runner.DRIVE_COLUMNS`).
-MOTOR_VOLTAGE, MOTOR_CURRENT = 9, 10
-N_COLUMNS = 11
+MOTOR_VOLTAGE, MOTOR_CURRENT = kl.N_RECORD, kl.N_RECORD + 1
+N_COLUMNS = kl.N_RECORD + 2
 #: The controller law of a row.
 LAW_VOLTAGE, LAW_CURRENT = 0, 1
 #: The signal a row's law reads: the grip force (N) or the motor current (A).
@@ -127,10 +127,7 @@ def _physics(m, o, depth, depths, rtol, atol, dt, k, u, x, drv, st, y, f, y_old,
     if o >= 0:
         n, _ = kl.contact_states(m, o, x, ga, ra)
     limit0 = kd.current_margin(m, ob, u, x[3])
-    save[0, :6] = x
-    save[1, :8] = st
-    save[2, :6], save[3, :6], save[4, :6] = y, f, y_old
-    save[5:12, :6] = dense
+    kl.save_solution(save, x, st, y, f, y_old, dense)
     taken = driven_dop853_step(m, rtol, atol, t0, h, u, x, st, y, f, y_old, dense, kk, y_new, taus, out)
     grip_force = 0.0
     if taken:  # the mesh guards at the step's end (`stepping._first_event`)
@@ -146,10 +143,7 @@ def _physics(m, o, depth, depths, rtol, atol, dt, k, u, x, drv, st, y, f, y_old,
                 taken = False
                 break
     if not taken:
-        x[:] = save[0, :6]
-        st[:] = save[1, :8]
-        y[:], f[:], y_old[:] = save[2, :6], save[3, :6], save[4, :6]
-        dense[:] = save[5:12, :6]
+        kl.restore_solution(save, x, st, y, f, y_old, dense)
     return taken, grip_force
 
 
@@ -228,25 +222,12 @@ def _row(m, o, depth, depths, break_min, rtol, atol, dt, sample_steps, delay_ste
         if k == until:
             steps[i] = k
             return PAUSE
-        setpoint = 0.0
-        for n in range(set_k.shape[0]):  # the schedule's value in force at step k
-            if set_k[n] <= k:
-                setpoint = set_v[n]
-        if k % sample_steps == 0:
-            u = _law(kind, feedback, scale, gains, s, k * dt, setpoint, signals, period)
-            pend_k[pend_n[i]], pend_u[pend_n[i]] = k + delay_steps, u
-            pend_n[i] += 1
-        due = 0
-        while due < pend_n[i] and pend_k[due] <= k:
-            command[i] = pend_u[due]
-            due += 1
-        if due:
-            for n in range(due, pend_n[i]):
-                pend_k[n - due], pend_u[n - due] = pend_k[n], pend_u[n]
-            pend_n[i] -= due
+        setpoint = kl.setpoint_at(set_k, set_v, k)
+        sampled = k % sample_steps == 0
+        u = _law(kind, feedback, scale, gains, s, k * dt, setpoint, signals, period) if sampled else 0.0
+        kl.hold_command(pend_k, pend_u, pend_n, command, i, k, k + delay_steps, u, sampled)
         r = rec[k]
-        r[kl.T], r[kl.GRIP], r[kl.SETPOINT], r[kl.THETA1], r[kl.THETA1_DOT] = k * dt, signals[0], setpoint, x[0], x[3]
-        r[kl.COMMAND], r[kl.TIP_X], r[kl.TIP_Y], r[kl.CRUSHED] = command[i], scene_rec[0], scene_rec[1], scene_rec[2]
+        kl.record_sample(r, k, dt, signals[0], setpoint, x, command[i], scene_rec)
         r[MOTOR_VOLTAGE], r[MOTOR_CURRENT] = signals[2], signals[1]
         taken, force = _physics(m, o, depth, depths, rtol, atol, dt, k, command[i], x, drv, st, y, f, y_old, dense, save,
                                 kk, y_new, taus, out, ga, ra, gb, rb)

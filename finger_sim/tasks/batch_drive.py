@@ -19,29 +19,24 @@ on the drive tasks). A controller fed a sensor's reading (`finger_sim.sensors`) 
 
 from __future__ import annotations
 
-import dataclasses
 import math
-import time
 from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from finger_sim.actuators.drive_outputs import MOTOR_CURRENT, MOTOR_VOLTAGE
+from finger_sim.actuators.drive_outputs import MOTOR_CURRENT
 from finger_sim.effects.contact import Contact
 from finger_sim.effects.contact_outputs import GRIP_FORCE
-from finger_sim.errors import ConfigError, SimulationDiverged
-from finger_sim.grasp_objects import Crush
+from finger_sim.errors import ConfigError
 from finger_sim.integrators.dop853 import DormandPrince853
 from finger_sim.scene import Scene
 from finger_sim.scene_changes import SceneChanges
 from finger_sim.simulate import Simulator
 from finger_sim.tasks import controllers, current_grip
-from finger_sim.tasks.batch import _contact_offset, _fit, _hand_over, _next_switch, _read_back
+from finger_sim.tasks.batch_rows import I_VALUE, Rows, SweepRow, step_rows, task_runs
 from finger_sim.tasks.controllers import Factory
-from finger_sim.tasks.metrics import judge, task_scores
-from finger_sim.tasks.runner import COLUMNS, DRIVE_COLUMNS, TaskRun, _outputs
+from finger_sim.tasks.runner import TaskRun
 from finger_sim.tasks.schema import Task
-from finger_sim.tip_force_profile import first_step
 
 #: The drive controllers whose law the kernel compiles: their defaults, the order of their settings
 #: in the law (`drive_grip_law`), and the signal each reads by default.
@@ -89,54 +84,37 @@ def rows_reason(tasks: Sequence[Task], factory: Factory) -> str | None:
     return batch.rows_reason(tasks, factory)
 
 
-class _Row:
-    """What the kernel reads of one row's Simulator: its flat model (ending in the drive's block),
-    contact block, depth gaps and drive."""
+class _Row(SweepRow):
+    """A drive row: its flat model ends in the drive's block; the drive's discrete state (mesh mode,
+    direction) and its DOP853 solution's mode follow the Simulator's."""
 
     def __init__(self, sim: Simulator) -> None:
         reason = sim_reason(sim)
         if reason is not None:  # a scene change the kernel cannot follow
             raise ConfigError(f"scene '{sim.scene.name}'", "a scene the compiled gain sweep steps", reason)
-        self.sim = sim
         integ = sim.integrator
         assert isinstance(integ, DormandPrince853)
-        self.model = integ._model  # noqa: SLF001 (its mode slot follows the drive: `Drive.mirror`)
         self.rtol, self.atol = integ.rtol, integ.atol
-        self.contact_at = _contact_offset(self.model)
-        rho = dict(sim._depth_sources)  # noqa: SLF001 (gap position → ρ; the contact's gaps come first)
-        count = len(sim._gaps) - len(rho)  # noqa: SLF001
-        self.depths = np.array([rho.get(c, 0.0) for c in range(count)])
-        self.depth = bool(rho)
+        super().__init__(sim, integ._model)  # noqa: SLF001 (its mode slot follows the drive: `Drive.mirror`)
 
-    def load(self, i: int, a: _Arrays, changes: SceneChanges) -> None:
-        a.models[i] = 0.0
-        a.models[i, : len(self.model)] = self.model
-        a.widths[i], a.contact_at[i], a.depth[i] = len(self.model), self.contact_at, self.depth
-        a.depths[i] = 0.0
-        a.depths[i, : len(self.depths)] = self.depths
-        forces = [o.properties.break_force for o in self.sim.scene.objects if o.properties.break_force is not None]
-        a.break_min[i] = min(forces) if changes.watching and forces else math.inf
-        self.sync(i, a)
-
-    def sync(self, i: int, a: _Arrays) -> None:
+    def sync(self, i: int, rows: Rows) -> None:
         """The drive's discrete state (mesh mode, direction) into row i's arrays."""
         drive = self.sim._drive  # noqa: SLF001
         p = drive.params
-        a.models[i, len(self.model) - len(drive.kernel_block())] = float(drive.mode)
-        a.drives[i] = (drive.direction, p.efficiency, p.backward_efficiency)
+        rows.models[i, len(self.model) - len(drive.kernel_block())] = float(drive.mode)
+        rows.drives[i] = (drive.direction, p.efficiency, p.backward_efficiency)
 
+    def hand_over(self, i: int, rows: Rows) -> None:
+        """`SweepRow.hand_over`; a solution the kernel continued is under the drive's current mode."""
+        super().hand_over(i, rows)
+        if not math.isnan(rows.integ[i, I_VALUE]):
+            self.sim.integrator._changes = self.sim._drive.changes  # type: ignore[attr-defined]  # noqa: SLF001
 
-@dataclasses.dataclass
-class _Arrays:
-    """The per-row arrays `closed_loop_drive.run` works on (its docstring)."""
-
-    models: np.ndarray
-    widths: np.ndarray
-    contact_at: np.ndarray
-    depth: np.ndarray
-    depths: np.ndarray
-    break_min: np.ndarray
-    drives: np.ndarray
+    def read_back(self, i: int, rows: Rows) -> None:
+        """`SweepRow.read_back`; a solution computed under another mesh mode than the current one restarts."""
+        super().read_back(i, rows)
+        if self.sim.integrator._changes != self.sim._drive.changes:  # type: ignore[attr-defined]  # noqa: SLF001
+            rows.integ[i, I_VALUE] = math.nan
 
 
 def _law_row(factory: Factory, period: float, params: Mapping[str, float]) -> tuple[int, int, float, list[float]]:
@@ -166,138 +144,24 @@ def run_task_rows(task: Task, factory: Factory, columns: Sequence[tuple[str, Map
     """The TaskRun of every (label, params) column of `factory` on the drive task `task` (module
     docstring); with `scenes`, column i runs on scenes[i] (the same dt, duration and tip-force
     profile). ConfigError when `rows_reason` is not None, or names a column's bad parameter."""
-    scenes = [task.scene] * len(columns) if scenes is None else list(scenes)
-    if len(scenes) != len(columns):
-        raise ConfigError("scenes", f"one per column ({len(columns)})", len(scenes))
-    reason = rows_reason([dataclasses.replace(task, scene=s) for s in scenes], factory)
-    if reason is not None:
-        raise ConfigError(f"task '{task.name}'", "a task the compiled gain sweep steps", reason)
-    from finger_sim.kernel import closed_loop as kl
     from finger_sim.kernel import closed_loop_drive as kd
+    from finger_sim.tasks.batch import row_scenes
 
-    dt, last = task.scene.dt, task.scene.step_count
-    period = task.sample_steps * dt
-    laws = [_law_row(factory, period, params) for _, params in columns]
-    nrow = len(columns)
-    changes = [SceneChanges(s) for s in scenes]
-    rows = [_Row(c.sim) for c in changes]
-    width = max(len(r.model) for r in rows)
-    ncand = max(1, max(len(r.depths) for r in rows))
-    a = _Arrays(np.zeros((nrow, width)), np.zeros(nrow, dtype=np.int64), np.full(nrow, -1, dtype=np.int64),
-                np.zeros(nrow, dtype=np.bool_), np.zeros((nrow, ncand)), np.empty(nrow), np.empty((nrow, 3)))
-    set_steps = [(first_step(t, dt), v) for t, v in task.setpoints]
-    set_k = np.array([k for k, _ in set_steps], dtype=np.int64)
-    set_v = np.array([v for _, v in set_steps])
+    scenes = row_scenes(task, factory, columns, scenes)
+    laws = [_law_row(factory, task.sample_steps * task.scene.dt, params) for _, params in columns]
     kind = np.array([law[0] for law in laws], dtype=np.int64)
     feedback = np.array([law[1] for law in laws], dtype=np.int64)
     scale = np.array([law[2] for law in laws])
     gains = np.array([law[3] for law in laws])
-    state = np.zeros((nrow, 7))  # the controllers' initial state: setpoint 0, nothing integrated
-    depth_of_queue = task.delay_steps // task.sample_steps + 2  # pending commands at most
-    pend_k = np.zeros((nrow, depth_of_queue), dtype=np.int64)
-    pend_u = np.zeros((nrow, depth_of_queue))
-    pend_n = np.zeros(nrow, dtype=np.int64)
-    command = np.zeros(nrow)
-    states = np.empty((nrow, 6))
-    signals = np.empty((nrow, 3))
-    integ = np.empty((nrow, len(kl.INTEGRATOR)))
-    ys, fs, y_olds, denses = np.empty((nrow, 6)), np.empty((nrow, 6)), np.empty((nrow, 6)), np.empty((nrow, 7, 6))
-    steps = np.zeros(nrow, dtype=np.int64)
-    switches = sorted(k for k in changes[0].switches if k > 0)  # step 0's force is the static scene's
-    until = np.array([_next_switch(switches, 0, last)] * nrow, dtype=np.int64)
-    scene_rec = np.zeros((nrow, 3))
-    record = np.empty((nrow, last + 1, kd.N_COLUMNS))
-    crushes: list[list[Crush]] = [[] for _ in range(nrow)]
-    stopped = [False] * nrow
-    ends = [last] * nrow
-    for i, row in enumerate(rows):
-        sim = changes[i].sim
-        states[i] = (*sim.q, *sim.v)
-        signals[i] = _signals(sim, 0.0)
-        scene_rec[i, :2] = sim.scene.tip_force
-        row.load(i, a, changes[i])
-        _read_back_drive(sim, integ[i], ys[i], fs[i], y_olds[i], denses[i])
-    rtol, atol = rows[0].rtol, rows[0].atol
-    start = time.perf_counter()
-    while True:
-        status = kd.run(a.models, a.widths, a.contact_at, a.depth, a.depths, a.break_min, rtol, atol, dt,
-                        task.sample_steps, task.delay_steps, set_k, set_v, kind, feedback, scale, gains, state, pend_k,
-                        pend_u, pend_n, command, states, signals, a.drives, integ, ys, fs, y_olds, denses, steps, until,
-                        last, scene_rec, record)
-        if (status == kd.DONE).all():
-            break
-        for i in np.flatnonzero(status != kd.DONE).tolist():
-            k, ch = int(steps[i]), changes[i]
-            if status[i] == kd.PAUSE:  # a tip-force switch: SceneChanges makes the new Simulator
-                _hand_over_drive(ch.sim, k, states[i], integ[i], ys[i], fs[i], y_olds[i], denses[i])
-                ch.before_step()
-                until[i] = _next_switch(switches, k, last)
-                scene_rec[i, :2] = ch.sim.scene.tip_force
-            elif status[i] == kd.EVENT:  # the Simulator takes step k, as run_task does
-                sim = ch.sim
-                _hand_over_drive(sim, k, states[i], integ[i], ys[i], fs[i], y_olds[i], denses[i])
-                try:
-                    sim.step(float(command[i]))
-                except SimulationDiverged:  # run_task's rule: the run stops, the task fails
-                    stopped[i], ends[i], steps[i], until[i] = True, k, last, last
-                    continue
-                signals[i] = _signals(sim, float(command[i]))
-                crushes[i] += ch.after_step()
-                steps[i] = k + 1
-            else:  # WATCH: the crush rule on the state after the step
-                _hand_over_drive(ch.sim, k, states[i], integ[i], ys[i], fs[i], y_olds[i], denses[i])
-                crushes[i] += ch.after_step()
-            sim = ch.sim
-            if sim is not rows[i].sim:  # a new scene: its model, and a fresh internal solution
-                rows[i] = _Row(sim)
-                a.models, a.depths = _fit(a.models, len(rows[i].model)), _fit(a.depths, len(rows[i].depths))
-                rows[i].load(i, a, ch)
-            rows[i].sync(i, a)
-            scene_rec[i, 2] = len(crushes[i])
-            states[i] = (*sim.q, *sim.v)
-            _read_back_drive(sim, integ[i], ys[i], fs[i], y_olds[i], denses[i])
-    wall = (time.perf_counter() - start) / nrow
-    runs = []
-    grid = tuple((k * dt, v) for k, v in set_steps)
-    names = COLUMNS + DRIVE_COLUMNS
-    assert names[kd.MOTOR_VOLTAGE] == MOTOR_VOLTAGE.name and names[kd.MOTOR_CURRENT] == MOTOR_CURRENT.name
-    for i, (label, _) in enumerate(columns):
-        n = ends[i]
-        if not stopped[i]:  # the last sample: the state after the last step
-            record[i, n] = (n * dt, signals[i, 0], set_v[set_k <= n - 1][-1], states[i, 0], states[i, 3], command[i],
-                            scene_rec[i, 0], scene_rec[i, 1], scene_rec[i, 2], signals[i, 2], signals[i, 1])
-        samples = {name: np.ascontiguousarray(record[i, : n + 1, c]) for c, name in enumerate(names)}
-        scores = task_scores(samples["t"], samples[GRIP_FORCE.name], grid, task.hold_after, bool(crushes[i]),
-                             outputs={c: samples[c] for c in DRIVE_COLUMNS}, torque=None)
-        passed = judge(scores, task.limits)
-        if stopped[i]:
-            passed["completed"] = False
-        runs.append(TaskRun(task.name, label, samples, crushes[i], scores, passed, grid, dict(task.limits), wall))
-    return runs
+    state = np.zeros((len(columns), 7))  # the controllers' initial state: setpoint 0, nothing integrated
+    rows = Rows(task, scenes, _Row)
+    assert rows.record.shape[2] == kd.N_COLUMNS and rows.measured.shape[1] == 3
+    rtol, atol = rows.rows[0].rtol, rows.rows[0].atol  # type: ignore[attr-defined]
 
+    def run(r: Rows) -> np.ndarray:
+        return kd.run(r.models, r.widths, r.contact_at, r.depth, r.depths, r.break_min, rtol, atol, r.dt,
+                      task.sample_steps, task.delay_steps, r.set_k, r.set_v, kind, feedback, scale, gains, state,
+                      r.pend_k, r.pend_u, r.pend_n, r.command, r.states, r.measured, r.drives, r.integ, r.ys, r.fs,
+                      r.y_olds, r.denses, r.steps, r.until, r.last, r.scene_rec, r.record)
 
-def _signals(sim: Simulator, voltage: float) -> tuple[float, float, float]:
-    """(grip force N, motor current A, terminal voltage V) at the Simulator's state under `voltage`
-    (`runner._outputs`, as run_task measures them)."""
-    out = _outputs(sim, voltage)
-    return out.get(GRIP_FORCE.name, 0.0), out[MOTOR_CURRENT.name], out[MOTOR_VOLTAGE.name]
-
-
-def _hand_over_drive(sim: Simulator, k: int, x: np.ndarray, st: np.ndarray, y: np.ndarray, f: np.ndarray,
-                     y_old: np.ndarray, dense: np.ndarray) -> None:
-    """`batch._hand_over`; a solution the kernel continued is under the drive's current mode."""
-    from finger_sim.kernel import closed_loop as kl
-
-    _hand_over(sim, k, x, st, y, f, y_old, dense)
-    if not math.isnan(st[kl.I_VALUE]):
-        sim.integrator._changes = sim._drive.changes  # type: ignore[attr-defined]  # noqa: SLF001
-
-
-def _read_back_drive(sim: Simulator, st: np.ndarray, y: np.ndarray, f: np.ndarray, y_old: np.ndarray,
-                     dense: np.ndarray) -> None:
-    """`batch._read_back`; a solution computed under another mesh mode than the current one restarts."""
-    from finger_sim.kernel import closed_loop as kl
-
-    _read_back(sim, st, y, f, y_old, dense)
-    if sim.integrator._changes != sim._drive.changes:  # type: ignore[attr-defined]  # noqa: SLF001
-        st[kl.I_VALUE] = math.nan
+    return task_runs(rows, columns, step_rows(rows, run))

@@ -4,7 +4,8 @@
                      [--param LABEL.key=value] [--vary key=v1,v2,...] [--chunk i/n] [--out DIR] [--no-figures]
 
 Without TASK files the installed suite (`config/tasks/*.yaml`) runs; without --controller the
-shipped `grip_pi` and `grip_pi_aggressive`. `--ros-controller` adds a ROS 2 controller node run
+shipped ones (`DEFAULT_CONTROLLERS`: `grip_pi`, `grip_pi_aggressive`, and on the drive tasks
+`grip_voltage` and `grip_current`). `--ros-controller` adds a ROS 2 controller node run
 through finger_node in lockstep (`finger_sim.tasks.ros_runner`; its --param values become the
 node's parameters): an executable (a torque controller such as finger_grip_controller), or a
 `module:callable` run as a node by finger_task_controller (a voltage controller runs the drive tasks). `--vary` (repeatable) runs the first controller over
@@ -39,10 +40,14 @@ from finger_sim.tasks.schema import Task, load_task
 #: A --vary key with this prefix sets a scene key of the tasks, not a controller parameter.
 SCENE_PREFIX = "scene."
 
-#: The controllers a suite runs when none is named: the shipped PI and its overshooting variant.
+#: The controllers a suite runs when none is named: the shipped PI and its overshooting variant
+#: (torque tasks), and both shipped drive controllers side by side on each drive task: the force
+#: loop `grip_voltage` (written for `hold_voltage_off`) and the current loop `grip_current`, the
+#: device's controller without a force sensor (written for `hold_current`).
 DEFAULT_CONTROLLERS = ("grip_pi=finger_sim.tasks.controllers:grip_pi",
                        "grip_pi_aggressive=finger_sim.tasks.controllers:grip_pi_aggressive",
-                       "grip_voltage=finger_sim.tasks.controllers:grip_voltage")
+                       "grip_voltage=finger_sim.tasks.controllers:grip_voltage",
+                       "grip_current=finger_sim.tasks.current_grip:grip_current")
 
 
 @dataclass(frozen=True)

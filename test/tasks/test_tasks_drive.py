@@ -62,3 +62,23 @@ def test_a_torque_controller_cannot_run_the_drive_task_in_a_suite():
                                      "grip_voltage=finger_sim.tasks.controllers:grip_voltage"], [], [])
     runs = run_suite([load_task(TASK)], controllers)
     assert [r.controller for r in runs] == ["grip_voltage"]
+
+
+def test_the_default_suite_runs_both_drive_controllers_and_the_current_loop_passes_hold_current():
+    """Without --controller, each drive task runs `grip_voltage` and `grip_current` side by side:
+    hold_current, written for the current loop, is passed by it; the force loop overshoots it
+    (its overshoot recomputed from the samples: the largest grip force past the setpoint, % of it)."""
+    from finger_sim.tasks.suite import parse_controllers, run_suite
+
+    controllers = parse_controllers([], [], [])
+    assert [c.label for c in controllers] == ["grip_pi", "grip_pi_aggressive", "grip_voltage", "grip_current"]
+    task = load_task(TASK.with_name("hold_current.yaml"))
+    runs = {r.controller: r for r in run_suite([task], controllers)}
+    assert list(runs) == ["grip_voltage", "grip_current"]  # the torque controllers skip a drive task
+    assert runs["grip_current"].ok, runs["grip_current"].passed
+    voltage = runs["grip_voltage"]
+    setpoint = task.setpoints[0][1]
+    overshoot = (voltage.samples["grip_force"].max() - setpoint) / setpoint * 100.0
+    assert overshoot > task.limits["overshoot"]
+    assert voltage.scores["overshoot"] == pytest.approx(overshoot, rel=1e-12)
+    assert [k for k, ok in voltage.passed.items() if not ok] == ["overshoot"]
