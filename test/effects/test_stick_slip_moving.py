@@ -12,7 +12,10 @@ References, none of them finger_sim's code:
 - the holding torque of the ride by an augmented KKT solve written here (q'', λ and τ_h unknown; the extra
   row: the tip's tangential acceleration equals the table's, t·(J q'' + J̇ q') = t·c̈), where finger_sim
   differentiates the ride's speed numerically;
-- the breakaway at the root of μ_s F_n |j| − |τ_h| along that ride (brentq).
+- the breakaway at the root of μ_s F_n |j| − |τ_h| along that ride (brentq);
+- after it, `table_reference`: sliding pieces by scipy's DOP853 at rtol 1e-11 on test/reference.py's KKT
+  equations with the kinetic friction opposing the tip's velocity relative to the table,
+  u = t·(J q' − ċ), stopped where u = 0; there the holding test above decides lock (a ride) or slide on.
 """
 
 from __future__ import annotations
@@ -21,13 +24,14 @@ import math
 
 import numpy as np
 import pytest
+from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
 import reference as ref
 import stick_slip_reference as ssr
 from finger_sim.scene import scene_from_dict
 from finger_sim.simulate import simulate
-from hybrid_reference import _candidates
+from hybrid_reference import _candidates, kkt_with, motion_offset
 
 DT = 0.001
 PUSH_START, PUSH_TIME, PUSH_DISTANCE = 0.3, 1.0, 0.01  # s, s, m (along +x)
@@ -91,6 +95,76 @@ def holding(theta1: float, t: float) -> tuple[float, float]:
     return tau_h, MU_S * fn * abs(j)
 
 
+def _ride_breakaway(theta_lock: float, t0: float, t_end: float) -> float | None:
+    """When the ride from (t0, θ1 = theta_lock) breaks free, by a scan every ms and brentq; None: it holds."""
+    x0 = ref.tip(ref.assemble(theta_lock))[0] - push(t0)[0]
+
+    def margin(t: float) -> float:
+        th = brentq(lambda th: ref.tip(ref.assemble(th))[0] - x0 - push(t)[0], theta_lock - 0.2, theta_lock + 0.2,
+                    xtol=1e-15, rtol=4 * np.finfo(float).eps)
+        tau_h, capacity = holding(th, t)
+        return capacity - abs(tau_h)
+
+    grid = np.append(np.arange(t0, t_end, DT), t_end)
+    for a, b in zip(grid, grid[1:]):
+        if margin(b) < 0.0:
+            return brentq(margin, a, b, xtol=1e-13)
+    return None
+
+
+def table_reference(theta_lock: float, t_end: float) -> tuple[list, list]:
+    """(pieces (t0, t1, θ1(t) function), mode changes (t, "lock" | "break")) from the lock at the push's start."""
+    objects = data(0.0)["objects"]
+    fx = ref.Effects(k=SPRING, c=DAMPING)
+    pieces, changes = [], []
+    t, theta, locked = PUSH_START, theta_lock, True
+    while t < t_end - 1e-12:
+        if locked:
+            x0 = ref.tip(ref.assemble(theta))[0] - push(t)[0]
+            track = (lambda x, x0=x0, th0=theta: brentq(lambda th: ref.tip(ref.assemble(th))[0] - x0 - push(x)[0],
+                                                        th0 - 0.2, th0 + 0.2, xtol=1e-15))
+            end = _ride_breakaway(theta, t, t_end)
+            pieces.append((t, t_end if end is None else end, track))
+            if end is None:
+                break
+            changes.append((end, "break"))
+            t, theta = end, track(end)
+            q = ref.assemble(theta)
+            j = float(TANGENT @ (ref.tip_jacobian(q) @ ref.rates(q, 1.0)))
+            y = np.concatenate([q, ref.rates(q, push(t)[1] / j)])
+            sign = -math.copysign(1.0, holding(theta, t)[0]) * math.copysign(1.0, j)  # of u after the break
+
+        def slip(x, yy):  # u = t·(J q' − ċ) of the tip
+            return float(TANGENT @ (ref.tip_jacobian(yy[:3]) @ yy[3:] - motion_offset(objects[0], x)[1]))
+
+        def rhs(x, yy, sign=sign):
+            q, v = yy[:3], yy[3:]
+            force = np.zeros(3)
+            for delta, n, jac in _candidates(q, objects, (0.008, 0.007), x):
+                if delta > 0.0:
+                    fn = K_C * delta**E_C
+                    force += jac.T @ (fn * n - MU_K * fn * sign * TANGENT)
+            return np.concatenate([v, kkt_with(q, v, TORQUE, fx, force)])
+
+        stop = (lambda x, yy, sign=sign: sign * slip(x, yy))
+        stop.terminal, stop.direction = True, -1
+        sol = solve_ivp(rhs, (t, t_end), y, method="DOP853", rtol=1e-11, atol=1e-13, dense_output=True, events=[stop])
+        assert sol.success
+        pieces.append((t, float(sol.t[-1]), (lambda x, f=sol.sol: float(f(x)[0]))))
+        t, y = float(sol.t[-1]), sol.y[:, -1].copy()
+        if sol.status == 1:  # u = 0: the holding test
+            theta = float(y[0])
+            tau_h, capacity = holding(theta, t)
+            locked = capacity >= abs(tau_h)
+            if locked:
+                changes.append((t, "lock"))
+            else:
+                q = ref.assemble(theta)
+                j = float(TANGENT @ (ref.tip_jacobian(q) @ ref.rates(q, 1.0)))
+                sign = -math.copysign(1.0, tau_h) * math.copysign(1.0, j)
+    return pieces, changes
+
+
 def changes(traj) -> list[tuple[int, float]]:
     m = traj.outputs["friction_mode"]
     return [(int(i) + 1, float(m[i + 1])) for i in np.nonzero(np.diff(m))[0]]
@@ -135,3 +209,18 @@ def test_a_finger_locked_on_a_moving_table_rides_with_it_then_slips_where_the_co
     after = traj.t > t_break
     assert (traj.outputs["friction_power"][after] <= 0.0).all()
     assert (traj.outputs["friction_mode"][after] == 1.0).any() and (traj.outputs["friction_mode"][after] == 0.0).any()
+
+
+def test_the_stick_slip_sawtooth_on_the_moving_table_follows_the_reference(pushed):
+    """After the breakaway the tip slips on the table, sticks again where its relative velocity vanishes
+    and the cone holds, and breaks again: every mode change in the reference's row, θ1 within auto's
+    promise throughout."""
+    traj = pushed
+    lock_row = changes(traj)[0][0]
+    pieces, ref_changes = table_reference(traj.q[lock_row, 0], traj.t[-1])
+    assert len(ref_changes) >= 5  # a sawtooth: break, lock, break, lock, ...
+    assert changes(traj)[1:] == [(row_after(t), 1.0 if kind == "lock" else 0.0) for t, kind in ref_changes]
+    rows = np.nonzero(traj.t >= PUSH_START)[0]
+    starts = np.array([p[0] for p in pieces])
+    theta_ref = np.array([pieces[np.searchsorted(starts, t, side="right") - 1][2](t) for t in traj.t[rows]])
+    assert np.abs(traj.q[rows, 0] - theta_ref).max() < THETA_TOLERANCE
