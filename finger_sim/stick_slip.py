@@ -60,7 +60,6 @@ MAX_EVENTS_PER_STEP = 64  # room for a stop's Zeno series down to its rest (effe
 #: auto's method on a stick–slip scene (`auto_method`): our error-controlled DOP853, restarted at every
 #: friction mode change (`StickSlipContact.law_state`).
 AUTO_METHOD = "dop853"
-LOCATE_SLIP_ZEROS = True
 #: The torque step (N·m) by which `holding_torque` probes the affine map τ ↦ θ1''.
 PROBE_TORQUE = 1.0
 
@@ -173,10 +172,6 @@ def advance(sim: Simulator, t0: float, t1: float, torque: TorqueFn) -> None:
             turn = None if event is None else (event.t, event.q, event.v)
             guard = drive_stepping.TURN if event is None else event.guard
         end, qe, ve = (t1, q1, v1) if turn is None else turn
-        flip = _flip_event(sim, friction, t, q, v, end, qe, ve, torque) if drive is None else None
-        if flip is not None:  # a contact's j_k changes sign first: its friction flips there
-            end, qe, ve = flip
-            turn = None
         crossing = sim._first_crossing(t, q, v, end, qe, ve, torque) if sim._gaps else None
         if crossing is not None:  # a stop or a contact change first: the turn is looked for again after it
             end, qe, ve = crossing.t, crossing.q, crossing.v
@@ -198,8 +193,6 @@ def advance(sim: Simulator, t0: float, t1: float, torque: TorqueFn) -> None:
                     v = _turn(sim, friction, t, q, torque)
                 else:  # the impact reversed the motion
                     _slide(sim, friction, t, q, torque, math.copysign(1.0, v[0]), v)
-        elif flip is not None:
-            pass  # no mode change: the sliding law's sgn(j_k direction) takes the new side from here
         elif turn is not None:
             if guard == drive_stepping.TURN:
                 v = _turn(sim, friction, t, q, torque)
@@ -328,35 +321,3 @@ def _turn_event(sim: Simulator, friction: StickSlipContact, t: float, q: Vec3, v
     b, (qb, vb) = illinois(at, lambda g: g < 0.0, t, max(s_dir * v[0], 0.0), t1, gb, (q1, v1),
                            width=LOCATE_TOLERANCE * (t1 - t), iterations=MAX_LOCATE_ITERATIONS)
     return b, qb, vb
-
-
-def _gains(friction: StickSlipContact, q: Vec3) -> list[float | None]:
-    """j_k (m/rad) of every candidate at q, in the element's candidate order; None out of contact."""
-    return [friction._tangent_gain(hit) if hit[2] > 0.0 else None for hit in friction._hits(q, True)]
-
-
-def _flip_event(sim: Simulator, friction: StickSlipContact, t: float, q: Vec3, v: Vec3, t1: float, q1: Vec3,
-                v1: Vec3, torque: TorqueFn) -> tuple[float, Vec3, Vec3] | None:
-    """(s, q, q') where a sliding contact's j_k first changes sign in (t, t1] (the far side), None if none."""
-    if not LOCATE_SLIP_ZEROS or friction.mode != SLIDING or not friction.static:
-        return None
-    before, after = _gains(friction, q), _gains(friction, q1)
-    found = None
-    for k, (a, b) in enumerate(zip(before, after)):
-        if a is None or b is None or a == 0.0 or (a > 0.0) == (b > 0.0):
-            continue
-        sign, end = math.copysign(1.0, a), t1 if found is None else found[0]
-
-        def at(s: float, k: int = k, sign: float = sign) -> tuple[float, tuple[Vec3, Vec3]]:
-            qs, vs = sim._step(t, q, v, s - t, torque)
-            gain = _gains(friction, qs)[k]
-            return sign * (0.0 if gain is None else gain), (qs, vs)
-
-        far = (q1, v1) if found is None else (found[1], found[2])
-        gb = sign * (b if found is None else (_gains(friction, far[0])[k] or 0.0))
-        if gb >= 0.0:
-            continue
-        s, (qs, vs) = illinois(at, lambda g: g < 0.0, t, abs(a), end, gb, far,
-                               width=LOCATE_TOLERANCE * (t1 - t), iterations=MAX_LOCATE_ITERATIONS)
-        found = (s, qs, vs)
-    return found
