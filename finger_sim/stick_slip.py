@@ -21,8 +21,8 @@ breaks free towards sgn(N τ_a − τ_h) (−sgn τ_h without a drive). With L >
 `actuators.inductive_stepping` steps the same shared lock (its stuck margin a guard of the step).
 
 A stop impact reverses θ1' (the sliding direction follows); at rest on a stop the stop holds the
-load and the friction is idle; leaving the stop is a turning point. Objects that move are refused by the scene
-(`finger_sim.scene`): they are not in this law yet.
+load and the friction is idle; leaving the stop is a turning point. With an object that moves, the slip is relative to its surface
+(`finger_sim.stick_slip_moving`: locked rides with it).
 """
 
 from __future__ import annotations
@@ -106,6 +106,11 @@ def holding_torque(system: FingerSystem, friction: StickSlipContact, t: float, q
 def start(sim: Simulator) -> None:
     """The friction mode of the scene's initial state: at rest, the holding test; moving, sliding."""
     friction = sim._friction
+    if friction.time_varying:  # a moving object: the slip is relative to it
+        from finger_sim import stick_slip_moving
+
+        stick_slip_moving.start(sim, sim.scene.torque)
+        return
     friction.holds.clear()
     if sim._drive is not None and sim._drive.inductive:  # its mode was set with the mesh's (`inductive_stepping.start`)
         if sim.v[0] == 0.0:
@@ -123,6 +128,11 @@ def advance(sim: Simulator, t0: float, t1: float, torque: TorqueFn) -> None:
     u(s)), splitting it at every turn, breakaway, mesh flank, current-limit kink and gap event (stops,
     contact onsets) on the way."""
     friction: StickSlipContact = sim._friction
+    if friction.time_varying:  # a moving object: ride with it while locked (`stick_slip_moving`)
+        from finger_sim import stick_slip_moving
+
+        stick_slip_moving.advance(sim, t0, t1, torque)
+        return
     drive = sim._drive
     if drive is not None and drive.inductive:  # the current is a state: the mesh's stepper takes the friction too
         from finger_sim.actuators import inductive_stepping

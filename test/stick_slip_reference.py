@@ -28,6 +28,8 @@ from hybrid_reference import _candidates, kkt_with
 RTOL, ATOL = 1e-11, 1e-13
 #: A contact gap this close to zero counts as on it when choosing its side at a restart.
 ON_GAP = 1e-13
+#: A tangential gain |j_k| this small (m/rad) at a restart is the zero the piece starts on (slip_zeros).
+ON_GAIN = 1e-10
 
 
 @dataclass(frozen=True)
@@ -90,8 +92,10 @@ class StickSlipReference:
         return out
 
 
-def solve(data: dict) -> StickSlipReference:
-    """The reference of a scene mapping (the keys test_stick_slip's scenes use)."""
+def solve(data: dict, *, slip_zeros: bool = False) -> StickSlipReference:
+    """The reference of a scene mapping (the keys test_stick_slip's scenes use). slip_zeros: also restart
+    the sliding pieces where a candidate's j_k changes sign (its friction flips, spec §7), so that no
+    piece straddles that kink of the force along the linkage."""
     model = data.get("model", {})
     fx = ref.Effects(k=model.get("spring_stiffness", ref.K_PAPER), c=model.get("damping", 0.0),
                      g=tuple(model.get("gravity", (0.0, 0.0))), f=tuple(model.get("tip_force", (0.0, 0.0))))
@@ -149,6 +153,18 @@ def solve(data: dict) -> StickSlipReference:
                 f = (lambda x, yy, i=i, side=side: side * _candidates(yy[:3], objects, law.rho)[i][0])
                 f.terminal, f.direction = True, -1
                 events.append(f)
+            if slip_zeros:
+                along = (lambda yy: ref.rates(yy[:3], 1.0))
+
+                def gain(yy, i):  # j_k = t_k·J_k n
+                    _, n, j = _candidates(yy[:3], objects, law.rho)[i]
+                    return float(np.array([-n[1], n[0]]) @ (j @ along(yy)))
+
+                for i in range(len(_candidates(y[:3], objects, law.rho))):
+                    if abs(gain(y, i)) > ON_GAIN:  # not the zero this piece starts on
+                        f = (lambda x, yy, i=i: gain(yy, i))
+                        f.terminal = True
+                        events.append(f)
             sol = solve_ivp(rhs, (t, b), y, method="DOP853", rtol=RTOL, atol=ATOL, dense_output=True, events=events)
             assert sol.success, sol.message
             out.pieces.append((t, float(sol.t[-1]), sol.sol))

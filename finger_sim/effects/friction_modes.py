@@ -27,7 +27,7 @@ import numpy as np
 from finger_sim.effects.base import STICK_SLIP_CONTACT
 from finger_sim.effects.contact import Contact, _Hit
 from finger_sim.effects.contact_outputs import FRICTION_MODE, FRICTION_POWER, FRICTION_TORQUE
-from finger_sim.errors import ConfigError
+from finger_sim.errors import ConfigError, SimulationDiverged
 from finger_sim.kinematics import Vec3
 
 REGULARIZED, STICK_SLIP = "regularized", "stick_slip"
@@ -46,6 +46,12 @@ HOLD_MEMORY = 4096
 #: Length of the law's block before the contact's own parameters in `kernel_params`: mode, direction,
 #: μ_k, μ_s, v_st (0: no Stribeck term).
 KERNEL_BLOCK = 5
+#: A tangential gain |j_k| below this (m/rad) is round-off of j_k = 0 (the proximal capsule on a circle):
+#: such a contact cannot carry the linkage along a moving object (`StickSlipContact.stick_speed`).
+MIN_TANGENT_GAIN = 1e-9
+#: Two contacts in touch with one moving object whose stick speeds w_k/j_k differ by more than this
+#: (relative, rad/s) cannot stick at once: the one-DOF linkage cannot follow both.
+STICK_SPEED_TOLERANCE = 1e-9
 
 
 # -- the law, plain float functions (the kernel compiles these same functions) -------------------
@@ -225,23 +231,55 @@ class StickSlipContact(Contact):
         mode's law until the event). Locked: the normal force alone (the holding friction is τ_h)."""
         _, i, d, _, _, nx, ny, j1x, j1y, j3x, j3y = hit
         vx, vy = j1x * v[0] + j3x * v[2], j1y * v[0] + j3y * v[2]
+        moving = self.time_varying and self._motions[i] is not None
+        if moving:  # relative to the object: ṗ − ċ
+            cvx, cvy = self._motions[i].velocity(t)
+            vx, vy = vx - cvx, vy - cvy
         fn = self._obj_k[i] * d**self._e * (1.0 - self._obj_d[i] * (nx * vx + ny * vy))  # δ' = −n_c·ṗ
         if fn <= 0.0:
             return (0.0, 0.0, 0.0)
         fx, fy = fn * nx, fn * ny
         if self._mode == SLIDING and self.static:  # μ_s ≥ μ_k: zero only without friction
-            ft = sliding_friction(fn, self._tangent_gain(hit), self._direction, v[0], self.kinetic, self.static,
-                                  self._v_st)
+            j = self._tangent_gain(hit)
+            # the Stribeck term's speed: j θ1' at a fixed object, the relative t_c·(ṗ − ċ) at a moving one
+            speed = (nx * vy - ny * vx) / j if moving and j != 0.0 else v[0]
+            ft = sliding_friction(fn, j, self._direction, speed, self.kinetic, self.static, self._v_st)
             fx -= ft * ny  # along t_c = (−ny, nx)
             fy += ft * nx
         return (fn, fx, fy)
 
-    def capacity(self, q: Vec3) -> float:
-        """Σ μ_s F_n,k |j_k| at rest at q, N·m: the largest holding torque the friction cones supply."""
+    def capacity(self, q: Vec3, t: float = 0.0, v: Vec3 = (0.0, 0.0, 0.0)) -> float:
+        """Σ μ_s F_n,k |j_k| at q (at rest, or at (t, q') riding with a moving object), N·m: the largest
+        holding torque the friction cones supply."""
         total = 0.0
-        for hit in self._hits(q, False):
-            total += self.static * self._forces(hit, (0.0, 0.0, 0.0))[0] * abs(self._tangent_gain(hit))
+        for hit in self._hits(q, False, t):
+            total += self.static * self._forces(hit, v, t)[0] * abs(self._tangent_gain(hit))
         return total
+
+    def stick_speed(self, t: float, q: Vec3) -> float:
+        """ω, rad/s: the θ1' at which the contacts in touch at (t s, q) do not slide on their objects,
+        ω = w_k / j_k with w_k = t_k·ċ_k the object's tangential velocity; 0 with fixed objects or
+        without a contact that has j_k (`MIN_TANGENT_GAIN`). SimulationDiverged if two contacts would
+        need different speeds (the one-DOF linkage cannot stick to both)."""
+        if not self.time_varying:
+            return 0.0
+        omega = None
+        for hit in self._hits(q, False, t):
+            j = self._tangent_gain(hit)
+            if abs(j) < MIN_TANGENT_GAIN:
+                continue
+            motion = self._motions[hit[1]]
+            w = 0.0
+            if motion is not None:
+                cvx, cvy = motion.velocity(t)
+                w = hit[5] * cvy - hit[6] * cvx  # t_c·ċ, t_c = (−ny, nx)
+            if omega is None:
+                omega = w / j
+            elif abs(w / j - omega) > STICK_SPEED_TOLERANCE * max(1.0, abs(omega)):
+                raise SimulationDiverged(f"{STICK_SLIP}: two contacts would stick at different speeds ({omega:.6g} and "
+                                         f"{w / j:.6g} rad/s) on a moving object, which the one-DOF linkage cannot follow",
+                                         t=t)
+        return 0.0 if omega is None else omega
 
     def friction_torque(self, t: float, q: Vec3, v: Vec3) -> tuple[float, float]:
         """(Σ j_k F_t,k N·m, Σ F_t,k v_t,k W) of the sliding law at a state: the friction's torque on θ1
@@ -252,15 +290,21 @@ class StickSlipContact(Contact):
             nx, ny, j1x, j1y, j3x, j3y = hit[5:]
             ft = -ny * fx + nx * fy  # t_c·F
             torque += self._tangent_gain(hit) * ft
-            power += ft * (-ny * (j1x * v[0] + j3x * v[2]) + nx * (j1y * v[0] + j3y * v[2]))
+            vx, vy = j1x * v[0] + j3x * v[2], j1y * v[0] + j3y * v[2]
+            motion = self._motions[hit[1]] if self.time_varying else None
+            if motion is not None:  # the slip is relative to the object
+                cvx, cvy = motion.velocity(t)
+                vx, vy = vx - cvx, vy - cvy
+            power += ft * (-ny * vx + nx * vy)
         return torque, power
 
-    def remember(self, t: float, q: Vec3) -> None:
-        """Keep the mode, direction and friction torque of the state (t s, q) at rest (θ1' = 0, so not a
-        function of the state) for `outputs`: the holding torque τ_h (N·m, `hold`) while locked, the
-        sliding law's torque at a turn. The last `memory` such states are kept."""
+    def remember(self, t: float, q: Vec3, v: Vec3 = (0.0, 0.0, 0.0)) -> None:
+        """Keep the mode, direction and friction torque of the state (t s, q, q') at rest relative to the
+        objects (θ1' = 0, or θ1' = `stick_speed` riding with a moving object: not a function of the state)
+        for `outputs`: the holding torque τ_h (N·m, `hold`) while locked, the sliding law's torque at a
+        turn. The last `memory` such states are kept."""
         holds = self.holds
-        torque = self.hold if self.mode == LOCKED else self.friction_torque(t, q, (0.0, 0.0, 0.0))[0]
+        torque = self.hold if self.mode == LOCKED else self.friction_torque(t, q, v)[0]
         holds[t] = (q, self.mode, self.direction, torque)
         if len(holds) > self.memory:
             del holds[next(iter(holds))]
@@ -277,6 +321,8 @@ class StickSlipContact(Contact):
         the contact forces are the normal forces (which split of τ_h among the contacts is not
         observable, spec §7)."""
         mode, direction = self.mode, self.direction
+        if self.time_varying:
+            return self._moving_outputs(t, q, v)
         known = self.holds.get(t) if v[0] == 0.0 else None
         if v[0] != 0.0:
             self.mode, self.direction = SLIDING, math.copysign(1.0, v[0])
@@ -293,6 +339,33 @@ class StickSlipContact(Contact):
             else:
                 out[FRICTION_MODE.name] = float(SLIDING)
                 out[FRICTION_TORQUE.name], out[FRICTION_POWER.name] = self.friction_torque(t, q, v)
+        finally:
+            self.mode, self.direction = mode, direction
+        return out
+
+    def _moving_outputs(self, t: float, q: Vec3, v: Vec3) -> Mapping[str, float]:
+        """`outputs` with a moving object: the stepper's record of (t, q) where it has one (every locked
+        step end, every turn), else sliding towards sgn(θ1' − ω) (`stick_speed`); NaN mode and torque for
+        a state at rest relative to the object that it did not record."""
+        mode, direction = self.mode, self.direction
+        known = self.holds.get(t)
+        if known is not None and known[0] == q:
+            self.mode, self.direction = known[1], known[2]
+        else:
+            known = None
+            slip = v[0] - self.stick_speed(t, q)
+            self.mode, self.direction = (SLIDING, math.copysign(1.0, slip)) if slip != 0.0 else (LOCKED, 0.0)
+        try:
+            out = dict(super().outputs(t, q, v))
+            if known is not None:
+                out[FRICTION_MODE.name], out[FRICTION_TORQUE.name] = float(known[1]), known[3]
+                out[FRICTION_POWER.name] = 0.0 if known[1] == LOCKED else self.friction_torque(t, q, v)[1]
+            elif self.mode == SLIDING:
+                out[FRICTION_MODE.name] = float(SLIDING)
+                out[FRICTION_TORQUE.name], out[FRICTION_POWER.name] = self.friction_torque(t, q, v)
+            else:
+                out[FRICTION_MODE.name] = out[FRICTION_TORQUE.name] = math.nan
+                out[FRICTION_POWER.name] = 0.0
         finally:
             self.mode, self.direction = mode, direction
         return out

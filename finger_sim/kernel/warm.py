@@ -27,6 +27,10 @@ CONFIG = Path(__file__).resolve().parents[2] / "config"
 SCENES = ("paper_flexion", "paper_to_stop", "grasp_cylinder")
 #: Steps of each warm-up run: enough to reach every code path's first call.
 STEPS = 20
+#: The stick–slip warm-up's inductance (H) and voltage (V): the fingertip driven (spec §8's default drive)
+#: onto the table of config/friction/hold_table.yaml.
+STICK_SLIP_INDUCTANCE = 0.02
+STICK_SLIP_VOLTAGE = {"type": "constant", "value": 2.0}
 
 
 def warm() -> list[str]:
@@ -66,7 +70,23 @@ def warm() -> list[str]:
         task = load_task(CONFIG / "tasks" / f"{name}.yaml")
         task = dataclasses.replace(task, scene=task.scene.with_overrides(duration=STEPS * task.scene.dt))
         run_task_rows(task, factory, [("a", {}), ("b", {"ki": 2.0})])  # the drive tasks' closed loop
-    return [*done, "batch", "rollout", "task sweep", "drive task sweep"]
+    _warm_stick_slip()
+    return [*done, "batch", "rollout", "task sweep", "drive task sweep", "stick-slip (L = 0, L > 0)"]
+
+
+def _warm_stick_slip() -> None:
+    """The stick–slip steps: our DOP853 on the friction law, and with a drive the driven DOP853 (L = 0)
+    and the inductive Runge–Kutta step (L > 0, `kernel.drive.inductive_step_tuple`, whose first call
+    otherwise compiles some twenty functions in the user's run)."""
+    from finger_sim.scene import scene_from_dict
+    from finger_sim.simulate import simulate
+
+    table = load_scene(CONFIG / "friction" / "hold_table.yaml").with_overrides(duration=STEPS * 0.001)
+    simulate(table, kernel="compiled")
+    data = table.to_dict()
+    for drive in ({}, {"inductance": STICK_SLIP_INDUCTANCE}):
+        driven = {**data, "model": {**data["model"], "drive": drive}, "input": {"voltage": STICK_SLIP_VOLTAGE}}
+        simulate(scene_from_dict(driven), kernel="compiled")
 
 
 def main() -> None:

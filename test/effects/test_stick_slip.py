@@ -229,11 +229,13 @@ def test_bad_friction_keys_are_refused_in_one_line_naming_the_key_and_range(cont
     assert message.startswith(key + ":") and allowed in message and "\n" not in message
 
 
-def test_stick_slip_with_a_moving_object_is_refused():
+def test_stick_slip_with_a_moving_object_and_joint_limits_is_refused():
+    """A moving object is covered (test_stick_slip_moving), with joint stops not yet: one line."""
     d = data({"friction": 0.5}, {"type": "constant", "value": 0.02}, 0.1)
     d["objects"] = [dict(TABLE[0], motion={"type": "push", "direction": [1.0, 0.0], "distance": 0.01, "start": 0.0,
                                            "duration": 0.1})]
-    with pytest.raises(ConfigError, match=r"^model\.contact\.friction_model: .*covers fixed objects"):
+    d["model"]["joint_limits"] = {"mcp": [0.0, 1.5]}
+    with pytest.raises(ConfigError, match=r"^model\.contact\.friction_model: .*covers neither yet"):
         scene_from_dict(d)
 
 
