@@ -10,12 +10,15 @@ needs what only Python does (DOP853's first internal step, an earlier internal s
 failure, an error estimate it does not hold), it puts the solution back as it was and answers
 PYTHON: the Simulator takes that step in Python, as always (`simulation.event_step`).
 
-The internal solution lives in two arrays, which `simulation.event_step` moves to and from the
-integrator's attributes when Python steps:
+Everything the call reads and keeps is one float64 array (one argument: numba's dispatch costs
+about 0.1 µs per argument), which `simulation.event_step` moves to and from the integrator's
+attributes when Python steps:
 
-    st: the scalars T … ATOL below, the stage torques (N_NODES), then a copy of the scalars;
+    [n_model, n_plan, n_gaps, the model (the integrator's), the gap plan (`gap_screen`), st, arr, work]
+    st: the scalars T … X below, the stage torques (N_NODES), then a copy of the scalars;
     arr (ROWS × 6): y, f, y_old, dense (7 rows), the attempt's stages (16), y_new, out, then a
-        copy of y, f, y_old and dense.
+        copy of y, f, y_old and dense;
+    work (4 × n_gaps): the gap screen's.
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ from numba import njit  # noqa: E402  (after the cache folder is set)
 from finger_sim.integrators import dop853  # noqa: E402
 from finger_sim.kernel.closed_loop import I_H, I_H_OLD, I_T, I_T_OLD, N_NODES, _advance  # noqa: E402
 from finger_sim.kernel.gap_screen import screen  # noqa: E402
+from finger_sim.kernel.integrators import _entry_point  # noqa: E402
 from finger_sim.kernel.numerics import JIT, OK, _rhs, dop853_output, dop853_theta_error  # noqa: E402
 
 #: `common_step`'s answer when Python must take the step.
@@ -35,11 +39,12 @@ PYTHON = 1
 #: The scalars of st: the internal step's (closed_loop's first four: t, next h, t_old, h_old, s), then
 #: the θ error estimate at t and t_old (rad, `DormandPrince853._err`, `_err_old`); the last output
 #: (HAS_LAST 1/0, its time, q, q' and its error estimate); the solution's origin (HAS_ORIGIN 1/0, t,
-#: q, q'); the gap screen's kept end gaps (KNOWN 1/0, their rows SIDE); DOP853's tolerances.
+#: q, q'); the gap screen's kept end gaps (KNOWN 1/0, their rows SIDE); DOP853's tolerances; the
+#: step's start (q, q') when the caller writes it (not the last output).
 T, H, T_OLD, H_OLD = I_T, I_H, I_T_OLD, I_H_OLD
 ERR, ERR_OLD, HAS_LAST, LAST_T, LAST_Q, LAST_V, LAST_EST = 4, 5, 6, 7, 8, 11, 14
-HAS_ORIGIN, ORIGIN_T, ORIGIN_Q, ORIGIN_V, KNOWN, SIDE, RTOL, ATOL = 15, 16, 17, 20, 23, 24, 25, 26
-N_SCALARS = 27
+HAS_ORIGIN, ORIGIN_T, ORIGIN_Q, ORIGIN_V, KNOWN, SIDE, RTOL, ATOL, X = 15, 16, 17, 20, 23, 24, 25, 26, 27
+N_SCALARS = 33
 TAUS = N_SCALARS
 SAVED = TAUS + N_NODES
 ST_SIZE = SAVED + N_SCALARS
@@ -47,20 +52,56 @@ ST_SIZE = SAVED + N_SCALARS
 Y, F, Y_OLD, DENSE, KK, Y_NEW, OUT = 0, 1, 2, 3, 10, 26, 27
 KEPT = KK  # y, f, y_old and dense: what a step changes of the solution
 ROWS = OUT + 1 + KEPT
+#: The workspace's header: the lengths of the model, the gap plan and the number of gaps.
+HEADER = 3
+#: `common_step`'s flags: the solution is under this command's torque function; the step starts at
+#: the last output (else at st[X:X + 6]).
+SAME, AT_LAST = 1, 2
 #: A continuation matches the last output's time within this fraction of a step (`DormandPrince853.step`).
 LAST_OUTPUT_SLACK = 1e-9
 E53, E3_WEIGHT = dop853._E53, dop853.E3_WEIGHT
 
 
+def workspace_size(n_model: int, n_plan: int, n_gaps: int) -> int:
+    """The length of a workspace (module docstring)."""
+    return HEADER + n_model + n_plan + ST_SIZE + ROWS * 6 + 4 * n_gaps
+
+
+def entry_point(ws):  # type: ignore[no-untyped-def]
+    """`common_step`'s compiled entry for a workspace like ws and the Simulator's argument types (floats,
+    an int), loaded (or compiled) now: it skips numba's type dispatch, as the lean path's `FastStepper.call`."""
+    args = (ws.copy(), 0.0, 1e-3, 0.0, 0)
+    common_step(*args)  # no last output: answers PYTHON at once
+    return _entry_point(common_step, args)
+
+
 @njit(**JIT)
-def common_step(m, plan, st, arr, work, t, t1, command, same, q, v):
-    """The step (t, q, q') → t1 under the held `command` (N·m), as `Simulator.step` takes a step with
-    no gap crossing. m: the integrator's model; plan, work: the gap screen's (`gap_screen.screen`);
-    same: the internal solution is under this command's torque function (`DormandPrince853._torque`).
-    Returns (status, q1, q1', the error estimate at q1 in rad): OK; or PYTHON with st and arr as they were."""
+def parts(ws):
+    """The workspace's views: (model, gap plan, st, arr, work)."""
+    nm, npl, ng = int(ws[0]), int(ws[1]), int(ws[2])
+    o = HEADER
+    m = ws[o:o + nm]
+    o += nm
+    plan = ws[o:o + npl]
+    o += npl
+    st = ws[o:o + ST_SIZE]
+    o += ST_SIZE
+    arr = ws[o:o + ROWS * 6].reshape((ROWS, 6))
+    o += ROWS * 6
+    return m, plan, st, arr, ws[o:o + 4 * ng].reshape((4, ng))
+
+
+@njit(**JIT)
+def common_step(ws, t, t1, command, flags):
+    """The step from t to t1 (s) under the held `command` (N·m), as `Simulator.step` takes a step with
+    no gap crossing, on the workspace ws (module docstring); flags: SAME, AT_LAST (or'ed).
+    Returns (status, q1, q1', the error estimate at q1 in rad): OK; or PYTHON with ws as it was."""
+    m, plan, st, arr, work = parts(ws)
     st[SAVED:SAVED + N_SCALARS] = st[:N_SCALARS]
     arr[ROWS - KEPT:] = arr[:KEPT]
-    status, q1, v1, estimate = _step(m, plan, st, arr, work, t, t1, command, same, q, v)
+    o = LAST_Q if flags & AT_LAST else X
+    q, v = (st[o], st[o + 1], st[o + 2]), (st[o + 3], st[o + 4], st[o + 5])
+    status, q1, v1, estimate = _step(m, plan, st, arr, work, t, t1, command, (flags & SAME) != 0, q, v)
     if status != OK:
         st[:N_SCALARS] = st[SAVED:SAVED + N_SCALARS]
         arr[:KEPT] = arr[ROWS - KEPT:]

@@ -144,8 +144,10 @@ class Simulator:
                 if status != BREAKPOINT:  # else a switch inside the step: split it below
                     fast.fail(status, k, self.q)
         events = self._event_step
-        if events is not None and events.step(self, torque):  # a step with no gap crossing, in one kernel call
-            return _new_state(State, (self.step_index * self.dt, self.q, self.v))
+        if events is not None:  # a step with no gap crossing, in one kernel call
+            state = events.step(self, torque)
+            if state is not None:
+                return state
         profile = self.scene.torque if torque is None else torque
         t0, t1 = self.step_index * self.dt, (self.step_index + 1) * self.dt
         if isinstance(profile, Profile):

@@ -31,60 +31,85 @@ from finger_sim.integrators.base import HeldTorque
 from finger_sim.integrators.dop853 import KEEP_OUTPUTS, MAX_OUTPUTS, DormandPrince853
 
 if TYPE_CHECKING:
-    from finger_sim.simulation.driver import Simulator
+    from finger_sim.simulation.driver import Simulator, State
 
 #: Columns of the kernel's solution rows: (q, q').
 WIDTH = 6
+#: State(t, q, v) without the NamedTuple's Python-level __new__ (as `Simulator.step`'s lean path).
+_new_state = tuple.__new__
 
 
 class EventStep:
     """The compiled common step of one Simulator (`step`), holding DOP853's solution between kernel steps."""
 
     def __init__(self, sim: Simulator, plan: np.ndarray, compiled: Any) -> None:
+        from finger_sim.simulation.driver import State  # (the driver imports this module)
+
+        self._state = State
         integ = sim.integrator
         assert isinstance(integ, DormandPrince853)
-        self._k, self._call, self._plan = compiled, compiled.common_step, plan
-        self._model = integ._model  # noqa: SLF001
-        self._st = np.zeros(compiled.ST_SIZE)
+        self._k, self._ok = compiled, compiled.OK
+        model, gaps = integ._model, int(plan[0])  # noqa: SLF001
+        #: the kernel's workspace (`kernel.event_step`): the model and gap plan, then the solution
+        self._ws = ws = np.zeros(compiled.workspace_size(len(model), len(plan), gaps))
+        ws[:compiled.HEADER] = len(model), len(plan), gaps
+        o = compiled.HEADER + len(model) + len(plan)
+        ws[compiled.HEADER:o] = np.concatenate([model, plan])
+        self._st = ws[o:o + compiled.ST_SIZE]  # views of ws: `kernel.event_step.parts`
+        o += compiled.ST_SIZE
+        self._arr = ws[o:o + compiled.ROWS * WIDTH].reshape(compiled.ROWS, WIDTH)
         self._st[compiled.RTOL], self._st[compiled.ATOL] = integ.rtol, integ.atol
-        self._arr = np.zeros((compiled.ROWS, WIDTH))
-        self._work = np.empty((4, int(plan[0])))
+        #: `common_step(ws, t, t1, command, flags)`, its compiled entry (floats, an int)
+        self._call = compiled.entry_point(ws)
+        self._x = slice(compiled.X, compiled.X + WIDTH)
+        self._same, self._at_last = compiled.SAME, compiled.AT_LAST
         #: the scene's torque when it is a constant (its steps may run here), else None
         self._constant = sim.scene.torque if type(sim.scene.torque) is Constant else None
+        self._constant_value = float(self._constant.value) if self._constant is not None else 0.0
         self._integ: DormandPrince853 | None = None  # the integrator the Simulator's last step left
         self._token: tuple | None = None  # and its last output then
         self._holds = False  # the arrays hold the solution (the integrator's attributes are behind)
         self._moved = False  # and the kernel has stepped it since it took it over
+        self._q: tuple | None = None  # the (q, q') tuples of the kernel's last output
+        self._v: tuple | None = None
         #: steps taken here (the rest went to Python), for tests and benchmarks
         self.taken = 0
 
-    def step(self, sim: Simulator, torque: Profile | float | None) -> bool:
-        """Take `sim.step(torque)` in the kernel (the Simulator's state, torque and step index after it);
-        False: Python must take it (the integrator is then up to date)."""
+    def step(self, sim: Simulator, torque: Profile | float | None) -> State | None:
+        """Take `sim.step(torque)` in the kernel: the state after it (the Simulator's state, torque and
+        step index set); None: Python must take it (the integrator is then up to date)."""
         integ = sim.integrator
-        if integ is not self._integ or integ._last is not self._token or self._token is None:  # noqa: SLF001
+        token = self._token
+        if integ._last is not token or token is None or integ is not self._integ:  # noqa: SLF001
             self._holds = self._moved = False  # another hand stepped or set it: the integrator is the truth
-            return False
-        if torque is None and self._constant is not None:
-            fn: Any = self._constant
-            value = float(fn.value)
-        elif torque is None or isinstance(torque, Profile) or sim._resting is not None:  # noqa: SLF001
-            self.release()
-            return False
+            return None
+        if torque is None:
+            fn: Any = self._constant  # None: a profile that is not a constant
+            value = self._constant_value
+        elif isinstance(torque, Profile):
+            fn = None
         else:
             value = float(torque)
             held = sim._held  # noqa: SLF001
             if held is None or held[0] != value:  # `Simulator.step`'s one function object per held value
                 held = sim._held = (value, HeldTorque(value))  # noqa: SLF001
             fn = held[1]
+        if fn is None or sim._resting is not None:  # noqa: SLF001  (a profile's step, or the stop's rest mode)
+            self.release()
+            return None
         if not self._holds:
             self._take_over(integ)
+        flags = self._same if fn is integ._torque else 0  # noqa: SLF001
+        q, v = sim.q, sim.v
+        if q is self._q and v is self._v:
+            flags |= self._at_last
+        else:  # a state the kernel did not produce
+            self._st[self._x] = (*q, *v)
         k, dt = sim.step_index, sim.dt
-        status, q, v, estimate = self._call(self._model, self._plan, self._st, self._arr, self._work, k * dt,
-                                            (k + 1) * dt, value, fn is integ._torque, sim.q, sim.v)  # noqa: SLF001
-        if status != self._k.OK:
+        status, q, v, estimate = self._call(self._ws, k * dt, (k + 1) * dt, value, flags)  # (floats, an int)
+        if status != self._ok:
             self.release()
-            return False
+            return None
         self._moved = True
         integ._torque = fn  # noqa: SLF001
         estimates = integ._estimates  # noqa: SLF001  (`DormandPrince853._remember`)
@@ -92,8 +117,9 @@ class EventStep:
             estimates = integ._estimates = dict(list(estimates.items())[-KEEP_OUTPUTS:])  # noqa: SLF001
         estimates[q] = estimate
         sim.q, sim.v, sim.torque, sim.step_index = q, v, value, k + 1
+        self._q, self._v = q, v
         self.taken += 1
-        return True
+        return _new_state(self._state, ((k + 1) * dt, q, v))
 
     def taken_in_python(self, integ: DormandPrince853) -> None:
         """The Simulator took its last step in Python: the kernel may continue from `integ`'s solution."""
@@ -123,7 +149,7 @@ class EventStep:
             st[k.ORIGIN_T] = origin[0]
             st[k.ORIGIN_Q:k.ORIGIN_Q + 3], st[k.ORIGIN_V:k.ORIGIN_V + 3] = origin[1], origin[2]
         st[k.KNOWN] = 0.0  # the screen's kept gaps are of another step
-        self._holds, self._moved = True, False
+        self._holds, self._moved, self._q = True, False, None
 
     def _write_back(self, integ: DormandPrince853) -> None:
         """The arrays' solution into the integrator's attributes, as its own steps would have left them
