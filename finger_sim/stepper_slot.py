@@ -57,6 +57,10 @@ class CompiledKernel(Protocol):
         """The compiled step-end gap check (`screen`: whether a step may hold a gap crossing)."""
         ...
 
+    def compiled_event_step(self) -> ModuleType:
+        """The compiled common step of a scene with events (`common_step`: DOP853 and the gap check)."""
+        ...
+
     def compiled_inductive(self) -> type:
         """The compiled Runge–Kutta class of an inductive drive (`actuators.inductive`'s twin)."""
         ...

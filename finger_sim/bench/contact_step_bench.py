@@ -1,10 +1,12 @@
-"""A contact step with and without the compiled gap check, side by side in one process.
+"""A contact step with and without its compiled parts, side by side in one process.
 
 `python -m finger_sim.bench.contact_step_bench [--repeats N]`: `method: auto` at 1 kHz through
-`Simulator.step` (the node's path) on each shipped contact scene, once with the compiled step-end
-gap check (`simulation.gap_screen`) and once with it switched off (the Python check alone, main's
-path before it), and the free paper_flexion; CPU per step (`time.process_time`), every variant
-timed in turn within each repeat after one warm-up round; medians, and ratios to the free step.
+`Simulator.step` (the node's path) on each shipped contact scene in three variants: the whole
+common step compiled (`simulation.event_step`, the default), the Python DOP853 step with the
+compiled step-end gap check (`simulation.gap_screen`; the event step switched off), and the Python
+check alone (both switched off); and the free paper_flexion. CPU per step (`time.process_time`),
+every variant timed in turn within each repeat after one warm-up round; medians, and ratios to the
+free step.
 """
 
 from __future__ import annotations
@@ -25,17 +27,19 @@ REPEATS = 5
 
 
 def measure(repeats: int) -> dict[tuple[str, str], float]:
-    """Median µs per step of (scene, variant): variant "free", "dop853" (the free scene), "python check"
-    or "compiled check"."""
+    """Median µs per step of (scene, variant): variant "free", "dop853" (the free scene), "python check",
+    "compiled check" or "compiled step"."""
     folder = config_dir()
     free = load_scene(folder / f"{FREE_SCENE}.yaml")
     # the free scene under auto (its lean compiled step), and under dop853: the contact path's floor, no gaps
     sims = {(FREE_SCENE, "free"): Simulator(free), (FREE_SCENE, "dop853"): Simulator(free.with_overrides(method="dop853"))}
     for name in CONTACT_SCENES:
         scene = load_scene(folder / f"{name}.yaml")
-        off = Simulator(scene)
-        off._gap_screen = None  # the Python check alone
-        sims[name, "python check"], sims[name, "compiled check"] = off, Simulator(scene)
+        off, check = Simulator(scene), Simulator(scene)
+        off._gap_screen = off._event_step = None  # the Python check alone
+        check._event_step = None  # the Python DOP853 step, the compiled check
+        sims[name, "python check"], sims[name, "compiled check"] = off, check
+        sims[name, "compiled step"] = Simulator(scene)
     samples: dict[tuple[str, str], list[float]] = {key: [] for key in sims}
     for k in range(repeats + 1):  # the first round warms up
         for key, sim in sims.items():
@@ -58,11 +62,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     floor = medians[FREE_SCENE, "dop853"]
     print(f"free {FREE_SCENE}: {free:.2f} µs/step under auto, {floor:.2f} µs/step ({floor / free:.2f}×) "
           f"under dop853 (median of {args.repeats})")
-    print("| scene | Python check µs/step | compiled check µs/step | × free, before | × free, after | after / before |")
-    print("|---|---:|---:|---:|---:|---:|")
+    print("| scene | Python check µs/step | compiled check µs/step | compiled step µs/step | × free: Python check "
+          "| × free: compiled check | × free: compiled step | step / check |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|")
     for name in CONTACT_SCENES:
-        old, new = medians[name, "python check"], medians[name, "compiled check"]
-        print(f"| {name} | {old:.1f} | {new:.1f} | {old / free:.2f}× | {new / free:.2f}× | {new / old:.2f} |")
+        old, check, new = (medians[name, v] for v in ("python check", "compiled check", "compiled step"))
+        print(f"| {name} | {old:.1f} | {check:.1f} | {new:.1f} | {old / free:.2f}× | {check / free:.2f}× "
+              f"| {new / free:.2f}× | {new / check:.2f} |")
     return 0
 
 

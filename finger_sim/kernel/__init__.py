@@ -204,6 +204,13 @@ def compiled_gap_screen() -> "ModuleType":
     return compiled
 
 
+def compiled_event_step() -> "ModuleType":
+    """The compiled common step of a scene with events (`kernel.event_step`)."""
+    from finger_sim.kernel import event_step as compiled
+
+    return compiled
+
+
 def compiled_inductive() -> type:
     """The inductive drive's compiled Runge–Kutta class (`kernel.inductive`)."""
     from finger_sim.kernel.inductive import CompiledInductiveRungeKutta

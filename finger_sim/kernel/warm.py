@@ -6,7 +6,8 @@ The Makefile's install step runs it, so `make run` (the node's compiled step) an
 `simulate`, `sweep` or `rollout` load the cache (well under a second) instead of compiling
 (6-25 s). numba keys its cache by each function's argument types, so the warm-up makes the
 same calls, with the same types, as those paths do: a short run of each shipped kind of scene
-(smooth, with a stop, with contact; rk6, dop853) on the compiled kernel, a batch, a rollout and
+(smooth, with a stop, with contact; rk6, dop853: the Simulator's compiled event step, `kernel.event_step`,
+among them) on the compiled kernel, a batch, a rollout and
 the task sweeps' closed loops (grip PI, and the drive's grip_current and grip_voltage).
 Prints one line: what was warmed and how long it took.
 """

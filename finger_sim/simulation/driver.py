@@ -23,7 +23,7 @@ from finger_sim.integrators import HeldTorque, Integrator, TorqueFn
 from finger_sim.kinematics import Vec3
 from finger_sim.projection import OK as FAST_OK
 from finger_sim.scene import Scene
-from finger_sim.simulation import crossings, gap_screen, impact
+from finger_sim.simulation import crossings, event_step, gap_screen, impact
 from finger_sim.simulation.crossings import Crossing, Gap
 from finger_sim.simulation.setup import hashable, setup_for
 from finger_sim.stepper_slot import BREAKPOINT
@@ -82,6 +82,8 @@ class Simulator:
         #: the compiled check of a step's end gaps (`simulation.gap_screen`), or None: the Python check alone
         self._gap_screen = gap_screen.for_simulator(self)
         self.reset()
+        #: the compiled common step of a scene with events (`simulation.event_step`), or None
+        self._event_step = event_step.for_simulator(self)
         #: the lean compiled path of `step` (a compiled fixed-step method on a smooth scene), else None
         self.fast_stepper = setup.fast_stepper
         #: what `step`'s lean path calls: the fast stepper, or a drive scene's (`actuators.stepping.fast_stepper`)
@@ -141,6 +143,11 @@ class Simulator:
                     return _new_state(State, ((k + 1) * self.dt, q, v))
                 if status != BREAKPOINT:  # else a switch inside the step: split it below
                     fast.fail(status, k, self.q)
+        events = self._event_step
+        if events is not None:  # a step with no gap crossing, in one kernel call
+            state = events.step(self, torque)
+            if state is not None:
+                return state
         profile = self.scene.torque if torque is None else torque
         t0, t1 = self.step_index * self.dt, (self.step_index + 1) * self.dt
         if isinstance(profile, Profile):
@@ -162,6 +169,8 @@ class Simulator:
         if not math.isfinite(sum(self.q) + sum(self.v)):  # a NaN or inf anywhere makes the sum non-finite
             raise SimulationDiverged(f"non-finite state (step {self.step_index + 1})", method=self.method, t=t1, dt=self.dt)
         self.step_index += 1
+        if events is not None:
+            events.taken_in_python(self.integrator)
         return self.state
 
     # -- internals ---------------------------------------------------------------------

@@ -33,6 +33,7 @@ def run(scene, screened: bool) -> tuple[np.ndarray, np.ndarray, str]:
     """Every step's (q, q') and the integrator's error estimate, with or without the screen, and
     the error that ended the run early ("" if none: soft_pass_through ends at its depth crossing)."""
     sim = Simulator(scene)
+    sim._event_step = None  # the screen inside Python's step (the compiled step: test_event_step)
     if not screened:
         sim._gap_screen = None
     states, estimates, error = [], [], ""
@@ -61,6 +62,7 @@ def test_runs_with_the_screen_equal_runs_without_bit_for_bit(name):
 def test_every_cleared_step_is_one_the_python_check_finds_nothing_in(name, monkeypatch):
     scene = load_scene(CONFIG / f"{name}.yaml")
     sim = Simulator(scene)
+    sim._event_step = None  # every step through Python's check (the compiled step: test_event_step)
     screen = sim._gap_screen
     assert screen is not None  # these scenes' gaps all have a compiled form
     python_check = crossings.first_crossing

@@ -1,0 +1,180 @@
+"""A Simulator's common step on a scene with events in one compiled call (`kernel.event_step`), where the scene allows.
+
+On a scene with stops or contact, `Simulator.step` runs our DOP853 step by step in Python around
+compiled attempts, then checks the step's end gaps (`simulation.gap_screen`). `EventStep.step`
+takes a step that holds no crossing in one kernel call on the same numbers: the internal solution
+(`DormandPrince853`'s state) is kept in the kernel's arrays while the kernel steps, and written back
+to the integrator's attributes before Python takes a step (a possible crossing, a resting stop, a
+torque profile other than a constant, DOP853's first step), so that Python's step, its event
+location included, runs exactly as it always did. The estimates of `error_estimate` are written at
+every step.
+
+Who stepped last is told by the integrator's last output (`DormandPrince853._last`, a new tuple at
+every Python step): the kernel continues only a solution whose last output is still the one it saw
+after the Simulator's own last step; anything else (a new integrator after `reset`, a caller that set
+the solution, as the task sweep's hand-over does) lets Python take the step, and the kernel
+continues from the step after.
+
+Exists when the Simulator runs the compiled gap screen, steps with the compiled DOP853, and has
+no drive, no stick–slip friction and no substeps near contact.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from finger_sim import stepper_slot
+from finger_sim.inputs import Constant, Profile
+from finger_sim.integrators.base import HeldTorque
+from finger_sim.integrators.dop853 import KEEP_OUTPUTS, MAX_OUTPUTS, DormandPrince853
+
+if TYPE_CHECKING:
+    from finger_sim.simulation.driver import Simulator, State
+
+#: Columns of the kernel's solution rows: (q, q').
+WIDTH = 6
+#: State(t, q, v) without the NamedTuple's Python-level __new__ (as `Simulator.step`'s lean path).
+_new_state = tuple.__new__
+
+
+class EventStep:
+    """The compiled common step of one Simulator (`step`), holding DOP853's solution between kernel steps."""
+
+    def __init__(self, sim: Simulator, plan: np.ndarray, compiled: Any) -> None:
+        from finger_sim.simulation.driver import State  # (the driver imports this module)
+
+        self._state = State
+        integ = sim.integrator
+        assert isinstance(integ, DormandPrince853)
+        self._k, self._ok = compiled, compiled.OK
+        model, gaps = integ._model, int(plan[0])  # noqa: SLF001
+        #: the kernel's workspace (`kernel.event_step`): the model and gap plan, then the solution
+        self._ws = ws = np.zeros(compiled.workspace_size(len(model), len(plan), gaps))
+        ws[:compiled.HEADER] = len(model), len(plan), gaps
+        o = compiled.HEADER + len(model) + len(plan)
+        ws[compiled.HEADER:o] = np.concatenate([model, plan])
+        self._st = ws[o:o + compiled.ST_SIZE]  # views of ws: `kernel.event_step.parts`
+        o += compiled.ST_SIZE
+        self._arr = ws[o:o + compiled.ROWS * WIDTH].reshape(compiled.ROWS, WIDTH)
+        self._st[compiled.RTOL], self._st[compiled.ATOL] = integ.rtol, integ.atol
+        #: `common_step(ws, t, t1, command, flags)`, its compiled entry (floats, an int)
+        self._call = compiled.entry_point(ws)
+        self._x = slice(compiled.X, compiled.X + WIDTH)
+        self._same, self._at_last = compiled.SAME, compiled.AT_LAST
+        #: the scene's torque when it is a constant (its steps may run here), else None
+        self._constant = sim.scene.torque if type(sim.scene.torque) is Constant else None
+        self._constant_value = float(self._constant.value) if self._constant is not None else 0.0
+        self._integ: DormandPrince853 | None = None  # the integrator the Simulator's last step left
+        self._token: tuple | None = None  # and its last output then
+        self._holds = False  # the arrays hold the solution (the integrator's attributes are behind)
+        self._moved = False  # and the kernel has stepped it since it took it over
+        self._q: tuple | None = None  # the (q, q') tuples of the kernel's last output
+        self._v: tuple | None = None
+        #: steps taken here (the rest went to Python), for tests and benchmarks
+        self.taken = 0
+
+    def step(self, sim: Simulator, torque: Profile | float | None) -> State | None:
+        """Take `sim.step(torque)` in the kernel: the state after it (the Simulator's state, torque and
+        step index set); None: Python must take it (the integrator is then up to date)."""
+        integ = sim.integrator
+        token = self._token
+        if integ._last is not token or token is None or integ is not self._integ:  # noqa: SLF001
+            self._holds = self._moved = False  # another hand stepped or set it: the integrator is the truth
+            return None
+        if torque is None:
+            fn: Any = self._constant  # None: a profile that is not a constant
+            value = self._constant_value
+        elif isinstance(torque, Profile):
+            fn = None
+        else:
+            value = float(torque)
+            held = sim._held  # noqa: SLF001
+            if held is None or held[0] != value:  # `Simulator.step`'s one function object per held value
+                held = sim._held = (value, HeldTorque(value))  # noqa: SLF001
+            fn = held[1]
+        if fn is None or sim._resting is not None:  # noqa: SLF001  (a profile's step, or the stop's rest mode)
+            self.release()
+            return None
+        if not self._holds:
+            self._take_over(integ)
+        flags = self._same if fn is integ._torque else 0  # noqa: SLF001
+        q, v = sim.q, sim.v
+        if q is self._q and v is self._v:
+            flags |= self._at_last
+        else:  # a state the kernel did not produce
+            self._st[self._x] = (*q, *v)
+        k, dt = sim.step_index, sim.dt
+        status, q, v, estimate = self._call(self._ws, k * dt, (k + 1) * dt, value, flags)  # (floats, an int)
+        if status != self._ok:
+            self.release()
+            return None
+        self._moved = True
+        integ._torque = fn  # noqa: SLF001
+        estimates = integ._estimates  # noqa: SLF001  (`DormandPrince853._remember`)
+        if len(estimates) >= MAX_OUTPUTS:
+            estimates = integ._estimates = dict(list(estimates.items())[-KEEP_OUTPUTS:])  # noqa: SLF001
+        estimates[q] = estimate
+        sim.q, sim.v, sim.torque, sim.step_index = q, v, value, k + 1
+        self._q, self._v = q, v
+        self.taken += 1
+        return _new_state(self._state, ((k + 1) * dt, q, v))
+
+    def taken_in_python(self, integ: DormandPrince853) -> None:
+        """The Simulator took its last step in Python: the kernel may continue from `integ`'s solution."""
+        self._integ, self._token = integ, integ._last  # noqa: SLF001
+        self._holds = self._moved = False
+
+    def release(self) -> None:
+        """Write the solution back to the integrator, if the kernel moved it, for Python to step."""
+        integ = self._integ
+        if self._moved and integ is not None:
+            self._write_back(integ)
+        self._holds = self._moved = False
+
+    def _take_over(self, integ: DormandPrince853) -> None:
+        """The integrator's solution into the arrays (`kernel.event_step`'s layout)."""
+        k, st, arr = self._k, self._st, self._arr
+        st[k.T], st[k.H], st[k.T_OLD], st[k.H_OLD] = integ._t, integ._h, integ._t_old, integ._h_old  # noqa: SLF001
+        st[k.ERR], st[k.ERR_OLD] = integ._err, integ._err_old  # noqa: SLF001
+        arr[k.Y], arr[k.F], arr[k.Y_OLD], arr[k.DENSE:k.KK] = integ._y, integ._f, integ._y_old, integ._dense  # noqa: SLF001
+        last, origin = integ._last, integ._origin  # noqa: SLF001
+        assert last is not None
+        st[k.HAS_LAST], st[k.LAST_T] = 1.0, last[0]
+        st[k.LAST_Q:k.LAST_Q + 3], st[k.LAST_V:k.LAST_V + 3] = last[1], last[2]
+        st[k.LAST_EST] = integ._estimates.get(last[1], 0.0)  # noqa: SLF001  (what a restart from it reads)
+        st[k.HAS_ORIGIN] = float(origin is not None)
+        if origin is not None:
+            st[k.ORIGIN_T] = origin[0]
+            st[k.ORIGIN_Q:k.ORIGIN_Q + 3], st[k.ORIGIN_V:k.ORIGIN_V + 3] = origin[1], origin[2]
+        st[k.KNOWN] = 0.0  # the screen's kept gaps are of another step
+        self._holds, self._moved, self._q = True, False, None
+
+    def _write_back(self, integ: DormandPrince853) -> None:
+        """The arrays' solution into the integrator's attributes, as its own steps would have left them
+        (the history of internal steps pruned to the one that covers the last output)."""
+        k, st, arr = self._k, self._st.tolist(), self._arr
+        integ._t, integ._h, integ._t_old, integ._h_old = st[k.T], st[k.H], st[k.T_OLD], st[k.H_OLD]  # noqa: SLF001
+        integ._err, integ._err_old = st[k.ERR], st[k.ERR_OLD]  # noqa: SLF001
+        integ._y, integ._y_old = arr[k.Y].copy(), arr[k.Y_OLD].copy()  # noqa: SLF001
+        integ._f[:], integ._dense[:] = arr[k.F], arr[k.DENSE:k.KK]  # noqa: SLF001
+        integ._last = (st[k.LAST_T], tuple(st[k.LAST_Q:k.LAST_Q + 3]), tuple(st[k.LAST_V:k.LAST_V + 3]))  # noqa: SLF001
+        integ._origin = ((st[k.ORIGIN_T], tuple(st[k.ORIGIN_Q:k.ORIGIN_Q + 3]), tuple(st[k.ORIGIN_V:k.ORIGIN_V + 3]))  # noqa: SLF001
+                         if st[k.HAS_ORIGIN] else None)
+        integ._history[:] = [(integ._t_old, integ._h_old, integ._y_old, integ._dense.copy(), integ._err_old,  # noqa: SLF001
+                              integ._err)]  # noqa: SLF001
+        integ._history_starts[:] = [integ._t_old]  # noqa: SLF001
+        self._token = integ._last  # noqa: SLF001
+
+
+def for_simulator(sim: Simulator) -> EventStep | None:
+    """The compiled common step of `sim`, or None (no compiled gap screen, another method, a drive,
+    stick–slip friction, substeps near contact)."""
+    screen = sim._gap_screen  # noqa: SLF001
+    integ = sim.integrator
+    if screen is None or sim._drive is not None or sim._friction is not None:  # noqa: SLF001
+        return None
+    if type(integ) is not DormandPrince853 or not integ.compiled or (sim.substeps != 1 and sim._kinks):  # noqa: SLF001
+        return None
+    return EventStep(sim, screen._plan, stepper_slot.kernel().compiled_event_step())  # noqa: SLF001

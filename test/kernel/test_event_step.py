@@ -1,0 +1,112 @@
+"""The Simulator's compiled common step on scenes with events (`simulation.event_step`, `kernel.event_step`).
+
+A step it takes skips Python's DOP853 driver and gap check; every other step goes to Python as
+before (the same code that locates a crossing). The reference is that Python path alone
+(`_event_step` switched off: main's path), run side by side: every state, torque and error estimate
+bit for bit, on every shipped scene with stops or contact, under the scene's torque and under
+commands held step by step as the node sends them, across resets and a state set from outside.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("numba")
+from finger_sim.errors import SimulationDiverged  # noqa: E402
+from finger_sim.scene import load_scene  # noqa: E402
+from finger_sim.simulate import Simulator  # noqa: E402
+
+CONFIG = Path(__file__).resolve().parents[2] / "config"
+#: The shipped scenes that step through the Simulator's gap check with DOP853 (test_gap_screen's,
+#: without drive_grasp, whose drive steps its own mesh modes) and the hand's finger.
+SCENES = ("grasp_cylinder", "press_table", "grasp_impact", "grasp_rigid", "paper_to_stop", "finger_default",
+          "hard/chatter_wall", "hard/elastic_impact", "hard/grasp_release", "hard/rigid_fast",
+          "hard/soft_pass_through", "hard/stops_elastic")
+#: finger_default runs an hour (the node's default); its first seconds hold its settling onto the stop.
+SETTLE = 3.0
+#: Least share of the steps of a contact scene under its constant torque the kernel takes by itself.
+MIN_TAKEN = 0.9
+
+Command = Callable[[int, Simulator], "float | None"]
+
+
+def shipped(name: str):
+    scene = load_scene(CONFIG / f"{name}.yaml")
+    return scene.with_overrides(duration=SETTLE) if name == "finger_default" else scene
+
+
+def run(scene, compiled: bool, command: Command = lambda k, sim: None,
+        between: Callable[[int, Simulator], None] = lambda k, sim: None) -> tuple[np.ndarray, str, float]:
+    """Every step's (q, q', torque, error estimate) under command(k, sim) (None: the scene's torque),
+    with `between(k, sim)` before each step; the error that ended the run ("" if none); the share of
+    steps the kernel took."""
+    sim = Simulator(scene)
+    if not compiled:
+        sim._event_step = None  # the Python step alone
+    rows, error = [], ""
+    try:
+        for k in range(scene.step_count):
+            between(k, sim)
+            state = sim.step(command(k, sim))
+            rows.append((*state.q, *state.v, sim.torque, sim.error_estimate))
+    except SimulationDiverged as exc:
+        error = str(exc)
+    share = sim._event_step.taken / scene.step_count if compiled else 0.0
+    return np.array(rows), error, share
+
+
+def assert_same(scene, command: Command = lambda k, sim: None,
+                between: Callable[[int, Simulator], None] = lambda k, sim: None) -> float:
+    """The compiled and the Python runs agree bit for bit; the kernel's share of the steps."""
+    rows, error, share = run(scene, True, command, between)
+    reference, reference_error = run(scene, False, command, between)[:2]
+    np.testing.assert_array_equal(rows, reference)
+    assert error == reference_error
+    return share
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_runs_under_the_scene_torque_equal_the_python_step_bit_for_bit(name):
+    scene = shipped(name)
+    assert Simulator(scene)._event_step is not None
+    share = assert_same(scene)
+    if name in ("grasp_cylinder", "press_table", "grasp_impact", "grasp_rigid"):
+        assert share >= MIN_TAKEN  # the common contact step no longer enters Python
+
+
+@pytest.mark.parametrize("name", ["finger_default", "grasp_cylinder", "hard/grasp_release", "paper_to_stop"])
+def test_held_commands_as_the_node_sends_them_equal_the_python_step(name):
+    scene = shipped(name)
+    rng = np.random.default_rng(7)
+    # runs of one held value (the solution continues) and a new value at every step (it restarts)
+    values = np.repeat(rng.uniform(-0.03, 0.05, 40), rng.integers(1, 40, 40))
+    assert assert_same(scene, lambda k, sim: float(values[k % len(values)])) > 0.5
+
+
+def test_a_closed_loop_command_every_step_equals_the_python_step():
+    scene = shipped("finger_default").with_overrides(duration=0.6)
+
+    def pd(k, sim):  # towards θ1 = 0.9 rad and back: the stops are reached
+        goal = 0.9 if k < 300 else -0.2
+        return 0.2 * (goal - sim.q[0]) - 0.01 * sim.v[0]
+
+    assert assert_same(scene, pd) > 0.5
+
+
+def test_resets_a_state_set_from_outside_and_mixed_torques_equal_the_python_step():
+    scene = load_scene(CONFIG / "grasp_cylinder.yaml")
+
+    def command(k, sim):  # the scene's constant, then held values, then the scene's again
+        return None if k < 150 or k >= 330 else (0.02 if k < 250 else 0.03)
+
+    def between(k, sim):
+        if k == 200:
+            sim.reset()  # a new integrator: the kernel starts over from Python's first step
+        if k == 300:
+            sim.q, sim.v = sim.q, (sim.v[0] * 0.5, sim.v[1] * 0.5, sim.v[2] * 0.5)  # not on the constraint: as main
+
+    assert assert_same(scene, command, between) > 0.5
