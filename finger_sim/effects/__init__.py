@@ -4,8 +4,9 @@ Importing this package registers every effect. The five below come first, in thi
 because the order the elements are summed in fixes the last bits of every run (old logs
 re-simulate bit for bit); any other module in this folder registers after them, in name
 order, so a new effect needs only its module: a builder decorated with `@effect(key, ..., PARAMETERS,
-outputs=...)`, which the scene loader, the JSON Schema and every output table read (test_new_effect).
-A compiled form (a `kernel_code` law in the kernel) and node topics for its outputs are extra.
+outputs=...)`, which the scene loader, the JSON Schema and every output table read, and for its compiled
+form one `kernel_law(<its force function>, <the state it reads>)` line, which the kernel's force sum
+dispatches over (`kernel.force_laws`; test_new_effect). Node topics for its outputs are extra.
 """
 
 import importlib

@@ -8,7 +8,8 @@ turns its effect on, so an absent effect costs nothing per step.
 
 Adding an effect takes its module: a class implementing `ForceElement` and a builder decorated with
 `@effect("scene_key", ..., parameters, outputs=...)`, declaring the scene keys it reads (a key that is no
-`Scene` field is read through `Scene.effect_value`) and the quantities it reports.
+`Scene` field is read through `Scene.effect_value`) and the quantities it reports; for its compiled form,
+one `kernel_law(...)` line naming the plain function its `force` calls.
 """
 
 from __future__ import annotations
@@ -23,17 +24,21 @@ if TYPE_CHECKING:
 
 Vec3 = tuple[float, float, float]
 
-#: The compiled force laws an element may name as its `kernel_code` (the kernel's `numerics.generalized_force`
-#: computes each from the element's `kernel_params()`). NO_FORCE: an element whose Q is zero (the stops).
+#: Codes of the compiled force laws an element may name as its `kernel_code` (the kernel's force sum computes
+#: each from the element's `kernel_params()`). NO_FORCE: an element whose Q is zero (the stops).
 NO_FORCE = 0
+#: the laws the effects declare with `kernel_law` below (the kernel's lock-step rollout also reads these four)
 SPRING = 1
 DAMPING = 2
 GRAVITY = 3
 TIP_FORCE = 4
+#: the laws the kernel writes itself (`kernel.numerics`: the contact's candidate loops over its own block)
 CONTACT = 5
 #: the contact with stick–slip friction (`effects.friction_modes.StickSlipContact`)
 STICK_SLIP_CONTACT = 6
-CODES = (NO_FORCE, SPRING, DAMPING, GRAVITY, TIP_FORCE, CONTACT, STICK_SLIP_CONTACT)
+KERNEL_RESIDENT = (NO_FORCE, CONTACT, STICK_SLIP_CONTACT)
+#: What a compiled law may read after its parameters, by the kernel's names: t (s), q (rad), q' (rad/s).
+KERNEL_ARGUMENTS = ("t", "q0", "q1", "q2", "v0", "v1", "v2")
 
 
 class ForceElement(Protocol):
@@ -88,14 +93,56 @@ class ForceElement(Protocol):
 
     # Optional: `check_clearance(q)`, which refuses a scene whose start q the element forbids (contact: an
     # object overlapping a phalanx), called by the scene loader with a one-line ConfigError.
-    # Optional: the compiled form (finger_sim.kernel). An element without these two members
-    # makes the Simulator step its scene in Python.
-    #: which compiled force law (one of CODES above) computes `force`
+    # Optional: the compiled form (finger_sim.kernel). An element without these two members, or whose law
+    # is not registered, makes the Simulator step its scene in Python.
+    #: which compiled force law (a `kernel_law` code, or one of KERNEL_RESIDENT above) computes `force`
     kernel_code: ClassVar[int]
 
     def kernel_params(self) -> tuple[float, ...]:
         """The numbers the compiled law `kernel_code` reads (pure data, SI), in its order."""
         ...
+
+
+@dataclass(frozen=True)
+class KernelLaw:
+    """An element's compiled force law, declared by its effect's module (`kernel_law`).
+
+    `force(p1, …, pn, *state)` is a plain function of floats returning Q = (Q1, Q2, Q3), N·m: the element's
+    n `kernel_params()` first, then the kernel arguments named in `state` (KERNEL_ARGUMENTS). The Python
+    path calls it as it is; the kernel compiles it (numba) and calls it from its force sum for every element
+    whose `kernel_code` is `code` (`finger_sim.kernel.force_laws`). `callees`: plain functions it calls by
+    name, compiled with it.
+    """
+
+    code: int
+    force: Callable[..., Vec3]
+    state: tuple[str, ...]
+    callees: tuple[Callable[..., Any], ...] = ()
+
+    @property
+    def parameters(self) -> int:
+        """How many of the element's `kernel_params()` the law reads."""
+        return self.force.__code__.co_argcount - len(self.state)
+
+
+#: code → compiled force law, in registration order.
+KERNEL_LAWS: dict[int, KernelLaw] = {}
+
+
+def kernel_law(force: Callable[..., Vec3], state: tuple[str, ...], *, code: int | None = None,
+               callees: tuple[Callable[..., Any], ...] = ()) -> KernelLaw:
+    """Register `force` as a compiled force law (`KernelLaw`) under `code` (default: the next free one) and
+    return it; an element names it by `kernel_code = <law>.code`."""
+    if code is None:
+        code = max((*KERNEL_RESIDENT, *KERNEL_LAWS)) + 1
+    if code in KERNEL_RESIDENT or code in KERNEL_LAWS:
+        raise ValueError(f"compiled force law code {code} registered twice ({force.__qualname__})")
+    unknown = [name for name in state if name not in KERNEL_ARGUMENTS]
+    if unknown or force.__code__.co_argcount < len(state):
+        raise ValueError(f"{force.__qualname__}: state must be trailing arguments among {list(KERNEL_ARGUMENTS)}, "
+                         f"got {list(state)}")
+    law = KERNEL_LAWS[code] = KernelLaw(code, force, tuple(state), tuple(callees))
+    return law
 
 
 @dataclass(frozen=True)

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
-from finger_sim.effects.base import DAMPING, Smooth, Vec3, effect
+from finger_sim.effects.base import DAMPING, Smooth, Vec3, effect, kernel_law
 from finger_sim.effects.parameters import scalar
 
 if TYPE_CHECKING:
@@ -40,6 +40,9 @@ def damping_force(c: float, w1: float, w2: float, w3: float) -> Vec3:
     the damping's one law, which the compiled kernel compiles."""
     beta_dot = w3 - w1
     return (-c * w1 + c * beta_dot, -c * w2, -c * beta_dot)
+
+
+kernel_law(damping_force, ("v0", "v1", "v2"), code=DAMPING)
 
 
 #: Largest coefficient, N·m·s/rad: keeps the modal arithmetic (C²) finite.

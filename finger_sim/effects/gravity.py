@@ -6,7 +6,7 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
-from finger_sim.effects.base import GRAVITY, Smooth, Vec3, effect
+from finger_sim.effects.base import GRAVITY, Smooth, Vec3, effect, kernel_law
 from finger_sim.effects.parameters import vector
 from finger_sim.kinematics import distal_offset
 from finger_sim.model import FingerParams
@@ -63,6 +63,9 @@ def gravity_force(gx: float, gy: float, w1: float, w2: float, w3: float, alpha: 
         w2 * (-math.sin(t2) * gx + math.cos(t2) * gy),
         w3 * (-math.sin(psi) * gx + math.cos(psi) * gy),
     )
+
+
+kernel_law(gravity_force, ("q0", "q1", "q2"), code=GRAVITY)
 
 
 #: Largest component, m/s² (~1000 g).

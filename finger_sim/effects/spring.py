@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
-from finger_sim.effects.base import SPRING, Smooth, Vec3, effect
+from finger_sim.effects.base import SPRING, Smooth, Vec3, effect, kernel_law
 from finger_sim.effects.parameters import scalar
 from finger_sim.kinematics import distal_offset
 
@@ -43,6 +43,9 @@ def spring_force(stiffness: float, alpha: float, t1: float, t3: float) -> Vec3:
     compiles and the node's pip_joint effort (−kβ) reads. k in N·m/rad, angles in rad."""
     kb = stiffness * (t3 + alpha - t1)
     return (kb, 0.0, -kb)
+
+
+kernel_law(spring_force, ("q0", "q2"), code=SPRING)
 
 
 #: Largest stiffness, N·m/rad: far beyond any finger (the paper's spring is 1e-3, the stiff scene's

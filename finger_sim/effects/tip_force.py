@@ -6,7 +6,7 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
-from finger_sim.effects.base import TIP_FORCE, Smooth, Vec3, effect
+from finger_sim.effects.base import TIP_FORCE, Smooth, Vec3, effect, kernel_law
 from finger_sim.effects.parameters import vector
 from finger_sim.kinematics import distal_offset
 from finger_sim.model import FingerParams
@@ -51,6 +51,9 @@ def tip_force(fx: float, fy: float, r1: float, l3: float, alpha: float, t1: floa
     the tip force's one law, which the compiled kernel compiles."""
     psi = t3 + alpha
     return (r1 * (-math.sin(t1) * fx + math.cos(t1) * fy), 0.0, l3 * (-math.sin(psi) * fx + math.cos(psi) * fy))
+
+
+kernel_law(tip_force, ("q0", "q2"), code=TIP_FORCE)
 
 
 #: Largest component, N.

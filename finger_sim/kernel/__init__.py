@@ -63,19 +63,23 @@ COMPILED_FOLDERS = ("kernel", "effects", "integrators", "actuators", "simulation
 @functools.cache
 def compiled_sources_digest() -> str:
     """A digest (16 hex digits) of the name, size and modification time of every source the
-    kernel compiles from: the package's top-level modules and COMPILED_FOLDERS."""
+    kernel compiles from: the package's top-level modules and COMPILED_FOLDERS, and a force-law
+    dispatch generated for a registry other than the committed one (`force_laws.uncommitted_source`)."""
+    from finger_sim.kernel.force_laws import uncommitted_source
+
     package = Path(__file__).parent.parent
     files = sorted([*package.glob("*.py"), *(f for d in COMPILED_FOLDERS for f in (package / d).glob("*.py"))])
     digest = hashlib.sha256()
     for f in files:
         stat = f.stat()
         digest.update(f"{f.relative_to(package)}:{stat.st_size}:{stat.st_mtime_ns}\n".encode())
+    digest.update(uncommitted_source().encode())
     return digest.hexdigest()[:16]
 
 
 @functools.cache
-def use_writable_cache() -> None:
-    """Point numba's cache at a writable folder keyed by `compiled_sources_digest` (module docstring)."""
+def cache_folder() -> Path:
+    """The writable folder, keyed by `compiled_sources_digest`, that numba caches the kernel in (module docstring)."""
     user = os.environ.get("NUMBA_CACHE_DIR")
     own = Path(__file__).parent / "__pycache__" / "numba"
     candidates = [Path(user)] if user else [own, FALLBACK_CACHE_DIR, Path(tempfile.gettempdir()) / "finger_sim_numba"]
@@ -87,6 +91,13 @@ def use_writable_cache() -> None:
             continue
         if os.access(target, os.W_OK):
             break
+    return target
+
+
+@functools.cache
+def use_writable_cache() -> None:
+    """Point numba's cache at `cache_folder()`."""
+    target = cache_folder()
     # numba's config, not the environment: child processes (a node, Dask workers) key their own
     try:
         import numba

@@ -7,9 +7,11 @@ The kernel reads the model as pure data, so one compiled function serves every s
     then per element, in the system's summation order: code, n, then its n parameters;
     with a drive (spec §8), its block last (`Drive.kernel_block`: the mode, ..., NaN as marker).
 
-An element's compiled form is `kernel_code` (one of the codes below) and `kernel_params()`
-(floats) on the element itself (see `finger_sim.effects.base.ForceElement`); an element
-without them has no compiled form, and the Simulator then steps the scene in Python.
+An element's compiled form is `kernel_code` (a law its effect declares, `effects.base.kernel_law`, or one
+the kernel writes itself) and `kernel_params()` (floats) on the element itself (see
+`finger_sim.effects.base.ForceElement`); an element without them, or whose law this process's kernel
+does not compile (`force_laws.compiled_codes`), has no compiled form, and the Simulator then steps the
+scene in Python.
 """
 
 from __future__ import annotations
@@ -19,7 +21,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from finger_sim.effects.base import CODES, CONTACT, DAMPING, GRAVITY, NO_FORCE, SPRING, STICK_SLIP_CONTACT, TIP_FORCE
+from finger_sim.effects.base import CONTACT, DAMPING, GRAVITY, NO_FORCE, SPRING, STICK_SLIP_CONTACT, TIP_FORCE
+from finger_sim.kernel.force_laws import compiled_codes
 from finger_sim.projection import NON_FINITE, NOT_CONVERGED, OK
 from finger_sim.stepper_slot import BREAKPOINT, STATE_NON_FINITE, STEP_TOO_SMALL
 
@@ -48,7 +51,7 @@ def model_array(system: "FingerSystem") -> np.ndarray | None:
     mirrored = []  # (element, offset of its parameters): elements whose discrete state the model follows
     for element in system.elements:
         code = getattr(element, "kernel_code", None)
-        if code not in CODES:
+        if code not in compiled_codes():
             return None
         params = [float(x) for x in element.kernel_params()]
         if hasattr(element, "mirror"):

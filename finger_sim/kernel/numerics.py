@@ -1,10 +1,11 @@
 """The compiled numerics: the acceleration solve, the force elements, projection, RK stages, DOP853.
 
 The laws are not written here: the acceleration solve (`dynamics.schur_solve`), the projection
-(`projection.project_state`), the smooth force elements (`spring_force`, `damping_force`,
-`gravity_force`, `tip_force`) and the torque profiles (`inputs.torque_at`, `inputs.switches_inside`)
-are the plain functions the Python path calls, compiled here as they are. What remains is the
-flat model's dispatch, the contact law (being reworked beside this), and the steppers: the same
+(`projection.project_state`), the force laws the effects declare (`effects.base.kernel_law`, dispatched
+by `element_force`, generated from the registry: `kernel.force_laws`) and the torque profiles
+(`inputs.torque_at`, `inputs.switches_inside`) are the plain functions the Python path calls, compiled
+here as they are. What remains is the flat model's force sum, the contact law (being reworked beside
+this), and the steppers: the same
 arithmetic, in the same order, as their Python references (`ExplicitRungeKutta.step`, scipy's
 DOP853), so both paths agree to round-off (the tests ask 1e-13 rad).
 Compiled by numba on first use and cached on disk (`cache=True`; see `finger_sim.kernel`).
@@ -14,32 +15,20 @@ Errors are status codes, raised as exceptions by the Python callers.
 from __future__ import annotations
 
 import math
-import types
-from collections.abc import Callable
 
 import numpy as np
 
-from finger_sim.kernel import use_writable_cache
-
-use_writable_cache()  # before numba reads NUMBA_CACHE_DIR
-try:
-    from numba import njit
-except ImportError:  # no numba: the same functions run as plain Python (slow, same numbers)
-
-    def njit(**_options):  # type: ignore[no-untyped-def]
-        return lambda function: function
-
+from finger_sim.kernel.jit import JIT, LAW, compiled, njit  # first: it keys numba's cache
 
 from finger_sim import dynamics, inputs, projection
-from finger_sim.effects import damping, gravity, spring
-from finger_sim.effects import tip_force as tip_force_effect
 from finger_sim.effects import friction_modes
 from finger_sim.effects.contact import MIN_DISTANCE
 from finger_sim.effects.friction_modes import KERNEL_BLOCK as SLIP_BLOCK
 from finger_sim.effects.friction_modes import SLIDING
 from finger_sim.inputs import BREAK_EPS, SQUARE, STEP
-from finger_sim.kernel.layout import (BREAKPOINT, CONTACT, DAMPING, GRAVITY, HEADER, NON_FINITE, NOT_CONVERGED, OK,
-                                     SPRING, STATE_NON_FINITE, STICK_SLIP_CONTACT, TIP_FORCE)
+from finger_sim.kernel.force_laws import element_forces
+from finger_sim.kernel.layout import (BREAKPOINT, CONTACT, HEADER, NON_FINITE, NOT_CONVERGED, OK, STATE_NON_FINITE,
+                                     STICK_SLIP_CONTACT)
 
 
 # DOP853's step-size control: scipy's constants (scipy/integrate/_ivp/rk.py).
@@ -50,27 +39,12 @@ ERROR_EXPONENT = -1.0 / 8.0  # −1/(order of the error estimator + 1)
 #: DOP853's step floor, in ulps of t (scipy's rule)
 MIN_STEP_ULPS = 10.0
 
-JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
-#: The laws compiled into their callers' own code (numba IR inlining), as the hand-written copies were.
-LAW = {**JIT, "inline": "always"}
-
-
-def compiled(law: Callable, **callees: Callable) -> Callable:
-    """`law` (a plain function) compiled, with the plain functions it calls by name (`callees`) bound
-    to their compiled forms: the same code object under other globals, so nothing is copied."""
-    function = types.FunctionType(law.__code__, {**law.__globals__, **callees}, law.__name__, law.__defaults__)
-    function.__qualname__, function.__doc__, function.__module__ = law.__qualname__, law.__doc__, law.__module__
-    return njit(**LAW)(function)
-
-
 #: The laws compiled from their one definition (the plain functions the Python path calls).
 schur_solve = njit(**LAW)(dynamics.schur_solve)
 trig = njit(**LAW)(dynamics.trig)
 project_state = njit(**LAW)(projection.project_state)
-spring_force = njit(**LAW)(spring.spring_force)
-damping_force = njit(**LAW)(damping.damping_force)
-gravity_force = njit(**LAW)(gravity.gravity_force)
-tip_force = njit(**LAW)(tip_force_effect.tip_force)
+#: Q of an element whose law an effect declares (`effects.base.kernel_law`): the dispatch generated from the registry.
+element_force = element_forces().element_force
 linkage_slope = njit(**LAW)(friction_modes.linkage_slope)
 tangent_gain = njit(**LAW)(friction_modes.tangent_gain)
 sliding_friction = njit(**LAW)(friction_modes.sliding_friction)
@@ -220,21 +194,15 @@ def generalized_force(m, t, q0, q1, q2, v0, v1, v2, tau):
     for _ in range(int(m[HEADER])):
         code, n = int(m[o]), int(m[o + 1])
         o += 2
-        e1 = e2 = e3 = 0.0
-        if code == SPRING:
-            e1, e2, e3 = spring_force(m[o], m[o + 1], q0, q2)
-        elif code == DAMPING:
-            e1, e2, e3 = damping_force(m[o], v0, v1, v2)
-        elif code == GRAVITY:
-            e1, e2, e3 = gravity_force(m[o], m[o + 1], m[o + 2], m[o + 3], m[o + 4], m[o + 5], q0, q1, q2)
-        elif code == TIP_FORCE:
-            e1, e2, e3 = tip_force(m[o], m[o + 1], m[o + 2], m[o + 3], m[o + 4], q0, q2)
-        elif code == CONTACT:
+        e2 = 0.0
+        if code == CONTACT:
             e1, e3 = _contact(m, o, q0, q2, v0, v2, False, 0.0, 0.0, 0.0, 0.0, 0.0)
         elif code == STICK_SLIP_CONTACT:  # the mode block first (`StickSlipContact.kernel_params`)
             slide = m[o] == SLIDING and m[o + 3] != 0.0
             n3 = linkage_slope(m[4], m[5], m[6], q0, q1, q2) if slide else 0.0
             e1, e3 = _contact(m, o + SLIP_BLOCK, q0, q2, v0, v2, slide, m[o + 1], m[o + 2], m[o + 3], m[o + 4], n3)
+        else:  # a declared law (NO_FORCE: zero)
+            e1, e2, e3 = element_force(code, m, o, t, q0, q1, q2, v0, v1, v2)
         f1 += e1
         f2 += e2
         f3 += e3
