@@ -6,7 +6,8 @@ re-simulate bit for bit); any other module in this folder registers after them, 
 order, so a new effect needs only its module: a builder decorated with `@effect(key, ..., PARAMETERS,
 outputs=...)`, which the scene loader, the JSON Schema and every output table read, and for its compiled
 form one `kernel_law(<its force function>, <the state it reads>)` line, which the kernel's force sum
-dispatches over (`kernel.force_laws`; test_new_effect). Node topics for its outputs are extra.
+dispatches over (`kernel.force_laws`; test_new_effect), after `python -m finger_sim.kernel.force_laws` has
+rewritten the committed dispatch (a test asks). Node topics for its outputs are extra (docs/architecture.md).
 """
 
 import importlib

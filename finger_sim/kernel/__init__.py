@@ -1,4 +1,4 @@
-"""The compiled stepping kernel (numba): the same numbers as the Python path, 5-10× cheaper per step.
+"""The compiled stepping kernel (numba): the same numbers as the Python path, cheaper per step (docs/kernel.md).
 
 `finger_sim.simulate.Simulator(scene, kernel=...)` picks the path: "auto" (the default) runs
 the compiled kernel whenever numba imports and every force element has a compiled form,
@@ -10,7 +10,7 @@ module is the `CompiledKernel` there, installed when it is imported.
 
 Compilation is cached on disk (numba's `cache=True`), so the node and the CLI pay it once
 per machine. numba checks a cached function against its own source file only, not against the
-laws it compiles from other modules (`numerics.compiled`, `drive._rebound`, the effects' laws):
+laws it compiles from other modules (`jit.compiled`, `drive._rebound`, the effects' laws):
 an edited law would be served stale. So `use_writable_cache()` points NUMBA_CACHE_DIR at a
 folder named by a digest of every source the kernel compiles from (`compiled_sources_digest`):
 `kernel/__pycache__/numba/<digest>` beside the modules, or FALLBACK_CACHE_DIR/<digest> where the
