@@ -34,7 +34,8 @@ from finger_sim.simulation.locate import illinois
 if TYPE_CHECKING:
     from finger_sim.simulate import Simulator
 
-#: Tolerances of the ride's ODE θ1' = ω(t, θ1) (rad): far below auto's 1e-6 rad promise.
+#: Tolerances of the ride's ODE θ1' = ω(t, θ1) (rad): far below auto's 1e-6 rad promise; a ride adds
+#: RIDE_RTOL·|Δθ1| + RIDE_ATOL to the run's error estimate.
 RIDE_RTOL, RIDE_ATOL = 1e-12, 1e-14
 #: Half-width of the central difference that gives the ride's θ1'' = dω/dt, s (error ∝ RIDE_PROBE²).
 RIDE_PROBE = 1e-5
@@ -62,7 +63,9 @@ def advance(sim: Simulator, t0: float, t1: float, torque: TorqueFn) -> None:
     t, q, v = t0, sim.q, sim.v
     for _ in range(MAX_EVENTS_PER_STEP):
         if friction.mode == LOCKED:
+            start = q
             t, q, v, tau_h, released = _ride(sim, friction, t, t1, q, torque)
+            _carry(sim, start, q, RIDE_RTOL * abs(q[0] - start[0]) + RIDE_ATOL)
             if not released:
                 friction.hold = tau_h
                 friction.remember(t1, q, v)
@@ -161,7 +164,17 @@ def _turn(sim: Simulator, friction: StickSlipContact, t: float, q: Vec3, torque:
         friction.mode, friction.direction, friction.hold = LOCKED, 0.0, tau_h
     else:
         friction.mode, friction.direction = SLIDING, -math.copysign(1.0, tau_h)
-    return riding_state(sim, friction, t, q[0])
+    riding = riding_state(sim, friction, t, q[0])
+    _carry(sim, q, riding[0], 0.0)
+    return riding
+
+
+def _carry(sim: Simulator, q_from: Vec3, q_to: Vec3, error: float) -> None:
+    """Let the run's error estimate (`Simulator.error_estimate`) follow a state the ride moved or re-closed:
+    q_from's plus `error` (rad); nothing for an integrator without an estimate."""
+    carry = getattr(sim.integrator, "carry", None)
+    if carry is not None:
+        carry(q_from, q_to, error)
 
 
 def _turn_event(sim: Simulator, friction: StickSlipContact, t: float, q: Vec3, v: Vec3, t1: float, q1: Vec3,

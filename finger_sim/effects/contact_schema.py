@@ -4,7 +4,7 @@ law), `model.phalanx_radius` and the top-level `objects` with their own law, str
 Bounds and defaults are the loader's own (`contact_geometry`, `friction_modes` and the scene's
 MAX_CONTACT_* constants), so an editor refuses what `finger_sim.scene.load_scene` refuses. Checks between
 keys that JSON Schema cannot state stay the loader's: μ_s ≥ μ_k, object names that differ, a non-zero
-normal or direction, stick_slip without a drive or moving object.
+normal or direction, stick_slip with a moving object and a drive or joint limits.
 """
 
 from __future__ import annotations

@@ -149,6 +149,13 @@ class DormandPrince853(Integrator):
         flow is not modelled."""
         return self._estimates.get(q, 0.0)
 
+    def carry(self, q_from: Vec3, q_to: Vec3, error: float) -> None:
+        """Give q_to, a state another solver reached from q_from (a ride with a moving object,
+        `finger_sim.stick_slip_moving`), q_from's estimate plus that solver's own `error` (rad)."""
+        if len(self._estimates) >= MAX_OUTPUTS:
+            self._estimates = dict(list(self._estimates.items())[-KEEP_OUTPUTS:])
+        self._estimates[q_to] = self._estimates.get(q_from, 0.0) + error
+
     def step(self, t: float, q: Vec3, v: Vec3, dt: float, torque: TorqueFn) -> tuple[Vec3, Vec3]:
         target = t + dt
         last = self._last

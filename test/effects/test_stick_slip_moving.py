@@ -224,3 +224,12 @@ def test_the_stick_slip_sawtooth_on_the_moving_table_follows_the_reference(pushe
     starts = np.array([p[0] for p in pieces])
     theta_ref = np.array([pieces[np.searchsorted(starts, t, side="right") - 1][2](t) for t in traj.t[rows]])
     assert np.abs(traj.q[rows, 0] - theta_ref).max() < THETA_TOLERANCE
+
+
+def test_the_run_reports_the_error_its_steps_estimated_through_a_ride():
+    """The summary's estimate is carried through the ride (its own bound added), not restarted at 0 by the
+    states a ride moves: a run that ends riding reports the estimate of the swing that led to the lock."""
+    riding = simulate(scene_from_dict(data(0.35)))
+    locked = simulate(scene_from_dict(data(0.25)))  # the same path, locked on the table at rest
+    assert riding.outputs["friction_mode"][-1] == 1.0 and riding.v[-1, 0] != 0.0
+    assert 0.0 < locked.error_estimate <= riding.error_estimate < THETA_TOLERANCE
