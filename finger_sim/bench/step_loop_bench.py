@@ -1,8 +1,8 @@
 """The stepping thread's CPU per step of a real finger_node or finger_hand, in this process.
 
-    python -m finger_sim.bench.step_loop_bench [--hand FILE] [--steps 10000] [--profile]
+    python -m finger_sim.bench.step_loop_bench [--hand FILE | --scene NAME] [--steps 10000] [--profile]
 
-Builds the node (paper_flexion, or the fingers of a hand file; torque from the topics, nobody
+Builds the node (paper_flexion or --scene, or the fingers of a hand file; torque from the topics, nobody
 sends; realtime_factor 0, publishing every step, markers at 30 Hz, recording on unless
 --no-record), publishes the first state, runs 500 steps of warm-up, then calls the stepping
 loop's `_advance()` --steps times back to back: the work of one step (physics, CDR packing,
@@ -28,6 +28,7 @@ PROFILE_ROWS = 35
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="step_loop_bench", description=__doc__.split("\n\n")[0])
     parser.add_argument("--hand", help="a hand file: finger_hand instead of finger_node")
+    parser.add_argument("--scene", default="paper_flexion", help="finger_node's scene (default paper_flexion)")
     parser.add_argument("--steps", type=int, default=10_000)
     parser.add_argument("--no-record", action="store_true")
     parser.add_argument("--profile", action="store_true", help="cProfile's table instead of the timing")
@@ -45,7 +46,7 @@ def main(argv: list[str] | None = None) -> int:
             params["hand"] = args.hand
         else:
             from finger_sim.ros.node import FingerNode as node_type  # type: ignore[assignment]
-            params["scene"] = "paper_flexion"
+            params["scene"] = args.scene
         node = node_type(parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])
         try:
             node._publish_state(force=True)
