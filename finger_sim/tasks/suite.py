@@ -35,7 +35,7 @@ from finger_sim.tasks import batch, report
 from finger_sim.tasks.controllers import Factory, commanded_input, load_factory
 from finger_sim.tasks.ros_runner import run_ros_task
 from finger_sim.tasks.runner import TaskRun, run_task
-from finger_sim.tasks.schema import Task, load_task
+from finger_sim.tasks.schema import Task
 
 #: A --vary key with this prefix sets a scene key of the tasks, not a controller parameter.
 SCENE_PREFIX = "scene."
