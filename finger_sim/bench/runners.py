@@ -277,16 +277,7 @@ def run_scipy(
     for a, b in zip(edges, edges[1:]):
         inside = grid[(grid >= a - 1e-12) & (grid <= b + 1e-12)]
         pieces.append((a, b, make(profile.on_segment(a, b)), inside))
-    count = [0]
-
-    def counted(fn):  # type: ignore[no-untyped-def]
-        def wrapped(t, y):  # type: ignore[no-untyped-def]
-            count[0] += 1
-            if count[0] > MAX_SCIPY_EVALUATIONS:
-                raise _GaveUp
-            return fn(t, y)
-
-        return wrapped
+    count, counted = _counted()
 
     def solve_all(t_eval: bool) -> tuple[np.ndarray, np.ndarray, int]:
         count[0] = 0
