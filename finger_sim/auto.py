@@ -8,10 +8,12 @@ Three steps, each stated in the reason `choose_method` returns (and logs):
    *discontinuous* when its torque switches (`Profile.breakpoints`); else *smooth*.
 2. The rate: the tabulated rate at or below 1/dt (accuracy measured at an equal or larger
    step, so no better than what the scene gets), or the slowest one below all of them.
-3. `pick`: the cheapest method of the table's row whose worst error over the kind's bench
-   scenes was within AUTO_TARGET, among those stable on the scene's fastest mode at its dt
-   (`stability.stable_at`); if none reached the target, the most accurate stable one; if
-   none is stable, FALLBACK (L-stable). The bench report calls the same `pick`.
+3. `pick`: among the methods of the table's row whose worst error over the kind's bench scenes
+   was within AUTO_TARGET and that are stable on the scene's fastest mode at its dt
+   (`stability.stable_at`), the most accurate of those costing at most COST_MARGIN times the
+   cheapest of them (costs closer than timing noise count as equal); if none reached the target,
+   the most accurate stable one; if none is stable, FALLBACK (L-stable). No pick is dearer than
+   another stable row at the same or better error. The bench report calls the same `pick`.
 
 Contact (spec §7) adds a mode of 10²–10⁴ rad/s that exists only while a phalanx touches an
 object. Before the accuracy promise, auto stepped such a scene with the table's explicit choice split into m
@@ -91,6 +93,11 @@ REALTIME_SHARE = 0.5
 #: The table's fixed-step method is trusted on a scene it did not measure only when its worst error
 #: over the kind's bench scenes is this many times inside the tolerance.
 TABLE_MARGIN = 10.0
+#: Costs of the table's rows within this factor of the cheapest row within the target count as equal in
+#: `pick` (the most accurate of them wins): the same row's µs/step moved by 10–30 % between the last four
+#: full bench runs (finger_sim/data/recommendation.json's history, e.g. discontinuous at 100 Hz: rk4 1.99,
+#: 1.94, 3.55, 2.03; rk6 2.28, 2.59, 2.72, 2.28), enough to flip a pick decided by a few percent.
+COST_MARGIN = 1.15
 #: The measured table, package data written by the bench.
 RECOMMENDATION_FILE = Path(__file__).parent / "data" / "recommendation.json"
 
@@ -168,8 +175,9 @@ def pick(rows: Sequence[Sequence[object]], root: complex, dt: float, target: flo
     """(method, why) from one row of the table, the rule auto and the bench report share.
 
     rows: (method, worst error rad, µs per step), cheapest first; root: the scene's fastest
-    mode, 1/s; dt: s; target: rad. The cheapest method within `target` that is stable at dt; else the
-    most accurate stable one; else FALLBACK. Methods not in METHODS are ignored.
+    mode, 1/s; dt: s; target: rad. Of the stable methods within `target`, the most accurate among those
+    costing at most COST_MARGIN × the cheapest one (on equal error the cheaper); else the most accurate
+    stable one; else FALLBACK. Methods not in METHODS are ignored.
     """
     stable: list[Row] = []
     skipped: list[str] = []
@@ -185,11 +193,15 @@ def pick(rows: Sequence[Sequence[object]], root: complex, dt: float, target: flo
     unstable = f"; unstable here: {', '.join(skipped)}" if skipped else ""
     within = [row for row in stable if row.error <= target]
     if within:
-        best = within[0]
-        missed = "".join(f"; cheaper {r.method} missed it ({r.error:.1e} rad)" for r in stable if r.cost < best.cost)
+        cheapest = min(row.cost for row in within)
+        best = min((row for row in within if row.cost <= COST_MARGIN * cheapest), key=lambda r: (r.error, r.cost))
+        missed = "".join(f"; cheaper {r.method} missed it ({r.error:.1e} rad)" for r in stable
+                         if r.cost < best.cost and r.error > target)
+        close = "".join(f"; {r.method} as cheap within timing noise ({r.cost:.3g} µs/step) but less accurate ({r.error:.1e} rad)"
+                        for r in within if r.cost < best.cost)
         return best.method, (
             f"the bench measured {best.method} as the cheapest method within {target:g} rad "
-            f"(worst {best.error:.1e} rad, {best.cost:.0f} µs/step){missed}{unstable}"
+            f"(worst {best.error:.1e} rad, {best.cost:.0f} µs/step){close}{missed}{unstable}"
         )
     if stable:
         best = min(stable, key=lambda r: r.error)

@@ -118,6 +118,36 @@ def test_pick_is_the_cheapest_stable_row_within_the_target():
     assert auto.pick((("rk4", 1e-9, 15.0),), fast, 1e-3) == (auto.FALLBACK, f"no tabulated method is stable; unstable here: rk4: {auto.FALLBACK}, L-stable")
 
 
+def test_pick_takes_the_most_accurate_row_among_those_as_cheap_within_timing_noise():
+    """issue 17 item 5: a pick is never dearer than another stable row at the same or better error, and a
+    difference of cost below COST_MARGIN (the spread of one row between bench runs) does not decide it."""
+    slow = -10j
+    # the discontinuous row at 100 Hz of two full bench runs: rk4 and rk6 swapped places by 12 %
+    run_a = (("rk4", 6.95e-08, 2.03), ("rk6", 7.11e-11, 2.28), ("dop8", 5.13e-14, 2.83))
+    run_b = (("rk6", 7.11e-11, 2.72), ("dop8", 5.13e-14, 3.2), ("rk4", 6.95e-08, 3.55))
+    assert auto.pick(run_a, slow, 1e-2)[0] == auto.pick(run_b, slow, 1e-2)[0] == "rk6"
+    assert "rk4 as cheap within timing noise (2.03 µs/step) but less accurate (6.9e-08 rad)" in auto.pick(run_a, slow, 1e-2)[1]
+    # beyond the margin the cheaper one within the target wins: 2.03 × 1.15 < 2.4
+    assert auto.pick((("rk4", 6.95e-08, 2.03), ("rk6", 7.11e-11, 2.4)), slow, 1e-2)[0] == "rk4"
+    # a row both cheaper and more accurate than another is picked over it, whatever their order
+    assert auto.pick((("dop8", 1e-12, 3.0), ("rk6", 1e-9, 3.1)), slow, 1e-3)[0] == "dop8"
+    # equal error: the cheaper
+    assert auto.pick((("rk6", 1e-12, 2.0), ("dop8", 1e-12, 2.2)), slow, 1e-3)[0] == "rk6"
+
+
+def test_no_pick_of_the_shipped_table_is_dominated_by_another_stable_row():
+    for kind, by_rate in auto.RECOMMENDATION.items():
+        for rate, rows in by_rate.items():
+            for target in (auto.AUTO_TARGET, auto.AUTO_TARGET / auto.TABLE_MARGIN):
+                method = auto.pick(rows, -10j, 1.0 / rate, target)[0]
+                chosen = next(auto.Row(*r) for r in rows if r[0] == method)
+                if chosen.error > target:
+                    continue  # none within the target: the most accurate
+                assert not [r for r in map(auto.Row._make, rows) if r.error <= chosen.error and r.cost <= chosen.cost
+                            and (r.error, r.cost) != (chosen.error, chosen.cost)
+                            and stable_at(METHODS[r.method], -10j, 1.0 / rate)], (kind, rate, target)
+
+
 def test_explicit_methods_stay_refused_where_auto_is_not_used():
     with pytest.raises(StabilityError) as info:
         Simulator(scene("stiff_spring", dt=1e-3).with_overrides(method="rk4"))
