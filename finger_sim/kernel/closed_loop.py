@@ -45,10 +45,10 @@ from numba import njit, prange  # noqa: E402  (after the cache folder is set)
 
 from finger_sim.kernel.event_checks import EVENT_TOLERANCE, predicted_crossing  # noqa: E402
 from finger_sim.integrators import dop853  # noqa: E402
-from finger_sim.inputs import HELD_ARRAY  # noqa: E402
+from finger_sim.inputs import HELD, HELD_ARRAY  # noqa: E402
 from finger_sim.kernel.numerics import (ERROR_EXPONENT, JIT, LAW, MAX_FACTOR, MIN_FACTOR, OK, SAFETY,  # noqa: E402
                                         _profile_step, _rhs, compiled, distal_circle, dop853_attempt, dop853_output,
-                                        joint_plane, proximal_circle, tip_plane)
+                                        joint_plane, proximal_circle, tip_plane, torque_at)
 from finger_sim import grip_law as grip  # noqa: E402
 
 #: A row's status after `run` (module docstring).
@@ -73,6 +73,8 @@ LAST_OUTPUT_SLACK = 1e-9
 #: scipy's DOP853 coefficients, as `DormandPrince853` passes them.
 A, B, C, E3, E5, D = dop853._A, dop853._B, dop853._C, dop853._E3, dop853._E5, dop853._D
 N_NODES, N_STAGES = len(dop853._NODES), dop853._N_STAGES
+#: The stage nodes c of an attempt, as `DormandPrince853._advance` evaluates τ(t + c h).
+NODES = np.array(dop853._NODES)
 MAX_ATTEMPTS, MAX_STEP = dop853.MAX_ATTEMPTS, dop853.MAX_STEP
 #: An internal step below this many ulps of t fails (`DormandPrince853._advance`).
 MIN_STEP_ULPS = 10.0
@@ -143,13 +145,19 @@ def may_cross(g0, r0, g1, r1, h):
 
 
 @njit(**JIT)
-def _advance(m, rtol, atol, st, y, f, y_old, dense, kk, y_new, taus):
-    """One accepted internal step from st[I_T]: `DormandPrince853._advance`. False if it fails."""
+def _advance(m, rtol, atol, st, y, f, y_old, dense, kk, y_new, taus, prof):
+    """One accepted internal step from st[I_T]: `DormandPrince853._advance`. False if it fails.
+    prof: a compiled profile (`inputs.profile_array`), τ at each attempt's stage times; or
+    HELD_ARRAY: taus already hold the held torque."""
     t, h = st[I_T], st[I_H]
     rejected = False
+    smooth = int(prof[0]) != HELD
     for _ in range(MAX_ATTEMPTS):
         if h < MIN_STEP_ULPS * abs(np.nextafter(t, np.inf) - t):
             return False
+        if smooth:  # `DormandPrince853._advance`: τ(t + c h) at every node
+            for c in range(N_NODES):
+                taus[c] = torque_at(prof, 0.0, t + NODES[c] * h)
         norm = dop853_attempt(m, A, B, C, E3, E5, D, t, y, f, h, taus, rtol, atol, kk, y_new, dense)
         if norm < 1.0:
             factor = MAX_FACTOR if norm == 0.0 else min(MAX_FACTOR, SAFETY * norm**ERROR_EXPONENT)
@@ -186,7 +194,7 @@ def _dop853_step(m, rtol, atol, t, dt, command, x, st, y, f, y_old, dense, kk, y
     for c in range(N_NODES):
         taus[c] = command
     while st[I_T] < target:
-        if not _advance(m, rtol, atol, st, y, f, y_old, dense, kk, y_new, taus):
+        if not _advance(m, rtol, atol, st, y, f, y_old, dense, kk, y_new, taus, HELD_ARRAY):
             return False
     status, _, _ = dop853_output(m, st[I_T_OLD], st[I_H_OLD], y_old, dense, target, out)
     if status != OK:

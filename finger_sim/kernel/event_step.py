@@ -15,7 +15,9 @@ about 0.1 µs per argument), which `simulation.event_step` moves to and from the
 attributes when Python steps:
 
     [n_model, n_plan, n_gaps, the model (the integrator's), the gap plan (`gap_screen`), st, arr, work]
-    st: the scalars T … X below, the stage torques (N_NODES), then a copy of the scalars;
+    st: the scalars T … X below, the stage torques (N_NODES), a copy of the scalars, then the torque
+        profile the PROFILE flag steps under (`inputs.profile_array`, zero-padded to PROFILE_SIZE) and
+        a held value's code (`inputs.HELD`);
     arr (ROWS × 6): y, f, y_old, dense (7 rows), the attempt's stages (16), y_new, out, then a
         copy of y, f, y_old and dense;
     work (4 × n_gaps): the gap screen's.
@@ -32,7 +34,7 @@ from finger_sim.integrators import dop853  # noqa: E402
 from finger_sim.kernel.closed_loop import I_H, I_H_OLD, I_T, I_T_OLD, N_NODES, _advance  # noqa: E402
 from finger_sim.kernel.gap_screen import screen  # noqa: E402
 from finger_sim.kernel.integrators import _entry_point  # noqa: E402
-from finger_sim.kernel.numerics import JIT, OK, _rhs, dop853_output, dop853_theta_error  # noqa: E402
+from finger_sim.kernel.numerics import JIT, OK, _rhs, dop853_output, dop853_theta_error, torque_at  # noqa: E402
 
 #: `common_step`'s answer when Python must take the step.
 PYTHON = 1
@@ -47,7 +49,10 @@ HAS_ORIGIN, ORIGIN_T, ORIGIN_Q, ORIGIN_V, KNOWN, SIDE, RTOL, ATOL, X = 15, 16, 1
 N_SCALARS = 33
 TAUS = N_SCALARS
 SAVED = TAUS + N_NODES
-ST_SIZE = SAVED + N_SCALARS
+#: The profile's slot (code and up to three parameters), then the held value's code.
+PROFILE_AT, PROFILE_SIZE = SAVED + N_SCALARS, 4
+HELD_AT = PROFILE_AT + PROFILE_SIZE
+ST_SIZE = HELD_AT + 1
 #: The rows of arr.
 Y, F, Y_OLD, DENSE, KK, Y_NEW, OUT = 0, 1, 2, 3, 10, 26, 27
 KEPT = KK  # y, f, y_old and dense: what a step changes of the solution
@@ -55,8 +60,8 @@ ROWS = OUT + 1 + KEPT
 #: The workspace's header: the lengths of the model, the gap plan and the number of gaps.
 HEADER = 3
 #: `common_step`'s flags: the solution is under this command's torque function; the step starts at
-#: the last output (else at st[X:X + 6]).
-SAME, AT_LAST = 1, 2
+#: the last output (else at st[X:X + 6]); the torque is the profile in st (else the held command).
+SAME, AT_LAST, PROFILE = 1, 2, 4
 #: A continuation matches the last output's time within this fraction of a step (`DormandPrince853.step`).
 LAST_OUTPUT_SLACK = 1e-9
 E53, E3_WEIGHT = dop853._E53, dop853.E3_WEIGHT
@@ -93,19 +98,21 @@ def parts(ws):
 
 @njit(**JIT)
 def common_step(ws, t, t1, command, flags):
-    """The step from t to t1 (s) under the held `command` (N·m), as `Simulator.step` takes a step with
-    no gap crossing, on the workspace ws (module docstring); flags: SAME, AT_LAST (or'ed).
-    Returns (status, q1, q1', the error estimate at q1 in rad): OK; or PYTHON with ws as it was."""
+    """The step from t to t1 (s) under the held `command` (N·m) or, with flag PROFILE, st's smooth profile,
+    as `Simulator.step` takes a step with no gap crossing, on the workspace ws (module docstring); flags:
+    SAME, AT_LAST, PROFILE (or'ed). Returns (status, q1, q1', the error estimate at q1 in rad, τ at t1
+    in N·m): OK; or PYTHON with ws as it was."""
     m, plan, st, arr, work = parts(ws)
     st[SAVED:SAVED + N_SCALARS] = st[:N_SCALARS]
     arr[ROWS - KEPT:] = arr[:KEPT]
     o = LAST_Q if flags & AT_LAST else X
     q, v = (st[o], st[o + 1], st[o + 2]), (st[o + 3], st[o + 4], st[o + 5])
-    status, q1, v1, estimate = _step(m, plan, st, arr, work, t, t1, command, (flags & SAME) != 0, q, v)
+    prof = st[PROFILE_AT:PROFILE_AT + PROFILE_SIZE] if flags & PROFILE else st[HELD_AT:HELD_AT + 1]
+    status, q1, v1, estimate = _step(m, plan, st, arr, work, t, t1, command, prof, (flags & SAME) != 0, q, v)
     if status != OK:
         st[:N_SCALARS] = st[SAVED:SAVED + N_SCALARS]
         arr[:KEPT] = arr[ROWS - KEPT:]
-    return status, q1, v1, estimate
+    return status, q1, v1, estimate, torque_at(prof, command, t1)
 
 
 @njit(**JIT)
@@ -121,7 +128,7 @@ def _put(st, o, q, v):
 
 
 @njit(**JIT)
-def _step(m, plan, st, arr, work, t, t1, command, same, q, v):
+def _step(m, plan, st, arr, work, t, t1, command, prof, same, q, v):
     """`common_step` without the restore."""
     h = t1 - t
     target = t + h
@@ -139,15 +146,15 @@ def _step(m, plan, st, arr, work, t, t1, command, same, q, v):
         st[ERR] = st[ERR_OLD] = st[LAST_EST]
         st[T] = st[T_OLD] = t
         y[0], y[1], y[2], y[3], y[4], y[5] = q[0], q[1], q[2], v[0], v[1], v[2]
-        _rhs(m, t, y, command, f)
+        _rhs(m, t, y, torque_at(prof, command, t), f)
         if st[H] <= 0.0:  # the first internal step: its initial size is Python's
             return PYTHON, q, v, 0.0
         st[HAS_ORIGIN], st[ORIGIN_T] = 1.0, t
         _put(st, ORIGIN_Q, q, v)
     for c in range(N_NODES):
-        taus[c] = command
+        taus[c] = command  # a held command's (a profile's are set by each attempt)
     while st[T] < target:
-        if not _advance(m, st[RTOL], st[ATOL], st, y, f, y_old, dense, kk, y_new, taus):
+        if not _advance(m, st[RTOL], st[ATOL], st, y, f, y_old, dense, kk, y_new, taus, prof):
             return PYTHON, q, v, 0.0
         st[ERR_OLD] = st[ERR]
         st[ERR] += dop853_theta_error(E53, kk, st[H_OLD], E3_WEIGHT)

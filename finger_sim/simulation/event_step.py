@@ -5,8 +5,10 @@ compiled attempts, then checks the step's end gaps (`simulation.gap_screen`). `E
 takes a step that holds no crossing in one kernel call on the same numbers: the internal solution
 (`DormandPrince853`'s state) is kept in the kernel's arrays while the kernel steps, and written back
 to the integrator's attributes before Python takes a step (a possible crossing, a resting stop, a
-torque profile other than a constant, DOP853's first step), so that Python's step, its event
-location included, runs exactly as it always did. The estimates of `error_estimate` are written at
+switch of a piecewise-constant profile inside the step, a profile without a compiled form, DOP853's
+first step), so that Python's step, its event location included, runs exactly as it always did. A
+smooth profile (ramp, sine) is evaluated in the kernel (its compiled form, `inputs.profile_array`); a
+piecewise-constant one (step, square) is held at its segment's value (`Profile.on_segment`). The estimates of `error_estimate` are written at
 every step.
 
 Who stepped last is told by the integrator's last output (`DormandPrince853._last`, a new tuple at
@@ -26,7 +28,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from finger_sim import stepper_slot
-from finger_sim.inputs import Constant, Profile
+from finger_sim.inputs import BREAK_EPS, HELD, PIECEWISE_CONSTANT, Constant, Profile, profile_array
 from finger_sim.integrators.base import HeldTorque
 from finger_sim.integrators.dop853 import KEEP_OUTPUTS, MAX_OUTPUTS, DormandPrince853
 
@@ -62,6 +64,10 @@ class EventStep:
         o += compiled.ST_SIZE
         self._arr = ws[o:o + compiled.ROWS * WIDTH].reshape(compiled.ROWS, WIDTH)
         self._st[compiled.RTOL], self._st[compiled.ATOL] = integ.rtol, integ.atol
+        self._st[compiled.HELD_AT] = HELD
+        self._profile_at = slice(compiled.PROFILE_AT, compiled.PROFILE_AT + compiled.PROFILE_SIZE)
+        self._profile_flag = compiled.PROFILE
+        self._profile: Profile | None = None  # the smooth profile in the workspace
         #: `common_step(ws, t, t1, command, flags)`, its compiled entry (floats, an int): one per process
         if compiled not in _ENTRY_POINTS:
             _ENTRY_POINTS[compiled] = compiled.entry_point(ws)
@@ -88,11 +94,13 @@ class EventStep:
         if integ._last is not token or token is None or integ is not self._integ:  # noqa: SLF001
             self._holds = self._moved = False  # another hand stepped or set it: the integrator is the truth
             return None
-        if torque is None:
-            fn: Any = self._constant  # None: a profile that is not a constant
+        k, dt = sim.step_index, sim.dt
+        flags = 0
+        if torque is None and self._constant is not None:
+            fn: Any = self._constant
             value = self._constant_value
-        elif isinstance(torque, Profile):
-            fn = None
+        elif torque is None or isinstance(torque, Profile):
+            fn, value, flags = self._profile_step(sim.scene.torque if torque is None else torque, k * dt, (k + 1) * dt)
         else:
             value = float(torque)
             held = sim._held  # noqa: SLF001
@@ -104,14 +112,14 @@ class EventStep:
             return None
         if not self._holds:
             self._take_over(integ)
-        flags = self._same if fn is integ._torque else 0  # noqa: SLF001
+        if fn is integ._torque:  # noqa: SLF001
+            flags |= self._same
         q, v = sim.q, sim.v
         if q is self._q and v is self._v:
             flags |= self._at_last
         else:  # a state the kernel did not produce
             self._st[self._x] = (*q, *v)
-        k, dt = sim.step_index, sim.dt
-        status, q, v, estimate = self._call(self._ws, k * dt, (k + 1) * dt, value, flags)  # (floats, an int)
+        status, q, v, estimate, end = self._call(self._ws, k * dt, (k + 1) * dt, value, flags)  # (floats, an int)
         if status != self._ok:
             self.release()
             return None
@@ -121,10 +129,29 @@ class EventStep:
         if len(estimates) >= MAX_OUTPUTS:
             estimates = integ._estimates = dict(list(estimates.items())[-KEEP_OUTPUTS:])  # noqa: SLF001
         estimates[q] = estimate
-        sim.q, sim.v, sim.torque, sim.step_index = q, v, value, k + 1
+        sim.q, sim.v, sim.torque, sim.step_index = q, v, end, k + 1
         self._q, self._v = q, v
         self.taken += 1
         return _new_state(self._state, ((k + 1) * dt, q, v))
+
+    def _profile_step(self, profile: Profile, t0: float, t1: float) -> tuple[Any, float, int]:
+        """(the torque function `Simulator.step` integrates [t0, t1] under, the held value, flags) for a
+        profile's step; (None, 0, 0) where Python must take it (a switch inside, no compiled form)."""
+        code = profile.kernel_code
+        if code is None:
+            return None, 0.0, 0
+        if code in PIECEWISE_CONSTANT:  # as `Simulator.step`: split at a switch inside, else held on the segment
+            eps = BREAK_EPS * (t1 - t0)
+            if any(t0 + eps < b < t1 - eps for b in profile.breakpoints(t0, t1)):
+                return None, 0.0, 0
+            segment = profile.on_segment(t0, t1)
+            return segment, float(segment(t1)), 0
+        if profile is not self._profile:  # a smooth profile: the kernel evaluates it at every stage
+            self._st[self._profile_at] = 0.0
+            array = profile_array(profile)
+            self._st[self._profile_at.start:self._profile_at.start + len(array)] = array
+            self._profile = profile
+        return profile, 0.0, self._profile_flag
 
     def taken_in_python(self, integ: DormandPrince853) -> None:
         """The Simulator took its last step in Python: the kernel may continue from `integ`'s solution."""

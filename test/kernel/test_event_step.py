@@ -17,7 +17,7 @@ import pytest
 
 pytest.importorskip("numba")
 from finger_sim.errors import SimulationDiverged  # noqa: E402
-from finger_sim.scene import load_scene  # noqa: E402
+from finger_sim.scene import load_scene, scene_from_dict  # noqa: E402
 from finger_sim.simulate import Simulator  # noqa: E402
 
 CONFIG = Path(__file__).resolve().parents[2] / "config"
@@ -110,3 +110,37 @@ def test_resets_a_state_set_from_outside_and_mixed_torques_equal_the_python_step
             sim.q, sim.v = sim.q, (sim.v[0] * 0.5, sim.v[1] * 0.5, sim.v[2] * 0.5)  # not on the constraint: as main
 
     assert assert_same(scene, command, between) > 0.5
+
+
+#: Torque profiles stepped by the kernel: smooth ones evaluated at every stage, piecewise-constant ones
+#: held on each segment (switches inside a step go to Python). Levels near each scene's own torque.
+PROFILES = {
+    "ramp": {"type": "ramp", "offset": 0.005, "slope": 0.04},
+    "sine": {"type": "sine", "amplitude": 0.02, "frequency": 3.0, "offset": 0.01},
+    "step": {"type": "step", "before": 0.03, "after": -0.01, "at": 0.2005},  # a switch inside a step
+    "square": {"type": "square", "amplitude": 0.02, "frequency": 4.0, "offset": 0.01},  # switches on the grid
+}
+
+
+def with_profile(name: str, profile: dict):
+    data = shipped(name).to_dict()
+    data["input"] = {"torque": profile}
+    return scene_from_dict(data)
+
+
+@pytest.mark.parametrize("profile", sorted(PROFILES))
+@pytest.mark.parametrize("name", ["paper_to_stop", "grasp_cylinder", "press_table", "hard/stops_elastic"])
+def test_torque_profiles_on_stop_and_contact_scenes_equal_the_python_step_bit_for_bit(name, profile):
+    share = assert_same(with_profile(name, PROFILES[profile]))
+    assert share >= 0.3  # the kernel takes the profile's steps but those resting on a stop or near a crossing
+
+
+@pytest.mark.parametrize("name", ["paper_to_stop", "hard/chatter_wall", "hard/grasp_release"])
+def test_the_shipped_profile_scenes_step_in_the_kernel(name):
+    scene = shipped(name)
+    rows, error, share = run(scene, True)
+    assert not error and share >= 0.5
+    # τ after each step is the profile's at the step's end, as the Python step reports it
+    reference = np.array([scene.torque.on_segment((k - 1) * scene.dt, k * scene.dt)(k * scene.dt)
+                          for k in range(1, scene.step_count + 1)])
+    np.testing.assert_array_equal(rows[:, 6], reference)
