@@ -62,6 +62,10 @@ HEADER = 3
 #: `common_step`'s flags: the solution is under this command's torque function; the step starts at
 #: the last output (else at st[X:X + 6]); the torque is the profile in st (else the held command).
 SAME, AT_LAST, PROFILE = 1, 2, 4
+#: A rest on a stop is kept here only when the push into it (rad/s²) exceeds this share of the free
+#: acceleration (at least 1 rad/s²) at both ends of the step: the compiled acceleration agrees with the
+#: Python one the Simulator decides on (`JointStops.release_time`) to round-off, far inside this margin.
+REST_MARGIN = 1e-9
 #: A continuation matches the last output's time within this fraction of a step (`DormandPrince853.step`).
 LAST_OUTPUT_SLACK = 1e-9
 E53, E3_WEIGHT = dop853._E53, dop853.E3_WEIGHT
@@ -174,3 +178,21 @@ def _step(m, plan, st, arr, work, t, t1, command, prof, same, q, v):
     st[HAS_LAST], st[LAST_T], st[LAST_EST] = 1.0, target, estimate
     _put(st, LAST_Q, q1, v1)
     return OK, q1, v1, estimate
+
+
+@njit(**JIT)
+def stays_at_rest(ws, t, t1, command, flags, sign, q0, q1, q2):
+    """Whether the finger resting on a stop at q (q' = 0) stays there over [t, t1] (s) under the held
+    `command` (N·m) or, with flag PROFILE, st's profile, as `JointStops.release_time` decides it (the push
+    −sign·θ1'' into the gap > 0 at t and at t1; sign: the gap gradient's θ1 component), with REST_MARGIN to
+    spare (else False: the Simulator decides). Returns (stays, τ at t1 in N·m)."""
+    m, _, st, arr, _ = parts(ws)
+    prof = st[PROFILE_AT:PROFILE_AT + PROFILE_SIZE] if flags & PROFILE else st[HELD_AT:HELD_AT + 1]
+    y, f = arr[OUT], arr[Y_NEW]  # scratch rows: neither is read across steps
+    for s in (t, t1):
+        y[0], y[1], y[2], y[3], y[4], y[5] = q0, q1, q2, 0.0, 0.0, 0.0
+        _rhs(m, s, y, torque_at(prof, command, s), f)
+        push = -sign * f[3]
+        if not push > REST_MARGIN * max(1.0, abs(f[3])):
+            return False, 0.0
+    return True, torque_at(prof, command, t1)

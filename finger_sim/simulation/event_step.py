@@ -4,12 +4,17 @@ On a scene with stops or contact, `Simulator.step` runs our DOP853 step by step 
 compiled attempts, then checks the step's end gaps (`simulation.gap_screen`). `EventStep.step`
 takes a step that holds no crossing in one kernel call on the same numbers: the internal solution
 (`DormandPrince853`'s state) is kept in the kernel's arrays while the kernel steps, and written back
-to the integrator's attributes before Python takes a step (a possible crossing, a resting stop, a
-switch of a piecewise-constant profile inside the step, a profile without a compiled form, DOP853's
-first step), so that Python's step, its event location included, runs exactly as it always did. A
-smooth profile (ramp, sine) is evaluated in the kernel (its compiled form, `inputs.profile_array`); a
-piecewise-constant one (step, square) is held at its segment's value (`Profile.on_segment`). The estimates of `error_estimate` are written at
-every step.
+to the integrator's attributes before Python takes a step (a possible crossing, a release from a
+stop, a switch of a piecewise-constant profile inside the step, a profile without a compiled form,
+DOP853's first step), so that Python's step, its event location included, runs exactly as it always
+did. The estimates of `error_estimate` are written at every step.
+
+A smooth profile (ramp, sine) is evaluated in the kernel (its compiled form, `inputs.profile_array`);
+a piecewise-constant one (step, square) is held at its segment's value (`Profile.on_segment`). A step
+resting on a stop (the rest mode, `simulation.impact`) is checked in the kernel as
+`JointStops.release_time` checks it, by the push into the stop at both ends
+(`kernel.event_step.stays_at_rest`), with a margin for the compiled acceleration's round-off; where
+the push is near zero, Python decides.
 
 Who stepped last is told by the integrator's last output (`DormandPrince853._last`, a new tuple at
 every Python step): the kernel continues only a solution whose last output is still the one it saw
@@ -37,6 +42,8 @@ if TYPE_CHECKING:
 
 #: Columns of the kernel's solution rows: (q, q').
 WIDTH = 6
+#: q' at rest on a stop (as `Simulator._advance` sets it).
+ZERO = (0.0, 0.0, 0.0)
 #: State(t, q, v) without the NamedTuple's Python-level __new__ (as `Simulator.step`'s lean path).
 _new_state = tuple.__new__
 #: The compiled module → `common_step`'s entry point (its argument types never change: looked up once,
@@ -72,6 +79,7 @@ class EventStep:
         if compiled not in _ENTRY_POINTS:
             _ENTRY_POINTS[compiled] = compiled.entry_point(ws)
         self._call = _ENTRY_POINTS[compiled]
+        self._stays = compiled.stays_at_rest
         self._x = slice(compiled.X, compiled.X + WIDTH)
         self._same, self._at_last = compiled.SAME, compiled.AT_LAST
         #: the scene's torque when it is a constant (its steps may run here), else None
@@ -107,9 +115,11 @@ class EventStep:
             if held is None or held[0] != value:  # `Simulator.step`'s one function object per held value
                 held = sim._held = (value, HeldTorque(value))  # noqa: SLF001
             fn = held[1]
-        if fn is None or sim._resting is not None:  # noqa: SLF001  (a profile's step, or the stop's rest mode)
+        if fn is None:  # a profile's step that Python takes
             self.release()
             return None
+        if sim._resting is not None:  # noqa: SLF001  (the stop's rest mode)
+            return self._rest(sim, value, flags, k)
         if not self._holds:
             self._take_over(integ)
         if fn is integ._torque:  # noqa: SLF001
@@ -133,6 +143,19 @@ class EventStep:
         self._q, self._v = q, v
         self.taken += 1
         return _new_state(self._state, ((k + 1) * dt, q, v))
+
+    def _rest(self, sim: Simulator, value: float, flags: int, k: int) -> State | None:
+        """A step resting on a stop throughout (`Simulator._advance`'s rest mode, no release inside), checked
+        in the kernel (`stays_at_rest`); None: Python takes it (a release may be near)."""
+        self.release()  # the integrator is Python's again: the rest does not move it
+        gap, q, dt = sim._resting, sim.q, sim.dt  # noqa: SLF001
+        stays, end = self._stays(self._ws, k * dt, (k + 1) * dt, value, flags,
+                                 gap.element.gap_gradient(gap.index, q)[0], *q)
+        if not stays:
+            return None
+        sim.v, sim.torque, sim.step_index = ZERO, end, k + 1
+        self.taken += 1
+        return _new_state(self._state, ((k + 1) * dt, q, ZERO))
 
     def _profile_step(self, profile: Profile, t0: float, t1: float) -> tuple[Any, float, int]:
         """(the torque function `Simulator.step` integrates [t0, t1] under, the held value, flags) for a

@@ -132,14 +132,16 @@ def with_profile(name: str, profile: dict):
 @pytest.mark.parametrize("name", ["paper_to_stop", "grasp_cylinder", "press_table", "hard/stops_elastic"])
 def test_torque_profiles_on_stop_and_contact_scenes_equal_the_python_step_bit_for_bit(name, profile):
     share = assert_same(with_profile(name, PROFILES[profile]))
-    assert share >= 0.3  # the kernel takes the profile's steps but those resting on a stop or near a crossing
+    assert share >= 0.3  # the kernel takes the profile's steps but those near a crossing, a switch or a release
 
 
-@pytest.mark.parametrize("name", ["paper_to_stop", "hard/chatter_wall", "hard/grasp_release"])
+@pytest.mark.parametrize("name", ["paper_to_stop", "hard/chatter_wall", "hard/grasp_release", "hard/stops_elastic"])
 def test_the_shipped_profile_scenes_step_in_the_kernel(name):
     scene = shipped(name)
     rows, error, share = run(scene, True)
     assert not error and share >= 0.5
+    if name == "paper_to_stop":  # the ramp onto the stop and the rest on it (from ~0.43 s): all but the located impact
+        assert share >= 0.99
     # τ after each step is the profile's at the step's end, as the Python step reports it
     reference = np.array([scene.torque.on_segment((k - 1) * scene.dt, k * scene.dt)(k * scene.dt)
                           for k in range(1, scene.step_count + 1)])
