@@ -372,7 +372,8 @@ def render_recommendation(tables: Tables, quick: bool) -> list[str]:
         "### The table behind `method: auto`",
         "",
         f"`finger_sim.auto` picks, for a smooth or discontinuous scene's rate, the cheapest method of this table within "
-        f"{auto.AUTO_TARGET / auto.TABLE_MARGIN:g} rad that is stable at the scene's dt (see its docstring); scenes with "
+        f"{auto.AUTO_TARGET / auto.TABLE_MARGIN:g} rad that is stable at the scene's dt, or a more accurate one costing at most "
+        f"{auto.COST_MARGIN:g}× as much (a closer cost is timing noise; see its docstring); scenes with "
         f"stops, contact or a stiff mode go to the error-controlled {auto.ERROR_CONTROLLED}. The full bench writes the "
         f"table as data, `{RECOMMENDATION_FILE}`, which `auto` loads. This run's table {verdict}",
     ]
