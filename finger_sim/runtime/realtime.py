@@ -1,0 +1,121 @@
+"""Real-time scheduling of a stepping node, when it is started under a real-time policy.
+
+A real-time simulation is deployed under SCHED_FIFO or SCHED_RR (`chrt -f 20 finger_node ...`).
+Every thread and child process then inherits the same policy and priority, so on a machine with
+few cores the stepping thread queues behind its own node's other work at equal priority (the
+log's writer process compressing a chunk, the executor and DDS threads), and the kernel may page
+out the node's code and data that a rare path needs (a major page fault is a disk read). With a
+real-time policy, `prepare_process()` and `prepare_stepping_thread()` set the node up as a
+real-time program should be:
+
+- memory locked (mlockall: what is mapped now and later stays resident, nothing is paged out);
+- the stepping thread one priority above the process (STEPPING_BOOST), the only thread there;
+- child processes started so far (the log's writer process) one priority below it
+  (CHILD_DROP), still above every normal process, so that the log keeps up under load.
+
+Under a normal policy nothing changes, and nothing does with FINGER_SIM_REALTIME_SETUP=0 in the
+environment (a deployment that sets priorities itself, or a side-by-side comparison). Each step that the kernel refuses (no privilege: neither
+root nor CAP_SYS_NICE / CAP_IPC_LOCK, or RLIMIT_RTPRIO / RLIMIT_MEMLOCK too small) is skipped and
+named in one log line; the node runs on without it. Linux only (os.sched_* and mlockall); on
+another system nothing is done and one line says so.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import os
+import sys
+import threading
+from collections.abc import Callable
+from pathlib import Path
+
+#: Priorities the stepping thread is raised above the process's real-time priority.
+STEPPING_BOOST = 1
+#: Priorities a child process (the log's writer) is lowered below the process's own.
+CHILD_DROP = 1
+#: mlockall flags (linux/mman.h): lock what is mapped now, and whatever is mapped later.
+MCL_CURRENT, MCL_FUTURE = 1, 2
+#: The real-time policies (os.SCHED_FIFO, os.SCHED_RR; absent off Linux).
+REALTIME_POLICIES = {getattr(os, "SCHED_FIFO", -1), getattr(os, "SCHED_RR", -2)}
+
+#: What lifts the kernel's refusals, for the log line.
+PRIVILEGE_HINT = "run as root, or grant CAP_SYS_NICE and CAP_IPC_LOCK, or raise RLIMIT_RTPRIO and RLIMIT_MEMLOCK"
+#: Environment variable that turns the set-up off when "0".
+SETUP_ENV = "FINGER_SIM_REALTIME_SETUP"
+
+Log = Callable[[str], None]
+
+
+def prepare(info: Log, warn: Log) -> None:
+    """Called by the stepping thread before its first step: `prepare_process()`, then
+    `prepare_stepping_thread()` (see the module doc); logs what it did and what it could not."""
+    if os.environ.get(SETUP_ENV) == "0":
+        if realtime_priority() is not None:
+            info(f"real-time policy at priority {realtime_priority()}; {SETUP_ENV}=0: scheduling and memory left as inherited")
+        return
+    prepare_stepping_thread(prepare_process(info, warn), info, warn)
+
+
+def realtime_priority() -> int | None:
+    """The calling thread's real-time priority (1..99), or None under a normal policy or off Linux."""
+    if not hasattr(os, "sched_getscheduler"):
+        return None
+    if os.sched_getscheduler(0) not in REALTIME_POLICIES:
+        return None
+    return os.sched_getparam(0).sched_priority
+
+
+def lock_memory() -> str | None:
+    """mlockall(MCL_CURRENT | MCL_FUTURE); None when done, else why not (the errno's text)."""
+    libc = ctypes.CDLL(ctypes.util.find_library("c"), use_errno=True)
+    if libc.mlockall(MCL_CURRENT | MCL_FUTURE) != 0:
+        errno = ctypes.get_errno()
+        return f"mlockall failed: {os.strerror(errno)} (errno {errno})"
+    return None
+
+
+def child_pids() -> list[int]:
+    """Process ids of this process's children (any thread's), from /proc."""
+    return [int(pid) for children in Path("/proc/self/task").glob("*/children")
+            for pid in children.read_text().split()]
+
+
+def prepare_process(info: Log, warn: Log) -> int | None:
+    """Under a real-time policy: lock the memory and lower the child processes (see the module
+    doc). Returns the process's real-time priority, None under a normal policy (nothing done)."""
+    if not sys.platform.startswith("linux"):
+        return None
+    priority = realtime_priority()
+    if priority is None:
+        return None
+    done, skipped = [], []
+    problem = lock_memory()
+    (skipped if problem else done).append(problem or "memory locked (mlockall)")
+    policy = os.sched_getscheduler(0)
+    child = max(priority - CHILD_DROP, 1)
+    for pid in child_pids():
+        try:
+            os.sched_setscheduler(pid, policy, os.sched_param(child))
+            done.append(f"child process {pid} at priority {child}")
+        except OSError as exc:
+            skipped.append(f"child process {pid} stays at priority {priority}: {exc.strerror}")
+    info(f"real-time policy at priority {priority}: " + "; ".join(done))
+    if skipped:
+        warn("real-time set-up incomplete, late steps under load are likelier: " + "; ".join(skipped) + f" ({PRIVILEGE_HINT})")
+    return priority
+
+
+def prepare_stepping_thread(priority: int | None, info: Log, warn: Log) -> None:
+    """In the stepping thread: raise it STEPPING_BOOST above the process's real-time `priority`
+    (None: a normal policy, nothing done)."""
+    if priority is None:
+        return
+    boosted = min(priority + STEPPING_BOOST, os.sched_get_priority_max(os.sched_getscheduler(0)))
+    try:
+        os.sched_setscheduler(threading.get_native_id(), os.sched_getscheduler(0), os.sched_param(boosted))
+    except OSError as exc:
+        warn(f"the stepping thread stays at real-time priority {priority} (raising it to {boosted}: {exc.strerror}); "
+             f"late steps under load are likelier ({PRIVILEGE_HINT})")
+        return
+    info(f"the stepping thread runs at real-time priority {boosted}")
