@@ -8,7 +8,11 @@ out the node's code and data that a rare path needs (a major page fault is a dis
 real-time policy, `prepare_process()` and `prepare_stepping_thread()` set the node up as a
 real-time program should be:
 
-- memory locked (mlockall: what is mapped now and later stays resident, nothing is paged out);
+- memory locked as it is touched (mlockall with MCL_ONFAULT: a page the node has used stays
+  resident and is never paged out, and the libraries' untouched pages are not read in);
+- the interpreter's switch interval at SWITCH_INTERVAL_S: a thread that wants the GIL (the
+  stepping thread, woken for its step) asks the holder (the executor thread in a callback, a
+  garbage collection) to hand it over after this long, instead of Python's 5 ms;
 - the stepping thread one priority above the process (STEPPING_BOOST), the only thread there;
 - child processes started so far (the log's writer process) one priority below it
   (CHILD_DROP), still above every normal process, so that the log keeps up under load.
@@ -34,8 +38,12 @@ from pathlib import Path
 STEPPING_BOOST = 1
 #: Priorities a child process (the log's writer) is lowered below the process's own.
 CHILD_DROP = 1
-#: mlockall flags (linux/mman.h): lock what is mapped now, and whatever is mapped later.
-MCL_CURRENT, MCL_FUTURE = 1, 2
+#: mlockall flags (linux/mman.h): lock what is mapped now and whatever is mapped later, each page
+#: once it is first touched (Linux >= 4.4).
+MCL_CURRENT, MCL_FUTURE, MCL_ONFAULT = 1, 2, 4
+#: Wall s a thread waits for the GIL before the holder is asked to hand it over (Python's default
+#: is 5 ms: a step due at 1 kHz waited up to that long behind the executor thread).
+SWITCH_INTERVAL_S = 0.0005
 #: The real-time policies (os.SCHED_FIFO, os.SCHED_RR; absent off Linux).
 REALTIME_POLICIES = {getattr(os, "SCHED_FIFO", -1), getattr(os, "SCHED_RR", -2)}
 
@@ -67,9 +75,9 @@ def realtime_priority() -> int | None:
 
 
 def lock_memory() -> str | None:
-    """mlockall(MCL_CURRENT | MCL_FUTURE); None when done, else why not (the errno's text)."""
+    """mlockall(MCL_CURRENT | MCL_FUTURE | MCL_ONFAULT); None when done, else why not (the errno's text)."""
     libc = ctypes.CDLL(ctypes.util.find_library("c"), use_errno=True)
-    if libc.mlockall(MCL_CURRENT | MCL_FUTURE) != 0:
+    if libc.mlockall(MCL_CURRENT | MCL_FUTURE | MCL_ONFAULT) != 0:
         errno = ctypes.get_errno()
         return f"mlockall failed: {os.strerror(errno)} (errno {errno})"
     return None
@@ -91,7 +99,9 @@ def prepare_process(info: Log, warn: Log) -> int | None:
         return None
     done, skipped = [], []
     problem = lock_memory()
-    (skipped if problem else done).append(problem or "memory locked (mlockall)")
+    (skipped if problem else done).append(problem or "memory locked as touched (mlockall)")
+    sys.setswitchinterval(SWITCH_INTERVAL_S)
+    done.append(f"GIL switch interval {SWITCH_INTERVAL_S * 1e3:g} ms")
     policy = os.sched_getscheduler(0)
     child = max(priority - CHILD_DROP, 1)
     for pid in child_pids():

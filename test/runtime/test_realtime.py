@@ -63,7 +63,7 @@ def test_realtime_policy_raises_the_stepping_thread_lowers_the_child_and_locks_m
     assert set(map(tuple, out["threads"].values())) == {(os.SCHED_FIFO, BASE)}  # the main thread stays
     assert out["child"] == [os.SCHED_FIFO, BASE - 1]
     assert out["vmlck_kb"] >= out["vmrss_kb"] > 0  # every resident page locked
-    assert out["lines"] == [f"INFO real-time policy at priority {BASE}: memory locked (mlockall); child process "
+    assert out["lines"] == [f"INFO real-time policy at priority {BASE}: memory locked as touched (mlockall); GIL switch interval 0.5 ms; child process "
                             f"{out['lines'][0].split('child process ')[1].split()[0]} at priority {BASE - 1}",
                             f"INFO the stepping thread runs at real-time priority {BASE + 1}"]
 
