@@ -2,7 +2,7 @@
 
 Samples every thread of `--pid` and of all its descendants every `--period` wall s from /proc
 (Linux only): the scheduling policy and priority, run time and run-queue wait
-(/proc/<pid>/task/<tid>/schedstat, ns), minor and major page faults, voluntary and forced
+(/proc/<pid>/task/<tid>/schedstat, ns), the CPU it last ran on, minor and major page faults, voluntary and forced
 context switches; and the machine's steal time and major faults (/proc/stat, /proc/vmstat).
 Each sample is one CSV row per thread, with the wall time (time.time(), s) so that a late
 /diagnostics window can be matched with what each thread did in it. Read only; it changes nothing.
@@ -23,7 +23,7 @@ from pathlib import Path
 DEFAULT_PERIOD_S = 0.05
 #: Clock ticks per second of /proc/stat (USER_HZ).
 USER_HZ = os.sysconf("SC_CLK_TCK")
-HEADER = ("wall_s,pid,tid,proc,thread,policy,rtprio,run_ns,wait_ns,slices,minflt,majflt,"
+HEADER = ("wall_s,pid,tid,proc,thread,cpu,policy,rtprio,run_ns,wait_ns,slices,minflt,majflt,"
           "vol_switches,forced_switches,steal_s,vm_majflt\n")
 
 
@@ -68,7 +68,7 @@ def thread_row(pid: int, tid: int, proc: str) -> str | None:
             vol = line.split()[1]
         elif line.startswith("nonvoluntary_ctxt_switches:"):
             forced = line.split()[1]
-    return f"{pid},{tid},{proc},{name},{f[38]},{f[37]},{run_ns},{wait_ns},{slices},{f[7]},{f[9]},{vol},{forced}"
+    return f"{pid},{tid},{proc},{name},{f[36]},{f[38]},{f[37]},{run_ns},{wait_ns},{slices},{f[7]},{f[9]},{vol},{forced}"
 
 
 def main(argv: list[str] | None = None) -> int:

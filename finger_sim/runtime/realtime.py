@@ -17,6 +17,12 @@ real-time program should be:
 - child processes started so far (the log's writer process) one priority below it
   (CHILD_DROP), still above every normal process, so that the log keeps up under load.
 
+One thing is the machine's, not the node's: real-time throttling (kernel.sched_rt_runtime_us
+below kernel.sched_rt_period_us, 950 ms of 1 s by default). Once the real-time threads of a CPU
+have run that long in a period, the kernel stops them all until it ends, up to 50 ms: a step
+that late, whatever the priorities. The node says so in a warning with the two values (RT_SYSCTL),
+and leaves the setting alone (it is the whole machine's).
+
 Under a normal policy nothing changes, and nothing does with FINGER_SIM_REALTIME_SETUP=0 in the
 environment (a deployment that sets priorities itself, or a side-by-side comparison). Each step that the kernel refuses (no privilege: neither
 root nor CAP_SYS_NICE / CAP_IPC_LOCK, or RLIMIT_RTPRIO / RLIMIT_MEMLOCK too small) is skipped and
@@ -47,6 +53,8 @@ SWITCH_INTERVAL_S = 0.0005
 #: The real-time policies (os.SCHED_FIFO, os.SCHED_RR; absent off Linux).
 REALTIME_POLICIES = {getattr(os, "SCHED_FIFO", -1), getattr(os, "SCHED_RR", -2)}
 
+#: The kernel's real-time throttling: runtime and period, µs (runtime -1: off).
+RT_SYSCTL = Path("/proc/sys/kernel/sched_rt_runtime_us"), Path("/proc/sys/kernel/sched_rt_period_us")
 #: What lifts the kernel's refusals, for the log line.
 PRIVILEGE_HINT = "run as root, or grant CAP_SYS_NICE and CAP_IPC_LOCK, or raise RLIMIT_RTPRIO and RLIMIT_MEMLOCK"
 #: Environment variable that turns the set-up off when "0".
@@ -83,6 +91,19 @@ def lock_memory() -> str | None:
     return None
 
 
+def throttling() -> str | None:
+    """Why real-time threads may be stopped for part of each period, or None (throttling off)."""
+    try:
+        runtime, period = (int(p.read_text()) for p in RT_SYSCTL)
+    except (OSError, ValueError):
+        return None
+    if runtime < 0 or runtime >= period:
+        return None
+    return (f"kernel.sched_rt_runtime_us is {runtime} of kernel.sched_rt_period_us {period}: once the real-time threads "
+            f"of a CPU have run {runtime / 1e3:g} ms in a period, the kernel stops them for up to {(period - runtime) / 1e3:g} ms "
+            "(a step that late); a real-time run sets it to -1 (sysctl, root)")
+
+
 def child_pids() -> list[int]:
     """Process ids of this process's children (any thread's), from /proc."""
     return [int(pid) for children in Path("/proc/self/task").glob("*/children")
@@ -111,6 +132,8 @@ def prepare_process(info: Log, warn: Log) -> int | None:
         except OSError as exc:
             skipped.append(f"child process {pid} stays at priority {priority}: {exc.strerror}")
     info(f"real-time policy at priority {priority}: " + "; ".join(done))
+    if (why := throttling()) is not None:
+        warn(why)
     if skipped:
         warn("real-time set-up incomplete, late steps under load are likelier: " + "; ".join(skipped) + f" ({PRIVILEGE_HINT})")
     return priority
