@@ -53,7 +53,8 @@ def main(argv: list[str] | None = None) -> int:
     threads: dict[tuple[str, int], list[dict[str, str]]] = collections.defaultdict(list)
     for row in csv.DictReader(args.probe.open()):
         threads[(row["proc"], int(row["tid"]))].append(row)
-    node = [k for k in threads if k[0] == NODE]
+    node = [k for k in threads if k[0] == NODE and k[1] != int(threads[k][-1]["pid"])  # not the main (executor) thread
+            and not threads[k][-1]["thread"].startswith("dds.")]  # nor the middleware's
     stepping = max(node, key=lambda k: int(threads[k][-1]["vol_switches"]))  # it sleeps once per step
     print("thread (process/tid/name)                      policy prio   CPU s  wait s majflt")
     for key, rows in sorted(threads.items(), key=lambda kv: -int(kv[1][-1]["run_ns"]))[:16]:
