@@ -4,9 +4,12 @@ recording on and the PD controller in a closed loop, answering every state.
 References: the node's resident memory with its child processes' (/proc/<pid>/status VmRSS), sampled every RSS_PERIOD_S,
 must stay within RSS_BAND_MB of its value at the end of the warm-up; every /diagnostics window
 after the warm-up must show a real-time factor of at least MIN_WINDOW_RTF. The samples are
-written to soak.csv in the test's folder (and its path printed) for the report in docs/.
+written to soak.csv in the test's folder (and its path printed) for the report in docs/, the windows
+(sim time, real-time factor, wall time received, latest wake-up, dropped steps) to soak_windows.csv.
 
-    FINGER_SIM_SOAK_S=3600 FINGER_SIM_TEST_DOMAINS=65-69 .venv/bin/pytest -q -s -m soak test/ros/test_soak.py
+    FINGER_SIM_SOAK_S=3600 FINGER_SIM_TEST_DOMAINS=65-69 chrt -f 20 .venv/bin/pytest -q -s -m soak test/ros/test_soak.py
+
+(under SCHED_FIFO as deployed; docs/soak_realtime.md has the probe to run beside it and the report.)
 """
 
 from __future__ import annotations
