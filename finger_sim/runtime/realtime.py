@@ -24,14 +24,16 @@ that late, whatever the priorities. The node says so in a warning with the two v
 and leaves the setting alone (it is the whole machine's).
 
 Under a normal policy nothing changes, and nothing does with FINGER_SIM_REALTIME_SETUP=0 in the
-environment (a deployment that sets priorities itself, or a side-by-side comparison). Each step that the kernel refuses (no privilege: neither
-root nor CAP_SYS_NICE / CAP_IPC_LOCK, or RLIMIT_RTPRIO / RLIMIT_MEMLOCK too small) is skipped and
-named in one log line; the node runs on without it. Linux only (os.sched_* and mlockall); on
-another system nothing is done and one line says so.
+environment (a deployment that sets priorities itself, or a side-by-side comparison; one info
+line says so). Each step that the kernel refuses (no privilege: neither root nor CAP_SYS_NICE /
+CAP_IPC_LOCK, or RLIMIT_RTPRIO / RLIMIT_MEMLOCK too small) is skipped and named in one warning;
+the node runs on without it. Linux only (os.sched_*, mlockall, /proc): elsewhere nothing is done.
+docs/soak_realtime.md has the measurements behind each step.
 """
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import ctypes.util
 import os
@@ -106,8 +108,11 @@ def throttling() -> str | None:
 
 def child_pids() -> list[int]:
     """Process ids of this process's children (any thread's), from /proc."""
-    return [int(pid) for children in Path("/proc/self/task").glob("*/children")
-            for pid in children.read_text().split()]
+    pids = []
+    for children in Path("/proc/self/task").glob("*/children"):
+        with contextlib.suppress(OSError):  # a thread that ended meanwhile
+            pids += [int(pid) for pid in children.read_text().split()]
+    return pids
 
 
 def prepare_process(info: Log, warn: Log) -> int | None:
