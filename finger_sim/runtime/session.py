@@ -38,8 +38,8 @@ from typing import Any
 
 from finger_sim.errors import SimulationDiverged
 from finger_sim.run_records import NS_PER_S, CommandEvent, stamp_ns
-from finger_sim.runtime.diagnostics import Level, LogStatus, Snapshot
 from finger_sim.runtime import realtime
+from finger_sim.runtime.diagnostics import Level, LogStatus, Snapshot
 from finger_sim.runtime.pacing import Pacer
 from finger_sim.runtime.parameters import RunSettings, TorqueSource
 from finger_sim.runtime.timeline import Timeline
