@@ -9,7 +9,7 @@ Each sample is one CSV row per thread, with the wall time (time.time(), s) so th
 
     python -m finger_sim.bench.soak_probe --pid <pytest pid> --out probe.csv [--period 0.05]
 
-Runs until the process `--pid` exits.
+Runs until the process `--pid` exits (or is a zombie).
 """
 
 from __future__ import annotations
@@ -39,6 +39,15 @@ def descendants(root: int) -> list[int]:
             except OSError:
                 pass
     return out
+
+
+def alive(pid: int) -> bool:
+    """True while `pid` runs (neither gone nor a zombie waiting for its parent)."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return stat[stat.rindex(")") + 2] != "Z"
 
 
 def machine_counters() -> tuple[float, int]:
@@ -79,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     with args.out.open("w") as out:
         out.write(HEADER)
-        while Path(f"/proc/{args.pid}").exists():
+        while alive(args.pid):
             wall = time.time()
             steal, vm_majflt = machine_counters()
             for pid in descendants(args.pid):
