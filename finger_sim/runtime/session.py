@@ -38,6 +38,7 @@ from typing import Any
 
 from finger_sim.errors import SimulationDiverged
 from finger_sim.run_records import NS_PER_S, CommandEvent, stamp_ns
+from finger_sim.runtime import realtime
 from finger_sim.runtime.diagnostics import Level, LogStatus, Snapshot
 from finger_sim.runtime.pacing import Pacer
 from finger_sim.runtime.parameters import RunSettings, TorqueSource
@@ -312,6 +313,7 @@ class SteppingSession:
 
     def _loop(self) -> None:
         try:
+            realtime.prepare(self.get_logger().info, self.get_logger().warning)  # before the first step is due
             while not self._stopping.is_set():
                 self._serve()
                 if self.state is not RunState.RUNNING:

@@ -4,9 +4,12 @@ recording on and the PD controller in a closed loop, answering every state.
 References: the node's resident memory with its child processes' (/proc/<pid>/status VmRSS), sampled every RSS_PERIOD_S,
 must stay within RSS_BAND_MB of its value at the end of the warm-up; every /diagnostics window
 after the warm-up must show a real-time factor of at least MIN_WINDOW_RTF. The samples are
-written to soak.csv in the test's folder (and its path printed) for the report in docs/.
+written to soak.csv in the test's folder (and its path printed) for the report in docs/, the windows
+(sim time, real-time factor, wall time received, latest wake-up, dropped steps) to soak_windows.csv.
 
-    FINGER_SIM_SOAK_S=3600 FINGER_SIM_TEST_DOMAINS=65-69 .venv/bin/pytest -q -s -m soak test/ros/test_soak.py
+    FINGER_SIM_SOAK_S=3600 FINGER_SIM_TEST_DOMAINS=65-69 chrt -f 20 .venv/bin/pytest -q -s -m soak test/ros/test_soak.py
+
+(under SCHED_FIFO as deployed; docs/soak_realtime.md has the probe to run beside it and the report.)
 """
 
 from __future__ import annotations
@@ -52,7 +55,9 @@ def rss_mb(pid: int) -> float:
 def test_closed_loop_soak_holds_memory_and_real_time(launcher, ros_client, tmp_path):
     launcher.node("finger_sim.ros.pd_controller", dict(setpoint=0.8))
     node = launcher.node("finger_sim.ros.node", dict(realtime_factor=1.0, command_qos="reliable", command_timeout=0.0))
-    diagnostics: list[DiagnosticArray] = ros_client.collect(DiagnosticArray, "/diagnostics", QoSProfile(depth=10_000))
+    diagnostics: list[tuple[float, DiagnosticArray]] = []  # (wall time received, time.time() s, message)
+    ros_client.node.create_subscription(DiagnosticArray, "/diagnostics", lambda m: diagnostics.append((time.time(), m)),
+                                        QoSProfile(depth=10_000))
     ros_client.wait_for(lambda: diagnostics, "the first /diagnostics", 60.0)
     start = time.monotonic()
     samples: list[tuple[float, float]] = []  # (wall s since start, RSS MB)
@@ -62,21 +67,23 @@ def test_closed_loop_soak_holds_memory_and_real_time(launcher, ros_client, tmp_p
         while time.monotonic() < deadline:
             ros_client.spin(0.1)
         assert node.running(), node.output()
-    windows = []  # (wall s since start, the window's real-time factor, torque, commands received)
-    for d in diagnostics:
+    windows = []  # (sim s, the window's real-time factor, commands received, wall s received, latest wake-up ms, dropped steps)
+    for wall, d in diagnostics:
         v = conversions.parse_values(d.status[0])
-        windows.append((float(v["clock"]), float(v["realtime_factor"]), int(v["commands_received"])))
+        windows.append((float(v["clock"]), float(v["realtime_factor"]), int(v["commands_received"]), wall,
+                        float(v["late_wakeup_max_ms"]), int(v["dropped_steps"])))
     out = tmp_path / "soak.csv"
     out.write_text("t_s,rss_mb\n" + "".join(f"{t:.1f},{m:.2f}\n" for t, m in samples))
-    (tmp_path / "soak_windows.csv").write_text("sim_t_s,window_rtf\n" + "".join(f"{c:.3f},{r:.4f}\n" for c, r, _ in windows))
+    (tmp_path / "soak_windows.csv").write_text("sim_t_s,window_rtf,wall_s,late_wakeup_max_ms,dropped_steps\n" + "".join(
+        f"{c:.3f},{r:.4f},{w:.3f},{lm:.2f},{ds}\n" for c, r, _, w, lm, ds in windows))
     judged = [m for t, m in samples if t >= WARMUP_S]
     base = judged[0]
-    late = [(c, r) for c, r, _ in windows if c >= WARMUP_S]
+    late = [(c, r) for c, r, *_ in windows if c >= WARMUP_S]
     worst = min(late, key=lambda w: w[1])
     print(f"\nsoak {SOAK_S:g} s: RSS {samples[0][1]:.1f} MB at start, {base:.1f} MB after warm-up, "
           f"{min(judged):.1f}..{max(judged):.1f} MB after it, {samples[-1][1]:.1f} MB at the end; "
           f"worst window RTF {worst[1]:.4f} at sim t = {worst[0]:.0f} s; {len(late)} windows, "
           f"{sum(r < MIN_WINDOW_RTF for _, r in late)} below {MIN_WINDOW_RTF}; "
-          f"commands received {windows[-1][2]}; samples in {out}")
+          f"commands received {windows[-1][2]}; dropped steps {windows[-1][5]}; samples in {out}")
     assert max(abs(m - base) for m in judged) <= RSS_BAND_MB
     assert worst[1] >= MIN_WINDOW_RTF

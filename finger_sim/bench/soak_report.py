@@ -1,0 +1,87 @@
+"""Summary of a soak: late wake-ups per /diagnostics window and what each thread did meanwhile.
+
+Reads test/ros/test_soak.py's soak_windows.csv (the node's 1 s windows: real-time factor, latest
+wake-up, received at wall time) and finger_sim.bench.soak_probe's CSV (every thread of the test's
+process tree, sampled), and prints:
+- the windows after the warm-up: how many fell below the real-time rule, and the distribution
+  of each window's latest wake-up (a window below 0.99 needs a wake-up at least 10 ms late);
+- per thread: policy, priority, CPU time, run-queue wait and page faults over the soak;
+- for each window with a wake-up later than `--late-ms`: the stepping thread's run-queue wait,
+  major faults and forced switches around it, the machine's steal, and the real-time threads'
+  run time per CPU in the second before (a CPU near kernel.sched_rt_runtime_us of real-time
+  run time gets throttled).
+
+    python -m finger_sim.bench.soak_report --windows .../soak_windows.csv --probe probe.csv [--late-ms 10]
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import csv
+from pathlib import Path
+
+#: Wall s after the first window that the soak test does not judge (test_soak.WARMUP_S).
+WARMUP_S = 60.0
+#: The test's real-time rule (test_soak.MIN_WINDOW_RTF).
+MIN_WINDOW_RTF = 0.99
+#: The node's module name in the probe's `proc` column.
+NODE = "finger_sim.ros.node"
+REALTIME = {"1", "2"}  # SCHED_FIFO, SCHED_RR
+
+
+def _percentile(sorted_values: list[float], p: float) -> float:
+    return sorted_values[min(int(p / 100 * len(sorted_values)), len(sorted_values) - 1)]
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--windows", type=Path, required=True)
+    parser.add_argument("--probe", type=Path, required=True)
+    parser.add_argument("--late-ms", type=float, default=10.0, help="list the windows with a wake-up at least this late")
+    args = parser.parse_args(argv)
+    windows = list(csv.DictReader(args.windows.open()))
+    t0 = float(windows[0]["wall_s"])
+    judged = [w for w in windows if float(w["wall_s"]) - t0 >= WARMUP_S]
+    late = sorted(float(w["late_wakeup_max_ms"]) for w in judged)
+    rtf = [float(w["window_rtf"]) for w in judged]
+    print(f"{len(judged)} windows after {WARMUP_S:g} s: {sum(r < MIN_WINDOW_RTF for r in rtf)} below {MIN_WINDOW_RTF}, "
+          f"lowest {min(rtf):.4f}; steps dropped {windows[-1]['dropped_steps']}")
+    print("latest wake-up per window, ms: median {:.2f}, p90 {:.2f}, p99 {:.2f}, max {:.2f}; windows with one >= 5 ms: {}, "
+          ">= 10 ms: {}, >= 20 ms: {}".format(_percentile(late, 50), _percentile(late, 90), _percentile(late, 99), late[-1],
+                                             sum(x >= 5 for x in late), sum(x >= 10 for x in late), sum(x >= 20 for x in late)))
+    threads: dict[tuple[str, int], list[dict[str, str]]] = collections.defaultdict(list)
+    for row in csv.DictReader(args.probe.open()):
+        threads[(row["proc"], int(row["tid"]))].append(row)
+    node = [k for k in threads if k[0] == NODE and k[1] != int(threads[k][-1]["pid"])  # not the main (executor) thread
+            and not threads[k][-1]["thread"].startswith("dds.")]  # nor the middleware's
+    stepping = max(node, key=lambda k: int(threads[k][-1]["vol_switches"]))  # it sleeps once per step
+    print("thread (process/tid/name)                      policy prio   CPU s  wait s majflt")
+    for key, rows in sorted(threads.items(), key=lambda kv: -int(kv[1][-1]["run_ns"]))[:16]:
+        first, last = rows[0], rows[-1]
+        mark = " <- stepping" if key == stepping else ""
+        print(f"{key[0].rsplit('.', 1)[-1][:18]:18s} {key[1]:8d} {last['thread'][:16]:16s} {last['policy']:>6s} {last['rtprio']:>4s} "
+              f"{(int(last['run_ns']) - int(first['run_ns'])) / 1e9:7.2f} {(int(last['wait_ns']) - int(first['wait_ns'])) / 1e9:7.2f} "
+              f"{int(last['majflt']) - int(first['majflt']):6d}{mark}")
+    for w in [w for w in judged if float(w["late_wakeup_max_ms"]) >= args.late_ms]:
+        end = float(w["wall_s"])
+        rows = [r for r in threads[stepping] if end - 1.1 <= float(r["wall_s"]) <= end + 0.05]
+        if len(rows) < 2:
+            continue
+        a, b = rows[0], rows[-1]
+        per_cpu: dict[str, float] = collections.defaultdict(float)
+        for key, series in threads.items():
+            inside = [r for r in series if end - 1.1 <= float(r["wall_s"]) <= end + 0.05 and r["policy"] in REALTIME]
+            for r0, r1 in zip(inside, inside[1:]):
+                per_cpu[r1.get("cpu", "?")] += (int(r1["run_ns"]) - int(r0["run_ns"])) / 1e6
+        span = float(b["wall_s"]) - float(a["wall_s"])
+        print(f"window at sim {float(w['sim_t_s']):7.1f} s: RTF {w['window_rtf']}, latest wake-up {float(w['late_wakeup_max_ms']):.1f} ms; "
+              f"stepping thread over {span:.2f} s: run-queue wait {(int(b['wait_ns']) - int(a['wait_ns'])) / 1e6:.1f} ms, "
+              f"forced switches {int(b['forced_switches']) - int(a['forced_switches'])}, major faults {int(b['majflt']) - int(a['majflt'])}; "
+              f"steal {float(b['steal_s']) - float(a['steal_s']):.2f} s; real-time run per CPU, ms: "
+              + ", ".join(f"cpu{c} {ms:.0f}" for c, ms in sorted(per_cpu.items())))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
