@@ -33,9 +33,14 @@ class StatefulRungeKutta(Integrator):
 
     reference: ClassVar[type[ExplicitRungeKutta]]
     substeps: ClassVar[int] = 1
+    #: the actuator a class made by `of` steps when none is given
+    bound: ClassVar[Actuator | None] = None
 
-    def __init__(self, system: FingerSystem, actuator: Actuator) -> None:
+    def __init__(self, system: FingerSystem, actuator: Actuator | None = None) -> None:
         super().__init__(system)
+        actuator = self.bound if actuator is None else actuator
+        if actuator is None:
+            raise TypeError(f"{type(self).__name__} needs an actuator")
         ref = self.reference
         self._stages = tuple(
             (c, tuple((j, a) for j, a in enumerate(row) if a != 0.0)) for c, row in zip(ref.C, ref.A)
@@ -47,15 +52,17 @@ class StatefulRungeKutta(Integrator):
         self._memory: deque[tuple[Vec3, Vec3, tuple[float, ...]]] = deque(maxlen=MEMORY)
 
     @classmethod
-    def of(cls, reference: type[Integrator], substeps: int = 1) -> type[StatefulRungeKutta]:
+    def of(cls, reference: type[Integrator], substeps: int = 1,
+           actuator: Actuator | None = None) -> type[StatefulRungeKutta]:
         """The class stepping the flat state with the tableau of `reference` (an ExplicitRungeKutta, or a
-        class naming one as its `reference`); ConfigError for a method that has no explicit tableau."""
+        class naming one as its `reference`), `actuator` bound; ConfigError for a method that has no
+        explicit tableau."""
         ref = getattr(reference, "reference", reference)
         if not (isinstance(ref, type) and issubclass(ref, ExplicitRungeKutta)):
             raise ConfigError("integrator.method", "an explicit Runge-Kutta method (rk4, rk6, dop8) for an actuator "
                               "with its own state", reference.name)
         return type(f"{cls.__name__}{ref.__name__}", (cls,), {
-            "reference": ref, "substeps": substeps, "name": reference.name, "order": reference.order,
+            "reference": ref, "substeps": substeps, "bound": actuator, "name": reference.name, "order": reference.order,
             "keeps_constraints": reference.keeps_constraints, "implicit": False,
             "__doc__": f"{reference.name} on the flat state: {(reference.__doc__ or '').splitlines()[0]}",
         })
