@@ -18,6 +18,7 @@ from finger_sim import stick_slip
 from finger_sim.actuators import stepping as drive_stepping
 from finger_sim.actuators.base import Actuator
 from finger_sim.effects import EFFECTS
+from finger_sim.effects.stops import JointStops
 from finger_sim.errors import SimulationDiverged
 from finger_sim.inputs import BREAK_EPS, HELD_ARRAY, Profile
 from finger_sim.integrators import HeldTorque, Integrator, TorqueFn
@@ -85,6 +86,9 @@ class Simulator:
             self.method, self._options = self._integrator_cls.name, {}
         #: the declared state: (q, q', then the drive's or `actuator`'s own slots), and the elements' modes
         self.layout: StateLayout = layout_of(self.system.elements, actuator or self._drive)
+        #: the owners of declared modes, in `layout.modes` order
+        self._mode_owners = tuple(o for o in (*self.system.elements, actuator or self._drive)
+                                  for _ in getattr(o, "modes", ()))
         self._gaps, self._kinks, self._gap_elements = setup.gaps, setup.kinks, setup.gap_elements
         #: the depth gaps (`DepthLimit`, last in `_gaps`): (position of the contact gap in `_gaps`, ρ) each
         self._depth_sources = setup.depth_sources
@@ -137,6 +141,14 @@ class Simulator:
         """The continuous state at the current step, flat, in `layout` order."""
         own_of = getattr(self.integrator, "own_of", None)
         return self.layout.pack(self.q, self.v, () if own_of is None else own_of(self.q, self.v))
+
+    @property
+    def modes(self) -> tuple[str, ...]:
+        """The value of each declared mode (`layout.modes`) at the current step: the stops' rest is held
+        by this Simulator (`_resting`), every other owner holds its own (`mode`, an index into its values)."""
+        return tuple(m.values[int(self._resting is not None and self._resting.element is owner)]
+                     if isinstance(owner, JointStops) else m.values[owner.mode]
+                     for owner, (_, m) in zip(self._mode_owners, self.layout.modes))
 
     @property
     def error_estimate(self) -> float:

@@ -14,11 +14,13 @@ import reference as ref
 from scipy.integrate import solve_ivp
 
 from finger_sim.actuators.base import Actuator
+from finger_sim.actuators.drive import MESH_MODES
 from finger_sim.dynamics import FingerSystem
 from finger_sim.errors import ConfigError
 from finger_sim.kinematics import Vec3
-from finger_sim.scene import scene_from_dict
-from finger_sim.simulate import Simulator
+from finger_sim.effects.stops import JointStops
+from finger_sim.scene import load_scene, scene_from_dict
+from finger_sim.simulate import Simulator, simulate
 from finger_sim.state_layout import Slot, StateLayout
 
 #: The lag's time constant, s: the torque reaches the command after a few T (0.3 s run: 15 T).
@@ -27,6 +29,7 @@ LAG = 0.02
 PAPER = {"model": {"spring_stiffness": 0.001}, "input": {"torque": {"type": "ramp", "offset": 0.001, "slope": 0.01}},
          "duration": 0.3, "integrator": {"method": "rk6", "dt": 1e-3}}
 STEPS = 300
+CONFIG = ref.CONFIG
 #: rk6 at 1 ms against the tight solve: measured 6.7e-13 rad, 2.6e-14 N·m (the lag moves θ1 by 0.09 rad).
 THETA_TOLERANCE = 1e-10  # rad
 TORQUE_TOLERANCE = 1e-12  # N·m
@@ -134,3 +137,21 @@ def test_what_the_actuator_slot_does_not_carry_yet_is_refused_in_one_line(change
     with pytest.raises(ConfigError) as err:
         Simulator(scene_from_dict(data), kernel=kernel, actuator=TorqueLag(LAG))
     assert str(err.value).startswith(words) and "\n" not in str(err.value)
+
+
+def test_the_declared_modes_read_as_the_run_switches_them():
+    """paper_to_stop rests on its stop (restitution 0): `resting` exactly on the steps where θ1 is at the
+    stop (to the location's round-off) with q' = 0; drive_grasp's mesh mode equals the `mesh_mode` output its run records."""
+    sc = load_scene(CONFIG / "paper_to_stop.yaml")
+    sim = Simulator(sc)
+    upper = next(e for e in sim.system.elements if isinstance(e, JointStops)).upper
+    for _ in range(sc.step_count):
+        sim.step()
+        at_rest = abs(sim.q[0] - upper) < 1e-12 and sim.v == (0.0, 0.0, 0.0)
+        assert sim.modes == (("resting",) if at_rest else ("free",))
+    assert sim.modes == ("resting",)
+    sc = load_scene(CONFIG / "drive_grasp.yaml")
+    sim = Simulator(sc)
+    modes = [(sim.step(), sim.modes)[1] for _ in range(sc.step_count)]
+    recorded = simulate(sc).outputs["mesh_mode"][1:]
+    assert modes == [(MESH_MODES[int(m)],) for m in recorded] and modes[-1] == ("stuck",)
