@@ -138,7 +138,10 @@ class Simulator:
 
     @property
     def state_vector(self) -> tuple[float, ...]:
-        """The continuous state at the current step, flat, in `layout` order."""
+        """The continuous state at the current step, flat, in `layout` order. The drive keeps its current
+        (`Drive.i`); an actuator's slots are those the integrator produced with (q, q') (`own_of`)."""
+        if self._drive is not None:
+            return self.layout.pack(self.q, self.v, (self._drive.i,) if self._drive.inductive else ())
         own_of = getattr(self.integrator, "own_of", None)
         return self.layout.pack(self.q, self.v, () if own_of is None else own_of(self.q, self.v))
 
