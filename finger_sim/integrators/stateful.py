@@ -115,7 +115,7 @@ class StatefulRungeKutta(Integrator):
                 w0 += ha * dv[0]
                 w1 += ha * dv[1]
                 w2 += ha * dv[2]
-                xo = tuple(x + ha * k for x, k in zip(xo, ko[j]))
+                xo = tuple([x + ha * k for x, k in zip(xo, ko[j])])
             ts = t + c * dt
             u = torque(ts)
             kq.append((w0, w1, w2))
@@ -130,7 +130,7 @@ class StatefulRungeKutta(Integrator):
             v0 += hb * dv[0]
             v1 += hb * dv[1]
             v2 += hb * dv[2]
-            own = tuple(x + hb * k for x, k in zip(own, ko[j]))
+            own = tuple([x + hb * k for x, k in zip(own, ko[j])])
         qn, vn = project(self.system.params, (q0, q1, q2), (v0, v1, v2))
         return qn, vn, own
 
