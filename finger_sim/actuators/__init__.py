@@ -1,15 +1,20 @@
 """Actuators: what turns the scene's input into a generalized force on link 1.
 
+The slot (`finger_sim.actuators.base.Actuator`) declares its input, its own continuous state (slots in
+the flat state, `finger_sim.state_layout`) and its modes; `Simulator(scene, actuator=...)` steps one
+(`finger_sim.integrators.stateful`).
+
 Without `model.drive` the input is the motor torque τ (N·m) and the ideal torque source of
 spec §3 applies it as it is: no actuator object exists and nothing costs anything. With
 `model.drive` (spec §8) the input is the terminal voltage command u (V) and the drive
 (`finger_sim.actuators.drive`) owns the mesh's discrete mode (drive / back / stuck), its
 guards and its outputs; `finger_sim.actuators.stepping` locates its mode changes inside the
 step. The scene's input profile (`Scene.torque`) is then read as volts. With an inductance
-L > 0 the winding current is the drive's own state (`Drive.i`), carried through the integrator's
-stages by `finger_sim.actuators.inductive` and stepped by `finger_sim.actuators.inductive_stepping`.
+L > 0 the winding current is the drive's declared slot (`Drive.slots`, kept in `Drive.i`), carried
+through the stages by `integrators.stateful` and its events located by `actuators.inductive_stepping`.
 """
 
+from finger_sim.actuators.base import Actuator
 from finger_sim.actuators.drive import Drive, DriveParams, DrivenSystem, drive_from_dict
 
-__all__ = ["Drive", "DriveParams", "DrivenSystem", "drive_from_dict"]
+__all__ = ["Actuator", "Drive", "DriveParams", "DrivenSystem", "drive_from_dict"]

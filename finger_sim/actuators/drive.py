@@ -28,6 +28,7 @@ from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
+from finger_sim.actuators.base import Actuator
 from finger_sim.actuators.drive_outputs import (DRIVE_OUTPUTS, ENCODER, MESH_LOSS, MESH_MODE, MESH_TORQUE, MOTOR_ANGLE,
                                                 MOTOR_CURRENT, MOTOR_VOLTAGE)
 from finger_sim.dynamics import FingerSystem
@@ -36,10 +37,18 @@ from finger_sim.errors import ConfigError, SimulationDiverged
 from finger_sim.kinematics import Vec3
 from finger_sim.model import FingerParams
 from finger_sim.scene_yaml import mapping, number
+from finger_sim.state_layout import ModeSet, Slot
 
 #: Mesh modes (the `mesh_mode` output's codes, index into MESH_MODES).
 DRIVE, BACK, STUCK = 0, 1, 2
 MESH_MODES = ("drive", "back", "stuck")
+#: The mesh's declared mode and the guards that switch it (`actuators.stepping`): turn (θ1' reaches 0,
+#: or the stuck mesh's holding margin), flank (τ_g against the flank), limit (the current limit acts).
+MESH = ModeSet("mesh", MESH_MODES, ("turn", "flank", "limit"))
+#: The drive's own continuous state with L > 0.
+WINDING_CURRENT = Slot("i", "A", "winding current (L > 0)")
+#: The drive's input.
+VOLTAGE_INPUT = Slot("voltage", "V", "terminal voltage command")
 ZERO: Vec3 = (0.0, 0.0, 0.0)
 #: Bounds of the drive's values: far beyond any prosthetic finger's motor and gear (spec §8's
 #: defaults are 8 Ω, 4e-3 N·m/A, 5e-9 kg·m², 6 V, 0.5 A, N = 300); they keep products finite.
@@ -205,12 +214,17 @@ def linkage_inertia_at(r1: float, r2: float, r3: float, m11: float, m22: float, 
 KERNEL_BLOCK = 11
 
 
-class Drive:
+class Drive(Actuator):
     """The actuator: the drive's parameters and its discrete state (mesh mode, direction of motion).
 
     `mode` is DRIVE, BACK or STUCK (an ideal gear stays in DRIVE with c = 1); `direction` is the
     sign of θ1' the rolling mode was entered with (its guards are signed by it). The compiled
-    models made from it (`kernel_block`) follow every change of the mode."""
+    models made from it (`kernel_block`) follow every change of the mode. Declared (`actuators.base`):
+    the input is the voltage, the mode is MESH, and with L > 0 the winding current is its own slot."""
+
+    name = "drive"
+    input = VOLTAGE_INPUT
+    modes = (MESH,)
 
     def __init__(self, params: DriveParams) -> None:
         self.params = params
@@ -221,6 +235,7 @@ class Drive:
         self.changes = 0
         #: L > 0: the current is a state (`i`), integrated with the linkage (`actuators.inductive`)
         self.inductive = params.inductance > 0.0
+        self.slots = (WINDING_CURRENT,) if self.inductive else ()
         #: the winding current at the Simulator's state, A: a state of its own when L > 0 (0 at t = 0)
         self.i = 0.0
         #: (q, q', (t, u, mode, direction), guards) of the last guard evaluation (`stepping._guards`)
@@ -253,6 +268,24 @@ class Drive:
         """Keep the mode slot of compiled model `model` (a numpy array ending in `kernel_block`) current."""
         self._mirrors = [ref for ref in self._mirrors if ref() is not None]
         self._mirrors.append(weakref.ref(model))
+
+    # -- the actuator slot (`actuators.base.Actuator`): own = (i,) with L > 0, () with L = 0
+    def initial(self) -> tuple[float, ...]:
+        """The current is 0 A at t = 0."""
+        return (0.0,) if self.inductive else ()
+
+    def torque(self, system: FingerSystem, t: float, q: Vec3, v: Vec3, u: float, own: tuple[float, ...]) -> float:
+        """τ_g (N·m) in the current mode (`DrivenSystem.mesh`)."""
+        return system.mesh(t, q, v, u, self._mode, own[0] if own else None)[0]  # type: ignore[attr-defined]
+
+    def accelerations(self, system: FingerSystem, t: float, q: Vec3, v: Vec3, u: float,
+                      own: tuple[float, ...]) -> Vec3:
+        """q'' in the current mode: the mesh is solved with the linkage (reflected inertia), not a torque."""
+        return system.mesh(t, q, v, u, self._mode, own[0] if own else None)[2]  # type: ignore[attr-defined]
+
+    def rates(self, t: float, q: Vec3, v: Vec3, u: float, own: tuple[float, ...]) -> tuple[float, ...]:
+        """(i',) in A/s with L > 0 (`current_rate`), () with L = 0."""
+        return (self.current_rate(u, own[0], v[0]),) if own else ()
 
     def current_rate(self, u: float, current: float, theta1_dot: float) -> float:
         """i' (A/s) with L > 0 (`current_rate`)."""

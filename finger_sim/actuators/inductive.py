@@ -7,10 +7,11 @@ current taken from the state (`DrivenSystem.mesh(..., current=i)`), so a stuck m
 where |i| reaches i_max and the winding would push it further, i' = 0 (`drive.current_rate`); its
 start and end are events located inside the step, and the current is set to ±i_max exactly there.
 
-The current is the actuator's own state (`Drive.i`, A, 0 at t = 0), not a seventh entry of the
-Simulator's state: a scene with L = 0 runs exactly as before. The integrator keeps the current of
-the states it produced (`InductiveRungeKutta.current_of`), so the Simulator's trial steps, event
-location and substeps continue each state with its own current.
+The current is the drive's declared slot (`Drive.slots`: i, A, 0 at t = 0), stepped in the flat state
+(q, q', i) by `integrators.stateful.StatefulRungeKutta` like any actuator's own state; the Simulator
+keeps it on the drive (`Drive.i`), so a scene with L = 0 runs exactly as before. The integrator keeps
+the slots of the states it produced (`StatefulRungeKutta.own_of`), so the Simulator's trial steps,
+event location and substeps continue each state with its own current.
 
 Methods: an explicit method must resolve the electrical modes at its step (`electrical_root`:
 s² + (R/L) s + N² k_t²/(L (c M_eff + N² J_m)) = 0 over the rolling flanks and the MCP range).
@@ -21,17 +22,14 @@ from __future__ import annotations
 
 import cmath
 import math
-from collections import deque
-from typing import TYPE_CHECKING, ClassVar
+from typing import TYPE_CHECKING
 
 
 from finger_sim import kinematics, stepper_slot
 from finger_sim.actuators.drive import BACK, DRIVE, DrivenSystem, unique
 from finger_sim.errors import ConfigError
-from finger_sim.integrators.base import Integrator, TorqueFn
-from finger_sim.integrators.explicit import ExplicitRungeKutta
-from finger_sim.kinematics import Vec3
-from finger_sim.projection import project
+from finger_sim.integrators.base import Integrator
+from finger_sim.integrators.stateful import StatefulRungeKutta
 
 if TYPE_CHECKING:
     from finger_sim.scene import Scene
@@ -48,8 +46,6 @@ MAX_ELECTRICAL_SUBSTEPS = 1024
 #: MCP poses sampled for the linkage's inertia M_eff (as `stability.SAMPLES`), off the toggles by
 #: `stability.TOGGLE_MARGIN`.
 SAMPLES = 33
-#: States the integrator remembers the current of (event location tries ≤ 2 × 60 per step).
-MEMORY = 256
 
 
 def electrical_root(system: DrivenSystem, theta1_range: tuple[float, float]) -> complex:
@@ -111,102 +107,12 @@ def electrical_substeps(scene: Scene, system: DrivenSystem, method: type[Integra
     return 1
 
 
-class InductiveRungeKutta(Integrator):
-    """An explicit Runge-Kutta method (`reference`) on (q, q', i), `substeps` per step, projected after
-    each. `current` (A) is the current of a state it did not produce (set by the caller); the states it
-    produced continue with their own (`current_of`)."""
-
-    reference: ClassVar[type[ExplicitRungeKutta]]
-    substeps: ClassVar[int] = 1
+class InductiveRungeKutta(StatefulRungeKutta):
+    """`StatefulRungeKutta` with the drive as the actuator: the flat state (q, q', i), the mesh's q'' in
+    the drive's mode at the stage's current, and i' from `Drive.current_rate`."""
 
     def __init__(self, system: DrivenSystem) -> None:  # type: ignore[override]
-        super().__init__(system)
-        ref = self.reference
-        self._stages = tuple(
-            (c, tuple((j, a) for j, a in enumerate(row) if a != 0.0)) for c, row in zip(ref.C, ref.A)
-        )
-        self._weights = tuple((j, b) for j, b in enumerate(ref.B) if b != 0.0)
-        self.current = 0.0
-        self._memory: deque[tuple[Vec3, Vec3, float]] = deque(maxlen=MEMORY)
-
-    @classmethod
-    def of(cls, reference: type[Integrator], substeps: int) -> type[InductiveRungeKutta]:
-        return type(f"Inductive{reference.__name__}", (cls,), {
-            "reference": getattr(reference, "reference", reference), "substeps": substeps, "name": reference.name,
-            "order": reference.order, "keeps_constraints": reference.keeps_constraints, "implicit": False,
-            "__doc__": f"{reference.name} on (q, q', i): {(reference.__doc__ or '').splitlines()[0]}",
-        })
-
-    def begin(self, q: Vec3, v: Vec3, i: float) -> None:
-        """The state (q, q') the next steps start from has the current i (A), whatever it had when this
-        integrator produced it (the current limit sets i = ±i_max at a located event)."""
-        self.current = i
-        self._memory.append((q, v, i))
-
-    def current_of(self, q: Vec3, v: Vec3) -> float:
-        """The current (A) of the state (q, q') (the same objects) this integrator produced or was told
-        of last (`begin`), else `current`."""
-        for qs, vs, i in reversed(self._memory):
-            if qs is q and vs is v:
-                return i
-        return self.current
-
-    def step(self, t: float, q: Vec3, v: Vec3, dt: float, torque: TorqueFn) -> tuple[Vec3, Vec3]:
-        q, v, i = self.advance(t, q, v, self.current_of(q, v), dt, torque, self.substeps)
-        self._memory.append((q, v, i))
-        return q, v
-
-    def advance(self, t: float, q: Vec3, v: Vec3, i: float, dt: float, torque: TorqueFn,
-                n: int) -> tuple[Vec3, Vec3, float]:
-        """(q, q', i) at t + dt from (q, q', i) at t in n substeps, remembering nothing."""
-        h = dt / n
-        for k in range(n):
-            q, v, i = self._substep(t + k * h, q, v, i, h, torque)
-        return q, v, i
-
-    def _substep(self, t: float, q: Vec3, v: Vec3, i: float, dt: float, torque: TorqueFn) -> tuple[Vec3, Vec3, float]:
-        """`ExplicitRungeKutta.step` with the current as a seventh state (same order of operations)."""
-        system: DrivenSystem = self.system  # type: ignore[assignment]
-        drive = system.drive
-        mode = drive.mode
-        kq: list[Vec3] = []
-        kv: list[Vec3] = []
-        ki: list[float] = []
-        q0, q1, q2 = q
-        v0, v1, v2 = v
-        for c, row in self._stages:
-            x0, x1, x2, w0, w1, w2, c6 = q0, q1, q2, v0, v1, v2, i
-            for j, a in row:
-                ha = dt * a
-                dq, dv = kq[j], kv[j]
-                x0 += ha * dq[0]
-                x1 += ha * dq[1]
-                x2 += ha * dq[2]
-                w0 += ha * dv[0]
-                w1 += ha * dv[1]
-                w2 += ha * dv[2]
-                c6 += ha * ki[j]
-            ts = t + c * dt
-            u = torque(ts)
-            kq.append((w0, w1, w2))
-            kv.append(system.mesh(ts, (x0, x1, x2), (w0, w1, w2), u, mode, c6)[2])
-            ki.append(drive.current_rate(u, c6, w0))
-        for j, b in self._weights:
-            hb = dt * b
-            dq, dv = kq[j], kv[j]
-            q0 += hb * dq[0]
-            q1 += hb * dq[1]
-            q2 += hb * dq[2]
-            v0 += hb * dv[0]
-            v1 += hb * dv[1]
-            v2 += hb * dv[2]
-            i += hb * ki[j]
-        q1_, v1_ = project(system.params, (q0, q1, q2), (v0, v1, v2))
-        return q1_, v1_, i
-
-    @classmethod
-    def is_stable(cls, z: complex) -> bool:
-        return cls.reference.is_stable(z / cls.substeps)
+        super().__init__(system, system.drive)
 
 
 def integrator_class(integrator_cls: type[Integrator], substeps: int) -> type[Integrator]:

@@ -8,7 +8,7 @@ The same events as with L = 0 (spec §8), on the state (q, q', i):
   is a guard of the step like the others, and where it turns negative the mesh breaks free.
 A rest on a stop holds q and q' = 0 while the current goes on (its release by brentq on the free
 acceleration at the current then). Every trial step starts from a state with its own current
-(`InductiveRungeKutta.current_of`).
+(`StatefulRungeKutta.own_of`).
 
 With stick–slip friction at the contacts (spec §7) the linkage locks as one, as with L = 0
 (`finger_sim.stick_slip`): the stuck mesh and the friction cones share τ_h, so the holding margin is the
@@ -33,6 +33,7 @@ from finger_sim.actuators.stepping import (FLANK, GAUSS_NODES, GAUSS_WEIGHTS, GU
 from finger_sim.effects.friction_modes import LOCKED, SLIDING, StickSlipContact
 from finger_sim.errors import SimulationDiverged
 from finger_sim.integrators.base import TorqueFn
+from finger_sim.integrators.stateful import StatefulRungeKutta
 from finger_sim.kinematics import Vec3
 from finger_sim.simulation.locate import illinois
 
@@ -54,7 +55,8 @@ class _Event(NamedTuple):
 def start(sim: Simulator) -> None:
     """The current 0 at t = 0 and the mesh mode of the initial state (`stepping.start`)."""
     system: DrivenSystem = sim.system  # type: ignore[assignment]
-    system.drive.i = sim.integrator.current = 0.0  # type: ignore[attr-defined]
+    system.drive.i = 0.0
+    sim.integrator.own = system.drive.initial()  # type: ignore[attr-defined]
     u = sim.scene.torque(0.0)
     if sim.v[0] == 0.0:
         sim.v = _turn(system, 0.0, sim.q, u, 0.0)
@@ -72,9 +74,9 @@ def advance(sim: Simulator, t0: float, t1: float, u_fn: TorqueFn) -> None:
     p = drive.params
 
     def trial(s0: float, q0: Vec3, v0: Vec3, i0: float, s: float) -> tuple[Vec3, Vec3, float]:
-        integ.begin(q0, v0, i0)  # type: ignore[attr-defined]
+        integ.begin(q0, v0, (i0,))  # type: ignore[attr-defined]
         qs, vs = sim._step(s0, q0, v0, s - s0, u_fn)
-        return qs, vs, integ.current_of(qs, vs)  # type: ignore[attr-defined]
+        return qs, vs, integ.own_of(qs, vs)[0]  # type: ignore[attr-defined]
 
     friction = _friction(system)
     t, q, v, i = t0, sim.q, sim.v, drive.i
@@ -98,11 +100,11 @@ def advance(sim: Simulator, t0: float, t1: float, u_fn: TorqueFn) -> None:
         end, qe, ve, ie = (t1, q1, v1, i1) if event is None else (event.t, event.q, event.v, event.i)
         crossing = None
         if sim._gaps and drive.mode != STUCK:
-            integ.begin(q, v, i)  # type: ignore[attr-defined]
+            integ.begin(q, v, (i,))  # type: ignore[attr-defined]
             crossing = sim._first_crossing(t, q, v, end, qe, ve, u_fn)
             if crossing is not None:  # a stop or a contact change first: the mode guards are checked again after it
                 end, qe, ve = crossing.t, crossing.q, crossing.v
-                ie = integ.current_of(qe, ve)  # type: ignore[attr-defined]
+                ie = integ.own_of(qe, ve)[0]  # type: ignore[attr-defined]
         if ledger is not None:
             _integrate_resolved(ledger, sim, t, end, (q, v, i), u_fn)
         if crossing is not None and end <= t and crossing.gap.restitution is not None and not any(v):
@@ -153,7 +155,7 @@ def _commit(sim: Simulator, t: float, q: Vec3, v: Vec3, i: float) -> None:
     """The Simulator's state at t (s) is (q, q', i); at rest, a stick–slip element remembers its mode there."""
     sim.q, sim.v = q, v
     sim.system.drive.i = i
-    sim.integrator.begin(q, v, i)  # type: ignore[attr-defined]
+    sim.integrator.begin(q, v, (i,))  # type: ignore[attr-defined]
     friction = _friction(sim.system)  # type: ignore[arg-type]
     if friction is not None and v[0] == 0.0:  # at rest the mode is not a function of the state
         if friction.mode == LOCKED and sim._resting is None:
@@ -288,10 +290,10 @@ def _rest(sim: Simulator, t: float, t1: float, q: Vec3, i: float, u_fn: TorqueFn
             return i
         drive.mode = STUCK
         try:
-            sim.integrator.begin(q, ZERO, i)  # type: ignore[attr-defined]
+            sim.integrator.begin(q, ZERO, (i,))  # type: ignore[attr-defined]
             qs, vs = sim.integrator.step(t, q, ZERO, s - t, u_fn)
             limit = drive.params.current_limit  # the driver's limit: a step's overshoot of it is cut off
-            return max(-limit, min(limit, sim.integrator.current_of(qs, vs)))  # type: ignore[attr-defined]
+            return max(-limit, min(limit, sim.integrator.own_of(qs, vs)[0]))  # type: ignore[attr-defined]
         finally:
             drive.mode = mode
 
@@ -335,12 +337,19 @@ def _integrate_resolved(ledger: EnergyLedger, sim: Simulator, a: float, b: float
                         u_fn: TorqueFn) -> None:
     """`_integrate` over [a, b] from the state x = (q, q', i) at a, in the integrator's substeps (the
     electrical transient resolved): each substep's Gauss nodes by one integrator substep from its start."""
-    integ = sim.integrator
-    n = integ.substeps  # type: ignore[attr-defined]
+    integ: StatefulRungeKutta = sim.integrator  # type: ignore[assignment]
+    n = integ.substeps
     h = (b - a) / n
     for k in range(n):
         s0 = a + k * h
         _integrate(ledger, sim.system, s0, s0 + h,  # type: ignore[arg-type]
-                   lambda s, s0=s0, x=x: integ.advance(s0, *x, s - s0, u_fn, 1), u_fn)  # type: ignore[attr-defined]
+                   lambda s, s0=s0, x=x: _advance(integ, s0, x, s - s0, u_fn), u_fn)
         if k < n - 1:
-            x = integ.advance(s0, *x, h, u_fn, 1)  # type: ignore[attr-defined]
+            x = _advance(integ, s0, x, h, u_fn)
+
+
+def _advance(integ: StatefulRungeKutta, t: float, x: tuple[Vec3, Vec3, float], h: float,
+             u_fn: TorqueFn) -> tuple[Vec3, Vec3, float]:
+    """(q, q', i) at t + h from x = (q, q', i) at t, in one integrator substep."""
+    q, v, own = integ.advance_state(t, x[0], x[1], (x[2],), h, u_fn, 1)
+    return q, v, own[0]

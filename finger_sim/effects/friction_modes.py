@@ -29,6 +29,7 @@ from finger_sim.effects.contact import Contact, _Hit
 from finger_sim.effects.contact_outputs import FRICTION_MODE, FRICTION_POWER, FRICTION_TORQUE
 from finger_sim.errors import ConfigError, SimulationDiverged
 from finger_sim.kinematics import Vec3
+from finger_sim.state_layout import ModeSet
 
 REGULARIZED, STICK_SLIP = "regularized", "stick_slip"
 FRICTION_MODELS = (REGULARIZED, STICK_SLIP)
@@ -40,6 +41,9 @@ MAX_STATIC_FRICTION = 10.0
 MIN_STRIBECK_VELOCITY, MAX_STRIBECK_VELOCITY = 1e-9, 10.0
 #: The friction modes as the `friction_mode` output reports them.
 SLIDING, LOCKED = 0, 1
+#: The linkage's friction mode and its guards: the turn (θ1' reaches 0 sliding, then the holding test)
+#: and the breakaway (the locked holding margin turns negative).
+FRICTION = ModeSet("friction", ("sliding", "locked"), ("turn", "breakaway"))
 #: Locked step ends whose holding torque an element remembers for `outputs` (the oldest go first):
 #: more than a streamed block's rows (`streaming.BLOCK_STEPS`), whose outputs are taken after the block.
 HOLD_MEMORY = 4096
@@ -149,6 +153,8 @@ class StickSlipContact(Contact):
     of such a scene builds its own element. Its compiled form (`kernel_code`: KERNEL_BLOCK floats, then the
     contact's) reads the mode and direction from the flat model, whose slots follow them (`mirror`)."""
 
+    #: the declared friction mode (`state_layout`), switched by `finger_sim.stick_slip`
+    modes: ClassVar[tuple[ModeSet, ...]] = (FRICTION,)
     kernel_code: ClassVar[int] = STICK_SLIP_CONTACT
 
     def __init__(self, *args: Any, law: FrictionLaw, **kwargs: Any) -> None:

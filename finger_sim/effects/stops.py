@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, ClassVar
 
 from finger_sim.effects.base import NO_FORCE, NO_OUTPUTS, Vec3, effect
 from finger_sim.effects.parameters import scalar
+from finger_sim.state_layout import ModeSet
 
 if TYPE_CHECKING:
     from finger_sim.scene import Scene
@@ -33,6 +34,10 @@ REST_HEIGHT = 1e-11
 RELEASE_TOLERANCE = 1e-12
 #: brentq's relative tolerance on the release time: four units in the last place.
 RELEASE_RTOL = 4 * 2.0**-52
+#: The stops' discrete mode: free, or resting on the lower or upper stop; its guards are the impact
+#: (a gap's crossing with a rebound no higher than REST_HEIGHT) and the release (the free acceleration
+#: pulls q off the stop).
+REST = ModeSet("rest", ("free", "resting"), ("impact", "release"))
 #: ∂gap/∂q of the lower gap θ1 − lower and of the upper gap upper − θ1.
 _GRADIENTS: tuple[Vec3, Vec3] = ((1.0, 0.0, 0.0), (-1.0, 0.0, 0.0))
 
@@ -48,6 +53,8 @@ class JointStops:
     affine_in_velocity: ClassVar[bool] = True
     smooth: ClassVar[bool] = False
     kernel_code: ClassVar[int] = NO_FORCE  # Q = 0: the Simulator handles the stops as events
+    #: the declared rest mode (`state_layout`): entered at an impact that `rests`, left at `release_time`
+    modes: ClassVar[tuple[ModeSet, ...]] = (REST,)
 
     def kernel_params(self) -> tuple[float, ...]:
         return ()

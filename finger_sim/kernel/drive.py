@@ -192,7 +192,7 @@ def inductive_rates(m, t, q0, q1, q2, v0, v1, v2, u, i):
 
 @njit(**JIT)
 def inductive_rk_step(m, tab, t, x, h, taus, k):
-    """`numerics.rk_step` on x = (q, q', i) in place (`InductiveRungeKutta._substep`). Status."""
+    """`numerics.rk_step` on x = (q, q', i) in place (`integrators.stateful.StatefulRungeKutta._substep`). Status."""
     s = tab.shape[1]
     for r in range(s):
         x0, x1, x2, w0, w1, w2, c6 = x[0], x[1], x[2], x[3], x[4], x[5], x[6]

@@ -26,12 +26,12 @@ class CompiledInductiveRungeKutta(InductiveRungeKutta):
         self._kernel = kernel_drive.inductive_step_tuple
         self._numerics = kernel_drive.numerics
 
-    def advance(self, t: float, q: Vec3, v: Vec3, i: float, dt: float, torque: TorqueFn,
-                n: int) -> tuple[Vec3, Vec3, float]:
+    def advance_state(self, t: float, q: Vec3, v: Vec3, own: tuple[float, ...], dt: float, torque: TorqueFn,
+                      n: int) -> tuple[Vec3, Vec3, tuple[float, ...]]:
         h = dt / n
         nodes = self.nodes
         taus = np.array([torque(tk + c * h) for tk in [t + k * h for k in range(n)] for c in nodes]).reshape(n, len(nodes))
-        status, q1, v1, i1 = self._kernel(self.model, self.tableau, t, q, v, i, dt, n, taus)
+        status, q1, v1, i1 = self._kernel(self.model, self.tableau, t, q, v, own[0], dt, n, taus)
         if status != self._numerics.OK:
             check_status(status, self.name, t, q)
-        return q1, v1, i1
+        return q1, v1, (i1,)

@@ -16,16 +16,19 @@ from typing import NamedTuple
 
 from finger_sim import stick_slip
 from finger_sim.actuators import stepping as drive_stepping
+from finger_sim.actuators.base import Actuator
 from finger_sim.effects import EFFECTS
+from finger_sim.effects.stops import JointStops
 from finger_sim.errors import SimulationDiverged
 from finger_sim.inputs import BREAK_EPS, HELD_ARRAY, Profile
 from finger_sim.integrators import HeldTorque, Integrator, TorqueFn
 from finger_sim.kinematics import Vec3
 from finger_sim.projection import OK as FAST_OK
 from finger_sim.scene import Scene
-from finger_sim.simulation import crossings, event_step, gap_screen, impact
+from finger_sim.simulation import actuated, crossings, event_step, gap_screen, impact
 from finger_sim.simulation.crossings import Crossing, Gap
 from finger_sim.simulation.setup import hashable, setup_for
+from finger_sim.state_layout import StateLayout, layout_of
 from finger_sim.stepper_slot import BREAKPOINT
 from finger_sim.tip_force_profile import refuse_profile
 
@@ -53,14 +56,18 @@ _new_state = tuple.__new__
 class Simulator:
     """Steps one scene at its fixed dt. Torque is the scene's profile, or a held value per step."""
 
-    def __init__(self, scene: Scene, *, kernel: str = "auto") -> None:
+    def __init__(self, scene: Scene, *, kernel: str = "auto", actuator: Actuator | None = None) -> None:
         """kernel: "auto" (compiled where numba and the scene allow), "compiled", "python", or a
         kernel name recorded by an earlier run; `self.kernel` names the one that runs. The set-up
-        (system, method choice, stability check, compiled plan) is kept per scene (`setup_for`)."""
+        (system, method choice, stability check, compiled plan) is kept per scene (`setup_for`).
+        actuator: an actuator with its own state in the slot (`actuators.base`), which takes the scene's
+        input; None: the ideal torque source (or the scene's drive)."""
         refuse_profile(scene, "simulate or rollout")
         self.scene = scene
         # the registered effects are part of the key: a plug-in registered later builds another system
         effects = tuple(EFFECTS.values())
+        if actuator is not None:  # the Python path (`simulation.actuated`)
+            requested, kernel = kernel, "python"
         # a drive holds its mesh mode: each Simulator of a drive scene builds its own system
         cached = hashable(scene) and scene.drive is None and not stick_slip.in_scene(scene)  # nor a friction mode
         setup = setup_for(scene, kernel, effects) if cached else setup_for.__wrapped__(scene, kernel, effects)
@@ -74,6 +81,14 @@ class Simulator:
         #: the stick–slip contact (spec §7) whose friction modes this Simulator steps, or None
         self._friction = stick_slip.element(self.system)
         self._method_cls, self._integrator_cls, self.kernel = setup.method_cls, setup.integrator_cls, setup.kernel
+        if actuator is not None:
+            self._integrator_cls = actuated.integrator_class(scene, setup, actuator, requested)
+            self.method, self._options = self._integrator_cls.name, {}
+        #: the declared state: (q, q', then the drive's or `actuator`'s own slots), and the elements' modes
+        self.layout: StateLayout = layout_of(self.system.elements, actuator or self._drive)
+        #: the owners of declared modes, in `layout.modes` order
+        self._mode_owners = tuple(o for o in (*self.system.elements, actuator or self._drive)
+                                  for _ in getattr(o, "modes", ()))
         self._gaps, self._kinks, self._gap_elements = setup.gaps, setup.kinks, setup.gap_elements
         #: the depth gaps (`DepthLimit`, last in `_gaps`): (position of the contact gap in `_gaps`, ρ) each
         self._depth_sources = setup.depth_sources
@@ -120,6 +135,23 @@ class Simulator:
     @property
     def state(self) -> State:
         return State(self.time, self.q, self.v)
+
+    @property
+    def state_vector(self) -> tuple[float, ...]:
+        """The continuous state at the current step, flat, in `layout` order. The drive keeps its current
+        (`Drive.i`); an actuator's slots are those the integrator produced with (q, q') (`own_of`)."""
+        if self._drive is not None:
+            return self.layout.pack(self.q, self.v, (self._drive.i,) if self._drive.inductive else ())
+        own_of = getattr(self.integrator, "own_of", None)
+        return self.layout.pack(self.q, self.v, () if own_of is None else own_of(self.q, self.v))
+
+    @property
+    def modes(self) -> tuple[str, ...]:
+        """The value of each declared mode (`layout.modes`) at the current step: the stops' rest is held
+        by this Simulator (`_resting`), every other owner holds its own (`mode`, an index into its values)."""
+        return tuple(m.values[int(self._resting is not None and self._resting.element is owner)]
+                     if isinstance(owner, JointStops) else m.values[owner.mode]
+                     for owner, (_, m) in zip(self._mode_owners, self.layout.modes))
 
     @property
     def error_estimate(self) -> float:
