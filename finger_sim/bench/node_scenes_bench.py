@@ -63,8 +63,8 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory(prefix="node_scenes_") as tmp:
         for name in args.scenes:
             method = Simulator(load_scene(files[name])).method
-            run = node_bench.measure(1.0, args.duration, args.domain_id, Path(tmp), commands=True, scene=str(files[name]),
-                                     command_hz=args.command_hz)
+            run = node_bench.measure(1.0, args.duration, args.domain_id, Path(tmp), commands=True,
+                                     scene=str(files[name]), command_hz=args.command_hz)
             overruns = run.diagnostics[-1].get("overruns", "?") if run.diagnostics else "?"
             per_sim_s = run.cpu_cores / run.rtf if run.rtf else float("nan")
             rows.append(f"| {name} | {method} | {run.rtf:.3f} | {run.cpu_cores:.2f} | {per_sim_s:.2f} | {overruns} |")
