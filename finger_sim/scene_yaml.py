@@ -197,6 +197,18 @@ def number(value: Any, key: str, *, minimum: float | None = None, maximum: float
     return x
 
 
+def whole(value: Any, key: str, minimum: int, maximum: int, expected: str) -> int:
+    """An integer in [minimum, maximum]; bools are not numbers. A float with no fractional part
+    (3.0) reads as that integer, as JSON Schema's "integer" (the editors' check) takes it too.
+    A refusal says `expected` and the value as given."""
+    given = value
+    if isinstance(value, float) and value.is_integer():
+        value = int(value)
+    if isinstance(value, bool) or not isinstance(value, int) or not minimum <= value <= maximum:
+        raise ConfigError(key, expected, given)
+    return value
+
+
 def magnitude(value: Any, key: str, limit: float) -> float:
     """A finite float with |value| ≤ limit."""
     x = number(value, key)

@@ -31,7 +31,7 @@ import numpy as np
 from finger_sim.actuators.drive_outputs import MOTOR_ANGLE, MOTOR_CURRENT
 from finger_sim.effects.contact_outputs import CONTACT_FORCES
 from finger_sim.errors import ConfigError
-from finger_sim.scene_yaml import mapping, number, pair
+from finger_sim.scene_yaml import mapping, number, pair, whole
 
 #: The sensors a scene may declare, and the true signal each reads (a run output's name, or for an
 #: FSR the force components whose magnitude it reads).
@@ -81,9 +81,7 @@ class SensorSet:
 def sensors_from_dict(data: Any, *, has_drive: bool, has_objects: bool) -> SensorSet:
     """Validate a scene's `sensors:` mapping; ConfigError names the key, its range and the value."""
     data = mapping(data, "sensors", {"seed", *SOURCES})
-    seed = data.get("seed", 0)
-    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
-        raise ConfigError("sensors.seed", f"an integer in [0, {MAX_SEED}]", seed)
+    seed = whole(data.get("seed", 0), "sensors.seed", 0, MAX_SEED, f"an integer in [0, {MAX_SEED}]")
     models = {}
     for name in SOURCES:  # a fixed order: each sensor's noise stream does not depend on the file's order
         if name not in data:

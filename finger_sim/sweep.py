@@ -41,9 +41,10 @@ STATE_COLUMNS = tuple(Trajectory.CSV_HEADER.split(",")[1:7])
 RESULT_COLUMNS = (*STATE_COLUMNS, "max_constraint_residual", "energy_change")
 GRIP_COLUMN = GRIP_FORCE.name
 #: Finger-steps a sweep may take unless the user raises the limit: about a minute of the
-#: compiled batch on two cores (≈ 0.3 µs of wall time per rk6 finger-step), hours in Python.
+#: compiled batch on two cores (≈ 0.5 µs of CPU per rk6 finger-step, docs/sweep_performance.md),
+#: hours in Python.
 DEFAULT_MAX_SWEEP_STEPS = 200_000_000
-#: Finger-steps whose angles `--plot` may hold (24 B each: ≈ 480 MB).
+#: Finger-steps whose angles `--plot` may hold (24 B each, measured: ≈ 480 MB).
 MAX_PLOT_STEPS = 20_000_000
 #: Bytes per held finger-step of a plotted sweep (three float64 angles).
 PLOT_BYTES_PER_STEP = 24

@@ -36,7 +36,7 @@ from finger_sim.effects.base import ForceElement
 from finger_sim.errors import ConfigError, SimulationDiverged
 from finger_sim.kinematics import Vec3
 from finger_sim.model import FingerParams
-from finger_sim.scene_yaml import mapping, number
+from finger_sim.scene_yaml import mapping, number, whole
 from finger_sim.state_layout import ModeSet, Slot
 
 #: Mesh modes (the `mesh_mode` output's codes, index into MESH_MODES).
@@ -102,9 +102,8 @@ def drive_from_dict(value: Any, key: str = "model.drive") -> DriveParams:
 
     efficiency = get("efficiency", d.efficiency, minimum=0.0, maximum=1.0, strict=True)
     inductance = get("inductance", d.inductance, minimum=0.0, maximum=MAX_INDUCTANCE)
-    counts = data.get("encoder_counts", d.encoder_counts)
-    if isinstance(counts, bool) or not isinstance(counts, int) or not 0 <= counts <= MAX_ENCODER_COUNTS:
-        raise ConfigError(f"{key}.encoder_counts", f"an integer in [0, {MAX_ENCODER_COUNTS}] (0: no encoder)", counts)
+    counts = whole(data.get("encoder_counts", d.encoder_counts), f"{key}.encoder_counts", 0, MAX_ENCODER_COUNTS,
+                   f"an integer in [0, {MAX_ENCODER_COUNTS}] (0: no encoder)")
     return DriveParams(
         resistance=get("resistance", d.resistance, minimum=0.0, maximum=MAX_RESISTANCE, strict=True),
         torque_constant=get("torque_constant", d.torque_constant, minimum=0.0, maximum=MAX_TORQUE_CONSTANT, strict=True),

@@ -77,5 +77,6 @@ def pair_of(description: str, bound: float = math.inf, *, default: Any = ...) ->
 
 
 def whole(description: str, minimum: int, maximum: int, *, default: Any = ...) -> Any:
-    """The pydantic type of an integer in [minimum, maximum] (a YAML int; the loader refuses 1.0)."""
-    return Annotated[int, Field(default=default, ge=minimum, le=maximum, description=description, strict=True)]
+    """The pydantic type of an integer in [minimum, maximum]; 3.0 counts as 3, in JSON Schema's "integer"
+    and in the loader (`scene_yaml.whole`)."""
+    return Annotated[int, Field(default=default, ge=minimum, le=maximum, description=description)]

@@ -49,7 +49,8 @@ PYTHON = "python"
 KERNELS = ("auto", "compiled", PYTHON)
 #: An offline run shorter than this (steps) runs in Python under kernel "auto" when numba is
 #: not loaded yet: loading numba and the cached kernel costs ≈ 0.5 s of CPU, which the kernel
-#: earns back at ≈ 25 µs per rk6 step saved (≈ 14 µs per rk4 step) only after some 20 000 steps.
+#: earns back at ≈ 33 µs of CPU per rk6 step saved (35 µs in Python against 2.4 µs compiled at a
+#: load of 16–19, docs/speed.md, 2026-11-26) only after some 15 000–20 000 steps.
 #: Both paths give the same numbers (the tests hold them to 1e-13 rad; in practice bit for bit).
 OFFLINE_BREAK_EVEN_STEPS = 20_000
 #: NUMBA_CACHE_DIR used when none is set and the package folder is read-only.

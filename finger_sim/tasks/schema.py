@@ -29,7 +29,7 @@ from typing import Any
 
 from finger_sim.errors import ConfigError
 from finger_sim.scene import NAME_LENGTH, Scene, load_scene, safe_name, scene_from_dict
-from finger_sim.scene_yaml import mapping, number, pair, read_scene_file, text
+from finger_sim.scene_yaml import mapping, number, pair, read_scene_file, text, whole
 from finger_sim.tasks.metrics import BOOLEAN_METRICS, METRICS
 from finger_sim.tip_force_profile import TipForceSpan, check_spans
 
@@ -133,9 +133,7 @@ def task_from_dict(data: Any, *, base: Path, default_name: str = "task") -> Task
 
 
 def _whole(value: Any, key: str, low: int) -> int:
-    if not isinstance(value, int) or isinstance(value, bool) or not low <= value <= MAX_STEPS:
-        raise ConfigError(key, f"a whole number of steps in [{low}, {MAX_STEPS}]", value)
-    return value
+    return whole(value, key, low, MAX_STEPS, f"a whole number of steps in [{low}, {MAX_STEPS}]")
 
 
 def _list(value: Any, key: str) -> list[Any]:
