@@ -80,7 +80,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from enum import Enum, auto
 from pathlib import Path
@@ -404,6 +404,35 @@ class McapRecorder:
                 return True
         self._report(problem, text)
         return False
+
+    def write_batch(self, messages: Sequence[tuple[str, bytes]], log_time_ns: int) -> int:
+        """Buffer several messages of CDR bytes at one log time (publish time the same), in
+        order: what write() does for each, under one lock and one check of the queue's room
+        (a node's state of one step, ~22 messages for a 10-finger hand). Returns how many were
+        buffered; the rest were dropped and counted exactly as write() would have."""
+        ok = type(log_time_ns) is int and 0 <= log_time_ns < self._time_limit_ns
+        channels = [self._channels.get(topic) for topic, _ in messages]
+        if not ok or self._state is not _State.OPEN or None in channels or any(type(d) is not bytes for _, d in messages):
+            return sum(self.write(topic, data, log_time_ns) for topic, data in messages)  # its checks and errors
+        if self.back_pressure:
+            self._wait_for_room()
+        log_ns = log_time_ns + self._offset_ns
+        size = sum(len(data) for _, data in messages)
+        with self._lock:
+            waiting = self._queued - self._taken
+            if (self._state is not _State.OPEN or waiting + len(messages) > self._queue_size
+                    or (waiting and self._queued_bytes - self._taken_bytes + size > MAX_QUEUED_BYTES)):
+                return sum(self.write(topic, data, log_time_ns) for topic, data in messages)  # the lock is reentrant
+            buffer, pack = self._buffer, _pack_header
+            for channel, (_, data) in zip(channels, messages):
+                sequence = channel.last_sequence = (channel.last_sequence + 1) % _SEQUENCE_MODULUS  # type: ignore[union-attr]
+                buffer += pack(channel.index, sequence, log_ns, log_ns, len(data))  # type: ignore[union-attr]
+                buffer += data
+            self._queued += len(messages)
+            self._queued_bytes += size
+            if waiting < self._queue_size // 2 <= waiting + len(messages):
+                self._wake.set()  # a burst: take it before the bound is reached
+        return len(messages)
 
     @property
     def path(self) -> Path:
