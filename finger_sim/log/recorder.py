@@ -410,14 +410,20 @@ class McapRecorder:
         order: what write() does for each, under one lock and one check of the queue's room
         (a node's state of one step, ~22 messages for a 10-finger hand). Returns how many were
         buffered; the rest were dropped and counted exactly as write() would have."""
-        ok = type(log_time_ns) is int and 0 <= log_time_ns < self._time_limit_ns
-        channels = [self._channels.get(topic) for topic, _ in messages]
-        if not ok or self._state is not _State.OPEN or None in channels or any(type(d) is not bytes for _, d in messages):
+        get, size = self._channels.get, 0
+        channels: list[_Channel] = []
+        for topic, data in messages:
+            channel = get(topic)
+            if channel is None or type(data) is not bytes:
+                break
+            channels.append(channel)
+            size += len(data)
+        if (len(channels) < len(messages) or self._state is not _State.OPEN
+                or not (type(log_time_ns) is int and 0 <= log_time_ns < self._time_limit_ns)):
             return sum(self.write(topic, data, log_time_ns) for topic, data in messages)  # its checks and errors
         if self.back_pressure:
             self._wait_for_room()
         log_ns = log_time_ns + self._offset_ns
-        size = sum(len(data) for _, data in messages)
         with self._lock:
             waiting = self._queued - self._taken
             if (self._state is not _State.OPEN or waiting + len(messages) > self._queue_size
@@ -425,8 +431,8 @@ class McapRecorder:
                 return sum(self.write(topic, data, log_time_ns) for topic, data in messages)  # the lock is reentrant
             buffer, pack = self._buffer, _pack_header
             for channel, (_, data) in zip(channels, messages):
-                sequence = channel.last_sequence = (channel.last_sequence + 1) % _SEQUENCE_MODULUS  # type: ignore[union-attr]
-                buffer += pack(channel.index, sequence, log_ns, log_ns, len(data))  # type: ignore[union-attr]
+                sequence = channel.last_sequence = (channel.last_sequence + 1) % _SEQUENCE_MODULUS
+                buffer += pack(channel.index, sequence, log_ns, log_ns, len(data))
                 buffer += data
             self._queued += len(messages)
             self._queued_bytes += size
