@@ -426,19 +426,26 @@ class McapRecorder:
         log_ns = log_time_ns + self._offset_ns
         with self._lock:
             waiting = self._queued - self._taken
-            if (self._state is not _State.OPEN or waiting + len(messages) > self._queue_size
-                    or (waiting and self._queued_bytes - self._taken_bytes + size > MAX_QUEUED_BYTES)):
-                return sum(self.write(topic, data, log_time_ns) for topic, data in messages)  # the lock is reentrant
-            buffer, pack = self._buffer, _pack_header
-            for channel, (_, data) in zip(channels, messages):
-                sequence = channel.last_sequence = (channel.last_sequence + 1) % _SEQUENCE_MODULUS
-                buffer += pack(channel.index, sequence, log_ns, log_ns, len(data))
-                buffer += data
-            self._queued += len(messages)
-            self._queued_bytes += size
-            if waiting < self._queue_size // 2 <= waiting + len(messages):
-                self._wake.set()  # a burst: take it before the bound is reached
+            fits = (self._state is _State.OPEN and waiting + len(messages) <= self._queue_size
+                    and not (waiting and self._queued_bytes - self._taken_bytes + size > MAX_QUEUED_BYTES))
+            if fits:
+                self._append_batch(channels, messages, log_ns, size, waiting)
+        if not fits:  # outside the lock: a blocked write() (back-pressure) must let the sender take the buffer
+            return sum(self.write(topic, data, log_time_ns) for topic, data in messages)
         return len(messages)
+
+    def _append_batch(self, channels: list[_Channel], messages: Sequence[tuple[str, bytes]], log_ns: int, size: int,
+                      waiting: int) -> None:
+        """write_batch's records into the buffer (under _lock)."""
+        buffer, pack = self._buffer, _pack_header
+        for channel, (_, data) in zip(channels, messages):
+            sequence = channel.last_sequence = (channel.last_sequence + 1) % _SEQUENCE_MODULUS
+            buffer += pack(channel.index, sequence, log_ns, log_ns, len(data))
+            buffer += data
+        self._queued += len(messages)
+        self._queued_bytes += size
+        if waiting < self._queue_size // 2 <= waiting + len(messages):
+            self._wake.set()  # a burst: take it before the bound is reached
 
     @property
     def path(self) -> Path:
