@@ -60,7 +60,8 @@ class FingerHand(SteppingNode):
 
     def _publish_run_state(self, stamp: int) -> None:
         """/joint_states: the fingers' joint states just published, merged in finger order."""
-        position, velocity, effort = (tuple(x for f in self.fingers for x in f.joint_values[i]) for i in range(3))
+        values = [f.joint_values for f in self.fingers]
+        position, velocity, effort = ([x for v in values for x in v[i]] for i in range(3))
         self._publish(self._merged_out, self._merged_cdr(stamp, position, velocity, effort))
 
 

@@ -70,6 +70,7 @@ from finger_sim.log import LogError
 from finger_sim.log.cdr_writer import clock_cdr
 from finger_sim.ros import conversions, parameters
 from finger_sim.ros.finger import Finger
+from finger_sim.ros.state_output import BatchedStateOutput, StateOutput
 from finger_sim.runtime.drive_commands import input_refusal
 from finger_sim.ros.interfaces import COMMAND_INPUTS, OUTPUTS, Endpoint, InputSpec, OutputSpec, command_qos, finger_topic, raw_sender
 from finger_sim.run_log import CommandEvent
@@ -104,7 +105,7 @@ SERVICES: tuple[tuple[str, type, Callable[[Any, Any], tuple[bool, str]]], ...] =
 )
 
 
-class SteppingNode(Node, SteppingSession):
+class SteppingNode(Node, BatchedStateOutput, SteppingSession):
     """Steps one or more fingers in lock-step at a fixed physics rate, with one /clock and one log.
 
     Subclasses say which fingers (`_finger_specs`) and which URDF (`_description`). Life cycle:
@@ -138,6 +139,7 @@ class SteppingNode(Node, SteppingSession):
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.robot_description = self._description()
         self.recorder = self._open_recorder() if s.record else None
+        self._output = StateOutput(self.recorder)
         self._log_start([e.topic for e in self.fingers[0].inputs] if len(self.fingers) == 1 else
                         [f"<finger>/{spec.topic}" for spec in COMMAND_INPUTS])
 
@@ -279,17 +281,12 @@ class SteppingNode(Node, SteppingSession):
         CDR bytes are published and logged: a Python encoder costs ~30 µs a message, which
         at 1 kHz doubled the node's CPU (docs/recording_performance.md).
         """
-        if type(msg) is bytes:  # the hot topics come as CDR bytes: sent as they are (interfaces.raw_sender)
-            out.send(msg)  # type: ignore[misc]  # a publisher's endpoint
-            if self.recorder is not None and out.recorded:
-                self.recorder.write(out.topic, msg, self.stamp_ns)
-            return
-        if self.recorder is None or not out.recorded:
-            out.handle.publish(msg)
-            return
-        data = serialize_message(msg)
-        out.send(data)  # type: ignore[misc]
-        self.recorder.write(out.topic, data, self.stamp_ns)
+        if type(msg) is not bytes:  # the hot topics come as CDR bytes: sent as they are (interfaces.raw_sender)
+            if self.recorder is None or not out.recorded:
+                out.handle.publish(msg)
+                return
+            msg = serialize_message(msg)
+        self._output.add(out, msg, self.stamp_ns)  # a state's messages: one hand-over to the log (state_output)
 
     def _record(self, endpoint: Endpoint, msg: Any) -> None:
         """Log a received message at the current sim time (never blocks)."""

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import os
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
@@ -117,6 +118,10 @@ class UnwritableLog:
     def write(self, topic: str, message: object, log_time_ns: int) -> bool:
         self.dropped += 1
         return False
+
+    def write_batch(self, messages: Sequence[tuple[str, bytes]], log_time_ns: int) -> int:
+        self.dropped += len(messages)
+        return 0
 
     def close(self) -> None:
         """Nothing to close."""
