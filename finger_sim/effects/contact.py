@@ -18,6 +18,8 @@ that material point (virtual work). For a circle, p slides along the segment, bu
 is normal to n_c (or p is clamped at an end), so J_pᵀ n_c F_n = −∂V_c/∂q exactly with
 V_c = k δ^(e+1)/(e+1). J_p has no θ2 column: the coupler touches nothing.
 
+The arithmetic (each candidate's geometry, the force) is `effects.contact_law`'s plain functions,
+which the compiled kernel compiles as they are; this element picks the candidates and sums.
 Scalar `math` throughout: `force` runs in every stage of every step. Candidates that cannot
 touch anywhere are dropped when the element is built; the rest are skipped by a cheap bound
 (the distal segment lies within L3 of B) before the distal direction e(ψ) is evaluated.
@@ -31,6 +33,8 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
 from finger_sim.effects.base import Vec3, effect
+from finger_sim.effects.contact_law import (contact_force, distal_circle, gap_gradient, generalized, joint_plane,
+                                            point_velocity, proximal_circle, tip_plane)
 from finger_sim.effects.contact_geometry import PHALANX_RADII, Circle, ContactParams, Plane, SceneObject, Vec2
 from finger_sim.effects.contact_outputs import CONTACT_FORCES, CONTACT_OUTPUTS, GRIP_FORCE, MOTION_POWER
 from finger_sim.errors import ConfigError
@@ -52,9 +56,6 @@ OVERLAP_TOLERANCE = 1e-4
 #: lets it see the stiff contact mode there (spec §7: ≈700 rad/s at k_c = 1e5, a few
 #: thousand rad/s at k_c = 1e7, the same force needing a much smaller δ).
 DESIGN_FORCE = 3.0
-#: Below this distance (m) from a circle's centre the phalanx axis has no closest direction;
-#: the normal then falls back to the phalanx's own normal (only reachable deep inside an object).
-MIN_DISTANCE = 1e-12
 
 
 @dataclass(frozen=True)
@@ -175,16 +176,9 @@ class Contact:
         for i, cx, cy, rad in self._prox_circles:
             if shift is not None and shift[i] is not None:
                 cx, cy = cx + shift[i][0], cy + shift[i][1]
-            # p = s B (material coordinate s along A→B), ∂p/∂θ1 = s r1 e'(θ1)
-            s = (cx * bx + cy * by) / (r1 * r1)
-            s = 0.0 if s < 0.0 else (1.0 if s > 1.0 else s)
-            px, py = s * bx, s * by
-            dx, dy = px - cx, py - cy
-            dist = math.sqrt(dx * dx + dy * dy)  # not hypot: CPython's and libm's differ in the last bit
-            d = rad - dist
-            if d > 0.0 or all_candidates:
-                nx, ny = (dx / dist, dy / dist) if dist > MIN_DISTANCE else (-s1, c1)
-                out.append((PROXIMAL, i, d, px, py, nx, ny, -s * by, s * bx, 0.0, 0.0))
+            hit = proximal_circle(cx, cy, rad, r1, bx, by, s1, c1)
+            if hit[0] > 0.0 or all_candidates:
+                out.append((PROXIMAL, i, *hit))
         ux = uy = 0.0
         have_u = False
         for i, cx, cy, rad, reach2 in self._dist_circles:
@@ -196,22 +190,15 @@ class Contact:
             if not have_u:
                 psi = q[2] + self.alpha
                 ux, uy, have_u = math.cos(psi), math.sin(psi), True
-            # p = B + ℓ e(ψ), ∂p/∂θ1 = r1 e'(θ1), ∂p/∂θ3 = ℓ e'(ψ)
-            ell = dx * ux + dy * uy
-            ell = 0.0 if ell < 0.0 else (l3 if ell > l3 else ell)
-            px, py = bx + ell * ux, by + ell * uy
-            dx, dy = px - cx, py - cy
-            dist = math.sqrt(dx * dx + dy * dy)  # not hypot: CPython's and libm's differ in the last bit
-            d = rad - dist
-            if d > 0.0 or all_candidates:
-                nx, ny = (dx / dist, dy / dist) if dist > MIN_DISTANCE else (-uy, ux)
-                out.append((DISTAL, i, d, px, py, nx, ny, -by, bx, -ell * uy, ell * ux))
+            hit = distal_circle(cx, cy, rad, l3, bx, by, ux, uy)
+            if hit[0] > 0.0 or all_candidates:
+                out.append((DISTAL, i, *hit))
         for phalanx, i, ox, oy, nx, ny, rho in self._ends:
             if shift is not None and shift[i] is not None:
                 ox, oy = ox + shift[i][0], oy + shift[i][1]
-            d = rho - (nx * (bx - ox) + ny * (by - oy))
-            if d > 0.0 or all_candidates:
-                out.append((phalanx, i, d, bx, by, nx, ny, -by, bx, 0.0, 0.0))
+            hit = joint_plane(ox, oy, nx, ny, rho, bx, by)
+            if hit[0] > 0.0 or all_candidates:
+                out.append((phalanx, i, *hit))
         for i, ox, oy, nx, ny, rho, reach in self._tips:
             if shift is not None and shift[i] is not None:
                 ox, oy = ox + shift[i][0], oy + shift[i][1]
@@ -221,29 +208,26 @@ class Contact:
             if not have_u:
                 psi = q[2] + self.alpha
                 ux, uy, have_u = math.cos(psi), math.sin(psi), True
-            px, py = bx + l3 * ux, by + l3 * uy
-            d = rho - (nx * (px - ox) + ny * (py - oy))
-            if d > 0.0 or all_candidates:
-                out.append((DISTAL, i, d, px, py, nx, ny, -by, bx, -l3 * uy, l3 * ux))
+            hit = tip_plane(ox, oy, nx, ny, rho, l3, bx, by, ux, uy)
+            if hit[0] > 0.0 or all_candidates:
+                out.append((DISTAL, i, *hit))
         return out
 
     def _forces(self, hit: _Hit, v: Vec3, t: float = 0.0) -> tuple[float, float, float]:
         """(F_n, Fx, Fy), N, of one candidate in contact: Hunt–Crossley normal force plus friction.
         The velocity is the phalanx's relative to the object (ṗ − ċ for a moving one)."""
-        _, i, d, _, _, nx, ny, j1x, j1y, j3x, j3y = hit
-        vx, vy = j1x * v[0] + j3x * v[2], j1y * v[0] + j3y * v[2]
-        if self.time_varying and self._motions[i] is not None:
-            cvx, cvy = self._motions[i].velocity(t)
+        _, i, d, _, _, nx, ny, *_ = hit
+        vx, vy = self._velocity(hit, v, t)
+        return contact_force(d, nx, ny, vx, vy, self._obj_k[i], self._e, self._obj_d[i], self._mu, self._vs)
+
+    def _velocity(self, hit: _Hit, v: Vec3, t: float) -> tuple[float, float]:
+        """ṗ (m/s) of a candidate's point, relative to its object (ṗ − ċ for a moving one)."""
+        vx, vy = point_velocity(*hit[7:], v[0], v[2])
+        motion = self._motions[hit[1]] if self.time_varying else None
+        if motion is not None:
+            cvx, cvy = motion.velocity(t)
             vx, vy = vx - cvx, vy - cvy
-        fn = self._obj_k[i] * d**self._e * (1.0 - self._obj_d[i] * (nx * vx + ny * vy))  # δ' = −n_c·ṗ
-        if fn <= 0.0:
-            return (0.0, 0.0, 0.0)
-        fx, fy = fn * nx, fn * ny
-        if self._mu:
-            ft = -self._mu * fn * math.tanh((nx * vy - ny * vx) / self._vs)  # v_t = t_c·ṗ, t_c = (−ny, nx)
-            fx -= ft * ny
-            fy += ft * nx
-        return (fn, fx, fy)
+        return vx, vy
 
     # -- the ForceElement protocol -------------------------------------------------------
     def force(self, t: float, q: Vec3, v: Vec3) -> Vec3:
@@ -251,8 +235,9 @@ class Contact:
         q1 = q3 = 0.0
         for hit in self._hits(q, False, t):
             _, fx, fy = self._forces(hit, v, t)
-            q1 += hit[7] * fx + hit[8] * fy
-            q3 += hit[9] * fx + hit[10] * fy
+            f1, f3 = generalized(*hit[7:], fx, fy)
+            q1 += f1
+            q3 += f3
         return (q1, 0.0, q3)
 
     def potential(self, q: Vec3) -> float:
@@ -274,12 +259,8 @@ class Contact:
         velocity ċ moves the gap too; the closest point's sliding is normal to n_c)."""
         out = []
         for hit in self._hits(q, True, t):
-            _, i, _, _, _, nx, ny, j1x, j1y, j3x, j3y = hit
-            vx, vy = j1x * v[0] + j3x * v[2], j1y * v[0] + j3y * v[2]
-            if self._motions[i] is not None:
-                cvx, cvy = self._motions[i].velocity(t)
-                vx, vy = vx - cvx, vy - cvy
-            out.append(nx * vx + ny * vy)
+            vx, vy = self._velocity(hit, v, t)
+            out.append(hit[5] * vx + hit[6] * vy)
         return tuple(out)
 
     def motion_power(self, t: float, q: Vec3, v: Vec3) -> float:
@@ -331,8 +312,8 @@ class Contact:
 
     def gap_gradient(self, index: int, q: Vec3) -> Vec3:
         """∂gap/∂q = n_cᵀ J_p of candidate `index` (m/rad): gap = −δ, δ' = −n_c·J_p q'."""
-        _, _, _, _, _, nx, ny, j1x, j1y, j3x, j3y = self._hits(q, True)[index]
-        return (nx * j1x + ny * j1y, 0.0, nx * j3x + ny * j3y)
+        g1, g3 = gap_gradient(*self._hits(q, True)[index][5:])
+        return (g1, 0.0, g3)
 
     def outputs(self, t: float, q: Vec3, v: Vec3) -> Mapping[str, float]:
         """grip_force = Σ F_n (N) and the force on each phalanx, N, model plane (sum over objects)."""

@@ -26,6 +26,7 @@ import numpy as np
 
 from finger_sim.effects.base import STICK_SLIP_CONTACT
 from finger_sim.effects.contact import Contact, _Hit
+from finger_sim.effects.contact_law import along_tangent
 from finger_sim.effects.contact_outputs import FRICTION_MODE, FRICTION_POWER, FRICTION_TORQUE
 from finger_sim.errors import ConfigError, SimulationDiverged
 from finger_sim.kinematics import Vec3
@@ -235,23 +236,19 @@ class StickSlipContact(Contact):
         """(F_n, Fx, Fy), N: the Hunt–Crossley normal force, and while sliding the kinetic friction
         −μ F_n sgn(j_k θ1') (sign from the mode's `direction`, so a step's stages past θ1' = 0 keep the
         mode's law until the event). Locked: the normal force alone (the holding friction is τ_h)."""
-        _, i, d, _, _, nx, ny, j1x, j1y, j3x, j3y = hit
-        vx, vy = j1x * v[0] + j3x * v[2], j1y * v[0] + j3y * v[2]
-        moving = self.time_varying and self._motions[i] is not None
-        if moving:  # relative to the object: ṗ − ċ
-            cvx, cvy = self._motions[i].velocity(t)
-            vx, vy = vx - cvx, vy - cvy
-        fn = self._obj_k[i] * d**self._e * (1.0 - self._obj_d[i] * (nx * vx + ny * vy))  # δ' = −n_c·ṗ
-        if fn <= 0.0:
-            return (0.0, 0.0, 0.0)
-        fx, fy = fn * nx, fn * ny
-        if self._mode == SLIDING and self.static:  # μ_s ≥ μ_k: zero only without friction
+        fn, fx, fy = super()._forces(hit, v, t)  # the normal force alone: this element's regularized μ is 0
+        if fn > 0.0 and self._mode == SLIDING and self.static:  # μ_s ≥ μ_k: zero only without friction
             j = self._tangent_gain(hit)
+            nx, ny = hit[5], hit[6]
             # the Stribeck term's speed: j θ1' at a fixed object, the relative t_c·(ṗ − ċ) at a moving one
-            speed = (nx * vy - ny * vx) / j if moving and j != 0.0 else v[0]
+            moving = self.time_varying and self._motions[hit[1]] is not None
+            if moving and j != 0.0:
+                vx, vy = self._velocity(hit, v, t)
+                speed = (nx * vy - ny * vx) / j
+            else:
+                speed = v[0]
             ft = sliding_friction(fn, j, self._direction, speed, self.kinetic, self.static, self._v_st)
-            fx -= ft * ny  # along t_c = (−ny, nx)
-            fy += ft * nx
+            fx, fy = along_tangent(fx, fy, ft, nx, ny)
         return (fn, fx, fy)
 
     def capacity(self, q: Vec3, t: float = 0.0, v: Vec3 = (0.0, 0.0, 0.0)) -> float:
@@ -293,14 +290,10 @@ class StickSlipContact(Contact):
         torque = power = 0.0
         for hit in self._hits(q, False, t):
             _, fx, fy = self._forces(hit, v, t)
-            nx, ny, j1x, j1y, j3x, j3y = hit[5:]
+            nx, ny = hit[5], hit[6]
             ft = -ny * fx + nx * fy  # t_c·F
             torque += self._tangent_gain(hit) * ft
-            vx, vy = j1x * v[0] + j3x * v[2], j1y * v[0] + j3y * v[2]
-            motion = self._motions[hit[1]] if self.time_varying else None
-            if motion is not None:  # the slip is relative to the object
-                cvx, cvy = motion.velocity(t)
-                vx, vy = vx - cvx, vy - cvy
+            vx, vy = self._velocity(hit, v, t)  # the slip is relative to the object
             power += ft * (-ny * vx + nx * vy)
         return torque, power
 

@@ -17,7 +17,7 @@ it with the shipped grip PI (`grip_pi`), nothing per step in Python:
   (`numerics._profile_step` under the held command, tableau `tab`);
 - the grip force after the step (`Contact.outputs`' Σ F_n), measured at the next sample.
 
-The contact geometry here (`contact_states`) is the force's own (`numerics.proximal_circle` …):
+The contact law here (`contact_states`) is the force's own (`effects.contact_law`, compiled in `numerics`):
 `Contact._hits` with `gaps`, `gap_gradient` and `_forces` in their order and arithmetic (sqrt, not
 hypot), so every decision the Simulator takes on the gaps (whether a step may hold a crossing) is
 taken here on the same numbers. The internal
@@ -48,7 +48,8 @@ from finger_sim.integrators import dop853  # noqa: E402
 from finger_sim.inputs import HELD, HELD_ARRAY  # noqa: E402
 from finger_sim.kernel.numerics import (ERROR_EXPONENT, JIT, LAW, MAX_FACTOR, MIN_FACTOR, OK, SAFETY,  # noqa: E402
                                         _profile_step, _rhs, compiled, distal_circle, dop853_attempt, dop853_output,
-                                        joint_plane, proximal_circle, tip_plane, torque_at)
+                                        gap_gradient, joint_plane, normal_force, point_velocity, proximal_circle,
+                                        tip_plane, torque_at)
 from finger_sim import grip_law as grip  # noqa: E402
 
 #: A row's status after `run` (module docstring).
@@ -108,24 +109,24 @@ def contact_states(m, o, x, gaps, rates):
         count = n_prox if kind == 0 else (n_dist if kind == 1 else (n_ends if kind == 2 else n_tips))
         for _ in range(count):
             if kind == 0:  # a circle on the proximal phalanx: p = s B
-                d, nx, ny, j1x, j1y, j3x, j3y = proximal_circle(m[j], m[j + 1], m[j + 2], r1, bx, by, s1, c1)
+                d, _, _, nx, ny, j1x, j1y, j3x, j3y = proximal_circle(m[j], m[j + 1], m[j + 2], r1, bx, by, s1, c1)
                 j += 3
             elif kind == 1:  # a circle on the distal phalanx: p = B + ℓ e(ψ)
-                d, nx, ny, j1x, j1y, j3x, j3y = distal_circle(m[j], m[j + 1], m[j + 2], l3, bx, by, ux, uy)
+                d, _, _, nx, ny, j1x, j1y, j3x, j3y = distal_circle(m[j], m[j + 1], m[j + 2], l3, bx, by, ux, uy)
                 j += 4
             elif kind == 2:  # a plane against the joint B
-                d, nx, ny, j1x, j1y, j3x, j3y = joint_plane(m[j], m[j + 1], m[j + 2], m[j + 3], m[j + 4], bx, by)
+                d, _, _, nx, ny, j1x, j1y, j3x, j3y = joint_plane(m[j], m[j + 1], m[j + 2], m[j + 3], m[j + 4], bx, by)
                 j += 5
             else:  # a plane against the fingertip
-                d, nx, ny, j1x, j1y, j3x, j3y = tip_plane(m[j], m[j + 1], m[j + 2], m[j + 3], m[j + 4], l3, bx, by,
+                d, _, _, nx, ny, j1x, j1y, j3x, j3y = tip_plane(m[j], m[j + 1], m[j + 2], m[j + 3], m[j + 4], l3, bx, by,
                                                           ux, uy)
                 j += 6
             gaps[i] = -d
-            g0, g1, g2 = nx * j1x + ny * j1y, 0.0, nx * j3x + ny * j3y
+            (g0, g2), g1 = gap_gradient(nx, ny, j1x, j1y, j3x, j3y), 0.0
             rates[i] = g0 * v0 + g1 * v1 + g2 * v2
             if d > 0.0:
-                vx, vy = j1x * v0 + j3x * v2, j1y * v0 + j3y * v2
-                fn = k * d**e * (1.0 - dd * (nx * vx + ny * vy))
+                vx, vy = point_velocity(j1x, j1y, j3x, j3y, v0, v2)
+                fn = normal_force(d, nx, ny, vx, vy, k, e, dd)
                 grip_force += fn if fn > 0.0 else 0.0
             i += 1
     return i, grip_force

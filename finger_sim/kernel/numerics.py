@@ -4,8 +4,9 @@ The laws are not written here: the acceleration solve (`dynamics.schur_solve`), 
 (`projection.project_state`), the force laws the effects declare (`effects.base.kernel_law`, dispatched
 by `element_force`, generated from the registry: `kernel.force_laws`) and the torque profiles
 (`inputs.torque_at`, `inputs.switches_inside`) are the plain functions the Python path calls, compiled
-here as they are. What remains is the flat model's force sum, the contact law (being reworked beside
-this), and the steppers: the same
+here as they are, and so is the contact law (`effects.contact_law`: the candidates' geometry and the force).
+What remains is the flat model's force sum, the contact's candidate loop over its flat parameters
+(`Contact.kernel_params`, the order of `Contact._hits`), and the steppers: the same
 arithmetic, in the same order, as their Python references (`ExplicitRungeKutta.step`, scipy's
 DOP853), so both paths agree to round-off (the tests ask 1e-13 rad).
 Compiled by numba on first use and cached on disk (`cache=True`; see `finger_sim.kernel`).
@@ -21,8 +22,7 @@ import numpy as np
 from finger_sim.kernel.jit import JIT, LAW, compiled, njit  # first: it keys numba's cache
 
 from finger_sim import dynamics, inputs, projection
-from finger_sim.effects import friction_modes
-from finger_sim.effects.contact import MIN_DISTANCE
+from finger_sim.effects import contact_law, friction_modes
 from finger_sim.effects.friction_modes import KERNEL_BLOCK as SLIP_BLOCK
 from finger_sim.effects.friction_modes import SLIDING
 from finger_sim.inputs import BREAK_EPS, SQUARE, STEP
@@ -54,50 +54,19 @@ torque_at = compiled(inputs.torque_at, **_PROFILE_LAWS)
 switches_inside = compiled(inputs.switches_inside, **_PROFILE_LAWS)
 
 
-# -- the contact candidates' geometry (`Contact._hits`), shared by the force, the closed loop and the event checks
-@njit(**LAW)
-def _circle_depth(px, py, cx, cy, rad, fx, fy):
-    """(δ = rad − |p − c| m, n_c = (p − c)/|p − c|) of a phalanx's closest point p to a circle's centre c;
-    n_c = (fx, fy), the phalanx's own normal, where p is on c."""
-    dx, dy = px - cx, py - cy
-    dist = math.sqrt(dx * dx + dy * dy)  # not hypot: CPython's and libm's differ in the last bit
-    if dist > MIN_DISTANCE:
-        return rad - dist, dx / dist, dy / dist
-    return rad - dist, fx, fy
-
-
-@njit(**LAW)
-def proximal_circle(cx, cy, rad, r1, bx, by, s1, c1):
-    """A circle (centre c, radius ρ1 + R: rad, m) and the proximal phalanx A→B (B = r1 e(θ1) = (bx, by),
-    (s1, c1) = sin, cos θ1): (δ m, n_c, j1 = ∂p/∂θ1, j3 = ∂p/∂θ3 m/rad) at its closest point p = s B."""
-    s = (cx * bx + cy * by) / (r1 * r1)
-    s = 0.0 if s < 0.0 else (1.0 if s > 1.0 else s)
-    delta, nx, ny = _circle_depth(s * bx, s * by, cx, cy, rad, -s1, c1)
-    return delta, nx, ny, -s * by, s * bx, 0.0, 0.0
-
-
-@njit(**LAW)
-def distal_circle(cx, cy, rad, l3, bx, by, ux, uy):
-    """A circle (rad = ρ3 + R) and the distal phalanx B → B + L3 e(ψ) ((ux, uy) = e(ψ)): as
-    `proximal_circle`, at p = B + ℓ e(ψ)."""
-    dx, dy = cx - bx, cy - by
-    ell = dx * ux + dy * uy
-    ell = 0.0 if ell < 0.0 else (l3 if ell > l3 else ell)
-    delta, nx, ny = _circle_depth(bx + ell * ux, by + ell * uy, cx, cy, rad, -uy, ux)
-    return delta, nx, ny, -by, bx, -ell * uy, ell * ux
-
-
-@njit(**LAW)
-def joint_plane(ox, oy, nx, ny, rho, bx, by):
-    """A plane (point o, outward normal n) and the joint B (radius rho): as `proximal_circle`."""
-    return rho - (nx * (bx - ox) + ny * (by - oy)), nx, ny, -by, bx, 0.0, 0.0
-
-
-@njit(**LAW)
-def tip_plane(ox, oy, nx, ny, rho, l3, bx, by, ux, uy):
-    """A plane and the fingertip B + L3 e(ψ): as `proximal_circle`."""
-    px, py = bx + l3 * ux, by + l3 * uy
-    return rho - (nx * (px - ox) + ny * (py - oy)), nx, ny, -by, bx, -l3 * uy, l3 * ux
+# -- the contact law (`effects.contact_law`, the plain functions `Contact` calls), compiled as it is: the
+# candidates' geometry, shared by the force, the closed loop and the event checks, and the force
+circle_depth = njit(**LAW)(contact_law.circle_depth)
+proximal_circle = compiled(contact_law.proximal_circle, circle_depth=circle_depth)
+distal_circle = compiled(contact_law.distal_circle, circle_depth=circle_depth)
+joint_plane = njit(**LAW)(contact_law.joint_plane)
+tip_plane = njit(**LAW)(contact_law.tip_plane)
+point_velocity = njit(**LAW)(contact_law.point_velocity)
+along_tangent = njit(**LAW)(contact_law.along_tangent)
+normal_force = njit(**LAW)(contact_law.normal_force)
+contact_force = compiled(contact_law.contact_force, along_tangent=along_tangent, normal_force=normal_force)
+gap_gradient = njit(**LAW)(contact_law.gap_gradient)
+generalized = njit(**LAW)(contact_law.generalized)
 
 
 @njit(**JIT)
@@ -114,7 +83,7 @@ def _contact(m, o, q0, q2, v0, v2, slide, direction, mu_k, mu_s, v_st, n3):
     out1 = 0.0
     out3 = 0.0
     for _ in range(n_prox):
-        delta, nx, ny, j1x, j1y, j3x, j3y = proximal_circle(m[j], m[j + 1], m[j + 2], r1, bx, by, s1, c1)
+        delta, _, _, nx, ny, j1x, j1y, j3x, j3y = proximal_circle(m[j], m[j + 1], m[j + 2], r1, bx, by, s1, c1)
         j += 3
         if delta > 0.0:
             f1, f3 = _contact_force(delta, nx, ny, j1x, j1y, j3x, j3y, v0, v2, k, e, d, mu, vs,
@@ -132,14 +101,14 @@ def _contact(m, o, q0, q2, v0, v2, slide, direction, mu_k, mu_s, v_st, n3):
         if not have_u:
             psi = q2 + alpha
             ux, uy, have_u = math.cos(psi), math.sin(psi), True
-        delta, nx, ny, j1x, j1y, j3x, j3y = distal_circle(cx, cy, rad, l3, bx, by, ux, uy)
+        delta, _, _, nx, ny, j1x, j1y, j3x, j3y = distal_circle(cx, cy, rad, l3, bx, by, ux, uy)
         if delta > 0.0:
             f1, f3 = _contact_force(delta, nx, ny, j1x, j1y, j3x, j3y, v0, v2, k, e, d, mu, vs,
                                      slide, direction, mu_k, mu_s, v_st, n3)
             out1 += f1
             out3 += f3
     for _ in range(n_ends):
-        delta, nx, ny, j1x, j1y, j3x, j3y = joint_plane(m[j], m[j + 1], m[j + 2], m[j + 3], m[j + 4], bx, by)
+        delta, _, _, nx, ny, j1x, j1y, j3x, j3y = joint_plane(m[j], m[j + 1], m[j + 2], m[j + 3], m[j + 4], bx, by)
         j += 5
         if delta > 0.0:
             f1, f3 = _contact_force(delta, nx, ny, j1x, j1y, j3x, j3y, v0, v2, k, e, d, mu, vs,
@@ -155,7 +124,7 @@ def _contact(m, o, q0, q2, v0, v2, slide, direction, mu_k, mu_s, v_st, n3):
         if not have_u:
             psi = q2 + alpha
             ux, uy, have_u = math.cos(psi), math.sin(psi), True
-        delta, nx, ny, j1x, j1y, j3x, j3y = tip_plane(ox, oy, nx, ny, rho, l3, bx, by, ux, uy)
+        delta, _, _, nx, ny, j1x, j1y, j3x, j3y = tip_plane(ox, oy, nx, ny, rho, l3, bx, by, ux, uy)
         if delta > 0.0:
             f1, f3 = _contact_force(delta, nx, ny, j1x, j1y, j3x, j3y, v0, v2, k, e, d, mu, vs,
                                      slide, direction, mu_k, mu_s, v_st, n3)
@@ -169,21 +138,12 @@ def _contact_force(delta, nx, ny, j1x, j1y, j3x, j3y, v0, v2, k, e, d, mu, vs, s
                    n3):
     """J_pᵀ F of one candidate in contact: `Contact._forces` (with `slide`, `StickSlipContact._forces`) then
     the sum in `Contact.force`."""
-    vx, vy = j1x * v0 + j3x * v2, j1y * v0 + j3y * v2
-    fn = k * delta**e * (1.0 - d * (nx * vx + ny * vy))
-    if fn <= 0.0:
-        fx = fy = 0.0
-    else:
-        fx, fy = fn * nx, fn * ny
-        if mu != 0.0:
-            ft = -mu * fn * math.tanh((nx * vy - ny * vx) / vs)
-            fx -= ft * ny
-            fy += ft * nx
-        if slide:
-            ft = sliding_friction(fn, tangent_gain(nx, ny, j1x, j1y, j3x, j3y, n3), direction, v0, mu_k, mu_s, v_st)
-            fx -= ft * ny
-            fy += ft * nx
-    return j1x * fx + j1y * fy, j3x * fx + j3y * fy
+    vx, vy = point_velocity(j1x, j1y, j3x, j3y, v0, v2)
+    fn, fx, fy = contact_force(delta, nx, ny, vx, vy, k, e, d, mu, vs)
+    if slide and fn > 0.0:
+        ft = sliding_friction(fn, tangent_gain(nx, ny, j1x, j1y, j3x, j3y, n3), direction, v0, mu_k, mu_s, v_st)
+        fx, fy = along_tangent(fx, fy, ft, nx, ny)
+    return generalized(j1x, j1y, j3x, j3y, fx, fy)
 
 
 @njit(**JIT)

@@ -74,7 +74,7 @@ from finger_sim.ros.state_output import BatchedStateOutput, StateOutput
 from finger_sim.runtime.drive_commands import input_refusal
 from finger_sim.ros.interfaces import COMMAND_INPUTS, OUTPUTS, Endpoint, InputSpec, OutputSpec, command_qos, finger_topic, raw_sender
 from finger_sim.run_log import CommandEvent
-from finger_sim.runtime.diagnostics import Level
+from finger_sim.runtime.diagnostics import ClockWatch, Level
 from finger_sim.runtime.hand_config import FingerSpec
 from finger_sim.runtime.log_paths import UnwritableLog
 from finger_sim.runtime.parameters import NODE_PARAMETERS, NodeSettings, Param, ParameterError, RunSettings
@@ -119,7 +119,7 @@ class SteppingNode(Node, BatchedStateOutput, SteppingSession):
         self.settings = s = settings_type.from_values(parameters.declare(self, table))  # _finger_specs reads it
         timeline = Timeline(1.0 / s.physics_rate_hz)
         self._start_session(node_name, s, timeline, [Finger(spec, s, timeline) for spec in self._finger_specs()], Future())
-        self._clock_warned = False
+        self._clock_watch = ClockWatch()
         self._shutdown_errors = (_rclpy.RCLError,)
 
         # -- interfaces, from the tables --
@@ -298,11 +298,8 @@ class SteppingNode(Node, BatchedStateOutput, SteppingSession):
         if self._clock_out is None:
             return None
         n = self.count_publishers(self._clock_out.topic)
-        if n > 1 and not self._clock_warned:
-            self._clock_warned = True
-            self.get_logger().warning(
-                f"{n} publishers on /clock: another node publishes sim time too, so /clock jumps back and forth; "
-                "run several fingers in one finger_hand (one clock), or publish_clock:=false on all but one")
+        if (warning := self._clock_watch.warning(n)) is not None:
+            self.get_logger().warning(warning)
         return n
 
     def _publish_diagnostics(self) -> None:

@@ -160,3 +160,19 @@ class DiagnosticsWindow:
         if pacer is not None and new_window:
             pacer.new_window()
         return level, message, values
+
+
+class ClockWatch:
+    """The console warning about another /clock publisher: once per run, the first time the graph
+    holds more than this node's (the diagnostics say it in every window; the log says it once)."""
+
+    def __init__(self) -> None:
+        self.warned = False
+
+    def warning(self, publishers: int) -> str | None:
+        """The warning to log, given the count of /clock publishers now; None: nothing (more) to say."""
+        if publishers <= 1 or self.warned:
+            return None
+        self.warned = True
+        return (f"{publishers} publishers on /clock: another node publishes sim time too, so /clock jumps back and "
+                "forth; run several fingers in one finger_hand (one clock), or publish_clock:=false on all but one")

@@ -17,7 +17,7 @@ import finger_sim.runtime
 from finger_sim.errors import ConfigError
 from finger_sim.run_log import CommandEvent
 from finger_sim.runtime.commands import REFUSED_NOT_FINITE, REFUSED_SCENE, Inbox, TorqueCommands, timeout_steps
-from finger_sim.runtime.diagnostics import DiagnosticsWindow, Level, LogStatus, Snapshot
+from finger_sim.runtime.diagnostics import ClockWatch, DiagnosticsWindow, Level, LogStatus, Snapshot
 from finger_sim.runtime.log_paths import LogFolder, UnwritableLog, create_log_file, safe_component
 from finger_sim.runtime.pacing import Lateness, Pacer
 from finger_sim.runtime.parameters import NODE_PARAMETERS, RUNTIME_PARAMETERS, CommandQos, NodeSettings, Param, ParameterError, TorqueSource
@@ -295,3 +295,11 @@ def test_create_log_file_makes_only_what_it_needs(tmp_path):
     with pytest.raises(OSError):
         create_log_file(str(blocker / "deeper" / "bags"), "s", started=started)
     assert sorted(p.name for p in (tmp_path / "x").iterdir()) == ["new"] and blocker.is_file()
+
+
+def test_clock_watch_warns_once_about_another_clock_publisher():
+    watch = ClockWatch()
+    assert [watch.warning(n) for n in (0, 1, 1)] == [None, None, None]  # not publishing yet, or alone
+    first = watch.warning(2)
+    assert first is not None and first.startswith("2 publishers on /clock") and "publish_clock:=false" in first
+    assert [watch.warning(n) for n in (3, 1, 2)] == [None, None, None]  # said once per run
