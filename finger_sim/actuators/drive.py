@@ -33,7 +33,7 @@ from finger_sim.actuators.drive_outputs import (DRIVE_OUTPUTS, ENCODER, MESH_LOS
                                                 MOTOR_CURRENT, MOTOR_VOLTAGE)
 from finger_sim.dynamics import FingerSystem
 from finger_sim.effects.base import ForceElement
-from finger_sim.errors import ConfigError, SimulationDiverged
+from finger_sim.errors import SimulationDiverged
 from finger_sim.kinematics import Vec3
 from finger_sim.model import FingerParams
 from finger_sim.scene_yaml import mapping, number, whole
