@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
 import subprocess
 import sys
 import time
@@ -16,6 +18,22 @@ def run_cli(*args: str | Path, timeout: float = CLI_TIMEOUT_S) -> subprocess.Com
     """`finger-sim ARGS...` in its own process; its exit status is the caller's to check."""
     return subprocess.run([str(FINGER_SIM), *map(str, args)], capture_output=True, text=True, timeout=timeout,
                           check=False)
+
+
+def run_cli_here(*args: str | Path) -> subprocess.CompletedProcess:
+    """`finger-sim ARGS...` called in this process (finger_sim.cli.main), its stdout, stderr and exit
+    status as run_cli gives them: for the tests where the process boundary is not what is tested
+    (each command keeps at least one test through run_cli). A traceback fails the test itself."""
+    from finger_sim.cli import main
+
+    argv = [str(a) for a in args]
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            status = main(argv)
+        except SystemExit as exc:  # argparse's usage errors (status 2) and --help
+            status = exc.code if isinstance(exc.code, int) else int(exc.code is not None)
+    return subprocess.CompletedProcess([str(FINGER_SIM), *argv], status, out.getvalue(), err.getvalue())
 
 
 #: How long a killed recorder's writer process may take to write what it was handed, s.

@@ -18,7 +18,7 @@ import pytest
 
 from finger_sim.scene import load_scene
 from finger_sim.simulate import Simulator, Trajectory, output_names, output_values
-from helpers import run_cli
+from helpers import run_cli, run_cli_here
 
 HAND = "finger_sim.ros.hand"
 CONFIG = Path(__file__).resolve().parents[2] / "config"
@@ -78,7 +78,7 @@ def test_resim_reproduces_every_finger_bit_for_bit(hand_log: Path) -> None:
     assert done.returncode == 0, done.stdout + done.stderr
     assert done.stdout.splitlines() == [f"{name}: resim: {STEPS + 1} recorded states reproduced bit for bit "
                                         "(max deviation 0)" for name in SCENES]
-    one = run_cli("resim", hand_log, "--finger", "ring")
+    one = run_cli_here("resim", hand_log, "--finger", "ring")  # the whole log ran through the console script
     assert one.returncode == 0 and one.stdout.splitlines() == done.stdout.splitlines()[2:], one.stdout + one.stderr
 
 
@@ -99,14 +99,14 @@ def test_export_writes_one_csv_per_finger_or_the_one_asked_for(hand_log: Path, t
     assert forces[:, 0].max() > 0.1  # it did grip
     assert (tmp_path / "hand_index.csv").read_text().partition("\n")[0] == Trajectory.csv_header(())
 
-    one = run_cli("export", hand_log, "--finger", "middle", "--csv", tmp_path / "middle.csv")
+    one = run_cli_here("export", hand_log, "--finger", "middle", "--csv", tmp_path / "middle.csv")
     assert one.returncode == 0, one.stdout + one.stderr
     assert (tmp_path / "middle.csv").read_text() == (tmp_path / "hand_middle.csv").read_text()
 
 
 @pytest.mark.parametrize("command", ["export", "resim"])
 def test_an_unknown_finger_is_one_line_naming_the_fingers(hand_log: Path, command: str) -> None:
-    done = run_cli(command, hand_log, "--finger", "thumb")
+    done = run_cli_here(command, hand_log, "--finger", "thumb")
     assert done.returncode == EXIT_ERROR
     assert "Traceback" not in done.stderr and len(done.stderr.splitlines()) == 1, done.stderr
     assert "--finger 'thumb'" in done.stderr and "'index', 'middle', 'ring'" in done.stderr

@@ -3,8 +3,10 @@
 References: the node log read by mcap + mcap_ros2 (not finger_sim's reader); spec §6 for the
 paper coordinates of the logged joint states (θ1 = mcp + θ1_ext, θ2 = coupler + θ2_ext,
 θ3 = pip + θ1 − α, rates likewise); spec §5 for θ(0.3 s) = (34.34°, 54.39°, −53.02°); and
-`finger-sim simulate` of the same scene. Every command runs as the installed console script in
-a subprocess, as a user would run it. The node runs once per module, on a domain of its own.
+`finger-sim simulate` of the same scene. Each command runs at least once as the installed console
+script in a subprocess, as a user runs it (run_cli: simulate, info, export, resim, repair, and a bad
+log to each of info, export and resim); the other cases call the same main() in this process
+(run_cli_here). The node runs once per module, on a domain of its own.
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ from conftest import Launcher, allocate_domain_id, ros_environment
 from finger_sim import kinematics
 from finger_sim.log import message_definition
 from finger_sim.scene import load_scene
-from helpers import NODE, run_cli
+from helpers import NODE, run_cli, run_cli_here
 
 ROOT = Path(__file__).resolve().parents[2]
 PAPER = ROOT / "config" / "paper_flexion.yaml"
@@ -152,7 +154,7 @@ def test_export_is_the_logged_states_in_paper_coordinates(node_log: NodeLog, sim
 
 def test_export_reaches_the_papers_angles(node_log: NodeLog, simulated: np.ndarray, tmp_path: Path) -> None:
     out = tmp_path / "export.csv"
-    assert run_cli("export", node_log.path, "--csv", out).returncode == 0
+    assert run_cli_here("export", node_log.path, "--csv", out).returncode == 0
     _, rows = read_csv(out)
     final = rows[-1]
     assert final[0] == pytest.approx(0.3, abs=1e-15)
@@ -176,7 +178,7 @@ def test_export_ros_columns_are_the_logged_messages(node_log: NodeLog, tmp_path:
     """--columns ros against what the node published, read by mcap_ros2: joint_states' positions,
     velocities and efforts as logged, and fingertip_pose's position and orientation."""
     out = tmp_path / "ros.csv"
-    done = run_cli("export", node_log.path, "--csv", out, "--columns", "ros")
+    done = run_cli_here("export", node_log.path, "--csv", out, "--columns", "ros")
     assert (done.returncode, done.stderr) == (0, ""), done.stderr  # no progress output off a terminal
     rows = read_ros_csv(out)
     efforts, poses = [], []
@@ -202,14 +204,14 @@ def test_every_thins_both_column_sets_and_simulate_agrees(node_log: NodeLog, sim
                                                           tmp_path: Path) -> None:
     for columns in ("paper", "ros"):
         out = tmp_path / f"{columns}.csv"
-        assert run_cli("export", node_log.path, "--csv", out, "--columns", columns, "--every", "7").returncode == 0
+        assert run_cli_here("export", node_log.path, "--csv", out, "--columns", columns, "--every", "7").returncode == 0
         rows = read_ros_csv(out) if columns == "ros" else read_csv(out)[1]
         assert len(rows) == math.ceil(301 / 7)
         np.testing.assert_array_equal(rows[:, 0], np.array(node_log.stamps[::7]) / 1e9)
     np.testing.assert_allclose(read_csv(tmp_path / "paper.csv")[1], simulated[::7], rtol=0, atol=TOL)
     # simulate --columns ros (streamed): the same scene offline, spec §6's efforts from its own torque
     sim_out = tmp_path / "sim_ros.csv"
-    done = run_cli("simulate", PAPER, "--csv", sim_out, "--columns", "ros", "--every", "7")
+    done = run_cli_here("simulate", PAPER, "--csv", sim_out, "--columns", "ros", "--every", "7")
     assert (done.returncode, done.stderr) == (0, ""), done.stderr
     sim_rows, logged = read_ros_csv(sim_out), read_ros_csv(tmp_path / "ros.csv")
     np.testing.assert_allclose(sim_rows[:, [0, 1, 2, 3, 4, 5, 6, 9, 11, 12, 13, 14, 15, 16, 17, 18]],
@@ -220,7 +222,7 @@ def test_every_thins_both_column_sets_and_simulate_agrees(node_log: NodeLog, sim
     assert not sim_rows[:, 8].any()
     # and the same through the in-memory path (with --plot)
     both = tmp_path / "sim_plot.csv"
-    assert run_cli("simulate", PAPER, "--csv", both, "--columns", "ros", "--every", "7",
+    assert run_cli_here("simulate", PAPER, "--csv", both, "--columns", "ros", "--every", "7",
                    "--plot", tmp_path / "p.png").returncode == 0
     np.testing.assert_array_equal(read_ros_csv(both), sim_rows)
 
@@ -251,7 +253,7 @@ def test_not_a_log(tmp_path: Path, command: str, content: bytes | None, problem:
     path = tmp_path / "run.mcap"
     if content is not None:
         path.write_bytes(content)
-    done = run_cli(command, path)
+    done = (run_cli if content is TEXT else run_cli_here)(command, path)  # one process per command
     assert done.returncode == EXIT_ERROR
     assert single_error_line(done) == f"finger-sim {command}: error: {path}: {problem}"
     assert done.stdout == ""
@@ -266,7 +268,7 @@ def test_truncated_log_is_read_up_to_the_cut(node_log: NodeLog, tmp_path: Path, 
     path = tmp_path / "cut.mcap"
     path.write_bytes(node_log.path.read_bytes()[:cut])
     out = tmp_path / "cut.csv"
-    done = run_cli(command, path, *(["--csv", out] if command == "export" else []))
+    done = run_cli_here(command, path, *(["--csv", out] if command == "export" else []))
     assert done.returncode == EXIT_TRUNCATED
     line = single_error_line(done)
     assert line.startswith(f"finger-sim: warning: {path}: truncated at byte {chunk.chunk_start_offset} of {cut}: "), line
@@ -292,7 +294,7 @@ def test_corrupt_chunk(node_log: NodeLog, tmp_path: Path, command: str) -> None:
     data[middle:middle + 16] = b"\xff" * 16
     path = tmp_path / "corrupt.mcap"
     path.write_bytes(bytes(data))
-    done = run_cli(command, path)
+    done = run_cli_here(command, path)
     assert done.returncode == EXIT_ERROR
     line = single_error_line(done)
     assert line.startswith(f"finger-sim {command}: error: {path}: corrupt record at byte {chunk.chunk_start_offset}: "
@@ -313,7 +315,7 @@ def foreign_log(tmp_path: Path) -> Path:
 
 @pytest.mark.parametrize("command", ["export", "resim"])
 def test_log_from_another_program(foreign_log: Path, command: str) -> None:
-    done = run_cli(command, foreign_log)
+    done = run_cli_here(command, foreign_log)
     assert done.returncode == EXIT_ERROR
     assert single_error_line(done) == (f"finger-sim {command}: error: {foreign_log}: no metadata record 'finger_sim' "
                                        "(records present: none)")
@@ -321,7 +323,7 @@ def test_log_from_another_program(foreign_log: Path, command: str) -> None:
 
 def test_info_describes_a_log_from_another_program(foreign_log: Path) -> None:
     """A valid MCAP is not an error for `info` (as for `ros2 bag info`): it says what is there."""
-    done = run_cli("info", foreign_log)
+    done = run_cli_here("info", foreign_log)
     assert (done.returncode, done.stderr) == (0, "")
     assert "Topics:   /joint_states | sensor_msgs/msg/JointState | 3 msgs | cdr" in done.stdout.splitlines()
     assert "Metadata: none" in done.stdout.splitlines()
@@ -333,7 +335,7 @@ def test_info_calls_a_log_without_its_end_truncated(node_log: NodeLog, tmp_path:
     """Missing only the closing magic's last byte, all of it, or one byte more: not 'complete'."""
     path = tmp_path / "end.mcap"
     path.write_bytes(node_log.path.read_bytes()[:-missing])
-    done = run_cli("info", path)
+    done = run_cli_here("info", path)
     assert done.returncode == EXIT_TRUNCATED, done.stdout
     assert "Status:   complete" not in done.stdout
     assert f"Messages: {sum(node_log.counts.values())} in {len(node_log.chunks)} chunks" in done.stdout.splitlines()
@@ -366,7 +368,7 @@ def _rewritten(node_log: NodeLog, path: Path, *, schema_name: str, definition: s
 def test_foreign_joint_state_schema_is_refused(node_log: NodeLog, tmp_path: Path, command: str, schema_name: str,
                                                definition: str, problem: str) -> None:
     path = _rewritten(node_log, tmp_path / "foreign_schema.mcap", schema_name=schema_name, definition=definition)
-    done = run_cli(command, path)
+    done = run_cli_here(command, path)
     assert done.returncode == EXIT_ERROR
     assert single_error_line(done) == f"finger-sim {command}: error: {path}: {problem}"
 
@@ -382,7 +384,7 @@ def test_metadata_that_does_not_parse_is_one_line(node_log: NodeLog, tmp_path: P
                                                   metadata: dict[str, str], problem: str) -> None:
     path = _rewritten(node_log, tmp_path / "bad_meta.mcap", schema_name="sensor_msgs/msg/JointState",
                       definition=message_definition("sensor_msgs/msg/JointState"), metadata=metadata)
-    done = run_cli(command, path)
+    done = run_cli_here(command, path)
     assert done.returncode == EXIT_ERROR
     assert single_error_line(done).startswith(f"finger-sim {command}: error: {path}: {problem}")
 
@@ -438,7 +440,7 @@ def test_repair_makes_a_cut_log_whole(node_log: NodeLog, tmp_path: Path, where: 
         expected = sum(m.log_time <= last for _, _, m in make_reader(file).iter_messages(log_time_order=False))
     assert ours.message_count == expected
 
-    done = run_cli("repair", path)
+    done = run_cli_here("repair", path)
     assert (done.returncode, done.stderr) == (0, ""), done.stderr
     out = tmp_path / "cut.repaired.mcap"
     assert done.stdout.startswith(f"repaired {path} → {out}: {expected} messages")
@@ -449,7 +451,7 @@ def test_repair_makes_a_cut_log_whole(node_log: NodeLog, tmp_path: Path, where: 
     assert [(t.topic, t.type, t.definition) for t in repaired.topics.values()] == \
            [(t.topic, t.type, t.definition) for t in ours.topics.values()]
     if expected:
-        done = run_cli("resim", out)
+        done = run_cli_here("resim", out)
         stamps = sum(s <= last for s in node_log.stamps)
         assert done.stdout.strip() == f"resim: {stamps} recorded states reproduced bit for bit (max deviation 0)"
 
@@ -472,7 +474,7 @@ def test_repair_refuses_to_overwrite_its_input(node_log: NodeLog, tmp_path: Path
     path = tmp_path / "log.mcap"
     path.write_bytes(node_log.path.read_bytes()[:-100])
     before = path.read_bytes()
-    done = run_cli("repair", path, "-o", tmp_path / "." / "log.mcap")
+    done = run_cli_here("repair", path, "-o", tmp_path / "." / "log.mcap")
     assert done.returncode == EXIT_ERROR
     assert "-o/--out: expected a file other than LOG" in single_error_line(done)
     assert path.read_bytes() == before

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 rclpy = pytest.importorskip("rclpy")
 
@@ -30,6 +31,7 @@ from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
 from finger_sim import joints, kinematics  # noqa: E402
 from finger_sim.scene import load_scene  # noqa: E402
 from finger_sim.simulate import Simulator, simulate  # noqa: E402
+from conftest import Launcher, allocate_domain_id, ros_environment  # noqa: E402
 from helpers import NODE  # noqa: E402
 from ros_helpers import start_when_heard, stamp, values  # noqa: E402
 
@@ -364,29 +366,42 @@ def test_several_fingers_in_namespaces(launcher, ros_client):
     assert [values(e)["event"] for e in middle_log] == ["refused"]  # the probe only
 
 
-@pytest.mark.parametrize(
-    "params, names",
-    [
-        (dict(physics_rate_hz=-5.0), ["physics_rate_hz", "out of range"]),
-        (dict(physics_rate_hz="fast"), ["physics_rate_hz", "DOUBLE"]),  # an int is taken as a float (issue 19)
-        (dict(torque_source="joystick"), ["torque_source", "joystick"]),
-        (dict(scene="no_such_scene"), ["scene", "no_such_scene", "paper_flexion"]),
-        (dict(scene="STIFF_RK4"), ["integrator.method", "rk4", "physics_rate_hz"]),
-    ],
-    ids=["out-of-range", "wrong-type", "bad-choice", "unknown-scene", "unstable-method"],
-)
-def test_a_bad_parameter_stops_the_start(launcher, tmp_path, params, names):
-    if params.get("scene") == "STIFF_RK4":
-        stiff = load_scene(CONFIG / "stiff_spring.yaml").to_dict()
-        stiff["integrator"]["method"] = "rk4"
-        path = tmp_path / "stiff_rk4.yaml"
-        path.write_text(__import__("yaml").safe_dump(stiff))
-        params = dict(scene=str(path))
-    node = launcher.node(NODE, params)
-    assert node.wait(30.0) == 2
-    out = node.output()
+#: id → (parameters, what the one-line refusal names)
+BAD_PARAMETERS = {
+    "out-of-range": (dict(physics_rate_hz=-5.0), ["physics_rate_hz", "out of range"]),
+    "wrong-type": (dict(physics_rate_hz="fast"), ["physics_rate_hz", "DOUBLE"]),  # an int is taken as a float (issue 19)
+    "bad-choice": (dict(torque_source="joystick"), ["torque_source", "joystick"]),
+    "unknown-scene": (dict(scene="no_such_scene"), ["scene", "no_such_scene", "paper_flexion"]),
+    "unstable-method": (dict(scene="STIFF_RK4"), ["integrator.method", "rk4", "physics_rate_hz"]),
+}
+
+
+@pytest.fixture(scope="module")
+def refused_starts(tmp_path_factory) -> dict[str, tuple[int, str]]:
+    """Every BAD_PARAMETERS node, started at once (each only starts and refuses): id → (exit status, output)."""
+    tmp = tmp_path_factory.mktemp("refused_starts")
+    launcher = Launcher(ros_environment(allocate_domain_id()), tmp)
+    try:
+        nodes = {}
+        for case, (params, _) in BAD_PARAMETERS.items():
+            if params.get("scene") == "STIFF_RK4":
+                stiff = load_scene(CONFIG / "stiff_spring.yaml").to_dict()
+                stiff["integrator"]["method"] = "rk4"
+                path = tmp / "stiff_rk4.yaml"
+                path.write_text(yaml.safe_dump(stiff))
+                params = dict(scene=str(path))
+            nodes[case] = launcher.node(NODE, params, name=case)
+        return {case: (node.wait(60.0), node.output()) for case, node in nodes.items()}
+    finally:
+        launcher.stop_all()
+
+
+@pytest.mark.parametrize("case", list(BAD_PARAMETERS))
+def test_a_bad_parameter_stops_the_start(refused_starts, case):
+    status, out = refused_starts[case]
+    assert status == 2, out
     assert "cannot start" in out and "Traceback" not in out, out
-    for name in names:
+    for name in BAD_PARAMETERS[case][1]:
         assert name in out, out
 
 
@@ -398,30 +413,50 @@ def last_status(diagnostics: list, condition) -> DiagnosticStatus | None:
     return None
 
 
-@pytest.mark.parametrize("name", ["../X", "/tmp/X", "paper.run-1"])
-def test_scene_name_cannot_put_the_log_outside_record_dir(launcher, tmp_path, name):
+HOSTILE_NAMES = ("../X", "/tmp/X", "paper.run-1")
+
+
+@pytest.fixture(scope="module")
+def hostile_runs(tmp_path_factory) -> tuple[dict[str, tuple[int, str, Path]], bool]:
+    """A node per HOSTILE_NAMES scene name, each in a folder of its own, started at once:
+    (name → (exit status, output, the folder), whether /tmp's X* are as before)."""
+    before = set(Path("/tmp").glob("X*"))
+    launchers, nodes = [], {}
+    try:
+        for k, name in enumerate(HOSTILE_NAMES):
+            folder = tmp_path_factory.mktemp(f"hostile{k}")
+            data = load_scene(PAPER).to_dict()
+            data["name"] = name
+            scene = folder / "hostile.yaml"
+            scene.write_text(yaml.safe_dump(data))
+            launchers.append(Launcher(ros_environment(allocate_domain_id()), folder))
+            nodes[name] = (launchers[-1].node(NODE, dict(scene=str(scene), torque_source="scene", realtime_factor=0.0,
+                                                         record_dir="missing/../bags")), folder)
+        runs = {name: (node.wait(60.0), node.output(), folder) for name, (node, folder) in nodes.items()}
+    finally:
+        for launcher in launchers:
+            launcher.stop_all()
+    return runs, set(Path("/tmp").glob("X*")) == before
+
+
+@pytest.mark.parametrize("name", HOSTILE_NAMES)
+def test_scene_name_cannot_put_the_log_outside_record_dir(hostile_runs, name):
     """A scene named "../X" or "/tmp/X" is refused (or would log to a safe name inside
     record_dir, see test_runtime); a record_dir through a missing folder and '..' creates only
     the folder it normalizes to, and the log lands there."""
-    data = load_scene(PAPER).to_dict()
-    data["name"] = name
-    scene = tmp_path / "hostile.yaml"
-    scene.write_text(__import__("yaml").safe_dump(data))
-    before = set(Path("/tmp").glob("X*"))
-    node = launcher.node(NODE, dict(scene=str(scene), torque_source="scene", realtime_factor=0.0,
-                                    record_dir="missing/../bags"))
-    status = node.wait(30.0)
-    assert "Traceback" not in node.output()
+    runs, tmp_unchanged = hostile_runs
+    status, out, folder = runs[name]
+    assert "Traceback" not in out
     if name == "paper.run-1":
-        assert status == 0, node.output()
-        logs = list((tmp_path / "bags").iterdir())
+        assert status == 0, out
+        logs = list((folder / "bags").iterdir())
         assert len(logs) == 1 and re.fullmatch(r"paper\.run-1_\d{8}T\d{6}\.\d{3}Z\.mcap", logs[0].name), logs
         assert logs[0].read_bytes()[:8] == b"\x89MCAP0\r\n"
     else:
-        assert status == 2 and "cannot start" in node.output() and repr(name) in node.output(), node.output()
-        assert not (tmp_path / "bags").exists()
-    assert not (tmp_path / "missing").exists() and not (tmp_path.parent / "X").exists()
-    assert set(Path("/tmp").glob("X*")) == before
+        assert status == 2 and "cannot start" in out and repr(name) in out, out
+        assert not (folder / "bags").exists()
+    assert not (folder / "missing").exists() and not (folder.parent / "X").exists()
+    assert tmp_unchanged
 
 
 def test_an_unwritable_record_dir_turns_diagnostics_to_error(launcher, ros_client, tmp_path):

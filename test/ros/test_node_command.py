@@ -1,5 +1,6 @@
 """`finger-sim node ...` against a running finger_node (issue 19, item 10), as a user runs it: the
-console script in its own process. Also: an int for a float parameter (item 11), exact clock
+console script in its own process (`echo`, `pub`, the no-node error; the other calls go through the
+same main() in this process). Also: an int for a float parameter (item 11), exact clock
 values in service answers (item 11), and /clock while paused (item 9, through `echo`).
 
 References: an offline Simulator of the same scene at the node's rate fed the same torque
@@ -21,6 +22,7 @@ from finger_sim import joints, kinematics  # noqa: E402
 from finger_sim.scene import load_scene  # noqa: E402
 from finger_sim.scene_paths import resolve_scene  # noqa: E402
 from finger_sim.simulate import Simulator  # noqa: E402
+from helpers import run_cli_here  # noqa: E402
 
 NODE = "finger_sim.ros.node"
 FINGER_SIM = Path(sys.executable).with_name("finger-sim")
@@ -33,8 +35,16 @@ DRIVE_GRASP = Path(__file__).resolve().parents[2] / "config" / "drive_grasp.yaml
 
 
 def node_cli(launcher, *args: object, timeout: float = 20.0) -> subprocess.CompletedProcess:
+    """`finger-sim node ARGS` in its own process, as a user runs it."""
     return subprocess.run([str(FINGER_SIM), "node", "--timeout", str(timeout), *map(str, args)], env=launcher.env,
                           capture_output=True, text=True, timeout=TIMEOUT_S, check=False)
+
+
+def node_here(*args: object, timeout: float = 20.0) -> subprocess.CompletedProcess:
+    """The same command through finger_sim.cli.main in this process (the ros_domain fixture has set
+    this process's ROS environment): a process start-up less per call. The process boundary stays
+    tested by node_cli and the `echo` and `pub` processes."""
+    return run_cli_here("node", "--timeout", timeout, *args)
 
 
 def ok(done: subprocess.CompletedProcess) -> str:
@@ -53,14 +63,14 @@ def test_the_node_command_drives_a_running_node(launcher, ros_client):
     launcher.node(NODE, dict(start_paused=True, steps_per_trigger=STEPS_PER_TRIGGER, publish_rate_hz=PUBLISH_HZ,
                              record=False),
                   ros_args=["-p", f"physics_rate_hz:={RATE}"])
-    assert ok(node_cli(launcher, "get", "physics_rate_hz")) == "physics_rate_hz = 500.0\n"  # the int, as a float
-    assert "motor torque 0.01 N·m sent to /motor_torque" in ok(node_cli(launcher, "torque", TORQUE))
+    assert ok(node_here("get", "physics_rate_hz")) == "physics_rate_hz = 500.0\n"  # the int, as a float
+    assert "motor torque 0.01 N·m sent to /motor_torque" in ok(node_here("torque", TORQUE))
 
     echo = subprocess.Popen([str(FINGER_SIM), "node", "echo", "/joint_states", "-n", "3"], env=launcher.env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         ros_client.wait_for(lambda: ros_client.node.count_subscribers("/joint_states") >= 1, "echo's subscription")
-        answer = ok(node_cli(launcher, "step", 3))  # three ~/step calls: 30 steps of 2 ms
+        answer = ok(node_here("step", 3))  # three ~/step calls: 30 steps of 2 ms
         assert answer.strip() == "clock=0.06 time=0.06 step=30 episode=0", answer
         out, err = echo.communicate(timeout=TIMEOUT_S)
     finally:
@@ -80,17 +90,17 @@ def test_the_node_command_drives_a_running_node(launcher, ros_client):
     assert state["velocity"] == list(joints.joint_velocities(sim.v))
     assert state["effort"][0] == TORQUE
 
-    clock = yaml.safe_load(ok(node_cli(launcher, "echo", "/clock", "-n", "1")).split("---")[0])
+    clock = yaml.safe_load(ok(node_here("echo", "/clock", "-n", "1")).split("---")[0])
     assert clock == {"clock": {"sec": 0, "nanosec": 60_000_000}}  # republished while paused
 
-    assert ok(node_cli(launcher, "set", "realtime_factor", "2")) == "realtime_factor = 2.0\n"
-    refused = one_line_error(node_cli(launcher, "set", "physics_rate_hz", "100.0"))
+    assert ok(node_here("set", "realtime_factor", "2")) == "realtime_factor = 2.0\n"
+    refused = one_line_error(node_here("set", "physics_rate_hz", "100.0"))
     assert "refused physics_rate_hz = 100.0" in refused and "read-only" in refused
-    assert ok(node_cli(launcher, "resume")).startswith("running; clock=")
-    assert ok(node_cli(launcher, "pause")).startswith("paused; clock=")
-    reset = ok(node_cli(launcher, "reset"))
+    assert ok(node_here("resume")).startswith("running; clock=")
+    assert ok(node_here("pause")).startswith("paused; clock=")
+    reset = ok(node_here("reset"))
     assert reset.endswith("time=0.0 step=0 episode=1\n"), reset
-    assert "no parameter 'no_such'" in one_line_error(node_cli(launcher, "get", "no_such"))
+    assert "no parameter 'no_such'" in one_line_error(node_here("get", "no_such"))
 
 
 def test_no_node_is_one_line_naming_the_service(launcher):
@@ -131,8 +141,8 @@ def test_voltage_drives_a_node_with_a_drive(launcher, ros_client):
                              command_timeout=0.0, physics_rate_hz=rate, record=False))
     states = ros_client.collect(JointState, "/joint_states")
     voltages = ros_client.collect(Float64, "/motor/voltage")
-    assert "motor voltage 3.0 V sent to /motor_voltage" in ok(node_cli(launcher, "voltage", volts))
-    answer = ok(node_cli(launcher, "step", 3))
+    assert "motor voltage 3.0 V sent to /motor_voltage" in ok(node_here("voltage", volts))
+    answer = ok(node_here("step", 3))
     assert answer.strip() == "clock=0.03 time=0.03 step=30 episode=0", answer
     ros_client.wait_for(lambda: any(conversions.from_time(m.header.stamp) == 30_000_000 for m in states),
                         "the state at step 30")

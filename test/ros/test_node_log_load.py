@@ -24,8 +24,8 @@ from finger_sim.cli import EXIT_INCOMPLETE  # noqa: E402
 from finger_sim.log import RECORDING_STATUS  # noqa: E402
 from finger_sim.log.reader import LogReader  # noqa: E402
 from finger_sim.ros import conversions  # noqa: E402
-from conftest import wait_until  # noqa: E402
-from helpers import NODE, child_pids, run_cli, wait_until_gone  # noqa: E402
+from conftest import Launcher, allocate_domain_id, ros_environment, wait_until  # noqa: E402
+from helpers import NODE, child_pids, run_cli, run_cli_here, wait_until_gone  # noqa: E402
 
 CONFIG = Path(__file__).resolve().parents[2] / "config"
 PAPER = CONFIG / "paper_flexion.yaml"
@@ -95,40 +95,59 @@ def read_rosbags(path: Path) -> dict[str, list]:
     return out
 
 
-def test_as_fast_as_possible_the_log_keeps_every_message(launcher, tmp_path):
+FAST_STEPS = 5000  # the run as fast as possible, 1 kHz steps
+DROP_STEPS = 3000  # the real-time run that drops
+
+
+@pytest.fixture(scope="module")
+def loaded_runs(tmp_path_factory) -> dict[str, tuple[int, str, Path]]:
+    """The two runs of a small queue, started at once (each only runs its scene to the end):
+    "fast" at realtime_factor 0, "drops" at 1 with its writer process stopped until the node
+    reports dropping. Kind → (exit status, output, log path)."""
+    runs, launchers = {}, []
+    try:
+        for kind, steps, factor in (("fast", FAST_STEPS, 0.0), ("drops", DROP_STEPS, 1.0)):
+            folder = tmp_path_factory.mktemp(kind)
+            launchers.append(Launcher(ros_environment(allocate_domain_id()), folder))
+            runs[kind] = (launchers[-1].node(NODE, dict(scene=str(scene_file(folder, steps / 1000)), torque_source="scene",
+                                                        realtime_factor=factor, record_queue_size=SMALL_QUEUE)), folder)
+        node = runs["drops"][0]
+        writer = wait_until(lambda: child_pids(node.pid), 60.0, "the log's writer process")[0]
+        os.kill(writer, signal.SIGSTOP)  # a writer that cannot keep up: the pipe fills, then the queue
+        try:
+            wait_until(lambda: "dropping messages" in node.output(), 60.0, "the node's report of dropped messages")
+        finally:
+            os.kill(writer, signal.SIGCONT)
+        return {kind: (node.wait(120.0), node.output(), folder / "bags") for kind, (node, folder) in runs.items()}
+    finally:
+        for launcher in launchers:
+            launcher.stop_all()
+
+
+def test_as_fast_as_possible_the_log_keeps_every_message(loaded_runs):
     """realtime_factor 0 with a queue far too small for the rate: the stepping waits for the
     writer (back-pressure), so every state, pose and clock tick of every step is in the log."""
-    steps = 5000
-    node = launcher.node(NODE, dict(scene=str(scene_file(tmp_path, steps / 1000)), torque_source="scene",
-                                    realtime_factor=0.0, record_queue_size=SMALL_QUEUE))
-    assert node.wait(120.0) == 0, node.output()
-    path = the_log(tmp_path / "bags")
+    exit_status, output, bags = loaded_runs["fast"]
+    assert exit_status == 0, output
+    path = the_log(bags)
     log = read_rosbags(path)
     for topic in ("/joint_states", "/fingertip_pose"):
-        assert [conversions.from_time(m.header.stamp) for m in log[topic]] == [n * DT_NS for n in range(steps + 1)]
-    assert len(log["/clock"]) == steps + 1
+        assert [conversions.from_time(m.header.stamp) for m in log[topic]] == [n * DT_NS for n in range(FAST_STEPS + 1)]
+    assert len(log["/clock"]) == FAST_STEPS + 1
     status = LogReader(path).metadata_record(RECORDING_STATUS)
     assert status["messages_dropped"] == "0"
     assert int(status["messages_recorded"]) == sum(len(v) for v in log.values())
     assert "INCOMPLETE" not in run_cli("info", path).stdout
 
 
-def test_a_real_time_run_that_drops_says_so_in_its_log(launcher, tmp_path):
+def test_a_real_time_run_that_drops_says_so_in_its_log(loaded_runs, tmp_path):
     """realtime_factor 1 with the same small queue and a recorder slowed on purpose (its writer
     process stopped until the node reports dropping): messages are dropped, and the log says how
     many (its 'recording' record, written at close); `info` shows it; `export` and `resim` refuse
     the log (exit 7) unless --accept-incomplete."""
-    steps = 3000
-    node = launcher.node(NODE, dict(scene=str(scene_file(tmp_path, steps / 1000)), torque_source="scene",
-                                    realtime_factor=1.0, record_queue_size=SMALL_QUEUE))
-    writer = wait_until(lambda: child_pids(node.pid), 60.0, "the log's writer process")[0]
-    os.kill(writer, signal.SIGSTOP)  # a writer that cannot keep up: the pipe fills, then the queue
-    try:
-        wait_until(lambda: "dropping messages" in node.output(), 60.0, "the node's report of dropped messages")
-    finally:
-        os.kill(writer, signal.SIGCONT)
-    assert node.wait(120.0) == 0, node.output()
-    path = the_log(tmp_path / "bags")
+    exit_status, output, bags = loaded_runs["drops"]
+    assert exit_status == 0, output
+    path = the_log(bags)
     log = read_rosbags(path)
     status = LogReader(path).metadata_record(RECORDING_STATUS)
     dropped = int(status["messages_dropped"])
@@ -136,15 +155,15 @@ def test_a_real_time_run_that_drops_says_so_in_its_log(launcher, tmp_path):
     assert dropped > 0 and sum(int(n) for n in by_topic.values()) == dropped
     assert int(status["messages_recorded"]) == sum(len(v) for v in log.values())  # all handed over reached the file
     states = len(log["/joint_states"])
-    assert states + int(by_topic.get("/joint_states", 0)) == steps + 1  # every state: in the file or counted
+    assert states + int(by_topic.get("/joint_states", 0)) == DROP_STEPS + 1  # every state: in the file or counted
 
     info = run_cli("info", path)
     assert info.returncode == 0 and f"INCOMPLETE: {dropped} messages dropped while recording" in info.stdout
     for command in (("resim", path), ("export", path, "--csv", tmp_path / "out.csv")):
-        refused = run_cli(*command)
+        refused = run_cli_here(*command)
         assert refused.returncode == EXIT_INCOMPLETE, refused.stderr
         assert f"{dropped} messages were dropped while recording" in refused.stderr
         assert "--accept-incomplete" in refused.stderr
-    accepted = run_cli("resim", path, "--accept-incomplete")
+    accepted = run_cli_here("resim", path, "--accept-incomplete")
     assert accepted.returncode == 0, accepted.stdout + accepted.stderr  # the states that are there agree
     assert "warning" in accepted.stderr and "incomplete" in accepted.stderr

@@ -12,6 +12,8 @@ conftest.py's launcher.
 
 from __future__ import annotations
 
+import contextlib
+import io
 import itertools
 import math
 import signal
@@ -223,6 +225,18 @@ def run_replay(start_replay: Callable[..., RosProcess]) -> Callable[..., tuple[i
     return lambda *args: start_replay(*args).finish(DEADLINE_S)
 
 
+def replay_here(*args: object) -> tuple[int, str, str]:
+    """finger_replay's main() in this process, for the refusals made before any ROS call (a process
+    start-up less each; run_replay keeps one of each kind in its own process): (status, stdout, stderr)."""
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            status = replay.main([str(a) for a in args])
+        except SystemExit as exc:  # argparse's usage errors
+            status = exc.code
+    return status, out.getvalue(), err.getvalue()
+
+
 def wait_for(condition: Callable[[], Any], what: str) -> None:
     wait_until(condition, DEADLINE_S, what)
 
@@ -324,27 +338,28 @@ def test_plan_refuses_a_log_without_messages(tmp_path: Path) -> None:
 )
 def test_bad_arguments_exit_2_with_one_line(log_path: Path, args: str, fragments: list[str],
                                             run_replay: Callable[..., tuple[int, str, str]]) -> None:
-    assert_one_line_error(run_replay(log_path, *args.split()), replay.EXIT_USAGE, *fragments)
+    run = run_replay if args == "--rate 0" else replay_here  # one in its own process
+    assert_one_line_error(run(log_path, *args.split()), replay.EXIT_USAGE, *fragments)
 
 
 def test_bad_logs_exit_1_with_one_line(tmp_path: Path, run_replay: Callable[..., tuple[int, str, str]]) -> None:
     missing = tmp_path / "missing.mcap"
-    assert_one_line_error(run_replay(missing), replay.EXIT_LOG, str(missing), "no such file")
+    assert_one_line_error(run_replay(missing), replay.EXIT_LOG, str(missing), "no such file")  # its own process
     text = tmp_path / "notes.mcap"
     text.write_text("not a log\n")
-    assert_one_line_error(run_replay(text), replay.EXIT_LOG, str(text), "not an MCAP file")
+    assert_one_line_error(replay_here(text), replay.EXIT_LOG, str(text), "not an MCAP file")
     empty = tmp_path / "empty.mcap"
     empty.touch()
-    assert_one_line_error(run_replay(empty), replay.EXIT_LOG, "not an MCAP file", "empty")
-    assert_one_line_error(run_replay(tmp_path), replay.EXIT_LOG, "a directory")
+    assert_one_line_error(replay_here(empty), replay.EXIT_LOG, "not an MCAP file", "empty")
+    assert_one_line_error(replay_here(tmp_path), replay.EXIT_LOG, "a directory")
 
 
-def test_a_type_without_python_class_exits_1_with_one_line(tmp_path: Path, run_replay: Callable[..., tuple[int, str, str]]) -> None:
+def test_a_type_without_python_class_exits_1_with_one_line(tmp_path: Path) -> None:
     path = tmp_path / "foreign.mcap"
     with McapRecorder(path) as rec:
         rec.register_channel("/foreign", "foreign_msgs/msg/Gauge", definition="float64 value\n")
         rec.write("/foreign", {"value": 1.5}, T0_NS)
-    assert_one_line_error(run_replay(path), replay.EXIT_LOG, "/foreign", "foreign_msgs/msg/Gauge",
+    assert_one_line_error(replay_here(path), replay.EXIT_LOG, "/foreign", "foreign_msgs/msg/Gauge",
                           "ros-jazzy-foreign-msgs")
 
 
