@@ -19,6 +19,7 @@ pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="re
 SPIN_S = 0.3
 CHILD = f"""
 import time
+print("up", flush=True)
 t0 = time.thread_time()
 while time.thread_time() - t0 < {SPIN_S}:
     pass
@@ -30,6 +31,7 @@ time.sleep(0.5)
 def test_probe_records_a_threads_cpu_time_and_policy(tmp_path):
     wrap = ["chrt", "-f", "5"] if os.geteuid() == 0 and shutil.which("chrt") else []
     child = subprocess.Popen([*wrap, sys.executable, "-c", CHILD], stdout=subprocess.PIPE, text=True)
+    assert child.stdout.readline() == "up\n"  # chrt has set the policy and exec'd Python: sampled earlier, it reads SCHED_OTHER
     out = tmp_path / "probe.csv"
     assert soak_probe.main(["--pid", str(child.pid), "--out", str(out), "--period", "0.02"]) == 0  # returns when it exits
     own_ns = int(child.stdout.read().split()[0])
