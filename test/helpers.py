@@ -4,10 +4,13 @@ from __future__ import annotations
 
 import contextlib
 import io
+import os
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 FINGER_SIM = Path(sys.executable).with_name("finger-sim")  # the venv's console script
 NODE = "finger_sim.ros.node"  # the node's module, as `python -m` runs it
@@ -62,3 +65,28 @@ def wait_until_gone(pids: list[int], timeout: float = WRITER_EXIT_S) -> None:
             if time.monotonic() > deadline:
                 raise AssertionError(f"process {pid} still runs after {timeout:g} s")
             time.sleep(0.01)
+
+
+#: How long a blocked recorder may take to close once its FIFO has a reader, s (generous: shared cores).
+BLOCKED_CLOSE_S = 20.0
+
+
+@contextlib.contextmanager
+def blocked_recorder(directory: Path, **options: Any) -> Iterator[tuple[Any, list[str]]]:
+    """An open McapRecorder(**options) whose file is a FIFO nobody reads, and the list its
+    `on_problem` appends to: its writer blocks opening the FIFO, so nothing leaves the queue.
+    On leaving, even on a failure, the FIFO gets a reader and the recorder is closed."""
+    from finger_sim.log import McapRecorder
+
+    fifo = directory / "blocked.mcap"
+    os.mkfifo(fifo)
+    problems: list[str] = []
+    recorder = McapRecorder(fifo, on_problem=problems.append, **options).open()
+    try:
+        yield recorder, problems
+    finally:
+        reader_fd = os.open(fifo, os.O_RDONLY | os.O_NONBLOCK)  # unblocks the writer
+        try:
+            recorder.close(timeout_s=BLOCKED_CLOSE_S)
+        finally:
+            os.close(reader_fd)

@@ -30,6 +30,7 @@ from finger_sim.run_log import FINGER_SIM_METADATA, CommandEvent, RunLogError, r
 from finger_sim.runtime.commands import MAX_REQUESTED_SHOWN
 from finger_sim.scene import load_scene
 from finger_sim.simulate import Simulator
+from helpers import blocked_recorder
 
 ROOT = Path(__file__).resolve().parents[2]
 PAPER = ROOT / "config" / "paper_flexion.yaml"
@@ -412,20 +413,11 @@ def test_replay_names_a_topic_of_a_foreign_type(launcher, tmp_path: Path) -> Non
 def test_the_recorder_queue_is_bounded_in_bytes(monkeypatch, tmp_path: Path) -> None:
     """Few but huge messages: dropped once the waiting bytes pass the bound, though the count is far below its own."""
     import finger_sim.log.recorder as recorder_module
-    from finger_sim.log import McapRecorder
 
     monkeypatch.setattr(recorder_module, "MAX_QUEUED_BYTES", 3000)
-    fifo = tmp_path / "blocked.mcap"
-    os.mkfifo(fifo)  # the writer thread blocks opening it: nothing leaves the queue
-    problems: list[str] = []
-    recorder = McapRecorder(fifo, on_problem=problems.append).open()
-    try:
+    with blocked_recorder(tmp_path) as (recorder, problems):
         recorder.register_channel("/blob", "std_msgs/msg/String", definition=message_definition("std_msgs/msg/String"))
         results = [recorder.write("/blob", b"\0" * 1000, i) for i in range(10)]
         assert results == [True] * 3 + [False] * 7  # 3000 bytes wait; a fourth 1000 would pass the bound
         assert recorder.dropped == 7
         assert len(problems) == 1 and "3 messages wait for the writer (3000 bytes; limits 10000 and 3000)" in problems[0]
-    finally:
-        reader_fd = os.open(fifo, os.O_RDONLY | os.O_NONBLOCK)  # unblock the writer
-        recorder.close(timeout_s=NODE_TIMEOUT_S)
-        os.close(reader_fd)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import os
 import select
 import struct
 import subprocess
@@ -43,7 +42,7 @@ from finger_sim.log import (  # noqa: E402
     message_definition,
     type_name_of,
 )
-from helpers import wait_until_gone  # noqa: E402
+from helpers import blocked_recorder, wait_until_gone  # noqa: E402
 
 SHARE = Path(sys.prefix) / "share"  # where the ROS 2 wheels install their .msg files
 DEADLINE_S = 20.0  # generous bound for conditions that normally hold within milliseconds
@@ -397,20 +396,12 @@ def test_metadata_is_bounded(tmp_path: Path) -> None:
 
 
 def test_queue_overflow_drops_and_reports_once(tmp_path: Path) -> None:
-    fifo = tmp_path / "blocked.mcap"
-    os.mkfifo(fifo)  # the writer thread blocks opening it until a reader appears
-    problems: list[str] = []
-    recorder = McapRecorder(fifo, queue_size=4, on_problem=problems.append).open()
-    try:
+    with blocked_recorder(tmp_path, queue_size=4) as (recorder, problems):
         recorder.register_channel("/motor_torque", Float64)
         results = [recorder.write("/motor_torque", Float64(data=float(i)), i) for i in range(10)]
         assert results == [True] * 4 + [False] * 6
         assert recorder.dropped == 6
         assert len(problems) == 1 and "4 messages wait for the writer" in problems[0]
-    finally:
-        reader_fd = os.open(fifo, os.O_RDONLY | os.O_NONBLOCK)  # unblock the writer
-        recorder.close(timeout_s=DEADLINE_S)
-        os.close(reader_fd)
     # A pipe cannot seek: writing the chunk fails, is reported once, and its messages are counted.
     assert (recorder.written, recorder.dropped) == (0, 10)
     assert len(problems) == 2 and "cannot write" in problems[1]

@@ -3,7 +3,6 @@ each of them (records, sequences, times), and drops and counts exactly as write(
 
 from __future__ import annotations
 
-import os
 import random
 import threading
 from pathlib import Path
@@ -14,6 +13,7 @@ from rosbags.highlevel import AnyReader
 
 from finger_sim.log import LogArgumentError, McapRecorder
 from finger_sim.log.cdr_writer import JointStateCdr, PoseStampedCdr, clock_cdr
+from helpers import blocked_recorder
 
 JOINTS = ["mcp_joint", "coupler_joint", "pip_joint"]
 FINGERS = 4  # joint_states and fingertip_pose of each, /clock: 9 messages a step
@@ -88,21 +88,13 @@ def test_rosbags_decodes_the_batched_log(tmp_path: Path) -> None:
 
 
 def test_a_full_queue_drops_the_rest_of_a_batch_as_write_would(tmp_path: Path) -> None:
-    fifo = tmp_path / "blocked.mcap"
-    os.mkfifo(fifo)  # the writer process blocks opening it until a reader appears
-    problems: list[str] = []
-    recorder = McapRecorder(fifo, queue_size=12, on_problem=problems.append).open()
-    try:
+    with blocked_recorder(tmp_path, queue_size=12) as (recorder, problems):
         register(recorder)
         first, second = step_messages(0, random.Random(1)), step_messages(1, random.Random(2))
         assert recorder.write_batch(first, T0_NS) == 9
         assert recorder.write_batch(second, T0_NS + DT_NS) == 3  # 12 - 9 fit, 6 dropped
         assert recorder.dropped == 6
         assert len(problems) == 1 and "12 messages wait for the writer" in problems[0]
-    finally:
-        reader_fd = os.open(fifo, os.O_RDONLY | os.O_NONBLOCK)  # unblock the writer
-        recorder.close(timeout_s=DEADLINE_S)
-        os.close(reader_fd)
 
 
 def test_a_batch_with_an_unregistered_topic_raises(tmp_path: Path) -> None:
