@@ -2,9 +2,10 @@
 
 References: the PD law (finger_sim.ros.pd_controller.pd_torque) evaluated in the test on each
 logged state, which must be the torque applied over the next step, bit for bit; a second run of
-the same closed loop, whose logged states must equal the first's bit for bit although the
-machine is loaded by a busy process; the commands this test sends itself and the events and
-diagnostics the node reports about them. Logs are read by rosbags (an independent reader).
+the same closed loop at the same time, whose logged states must equal the first's bit for bit
+although the machine is loaded by a busy process and by the other run; the commands this test
+sends itself and the events and diagnostics the node reports about them. Logs are read by
+rosbags (an independent reader).
 """
 
 from __future__ import annotations
@@ -63,8 +64,8 @@ def last_values(log: list[tuple[str, object]]) -> dict[str, str]:
     return {kv.key: kv.value for kv in status.values}
 
 
-def closed_loop_run(launcher, ros_client, tag: str) -> list[tuple[str, object]]:
-    """The PD controller and a lockstep node until STEPS states went out; the node's log.
+def start_closed_loop(launcher, ros_client, tag: str) -> tuple:
+    """The PD controller and a lockstep node, started; (the node, the states this client gets).
 
     Both run in a namespace of their own (this test process's id and `tag`), so that no other
     node on the DDS domain (another checkout's run, the other run here) can answer or be counted."""
@@ -74,17 +75,22 @@ def closed_loop_run(launcher, ros_client, tag: str) -> list[tuple[str, object]]:
     node = launcher.node(NODE, dict(lockstep=True, lockstep_timeout=LOCKSTEP_TIMEOUT_S, realtime_factor=0.0,
                                     command_qos="reliable", record_dir=f"bags_{tag}", marker_rate_hz=0.0),
                          name=f"node_{tag}", ros_args=remap)
-    states = ros_client.collect(JointState, f"{ns}/joint_states", RELIABLE)
-    ros_client.wait_for(lambda: states and stamp_ns(states[-1]) >= STEPS * DT_NS, f"{STEPS} lockstep states", 120.0)
+    return node, ros_client.collect(JointState, f"{ns}/joint_states", RELIABLE)
+
+
+def closed_loop_log(launcher, ros_client, tag: str, node, states: list) -> list[tuple[str, object]]:
+    """Once STEPS states of the run `tag` went out: the node stopped, its log."""
+    ros_client.wait_for(lambda: states and stamp_ns(states[-1]) >= STEPS * DT_NS, f"{STEPS} lockstep states of {tag}", 120.0)
     status = node.stop()
     assert status == 0, f"exit status {status}:\n{node.output()}"
     return read_log(launcher.tmp / f"bags_{tag}")
 
 
 def test_two_lockstep_runs_of_the_pd_controller_are_identical_under_load(launcher, ros_client):
+    """The two closed loops run at the same time, beside a busy process: each loads the other too."""
     launcher.start([sys.executable, "-c", BURN], "burn")
-    first = closed_loop_run(launcher, ros_client, "a")
-    second = closed_loop_run(launcher, ros_client, "b")
+    runs = {tag: start_closed_loop(launcher, ros_client, tag) for tag in ("a", "b")}
+    first, second = (closed_loop_log(launcher, ros_client, tag, *runs[tag]) for tag in ("a", "b"))
 
     a, b = states_of(first, namespace("a")), states_of(second, namespace("b"))
     assert len(a) > STEPS and len(b) > STEPS
