@@ -21,6 +21,7 @@ import re
 import signal
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -50,7 +51,7 @@ from finger_sim.log import McapRecorder, read_log  # noqa: E402
 from finger_sim.run_log import FINGER_SIM_METADATA, load_run, resimulate  # noqa: E402
 from finger_sim.scene import load_scene, scene_from_dict  # noqa: E402
 from finger_sim.simulate import Simulator  # noqa: E402
-from helpers import NODE, child_pids, run_cli, wait_until_gone  # noqa: E402
+from helpers import NODE, child_pids, run_cli, run_cli_here, wait_until_gone  # noqa: E402
 from ros_helpers import start_when_heard, values  # noqa: E402
 
 CONTROLLER = "finger_sim.ros.pd_controller"
@@ -517,9 +518,10 @@ def test_kill_9_leaves_a_readable_prefix(launcher, ros_client, tmp_path):
     assert_repairs(path, log.message_count)
 
 
-def assert_repairs(path: Path, count: int) -> None:
-    """`finger-sim repair` of `path` is a complete log with `count` messages for rosbags and mcap."""
-    done = run_cli("repair", str(path))
+def assert_repairs(path: Path, count: int, run: Callable[..., Any] = run_cli) -> None:
+    """`finger-sim repair` of `path` is a complete log with `count` messages for rosbags and mcap;
+    `run` is run_cli (the console script's own process) or run_cli_here (this process)."""
+    done = run("repair", str(path))
     assert done.returncode == 0 and done.stderr == "", done
     out = path.with_name(path.stem + ".repaired.mcap")
     with AnyReader([out]) as bag:
@@ -546,7 +548,7 @@ def test_a_kill_at_any_moment_leaves_a_repairable_log(launcher, tmp_path, after_
         head = path.read_bytes()[:8]
         assert head in (b"", MCAP0_MAGIC), head  # empty (name reserved) or a whole header follows
         count = read_log(path).message_count if head else 0
-        assert_repairs(path, count)
+        assert_repairs(path, count, run_cli_here)  # repair's own process: test_kill_9_leaves_a_readable_prefix
 
 
 def test_resim_of_a_controller_run_is_bit_for_bit(launcher, ros_client, tmp_path):
@@ -593,7 +595,7 @@ def test_resim_of_a_controller_run_is_bit_for_bit(launcher, ros_client, tmp_path
     result = resimulate(load_run(read_log(tampered)))
     assert result.first_stamp_ns == first_off and result.max_deviation > 0.0
     assert result.compared == n_states
-    done = run_cli("resim", str(tampered))
+    done = run_cli_here("resim", str(tampered))  # resim's own process: the untampered log above
     assert done.returncode == 4, done
     assert done.stdout.strip() == (f"resim: max deviation {result.max_deviation:.3e} over {n_states} recorded states; "
                                    f"first at t = {first_off / 1e9:.6f} s on /clock")
