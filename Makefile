@@ -5,7 +5,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
 
-.PHONY: run test bench clean browser
+.PHONY: run test test-noros bench clean browser
 
 $(STAMP): setup.py setup.cfg package.xml
 	test -x $(PY) || python3 -m venv $(VENV)
@@ -34,6 +34,20 @@ run: $(STAMP)
 test: $(STAMP) browser
 	$(PY) -m finger_sim.kernel.warm
 	$(VENV)/bin/pytest -q
+
+# The suite on a machine without ROS 2: a venv of its own without the ros extra (no rclpy), where the ROS
+# layer (test/ros/, marker `ros`) skips by importorskip and every other test runs (docs/test_suite.md).
+NOROS := .venv-noros
+$(NOROS)/.installed-stamp: setup.py setup.cfg package.xml
+	test -x $(NOROS)/bin/python || python3 -m venv $(NOROS)
+	$(NOROS)/bin/python -m pip install --quiet --upgrade pip
+	$(NOROS)/bin/python -m pip install --quiet -e ".[test,bench]"
+	touch $@
+
+test-noros: $(NOROS)/.installed-stamp browser
+	@! $(NOROS)/bin/python -c "import rclpy" 2>/dev/null || { echo "make: rclpy imports in $(NOROS): not a ROS-free venv"; exit 1; }
+	$(NOROS)/bin/python -m finger_sim.kernel.warm
+	$(NOROS)/bin/pytest -q
 
 # The viewer's browser tests drive Debian's Chromium (test/view/test_view_browser.py): installed here
 # when missing and run as root (CI); otherwise they skip, saying why (and fail under CI=true).

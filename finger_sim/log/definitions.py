@@ -64,9 +64,38 @@ def default_search_prefixes() -> list[Path]:
 def message_definition(type_name: str, *, prefixes: Sequence[Path] | None = None) -> str:
     """The complete `ros2msg` definition of `type_name` ('pkg/msg/Type' or 'pkg/Type').
 
-    Raises MessageDefinitionNotFoundError naming every file looked for if a `.msg` is missing.
+    From the installed `.msg` files (byte for byte what rosbag2 writes). Where the default search finds
+    none (a machine without ROS 2), from rosbags' ROS 2 Jazzy type store (`jazzy_definition`).
+    Raises MessageDefinitionNotFoundError naming every file looked for if a `.msg` is missing and, with
+    the default search, rosbags does not know the type either.
     """
-    search = list(default_search_prefixes() if prefixes is None else prefixes)
+    if prefixes is None:
+        try:
+            return _definition_from_files(type_name, default_search_prefixes())
+        except MessageDefinitionNotFoundError:
+            fallback = jazzy_definition(type_name)
+            if fallback is None:
+                raise
+            return fallback
+    return _definition_from_files(type_name, prefixes)
+
+
+def jazzy_definition(type_name: str) -> str | None:
+    """The `ros2msg` definition rosbags generates from its ROS 2 Jazzy type store, or None if it does
+    not know the type: the same fields, types, constants and dependency blocks as rosbag2's text, without
+    the `.msg` files' comments, so mcap_ros2, rosbags and Foxglove decode a log written with it alike."""
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    root = normalize_type_name(type_name)
+    if root not in store.fielddefs:
+        return None
+    return store.generate_msgdef(root, ros_version=2)[0]
+
+
+def _definition_from_files(type_name: str, prefixes: Sequence[Path]) -> str:
+    """message_definition from the `.msg` files under `prefixes` only."""
+    search = list(prefixes)
     root = normalize_type_name(type_name)
     seen: set[str] = set()
 

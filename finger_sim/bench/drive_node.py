@@ -1,0 +1,83 @@
+"""finger_node at 1 kHz, realtime_factor 1, with the default drive and with its torque-driven twin, side by side.
+
+    python -m finger_sim.bench.drive_node [--duration 20] [--rounds 2] [--domain-id 80]
+
+The drive scene is drive_grasp's (config/): the default drive (self-locking worm train) on the cup under a
+square voltage of ±6 V at 1 Hz, so that the node keeps grasping, holding stuck and being back-driven open
+for as long as it runs (the mesh changes mode at every half period). Its twin is the same finger and cup
+without the drive, under a square torque of ±TWIN_TORQUE at 1 Hz. Each round runs drive then torque
+(A B A B), each node measured `--duration` s after its warm-up by `node_bench.measure_window` (the node's own
+1 s /diagnostics windows; CPU s of the node process per sim s; dropped steps; the log's states against the
+steps run), recording on. Prints a Markdown table of medians over the rounds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import tempfile
+from datetime import datetime, timezone
+from pathlib import Path
+
+import yaml
+
+from finger_sim.bench.node_bench import measure_window
+from finger_sim.bench.plan import config_dir
+from finger_sim.bench.processes import ros_env
+
+#: The drive's voltage: ±6 V (the default drive's rated voltage) switching every 0.5 s.
+VOLTAGE = {"type": "square", "amplitude": 6.0, "frequency": 1.0}
+#: The twin's torque on θ1, N·m: a square wave of the same period that also closes on the cup and opens.
+TWIN_TORQUE = {"type": "square", "amplitude": 0.1, "frequency": 1.0}
+#: Long enough that no node reaches its scene's end while measured, s.
+RUN_S = 3600.0
+
+
+def scenes(folder: Path) -> dict[str, Path]:
+    """'drive' and 'torque' → a YAML file of the cup scene under its periodic input in `folder`."""
+    data = yaml.safe_load((config_dir() / "drive_grasp.yaml").read_text())
+    data["duration"] = RUN_S
+    drive = {**data, "input": {"voltage": VOLTAGE}}
+    torque = {**data, "model": {k: v for k, v in data["model"].items() if k != "drive"}, "input": {"torque": TWIN_TORQUE}}
+    out = {}
+    for name, d in (("drive", drive), ("torque", torque)):
+        out[name] = folder / f"cup_square_{name}.yaml"
+        out[name].write_text(yaml.safe_dump(d))
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--duration", type=float, default=20.0, help="measured s per node run")
+    parser.add_argument("--rounds", type=int, default=2)
+    parser.add_argument("--domain-id", type=int, default=80)
+    args = parser.parse_args(argv)
+    rows: dict[str, list] = {}
+    with tempfile.TemporaryDirectory(prefix="drive_node_") as tmp:
+        folder = Path(tmp)
+        files = scenes(folder)
+        env = ros_env(args.domain_id)
+        for r in range(args.rounds):
+            for name, path in files.items():
+                print(f"drive_node: {name} round {r}", file=sys.stderr, flush=True)
+                params = dict(scene=str(path), torque_source="scene", physics_rate_hz=1000.0, realtime_factor=1.0)
+                rows.setdefault(name, []).append(measure_window(params, args.duration, args.domain_id, folder, env,
+                                                                f"{name}_{r}"))
+    when = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    print(f"{when}; {args.rounds} rounds of {args.duration:g} s, medians\n")
+    print("| input | real-time factor: median of 1 s windows | lowest window | CPU s per sim s | dropped steps "
+          "| log: states logged / expected, dropped |")
+    print("|---|---|---|---|---|---|")
+    base = statistics.median(w.cpu_per_sim_s for w in rows["torque"])
+    for name, runs in rows.items():
+        rtf = [x for w in runs for x in w.rtf]
+        cpu = statistics.median(w.cpu_per_sim_s for w in runs)
+        logged = ", ".join(f"{w.states_logged} / {w.states_expected}, {w.log_dropped}" for w in runs)
+        print(f"| {name} | {statistics.median(rtf):.4f} | {min(rtf):.4f} | {cpu:.3f} ({cpu / base:.2f}×) | "
+              f"{sum(w.dropped_steps for w in runs)} | {logged} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
