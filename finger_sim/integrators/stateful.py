@@ -23,6 +23,7 @@ from finger_sim.integrators.explicit import ExplicitRungeKutta
 from finger_sim.kinematics import Vec3
 from finger_sim.projection import project
 
+ZERO: Vec3 = (0.0, 0.0, 0.0)
 #: States whose own slots the integrator remembers (event location tries ≤ 2 × 60 per step).
 MEMORY = 256
 
@@ -93,6 +94,25 @@ class StatefulRungeKutta(Integrator):
         for k in range(n):
             q, v, own = self._substep(t + k * h, q, v, own, h, torque)
         return q, v, own
+
+    def advance_held(self, t: float, q: Vec3, own: tuple[float, ...], dt: float,
+                     torque: TorqueFn) -> tuple[float, ...]:
+        """The own slots at t + dt from `own` at t while the linkage is held at q with q' = 0 (at rest on a
+        stop): the same tableau and substeps on the slots alone, their rates at (q, 0)."""
+        h = dt / self.substeps
+        rates = self.actuator.rates
+        for k in range(self.substeps):
+            s = t + k * h
+            ko: list[tuple[float, ...]] = []
+            for c, row in self._stages:
+                xo = own
+                for j, a in row:
+                    xo = tuple([x + h * a * r for x, r in zip(xo, ko[j])])
+                ts = s + c * h
+                ko.append(rates(ts, q, ZERO, torque(ts), xo))
+            for j, b in self._weights:
+                own = tuple([x + h * b * r for x, r in zip(own, ko[j])])
+        return own
 
     def _substep(self, t: float, q: Vec3, v: Vec3, own: tuple[float, ...], dt: float,
                  torque: TorqueFn) -> tuple[Vec3, Vec3, tuple[float, ...]]:
