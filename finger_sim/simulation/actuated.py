@@ -64,7 +64,10 @@ def integrator_class(scene: Scene, setup: Setup, actuator: Actuator, kernel: str
         method, substeps = METHODS[ACTUATED_DEFAULT], contact_substeps(scene)
         check_stability(scene, setup.system, method, substeps)
         note += f"; {method.name} instead (the slots of the actuator {actuator.name!r} need an explicit tableau)"
-    return Actuated(StatefulRungeKutta.of(method, own_substeps(scene, method, actuator), actuator), substeps, note)
+    n = own_substeps(scene, method, actuator)
+    if n > 1:
+        note += f"; {n} substeps per step resolve the time constant {actuator.time_constant:g} s of the actuator {actuator.name!r}"
+    return Actuated(StatefulRungeKutta.of(method, n, actuator), substeps, note)
 
 
 def own_substeps(scene: Scene, method: type[Integrator], actuator: Actuator) -> int:
@@ -80,14 +83,14 @@ def own_substeps(scene: Scene, method: type[Integrator], actuator: Actuator) -> 
     if scene.method == AUTO:
         n = max(1, math.ceil(scene.dt / (tau * OWN_RESOLUTION)))
         if n > MAX_OWN_SUBSTEPS:
-            raise ConfigError("integrator.dt", f"a step that resolves the actuator {actuator.name!r}'s time constant "
-                              f"{tau:g} s in at most {MAX_OWN_SUBSTEPS} substeps", scene.dt)
+            raise ConfigError("integrator.dt", f"a step that resolves the time constant {tau:g} s of the actuator "
+                              f"{actuator.name!r} in at most {MAX_OWN_SUBSTEPS} substeps", scene.dt)
         return n
     ref = getattr(method, "reference", method)
     if not stable_at(ref, root, scene.dt):
         raise ConfigError("integrator.method", f"auto, or dt ≤ {largest_stable_dt(ref, root, scene.dt):.3g} s",
-                          method.name, problem=f"{method.name} is unstable on the actuator {actuator.name!r}'s time "
-                          f"constant {tau:g} s at dt = {scene.dt:g} s")
+                          method.name, problem=f"{method.name} is unstable on the time constant {tau:g} s of the "
+                          f"actuator {actuator.name!r} at dt = {scene.dt:g} s")
     return 1
 
 

@@ -128,7 +128,9 @@ def test_layout_packs_unpacks_and_names_what_it_lacks():
 
 
 @pytest.mark.parametrize("change, kernel, words", [
-    ({"model": {"joint_limits": {"mcp": [0.0, 0.5]}}}, "auto", "model: expected a scene without stops or contact"),
+    ({"model": {"contact": {"friction_model": "stick_slip", "friction": 0.5}},
+      "objects": [{"name": "cup", "type": "circle", "center": [0.065, 0.040], "radius": 0.012}]}, "auto",
+     "model.contact.friction_model: expected a contact without stick–slip friction for the actuator 'lag'"),
     ({}, "compiled", "kernel: expected python or auto for the actuator 'lag'"),
     ({"integrator": {"method": "radau", "dt": 1e-3}}, "auto", "integrator.method: expected an explicit Runge-Kutta"),
 ])
