@@ -4,8 +4,8 @@ The actuator's own slots are stepped with q and q' in the flat state (`integrato
 scene's explicit Runge-Kutta tableau, on the Python path; with stops or contact the Simulator's events
 carry them (`simulation.actuated_events`). An actuator that declares a `time_constant` (s) has its
 own mode s = −1/T checked like the linkage's: auto splits each step to resolve it, a named method that
-is unstable on it is refused. What it does not carry is refused in one line: stick–slip friction (its
-lock shares the holding torque with the actuator), a constrained actuator (its own `accelerations`)
+is unstable on it is refused. What it does not carry is refused in one line: stick–slip friction on a
+moving object, a constrained actuator (its own `accelerations`)
 with gaps, a drive scene (the drive is the scene's actuator already), the compiled kernel, and a method
 without an explicit tableau. auto's kernel falls back to the Python path and says so in the method's reason.
 """
@@ -51,10 +51,10 @@ def integrator_class(scene: Scene, setup: Setup, actuator: Actuator, kernel: str
     if scene.drive is not None:
         raise ConfigError("model.drive", f"no drive with the actuator {actuator.name!r} (one actuator drives θ1)",
                           "a drive")
-    if stick_slip.element(setup.system) is not None:
-        raise ConfigError("model.contact.friction_model", f"a contact without stick–slip friction for the actuator "
-                          f"{actuator.name!r} with its own state (the lock's holding torque does not carry its slots)",
-                          "stick_slip")
+    friction = stick_slip.element(setup.system)
+    if friction is not None and friction.time_varying:
+        raise ConfigError("objects", f"fixed objects with stick–slip friction for the actuator {actuator.name!r} with "
+                          "its own state (riding a moving object does not carry its slots)", "a moving object")
     if setup.gaps and type(actuator).accelerations is not Actuator.accelerations:
         raise ConfigError("model", f"a scene without stops or contact for the actuator {actuator.name!r}, which "
                           "writes its own accelerations (a constrained actuator)", f"{len(setup.gaps)} gaps")

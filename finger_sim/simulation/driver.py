@@ -127,7 +127,7 @@ class Simulator:
         if self._drive is not None:
             drive_stepping.start(self)
         if self._friction is not None:
-            stick_slip.start(self)
+            (stick_slip.start if self._actuator is None else actuated_events.start_friction)(self)
         self.impacts = 0
         self._held: tuple[float, TorqueFn] | None = None  # the held torque (N·m) and its function
 
@@ -214,14 +214,14 @@ class Simulator:
     # -- internals ---------------------------------------------------------------------
     def _advance(self, t0: float, t1: float, torque: TorqueFn) -> None:
         """Integrate [t0, t1] under a smooth torque, splitting it at every event on the way."""
+        if self._actuator is not None and self._gaps:  # stops, contact, stick–slip: the actuator's slots carried
+            actuated_events.advance(self, t0, t1, torque)
+            return
         if self._friction is not None:  # with a drive too: the mesh and the friction share one lock
             stick_slip.advance(self, t0, t1, torque)
             return
         if self._drive is not None:
             drive_stepping.advance(self, t0, t1, torque)
-            return
-        if self._actuator is not None and self._gaps:
-            actuated_events.advance(self, t0, t1, torque)
             return
         if not self._gaps:
             self.q, self.v = self.integrator.step(t0, self.q, self.v, t1 - t0, torque)

@@ -15,6 +15,7 @@ import yaml
 
 import hybrid_reference as hybrid
 import reference as ref
+import stick_slip_reference
 from test_state_layout import LAG, PAPER, TorqueLag
 
 from finger_sim.errors import ConfigError
@@ -87,6 +88,48 @@ def test_the_lag_closing_onto_a_cup_matches_the_tight_solve_with_contact():
     assert np.max(np.abs(xs[:, :3] - theta)) < 5e-8
     assert np.max(np.abs(xs[:, 6] - value * (1.0 - np.exp(-t / LAG)))) < TORQUE_TOLERANCE
     assert sim.system.elements and any(g < 0 for e in sim.system.elements if not e.smooth for g in e.gaps(sim.q))
+
+
+def lag_of_step(before: float, after: float, at: float) -> tuple:
+    """(segment → τ_a(t), t_end → switches) under the command u = before, after from `at` s: the closed form of
+    the lag (exponentials joined at `at`), in `stick_slip_reference.solve`'s torque pair."""
+    at_value = before * (1.0 - math.exp(-at / LAG))
+
+    def on(a: float, b: float):
+        if b <= at:
+            return lambda t: before * (1.0 - math.exp(-t / LAG))
+        return lambda t: after + (at_value - after) * math.exp(-(t - at) / LAG)
+
+    return on, lambda end: [at] if at < end else []
+
+
+def test_the_lag_holding_a_table_by_stick_slip_locks_and_breaks_away_as_the_tight_solve():
+    """config/friction/hold_table.yaml with μ_s = 1 through the lag: the tip slides on the table, locks at its
+    turning point, and breaks away after the command drops at 0.5 s, once the lagged torque has fallen below
+    what the friction cone holds; rk6 at 0.5 ms against test/stick_slip_reference.py's tight solve."""
+    with open(ref.CONFIG / "friction" / "hold_table.yaml") as f:
+        data = yaml.safe_load(f)
+    data["model"]["contact"]["static_friction"] = 1.0
+    data.update(duration=0.6, integrator={"method": "rk6", "dt": 5e-4})
+    command = data["input"]["torque"]
+    torque = lag_of_step(command["before"], command["after"], command["at"])
+    sim = Simulator(scene_from_dict(data), actuator=TorqueLag(LAG), kernel="python")
+    xs, modes = [], []
+    for _ in range(1200):
+        sim.step()
+        xs.append(sim.state_vector)
+        modes.append(sim.modes[-1])
+    t = sim.dt * np.arange(1, 1201)
+    expected = stick_slip_reference.solve(data, torque=torque)
+    # measured 5.0e-8 rad (rk6's error across the contact and the mode changes)
+    assert np.max(np.abs(np.array(xs)[:, :3] - expected.states(t)[:3].T)) < 2e-7
+    assert np.max(np.abs(np.array(xs)[:, 6] - [torque[0](s - 1e-9, s)(s) for s in t])) < TORQUE_TOLERANCE
+    changes = [(t[k], modes[k]) for k in range(1, len(t)) if modes[k] != modes[k - 1]]
+    assert [m for _, m in changes] == ["locked", "sliding"]
+    assert [c for _, c in expected.changes[1:]] == ["lock", "break"]
+    for (s, _), (s_ref, _) in zip(changes, expected.changes[1:]):
+        assert s_ref <= s < s_ref + sim.dt  # the first step that ends in the new mode
+    assert changes[1][0] > command["at"] + 2 * sim.dt  # the lag delays the breakaway (0.5028 s)
 
 
 def test_auto_runs_the_actuator_on_the_python_path_and_says_so_while_compiled_is_refused():
