@@ -146,8 +146,9 @@ class HybridReference:
         return out
 
 
-def solve(data: dict, *, rest_height: float = 1e-11) -> HybridReference:
-    """The reference of a scene mapping as written in config/ (the keys its hard scenes use)."""
+def solve(data: dict, *, rest_height: float = 1e-11, torque=None) -> HybridReference:
+    """The reference of a scene mapping as written in config/ (the keys its hard scenes use); `torque`:
+    (segment → τ(t), t_end → switches) in place of the scene's input (`ref.torque_from_dict`'s pair)."""
     model = data.get("model", {})
     fx = ref.Effects(k=model.get("spring_stiffness", ref.K_PAPER), c=model.get("damping", 0.0),
                      g=tuple(model.get("gravity", (0.0, 0.0))), f=tuple(model.get("tip_force", (0.0, 0.0))))
@@ -157,7 +158,7 @@ def solve(data: dict, *, rest_height: float = 1e-11) -> HybridReference:
     objects = data.get("objects", [])
     limits = model.get("joint_limits", {}).get("mcp")
     e_stop = model.get("restitution", 0.0)
-    on, switches = ref.torque_from_dict(data["input"]["torque"])
+    on, switches = torque or ref.torque_from_dict(data["input"]["torque"])
     t_end = data["duration"]
     init = data.get("initial", {})
     q0 = ref.assemble(init.get("theta1", 0.0))
@@ -185,7 +186,7 @@ def solve(data: dict, *, rest_height: float = 1e-11) -> HybridReference:
                         out.pieces.append((t, b, y.copy()))
                         t = b
                         continue
-                    tr = brentq(lambda s: push(s, q, side), t, b, xtol=1e-15, rtol=4e-16)
+                    tr = brentq(lambda s: push(s, q, side), t, b, xtol=1e-15, rtol=4 * np.finfo(float).eps)
                     out.pieces.append((t, tr, y.copy()))
                     t = tr
                 resting = False

@@ -92,10 +92,11 @@ class StickSlipReference:
         return out
 
 
-def solve(data: dict, *, slip_zeros: bool = False) -> StickSlipReference:
+def solve(data: dict, *, slip_zeros: bool = False, torque=None) -> StickSlipReference:
     """The reference of a scene mapping (the keys test_stick_slip's scenes use). slip_zeros: also restart
     the sliding pieces where a candidate's j_k changes sign (its friction flips, spec §7), so that no
-    piece straddles that kink of the force along the linkage."""
+    piece straddles that kink of the force along the linkage. torque: (segment → τ(t), t_end → switches)
+    in place of the scene's input (`ref.torque_from_dict`'s pair)."""
     model = data.get("model", {})
     fx = ref.Effects(k=model.get("spring_stiffness", ref.K_PAPER), c=model.get("damping", 0.0),
                      g=tuple(model.get("gravity", (0.0, 0.0))), f=tuple(model.get("tip_force", (0.0, 0.0))))
@@ -104,7 +105,7 @@ def solve(data: dict, *, slip_zeros: bool = False) -> StickSlipReference:
     law = Law(c.get("stiffness", 1e5), c.get("exponent", 1.5), c.get("damping", 1.5), mu_k,
               c.get("static_friction", mu_k), c.get("stribeck_velocity"), tuple(model.get("phalanx_radius", (0.008, 0.007))))
     objects = data.get("objects", [])
-    on, switches = ref.torque_from_dict(data["input"]["torque"])
+    on, switches = torque or ref.torque_from_dict(data["input"]["torque"])
     t_end = data["duration"]
     init = data.get("initial", {})
     q0 = ref.assemble(init.get("theta1", 0.0))

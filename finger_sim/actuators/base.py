@@ -35,6 +35,8 @@ class Actuator(ABC):
     input: ClassVar[Slot] = TORQUE_INPUT
     slots: tuple[Slot, ...] = ()
     modes: tuple[ModeSet, ...] = ()
+    #: the time constant of the fastest own slot, s (its mode s = −1/T enters the stability check); None: none
+    time_constant: float | None = None
 
     @abstractmethod
     def initial(self) -> tuple[float, ...]:

@@ -3,12 +3,71 @@
 from __future__ import annotations
 
 import cmath
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 from finger_sim.dynamics import FingerSystem
 from finger_sim.integrators.base import STABILITY_SLACK, Integrator, TorqueFn
 from finger_sim.kinematics import Vec3
 from finger_sim.projection import project
+
+if TYPE_CHECKING:
+    from finger_sim.actuators.base import Actuator
+
+#: A tableau's stages as the stage loop takes them: (c, the non-zero (j, a_j) of its row) each.
+Stages = tuple[tuple[float, tuple[tuple[int, float], ...]], ...]
+#: A tableau's non-zero weights (j, b_j).
+Weights = tuple[tuple[int, float], ...]
+
+
+def rk_stage_loop(stages: Stages, weights: Weights, system: FingerSystem, t: float, q: Vec3, v: Vec3,
+                  own: tuple[float, ...], dt: float, torque: TorqueFn,
+                  actuator: Actuator | None = None) -> tuple[Vec3, Vec3, tuple[float, ...]]:
+    """One explicit Runge-Kutta step of (q, q', own) from t to t + dt (s), before any projection: the one
+    stage loop of `ExplicitRungeKutta` and `integrators.stateful.StatefulRungeKutta` (as scipy's `rk_step`).
+
+    stages: (c, the non-zero (j, a_j) of its row) per stage; weights: the non-zero (j, b_j). Without an
+    actuator q'' is the system's under the torque τ(s) on θ1 and `own` is empty; with one, q'' and the
+    rates of its own slots `own` come from it (`actuators.base.Actuator`) under the input u(s) = torque(s).
+    q and q' take the same operations in the same order either way."""
+    acc = system.accelerations
+    kq: list[Vec3] = []  # stage velocities: dq/dt
+    kv: list[Vec3] = []  # stage accelerations: dv/dt
+    ko: list[tuple[float, ...]] = []  # stage rates of the own slots
+    q0, q1, q2 = q
+    v0, v1, v2 = v
+    for c, row in stages:
+        x0, x1, x2, w0, w1, w2, xo = q0, q1, q2, v0, v1, v2, own
+        for j, a in row:
+            ha = dt * a
+            dq, dv = kq[j], kv[j]
+            x0 += ha * dq[0]
+            x1 += ha * dq[1]
+            x2 += ha * dq[2]
+            w0 += ha * dv[0]
+            w1 += ha * dv[1]
+            w2 += ha * dv[2]
+            if own:
+                xo = tuple([x + ha * k for x, k in zip(xo, ko[j])])
+        ts = t + c * dt
+        kq.append((w0, w1, w2))
+        if actuator is None:
+            kv.append(acc(ts, (x0, x1, x2), (w0, w1, w2), torque(ts))[0])
+        else:
+            u = torque(ts)
+            kv.append(actuator.accelerations(system, ts, (x0, x1, x2), (w0, w1, w2), u, xo))
+            ko.append(actuator.rates(ts, (x0, x1, x2), (w0, w1, w2), u, xo))
+    for j, b in weights:
+        hb = dt * b
+        dq, dv = kq[j], kv[j]
+        q0 += hb * dq[0]
+        q1 += hb * dq[1]
+        q2 += hb * dq[2]
+        v0 += hb * dv[0]
+        v1 += hb * dv[1]
+        v2 += hb * dv[2]
+        if own:
+            own = tuple([x + hb * k for x, k in zip(own, ko[j])])
+    return (q0, q1, q2), (v0, v1, v2), own
 
 
 class PaperEuler(Integrator):
@@ -62,35 +121,8 @@ class ExplicitRungeKutta(Integrator):
         self._weights = tuple((j, b) for j, b in enumerate(self.B) if b != 0.0)
 
     def step(self, t: float, q: Vec3, v: Vec3, dt: float, torque: TorqueFn) -> tuple[Vec3, Vec3]:
-        acc = self.system.accelerations
-        kq: list[Vec3] = []  # stage velocities: dq/dt
-        kv: list[Vec3] = []  # stage accelerations: dv/dt
-        q0, q1, q2 = q
-        v0, v1, v2 = v
-        for c, row in self._stages:
-            x0, x1, x2, w0, w1, w2 = q0, q1, q2, v0, v1, v2
-            for j, a in row:
-                ha = dt * a
-                dq, dv = kq[j], kv[j]
-                x0 += ha * dq[0]
-                x1 += ha * dq[1]
-                x2 += ha * dq[2]
-                w0 += ha * dv[0]
-                w1 += ha * dv[1]
-                w2 += ha * dv[2]
-            ts = t + c * dt
-            kq.append((w0, w1, w2))
-            kv.append(acc(ts, (x0, x1, x2), (w0, w1, w2), torque(ts))[0])
-        for j, b in self._weights:
-            hb = dt * b
-            dq, dv = kq[j], kv[j]
-            q0 += hb * dq[0]
-            q1 += hb * dq[1]
-            q2 += hb * dq[2]
-            v0 += hb * dv[0]
-            v1 += hb * dv[1]
-            v2 += hb * dv[2]
-        return project(self.system.params, (q0, q1, q2), (v0, v1, v2))
+        q, v, _ = rk_stage_loop(self._stages, self._weights, self.system, t, q, v, (), dt, torque)
+        return project(self.system.params, q, v)
 
     @classmethod
     def is_stable(cls, z: complex) -> bool:

@@ -3,7 +3,7 @@
 The tableau is the scene's method's (`ExplicitRungeKutta`: rk4, rk6, dop8); the stages carry the whole
 flat state (`state_layout`), q' and q'' from the actuator (`actuators.base.Actuator.accelerations`)
 and its slots' rates (`Actuator.rates`); after the step (q, q') are projected onto the constraints as
-`ExplicitRungeKutta.step` does, with the same operations in the same order on q and q'.
+`ExplicitRungeKutta.step` does: both run the one stage loop, `explicit.rk_stage_loop`.
 
 The Simulator's events (trial steps, location, substeps) pass (q, q') alone; the integrator keeps the
 own slots of the states it produced (`own_of`, by the identity of the q and q' objects), so each trial
@@ -19,10 +19,11 @@ from finger_sim.actuators.base import Actuator
 from finger_sim.dynamics import FingerSystem
 from finger_sim.errors import ConfigError
 from finger_sim.integrators.base import Integrator, TorqueFn
-from finger_sim.integrators.explicit import ExplicitRungeKutta
+from finger_sim.integrators.explicit import ExplicitRungeKutta, rk_stage_loop
 from finger_sim.kinematics import Vec3
 from finger_sim.projection import project
 
+ZERO: Vec3 = (0.0, 0.0, 0.0)
 #: States whose own slots the integrator remembers (event location tries ≤ 2 × 60 per step).
 MEMORY = 256
 
@@ -94,46 +95,45 @@ class StatefulRungeKutta(Integrator):
             q, v, own = self._substep(t + k * h, q, v, own, h, torque)
         return q, v, own
 
+    def advance_held(self, t: float, q: Vec3, own: tuple[float, ...], dt: float,
+                     torque: TorqueFn) -> tuple[float, ...]:
+        """The own slots at t + dt from `own` at t while the linkage is held at q with q' = 0 (at rest on a
+        stop, locked by friction): the same tableau and substeps on the slots, their rates at (q, 0)."""
+        held = _Held(self.actuator, q)
+        h = dt / self.substeps
+        for k in range(self.substeps):
+            own = rk_stage_loop(self._stages, self._weights, self.system, t + k * h, q, ZERO, own, h, torque, held)[2]
+        return own
+
     def _substep(self, t: float, q: Vec3, v: Vec3, own: tuple[float, ...], dt: float,
                  torque: TorqueFn) -> tuple[Vec3, Vec3, tuple[float, ...]]:
-        """`ExplicitRungeKutta.step` on the flat state (q and q' with the same operations in the same order)."""
-        system = self.system
-        actuator = self.actuator
-        kq: list[Vec3] = []  # stage velocities: dq/dt
-        kv: list[Vec3] = []  # stage accelerations: dv/dt
-        ko: list[tuple[float, ...]] = []  # stage rates of the own slots
-        q0, q1, q2 = q
-        v0, v1, v2 = v
-        for c, row in self._stages:
-            x0, x1, x2, w0, w1, w2, xo = q0, q1, q2, v0, v1, v2, own
-            for j, a in row:
-                ha = dt * a
-                dq, dv = kq[j], kv[j]
-                x0 += ha * dq[0]
-                x1 += ha * dq[1]
-                x2 += ha * dq[2]
-                w0 += ha * dv[0]
-                w1 += ha * dv[1]
-                w2 += ha * dv[2]
-                xo = tuple([x + ha * k for x, k in zip(xo, ko[j])])
-            ts = t + c * dt
-            u = torque(ts)
-            kq.append((w0, w1, w2))
-            kv.append(actuator.accelerations(system, ts, (x0, x1, x2), (w0, w1, w2), u, xo))
-            ko.append(actuator.rates(ts, (x0, x1, x2), (w0, w1, w2), u, xo))
-        for j, b in self._weights:
-            hb = dt * b
-            dq, dv = kq[j], kv[j]
-            q0 += hb * dq[0]
-            q1 += hb * dq[1]
-            q2 += hb * dq[2]
-            v0 += hb * dv[0]
-            v1 += hb * dv[1]
-            v2 += hb * dv[2]
-            own = tuple([x + hb * k for x, k in zip(own, ko[j])])
-        qn, vn = project(self.system.params, (q0, q1, q2), (v0, v1, v2))
+        """`ExplicitRungeKutta.step` on the flat state: the same stage loop, then the same projection."""
+        q, v, own = rk_stage_loop(self._stages, self._weights, self.system, t, q, v, own, dt, torque, self.actuator)
+        qn, vn = project(self.system.params, q, v)
         return qn, vn, own
 
     @classmethod
     def is_stable(cls, z: complex) -> bool:
         return cls.reference.is_stable(z / cls.substeps)
+
+
+class _Held(Actuator):
+    """The actuator's slots with the linkage held at q, q' = 0: no acceleration, the slots' rates at (q, 0)."""
+
+    name = "held"
+
+    def __init__(self, actuator: Actuator, q: Vec3) -> None:
+        self.actuator, self.q = actuator, q
+
+    def initial(self) -> tuple[float, ...]:
+        return self.actuator.initial()
+
+    def torque(self, system: FingerSystem, t: float, q: Vec3, v: Vec3, u: float, own: tuple[float, ...]) -> float:
+        return self.actuator.torque(system, t, self.q, ZERO, u, own)
+
+    def rates(self, t: float, q: Vec3, v: Vec3, u: float, own: tuple[float, ...]) -> tuple[float, ...]:
+        return self.actuator.rates(t, self.q, ZERO, u, own)
+
+    def accelerations(self, system: FingerSystem, t: float, q: Vec3, v: Vec3, u: float,
+                      own: tuple[float, ...]) -> Vec3:
+        return ZERO

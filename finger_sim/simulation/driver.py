@@ -25,7 +25,7 @@ from finger_sim.integrators import HeldTorque, Integrator, TorqueFn
 from finger_sim.kinematics import Vec3
 from finger_sim.projection import OK as FAST_OK
 from finger_sim.scene import Scene
-from finger_sim.simulation import actuated, crossings, event_step, gap_screen, impact
+from finger_sim.simulation import actuated, actuated_events, crossings, event_step, gap_screen, impact
 from finger_sim.simulation.crossings import Crossing, Gap
 from finger_sim.simulation.setup import hashable, setup_for
 from finger_sim.state_layout import StateLayout, layout_of
@@ -82,14 +82,18 @@ class Simulator:
         self._friction = stick_slip.element(self.system)
         self._method_cls, self._integrator_cls, self.kernel = setup.method_cls, setup.integrator_cls, setup.kernel
         if actuator is not None:
-            self._integrator_cls = actuated.integrator_class(scene, setup, actuator, requested)
-            self.method, self._options = self._integrator_cls.name, {}
+            self._integrator_cls, self.substeps, note = actuated.integrator_class(scene, setup, actuator, requested)
+            self.method, self._options, self.method_reason = self._integrator_cls.name, {}, self.method_reason + note
+        #: the actuator with its own state in the slot, or None
+        self._actuator = actuator
         #: the declared state: (q, q', then the drive's or `actuator`'s own slots), and the elements' modes
         self.layout: StateLayout = layout_of(self.system.elements, actuator or self._drive)
         #: the owners of declared modes, in `layout.modes` order
         self._mode_owners = tuple(o for o in (*self.system.elements, actuator or self._drive)
                                   for _ in getattr(o, "modes", ()))
         self._gaps, self._kinks, self._gap_elements = setup.gaps, setup.kinks, setup.gap_elements
+        if actuator is not None and self.substeps > setup.substeps:  # auto's rk6 for the actuator: its contact substeps
+            self._kinks = tuple(gap for gap in self._gaps if gap.restitution is None)
         #: the depth gaps (`DepthLimit`, last in `_gaps`): (position of the contact gap in `_gaps`, ρ) each
         self._depth_sources = setup.depth_sources
         #: elements whose gaps move with time too (contact with a moving object): asked at (t, q)
@@ -123,7 +127,7 @@ class Simulator:
         if self._drive is not None:
             drive_stepping.start(self)
         if self._friction is not None:
-            stick_slip.start(self)
+            (stick_slip.start if self._actuator is None else actuated_events.start_friction)(self)
         self.impacts = 0
         self._held: tuple[float, TorqueFn] | None = None  # the held torque (N·m) and its function
 
@@ -201,6 +205,8 @@ class Simulator:
         if not math.isfinite(sum(self.q) + sum(self.v)):  # a NaN or inf anywhere makes the sum non-finite
             raise SimulationDiverged(f"non-finite state (step {self.step_index + 1})", method=self.method, t=t1, dt=self.dt)
         self.step_index += 1
+        if self._actuator is not None:
+            actuated_events.commit(self)
         if events is not None:
             events.taken_in_python(self.integrator)
         return self.state
@@ -208,6 +214,9 @@ class Simulator:
     # -- internals ---------------------------------------------------------------------
     def _advance(self, t0: float, t1: float, torque: TorqueFn) -> None:
         """Integrate [t0, t1] under a smooth torque, splitting it at every event on the way."""
+        if self._actuator is not None and self._gaps:  # stops, contact, stick–slip: the actuator's slots carried
+            actuated_events.advance(self, t0, t1, torque)
+            return
         if self._friction is not None:  # with a drive too: the mesh and the friction share one lock
             stick_slip.advance(self, t0, t1, torque)
             return

@@ -128,7 +128,10 @@ def test_layout_packs_unpacks_and_names_what_it_lacks():
 
 
 @pytest.mark.parametrize("change, kernel, words", [
-    ({"model": {"joint_limits": {"mcp": [0.0, 0.5]}}}, "auto", "model: expected a scene without stops or contact"),
+    ({"model": {"contact": {"friction_model": "stick_slip", "friction": 0.5}},
+      "objects": [{"name": "table", "type": "plane", "point": [0.0, 0.045], "normal": [0.0, -1.0],
+                   "motion": {"type": "push", "direction": [1.0, 0.0], "distance": 0.01, "start": 0.1, "duration": 1.0}}]}, "auto",
+     "objects: expected fixed objects with stick–slip friction for the actuator 'lag'"),
     ({}, "compiled", "kernel: expected python or auto for the actuator 'lag'"),
     ({"integrator": {"method": "radau", "dt": 1e-3}}, "auto", "integrator.method: expected an explicit Runge-Kutta"),
 ])
