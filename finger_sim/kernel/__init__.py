@@ -223,6 +223,13 @@ def compiled_event_step() -> "ModuleType":
     return compiled
 
 
+def compiled_internal_steps() -> "ModuleType":
+    """DOP853's internal steps up to an output time in one call (`kernel.internal_steps`)."""
+    from finger_sim.kernel import internal_steps as compiled
+
+    return compiled
+
+
 def compiled_inductive() -> type:
     """The inductive drive's compiled Runge–Kutta class (`kernel.inductive`)."""
     from finger_sim.kernel.inductive import CompiledInductiveRungeKutta
