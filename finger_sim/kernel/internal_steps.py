@@ -50,3 +50,28 @@ def advance_to(m, rtol, atol, st, y, f, y_old, dense, kk, y_new, taus, prof, tar
             row[ROW_DENSE + 6 * i:ROW_DENSE + 6 * i + 6] = dense[i]
         n += 1
     return n
+
+
+#: A step's record of its internal steps (`event_step.common_step`): the count, the branch the step took
+#: (CONTINUED: the last output continued; RESTARTED; else none recorded), then HISTORY_ROWS rows (ROW_*).
+COUNT, BRANCH, ROWS_AT = 0, 1, 2
+CONTINUED, RESTARTED = 1.0, 2.0
+HISTORY_ROWS = 64
+HISTORY_SIZE = ROWS_AT + HISTORY_ROWS * ROW_SIZE
+
+
+@njit(**JIT)
+def record(log, st, y_old, dense):
+    """Append the accepted internal step in st (T_OLD, H_OLD, ERR_OLD, ERR at `advance_to`'s indices)
+    with y_old and dense to log (the layout above); a full log stops counting at HISTORY_ROWS + 1."""
+    n = int(log[COUNT])
+    if n < HISTORY_ROWS:
+        o = ROWS_AT + n * ROW_SIZE
+        log[o + ROW_T], log[o + ROW_H] = st[I_T_OLD], st[I_H_OLD]
+        log[o + ROW_ERR_OLD], log[o + ROW_ERR] = st[ERR_OLD], st[ERR]
+        log[o + ROW_Y_OLD:o + ROW_DENSE] = y_old
+        for i in range(7):
+            log[o + ROW_DENSE + 6 * i:o + ROW_DENSE + 6 * i + 6] = dense[i]
+        log[COUNT] = n + 1
+    else:
+        log[COUNT] = HISTORY_ROWS + 1
