@@ -61,8 +61,9 @@ class CompiledKernel(Protocol):
         """The compiled common step of a scene with events (`common_step`: DOP853 and the gap check)."""
         ...
 
-    def compiled_internal_steps(self) -> ModuleType:
-        """DOP853's internal steps up to an output time in one call (`advance_to`, under a held torque)."""
+    def compiled_internal_steps(self) -> ModuleType | None:
+        """DOP853's internal steps up to an output time in one call (`advance_to`, under a held torque);
+        None without numba."""
         ...
 
     def compiled_inductive(self) -> type:

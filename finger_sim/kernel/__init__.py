@@ -223,8 +223,10 @@ def compiled_event_step() -> "ModuleType":
     return compiled
 
 
-def compiled_internal_steps() -> "ModuleType":
-    """DOP853's internal steps up to an output time in one call (`kernel.internal_steps`)."""
+def compiled_internal_steps() -> "ModuleType | None":
+    """DOP853's internal steps up to an output time in one call (`kernel.internal_steps`); None without numba."""
+    if compiled_name() is None:
+        return None
     from finger_sim.kernel import internal_steps as compiled
 
     return compiled
