@@ -61,6 +61,11 @@ class CompiledKernel(Protocol):
         """The compiled common step of a scene with events (`common_step`: DOP853 and the gap check)."""
         ...
 
+    def compiled_internal_steps(self) -> ModuleType | None:
+        """DOP853's internal steps up to an output time in one call (`advance_to`, under a held torque);
+        None without numba."""
+        ...
+
     def compiled_inductive(self) -> type:
         """The compiled Runge–Kutta class of an inductive drive (`actuators.inductive`'s twin)."""
         ...

@@ -35,6 +35,7 @@ import numpy as np
 from finger_sim import stepper_slot
 from finger_sim.dynamics import FingerSystem
 from finger_sim.errors import SimulationDiverged
+from finger_sim.inputs import HELD_ARRAY
 from finger_sim.integrators.base import Integrator, TorqueFn
 from finger_sim.kinematics import Vec3
 
@@ -67,6 +68,8 @@ MAX_ATTEMPTS = 60
 MAX_STEP = 0.1
 #: Weight of the 3rd-order estimate in DOP853's error combination |e5|²/√(|e5|² + w|e3|²) (scipy's).
 E3_WEIGHT = 0.01
+#: Internal steps per call of the compiled loop (`DormandPrince853._advance_compiled`): rows of history.
+COMPILED_CHUNK = 32
 #: `error_estimate` remembers this many recent outputs (the states event location tried within
 #: a step); older ones are dropped down to KEEP_OUTPUTS.
 MAX_OUTPUTS, KEEP_OUTPUTS = 4096, 256
@@ -140,6 +143,11 @@ class DormandPrince853(Integrator):
         self._history: list[tuple[float, float, np.ndarray, np.ndarray, float, float]] = []
         self._history_starts: list[float] = []
         self._keep_history = True
+        #: the compiled loop of internal steps under a held torque (`kernel.internal_steps`), or None
+        #: (stages in Python, a drive's mesh mode), and its scalars and scratch arrays
+        self._steps = compiled.compiled_internal_steps() if self.compiled and self._drive is None else None
+        self._step_scalars, self._y_next, self._f_next = np.empty(6), np.empty(6), np.empty(6)
+        self._y_scratch, self._y_new = np.empty(6), np.empty(6)
 
     def error_estimate(self, q: Vec3) -> float:
         """The estimated θ error (rad) of an output q of this integrator (0 for a state it did not
@@ -171,6 +179,9 @@ class DormandPrince853(Integrator):
             self._prune(t)
         else:
             self._restart(t, q, v, dt, torque)
+        held = getattr(torque, "value", None)  # a held or constant torque (`HeldTorque`, `inputs.Constant`)
+        if held is not None and self._steps is not None and self._t < target:
+            self._advance_compiled(target, held)
         while self._t < target:
             self._advance(torque)
         t_old, h_old, y_old, dense, err_old, err = self._segment(target)
@@ -255,6 +266,33 @@ class DormandPrince853(Integrator):
             self._f[:] = _python_rhs(self.system, t, self._y, torque(t))
         if self._h <= 0.0:
             self._h = _initial_step(self._y, self._f, self.rtol, self.atol, dt)
+
+    def _advance_compiled(self, target: float, held: float) -> None:
+        """`while _t < target: _advance(torque)` under the held torque `held` (N·m) in compiled chunks of
+        COMPILED_CHUNK internal steps (`kernel.internal_steps.advance_to`, the same numbers), each step
+        kept in the history as `_advance` keeps it; it stops before a step that fails, which the Python
+        loop then retries and reports. The rejected attempts are not counted here."""
+        k = self._steps
+        st, y, f = self._step_scalars, self._y_next, self._f_next
+        self._taus.fill(held)
+        while self._t < target:
+            st[:] = (self._t, self._h, self._t_old, self._h_old, self._err, self._err_old)
+            y[:], f[:] = self._y, self._f
+            rows = np.empty((COMPILED_CHUNK, k.ROW_SIZE))  # the history keeps views of its rows
+            n = k.advance_to(self._model, self.rtol, self.atol, st, y, f, self._y_scratch, self._dense, self._kk,
+                             self._y_new, self._taus, HELD_ARRAY, target, rows)
+            done = n if n >= 0 else -n - 1
+            if done:
+                self._t, self._h, self._t_old, self._h_old, self._err, self._err_old = st.tolist()
+                self._y, self._f[:] = y.copy(), f  # a new array for y, as `_advance` makes one per step
+                self.accepted += done
+                for (t_old, h_old, err_old, err), row in zip(rows[:done, :4].tolist(), rows[:done]):
+                    self._y_old = row[k.ROW_Y_OLD:k.ROW_DENSE]
+                    if self._keep_history:
+                        self._history.append((t_old, h_old, self._y_old, row[k.ROW_DENSE:].reshape(7, 6), err_old, err))
+                        self._history_starts.append(t_old)
+            if n < 0:
+                return
 
     def _advance(self, torque: TorqueFn) -> None:
         """One accepted internal step from _t (scipy's `RungeKutta._step_impl` without t_bound)."""

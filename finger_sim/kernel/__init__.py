@@ -223,6 +223,15 @@ def compiled_event_step() -> "ModuleType":
     return compiled
 
 
+def compiled_internal_steps() -> "ModuleType | None":
+    """DOP853's internal steps up to an output time in one call (`kernel.internal_steps`); None without numba."""
+    if compiled_name() is None:
+        return None
+    from finger_sim.kernel import internal_steps as compiled
+
+    return compiled
+
+
 def compiled_inductive() -> type:
     """The inductive drive's compiled Runge–Kutta class (`kernel.inductive`)."""
     from finger_sim.kernel.inductive import CompiledInductiveRungeKutta

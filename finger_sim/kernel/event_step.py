@@ -34,10 +34,15 @@ from finger_sim.integrators import dop853  # noqa: E402
 from finger_sim.kernel.closed_loop import I_H, I_H_OLD, I_T, I_T_OLD, N_NODES, _advance  # noqa: E402
 from finger_sim.kernel.gap_screen import screen  # noqa: E402
 from finger_sim.kernel.integrators import _entry_point  # noqa: E402
+from finger_sim.kernel import internal_steps  # noqa: E402  (its layout, read by `simulation.event_handover`)
+from finger_sim.kernel.internal_steps import BRANCH, CONTINUED, COUNT, HISTORY_ROWS, HISTORY_SIZE, RESTARTED, record  # noqa: E402
 from finger_sim.kernel.numerics import JIT, OK, _rhs, dop853_output, dop853_theta_error, torque_at  # noqa: E402
 
 #: `common_step`'s answer when Python must take the step.
 PYTHON = 1
+#: Its answer when the step may hold a gap crossing: the solution is kept advanced to the step's end, its
+#: internal steps in the workspace's log (`internal_steps.record`), for Python to locate the crossing from.
+EVENT = 2
 #: The scalars of st: the internal step's (closed_loop's first four: t, next h, t_old, h_old, s), then
 #: the θ error estimate at t and t_old (rad, `DormandPrince853._err`, `_err_old`); the last output
 #: (HAS_LAST 1/0, its time, q, q' and its error estimate); the solution's origin (HAS_ORIGIN 1/0, t,
@@ -73,7 +78,13 @@ E53, E3_WEIGHT = dop853._E53, dop853.E3_WEIGHT
 
 def workspace_size(n_model: int, n_plan: int, n_gaps: int) -> int:
     """The length of a workspace (module docstring)."""
-    return HEADER + n_model + n_plan + ST_SIZE + ROWS * 6 + 4 * n_gaps
+    return HEADER + n_model + n_plan + ST_SIZE + ROWS * 6 + 4 * n_gaps + HISTORY_SIZE
+
+
+@njit(**JIT)
+def log_of(ws):
+    """The workspace's log of the last step's internal steps (`internal_steps.record`): its last part."""
+    return ws[ws.shape[0] - HISTORY_SIZE:]
 
 
 def entry_point(ws):  # type: ignore[no-untyped-def]
@@ -112,8 +123,8 @@ def common_step(ws, t, t1, command, flags):
     o = LAST_Q if flags & AT_LAST else X
     q, v = (st[o], st[o + 1], st[o + 2]), (st[o + 3], st[o + 4], st[o + 5])
     prof = st[PROFILE_AT:PROFILE_AT + PROFILE_SIZE] if flags & PROFILE else st[HELD_AT:HELD_AT + 1]
-    status, q1, v1, estimate = _step(m, plan, st, arr, work, t, t1, command, prof, (flags & SAME) != 0, q, v)
-    if status != OK:
+    status, q1, v1, estimate = _step(m, plan, st, arr, work, t, t1, command, prof, (flags & SAME) != 0, q, v, log_of(ws))
+    if status == PYTHON:
         st[:N_SCALARS] = st[SAVED:SAVED + N_SCALARS]
         arr[:KEPT] = arr[ROWS - KEPT:]
     return status, q1, v1, estimate, torque_at(prof, command, t1)
@@ -132,18 +143,20 @@ def _put(st, o, q, v):
 
 
 @njit(**JIT)
-def _step(m, plan, st, arr, work, t, t1, command, prof, same, q, v):
-    """`common_step` without the restore."""
+def _step(m, plan, st, arr, work, t, t1, command, prof, same, q, v, log):
+    """`common_step` without the restore; its internal steps recorded in log."""
     h = t1 - t
     target = t + h
     y, f, y_old, dense, kk, y_new, out = arr[Y], arr[F], arr[Y_OLD], arr[DENSE:KK], arr[KK:Y_NEW], arr[Y_NEW], arr[OUT]
     taus = st[TAUS:SAVED]
+    log[COUNT], log[BRANCH] = 0.0, 0.0
     if same and st[HAS_ORIGIN] == 1.0 and st[ORIGIN_T] == t and _is(st, ORIGIN_Q, q, v) and target >= t:
         pass  # a step from the solution's start: answered from it
     elif same and st[HAS_LAST] == 1.0 and _is(st, LAST_Q, q, v) and abs(st[LAST_T] - t) <= LAST_OUTPUT_SLACK * h \
             and target >= st[T_OLD]:
         st[HAS_ORIGIN], st[ORIGIN_T] = 1.0, t  # continuing the last output
         _put(st, ORIGIN_Q, q, v)
+        log[BRANCH] = CONTINUED
     else:  # `DormandPrince853._restart`, from the last output's q (whose error estimate is kept)
         if not (st[HAS_LAST] == 1.0 and st[LAST_Q] == q[0] and st[LAST_Q + 1] == q[1] and st[LAST_Q + 2] == q[2]):
             return PYTHON, q, v, 0.0
@@ -155,6 +168,7 @@ def _step(m, plan, st, arr, work, t, t1, command, prof, same, q, v):
             return PYTHON, q, v, 0.0
         st[HAS_ORIGIN], st[ORIGIN_T] = 1.0, t
         _put(st, ORIGIN_Q, q, v)
+        log[BRANCH] = RESTARTED
     for c in range(N_NODES):
         taus[c] = command  # a held command's (a profile's are set by each attempt)
     while st[T] < target:
@@ -162,6 +176,7 @@ def _step(m, plan, st, arr, work, t, t1, command, prof, same, q, v):
             return PYTHON, q, v, 0.0
         st[ERR_OLD] = st[ERR]
         st[ERR] += dop853_theta_error(E53, kk, st[H_OLD], E3_WEIGHT)
+        record(log, st, y_old, dense)
     t_old, h_old = st[T_OLD], st[H_OLD]
     if target < t_old:  # an earlier internal step's output: the history is Python's
         return PYTHON, q, v, 0.0
@@ -170,7 +185,8 @@ def _step(m, plan, st, arr, work, t, t1, command, prof, same, q, v):
         return PYTHON, q, v, 0.0
     side = int(st[SIDE])
     if screen(plan, work, side, st[KNOWN] == 1.0, h, q, v, q1, v1):
-        return PYTHON, q, v, 0.0
+        # a crossing may lie inside: kept for Python when the log holds the step's whole history
+        return (EVENT if log[BRANCH] != 0.0 and log[COUNT] <= HISTORY_ROWS else PYTHON), q, v, 0.0
     st[KNOWN], st[SIDE] = 1.0, 2 - side
     # `DormandPrince853._remember`: the estimate interpolated over the internal step that covers the output
     x = (target - t_old) / h_old if h_old > 0.0 else 1.0

@@ -36,6 +36,7 @@ from finger_sim import stepper_slot
 from finger_sim.inputs import BREAK_EPS, HELD, PIECEWISE_CONSTANT, Constant, Profile, profile_array
 from finger_sim.integrators.base import HeldTorque
 from finger_sim.integrators.dop853 import KEEP_OUTPUTS, MAX_OUTPUTS, DormandPrince853
+from finger_sim.simulation.event_handover import hand_over
 
 if TYPE_CHECKING:
     from finger_sim.simulation.driver import Simulator, State
@@ -60,7 +61,7 @@ class EventStep:
         self._state = State
         integ = sim.integrator
         assert isinstance(integ, DormandPrince853)
-        self._k, self._ok = compiled, compiled.OK
+        self._k, self._ok, self._event = compiled, compiled.OK, compiled.EVENT
         model, gaps = integ._model, int(plan[0])  # noqa: SLF001
         #: the kernel's workspace (`kernel.event_step`): the model and gap plan, then the solution
         self._ws = ws = np.zeros(compiled.workspace_size(len(model), len(plan), gaps))
@@ -70,6 +71,7 @@ class EventStep:
         self._st = ws[o:o + compiled.ST_SIZE]  # views of ws: `kernel.event_step.parts`
         o += compiled.ST_SIZE
         self._arr = ws[o:o + compiled.ROWS * WIDTH].reshape(compiled.ROWS, WIDTH)
+        self._log = ws[len(ws) - compiled.internal_steps.HISTORY_SIZE:]  # `kernel.event_step.log_of`
         self._st[compiled.RTOL], self._st[compiled.ATOL] = integ.rtol, integ.atol
         self._st[compiled.HELD_AT] = HELD
         self._profile_at = slice(compiled.PROFILE_AT, compiled.PROFILE_AT + compiled.PROFILE_SIZE)
@@ -104,11 +106,13 @@ class EventStep:
             return None
         k, dt = sim.step_index, sim.dt
         flags = 0
+        continues = True  # Python's step integrates under fn itself (not a new segment's function)
         if torque is None and self._constant is not None:
             fn: Any = self._constant
             value = self._constant_value
         elif torque is None or isinstance(torque, Profile):
             fn, value, flags = self._profile_step(sim.scene.torque if torque is None else torque, k * dt, (k + 1) * dt)
+            continues = flags != 0  # a smooth profile (a piecewise-constant one's segment is a new function each time)
         else:
             value = float(torque)
             held = sim._held  # noqa: SLF001
@@ -131,6 +135,14 @@ class EventStep:
             self._st[self._x] = (*q, *v)
         status, q, v, estimate, end = self._call(self._ws, k * dt, (k + 1) * dt, value, flags)  # (floats, an int)
         if status != self._ok:
+            if status == self._event and continues:  # a crossing may lie inside: Python locates it, not integrating again
+                hand_over(self, integ, fn)
+                self._holds = self._moved = False
+                return None
+            if status == self._event:  # Python integrates under a new function: the solution as before the step
+                k = self._k
+                self._st[:k.N_SCALARS] = self._st[k.SAVED:k.SAVED + k.N_SCALARS]
+                self._arr[:k.KEPT] = self._arr[k.ROWS - k.KEPT:]
             self.release()
             return None
         self._moved = True

@@ -1,0 +1,77 @@
+"""DOP853's internal steps up to an output time, in one compiled call: `DormandPrince853.step`'s loop.
+
+`DormandPrince853.step` advances its internal solution (`while t < target: _advance()`) before it
+answers from the dense output. Under a held torque that loop runs here: `closed_loop._advance` (the
+kernel's `DormandPrince853._advance`: the attempt, error control and step-size update, the same
+numbers) and the θ error estimate, each accepted step recorded as `DormandPrince853` keeps it in its
+history (what an event's trial steps inside the step are answered from). Where a contact or an impact
+shortens the internal step (tens of internal steps per 1 ms output around an onset), this is most of a
+located event's cost in Python.
+"""
+
+from __future__ import annotations
+
+from finger_sim.kernel import use_writable_cache
+
+use_writable_cache()  # before numba reads NUMBA_CACHE_DIR
+from numba import njit  # noqa: E402  (after the cache folder is set)
+
+from finger_sim.integrators import dop853  # noqa: E402
+from finger_sim.kernel.closed_loop import I_H_OLD, I_T, I_T_OLD, _advance  # noqa: E402
+from finger_sim.kernel.numerics import JIT, dop853_theta_error  # noqa: E402
+
+#: The scalars of `advance_to`'s st: closed_loop's t, next h, t_old, h_old (s), then the θ error
+#: estimate at t and at t_old (rad: `DormandPrince853._err`, `_err_old`).
+ERR, ERR_OLD = 4, 5
+ST_SIZE = 6
+#: A history row: t_old, h_old (s), err_old, err (rad), y_old (6), then the dense output's 7 × 6.
+ROW_T, ROW_H, ROW_ERR_OLD, ROW_ERR, ROW_Y_OLD, ROW_DENSE = 0, 1, 2, 3, 4, 10
+ROW_SIZE = ROW_DENSE + 7 * 6
+E53, E3_WEIGHT = dop853._E53, dop853.E3_WEIGHT
+
+
+@njit(**JIT)
+def advance_to(m, rtol, atol, st, y, f, y_old, dense, kk, y_new, taus, prof, target, history):
+    """Accepted internal steps from st[T] until st[T] ≥ target (s), at most len(history) of them, under
+    the held torque in taus (prof: `inputs.HELD_ARRAY`); m: the model; y, f, y_old, dense: the solution
+    (in place); kk, y_new: the attempt's scratch. Row i of history gets the i-th step (ROW_* layout).
+    Returns the number of steps taken, or −(that number + 1) where the next one fails (st, y, f as
+    after the steps taken: Python retries it and raises)."""
+    n = 0
+    while st[I_T] < target and n < history.shape[0]:
+        if not _advance(m, rtol, atol, st, y, f, y_old, dense, kk, y_new, taus, prof):
+            return -(n + 1)
+        st[ERR_OLD] = st[ERR]
+        st[ERR] += dop853_theta_error(E53, kk, st[I_H_OLD], E3_WEIGHT)
+        row = history[n]
+        row[ROW_T], row[ROW_H], row[ROW_ERR_OLD], row[ROW_ERR] = st[I_T_OLD], st[I_H_OLD], st[ERR_OLD], st[ERR]
+        row[ROW_Y_OLD:ROW_DENSE] = y_old
+        for i in range(7):
+            row[ROW_DENSE + 6 * i:ROW_DENSE + 6 * i + 6] = dense[i]
+        n += 1
+    return n
+
+
+#: A step's record of its internal steps (`event_step.common_step`): the count, the branch the step took
+#: (CONTINUED: the last output continued; RESTARTED; else none recorded), then HISTORY_ROWS rows (ROW_*).
+COUNT, BRANCH, ROWS_AT = 0, 1, 2
+CONTINUED, RESTARTED = 1.0, 2.0
+HISTORY_ROWS = 64
+HISTORY_SIZE = ROWS_AT + HISTORY_ROWS * ROW_SIZE
+
+
+@njit(**JIT)
+def record(log, st, y_old, dense):
+    """Append the accepted internal step in st (T_OLD, H_OLD, ERR_OLD, ERR at `advance_to`'s indices)
+    with y_old and dense to log (the layout above); a full log stops counting at HISTORY_ROWS + 1."""
+    n = int(log[COUNT])
+    if n < HISTORY_ROWS:
+        o = ROWS_AT + n * ROW_SIZE
+        log[o + ROW_T], log[o + ROW_H] = st[I_T_OLD], st[I_H_OLD]
+        log[o + ROW_ERR_OLD], log[o + ROW_ERR] = st[ERR_OLD], st[ERR]
+        log[o + ROW_Y_OLD:o + ROW_DENSE] = y_old
+        for i in range(7):
+            log[o + ROW_DENSE + 6 * i:o + ROW_DENSE + 6 * i + 6] = dense[i]
+        log[COUNT] = n + 1
+    else:
+        log[COUNT] = HISTORY_ROWS + 1
