@@ -6,7 +6,8 @@ holds the solution, the steps that need no Python decision run in one kernel cal
 (`kernel.event_run`): the same compiled step, looped, its outputs in a preallocated array. The
 call returns at the first step that needs Python (a crossing to locate, an impact, a release from a
 stop the kernel does not decide, DOP853's first step), and at the last step before a switch of a
-piecewise-constant profile; that step goes through `sim.step()`, and the next stretch follows.
+piecewise-constant profile; that step goes through `sim.step()`, and the next stretch follows (taking
+the solution over from Python's step as `EventStep.step` does).
 
 What `EventStep.step` does after each of its steps is done once per stretch: the Simulator's state,
 torque and step index, the integrator's torque function and its estimates (`_remember_all`).
@@ -71,14 +72,14 @@ def _stretch(sim: Simulator, events: EventStep, compiled: Any, rows: np.ndarray,
             sim.v, sim.torque, sim.step_index = ZERO, end, k + count
             events.taken += count
         return count
-    if not events._holds or events._q is None:  # noqa: SLF001
-        return 0  # the first kernel step after Python's goes through `EventStep.step` (it takes over)
+    if not events._holds:  # noqa: SLF001
+        events._take_over(integ)  # noqa: SLF001  (the solution Python's last step left)
     if fn is integ._torque:  # noqa: SLF001
         flags |= events._same  # noqa: SLF001
     if sim.q is events._q and sim.v is events._v:  # noqa: SLF001
         flags |= events._at_last  # noqa: SLF001
-    else:
-        return 0  # a state the kernel did not produce: `EventStep.step` writes it
+    else:  # a state the kernel did not produce
+        events._st[events._x] = (*sim.q, *sim.v)  # noqa: SLF001
     count, end = compiled.run(events._ws, k, n, dt, value, flags, rows)  # noqa: SLF001
     if count:
         xs[:count] = rows[:count, :6]
