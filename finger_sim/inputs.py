@@ -14,6 +14,7 @@ them, and the compiled kernel compiles them.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import MISSING, asdict, dataclass, fields
@@ -122,13 +123,28 @@ class Sine(Profile):
         return 0.5 / self.frequency
 
 
+#: Levels of piecewise-constant profiles whose function `held_level` keeps (a dropped one is made again:
+#: the solution then restarts once more, with the same numbers as a restart at every step).
+LEVELS_KEPT = 1024
+
+
+@functools.lru_cache(maxsize=LEVELS_KEPT)
+def held_level(value: float, negative: bool) -> Constant:
+    """The one function of a held level τ = value (N·m), keyed with its sign (−0.0 is not 0.0): a `Constant`,
+    whose `value` tells a method that τ is the same at every stage."""
+    return Constant(value)
+
+
 @dataclass(frozen=True)
 class _PiecewiseConstant(Profile):
     """A profile that switches between constants at known times."""
 
     def on_segment(self, a: float, b: float) -> TorqueFn:
+        """The segment's level as one function object per level (`held_level`): an error-controlled method,
+        which restarts its solution for a new function, then continues it across the output steps of a
+        segment and restarts only at a switch."""
         value = self(0.5 * (a + b))
-        return lambda t: value
+        return held_level(value, math.copysign(1.0, value) < 0.0)
 
 
 @dataclass(frozen=True)

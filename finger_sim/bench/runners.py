@@ -32,8 +32,8 @@ from finger_sim.effects.contact import build_contact
 from finger_sim.errors import FingerSimError, SimulationDiverged, StabilityError
 from finger_sim.inputs import Constant
 from finger_sim.scene import Scene
-from finger_sim.simulate import Simulator
-from finger_sim import stick_slip
+from finger_sim.simulate import Simulator, State
+from finger_sim import stepper_slot, stick_slip
 
 #: Runs whose first repeat takes longer than this (s of CPU) are not repeated.
 LONG_RUN_SECONDS = 2.0
@@ -152,12 +152,15 @@ def fill_grip(run: Run, times: np.ndarray, grip: np.ndarray) -> None:
 
 
 def run_method(
-    scene: Scene, method: str, dt: float, reference: Reference, *, spacing: float, repeats: int, kernel: str = "auto"
+    scene: Scene, method: str, dt: float, reference: Reference, *, spacing: float, repeats: int, kernel: str = "auto",
+    whole_run: bool = False,
 ) -> Run:
     """`scene` stepped by the project's `method` at `dt` through `Simulator` (the node's path).
 
     method AUTO runs `method: auto` (its choice and, in contact, its substeps); the note says what ran.
     kernel: Simulator's kernel ("auto": compiled where it can, "python": CPython, "compiled").
+    whole_run: the run to its end as `simulate` steps it (`kernel.advance`: stretches of steps in one
+    kernel call where the scene allows), not one `Simulator.step` per step; the same states.
     """
     family = FAMILY_PROJECT
     run = Run(scene.name, family, method, "dt", dt, scene.duration)
@@ -174,6 +177,12 @@ def run_method(
     def timed_once() -> tuple[list, float]:
         sim = Simulator(resolved, kernel=kernel)
         states = [sim.state]
+        if whole_run:
+            start = time.process_time()
+            xs = stepper_slot.kernel().advance(sim, n)
+            cpu = time.process_time() - start
+            rows = xs.tolist()
+            return states + [State((k + 1) * sim.dt, tuple(r[:3]), tuple(r[3:])) for k, r in enumerate(rows)], cpu
         step, append = sim.step, states.append
         start = time.process_time()
         for _ in range(n):

@@ -60,6 +60,8 @@ def warm() -> list[str]:
             sim.step(0.0)  # a held command, as the node steps
         run_batch([short])
         done.append(name)
+    # the whole run to its rest on the stop (from ~0.43 s): the stretches' loops (`kernel.event_run`)
+    simulate(load_scene(CONFIG / "paper_to_stop.yaml"), kernel="compiled")
     paper = load_scene(CONFIG / "paper_flexion.yaml").with_overrides(duration=STEPS * 0.001)
     run_batch([paper.with_overrides(method="euler")])  # a row of the batch's event-checked loop (run_rows)
     rollout(paper, nstep=STEPS)
