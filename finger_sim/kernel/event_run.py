@@ -16,7 +16,7 @@ from finger_sim.kernel import use_writable_cache
 use_writable_cache()  # before numba reads NUMBA_CACHE_DIR
 from numba import njit  # noqa: E402  (after the cache folder is set)
 
-from finger_sim.kernel.event_step import AT_LAST, SAME, common_step, stays_at_rest  # noqa: E402
+from finger_sim.kernel.event_step import AT_LAST, EVENT, SAME, common_step, restore, stays_at_rest  # noqa: E402
 from finger_sim.kernel.numerics import JIT, OK  # noqa: E402
 
 #: Columns of `run`'s output rows: q (3), q' (3), the θ error estimate (rad).
@@ -34,6 +34,8 @@ def run(ws, k0, n, dt, command, flags, out):
         k = k0 + i
         status, q, v, estimate, tau = common_step(ws, k * dt, (k + 1) * dt, command, flags)
         if status != OK:
+            if status == EVENT:  # a stretch hands Python the step as it was (its `sim.step()` takes it again)
+                restore(ws)
             return i, end
         out[i, 0], out[i, 1], out[i, 2], out[i, 3], out[i, 4], out[i, 5] = q[0], q[1], q[2], v[0], v[1], v[2]
         out[i, 6] = estimate

@@ -125,9 +125,16 @@ def common_step(ws, t, t1, command, flags):
     prof = st[PROFILE_AT:PROFILE_AT + PROFILE_SIZE] if flags & PROFILE else st[HELD_AT:HELD_AT + 1]
     status, q1, v1, estimate = _step(m, plan, st, arr, work, t, t1, command, prof, (flags & SAME) != 0, q, v, log_of(ws))
     if status == PYTHON:
-        st[:N_SCALARS] = st[SAVED:SAVED + N_SCALARS]
-        arr[:KEPT] = arr[ROWS - KEPT:]
+        restore(ws)
     return status, q1, v1, estimate, torque_at(prof, command, t1)
+
+
+@njit(**JIT)
+def restore(ws):
+    """The solution in ws as it was before the last `common_step`."""
+    _, _, st, arr, _ = parts(ws)
+    st[:N_SCALARS] = st[SAVED:SAVED + N_SCALARS]
+    arr[:KEPT] = arr[ROWS - KEPT:]
 
 
 @njit(**JIT)

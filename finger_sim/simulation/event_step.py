@@ -140,9 +140,7 @@ class EventStep:
                 self._holds = self._moved = False
                 return None
             if status == self._event:  # Python integrates under a new function: the solution as before the step
-                k = self._k
-                self._st[:k.N_SCALARS] = self._st[k.SAVED:k.SAVED + k.N_SCALARS]
-                self._arr[:k.KEPT] = self._arr[k.ROWS - k.KEPT:]
+                self._k.restore(self._ws)
             self.release()
             return None
         self._moved = True
