@@ -5,10 +5,11 @@ Two executors, chosen by the run's `executor` parameter (runtime.parameters.Exec
 - `events` (default): rclpy.experimental.EventsExecutor. Each message, service request or
   timer is dispatched from C++ as it arrives, without rebuilding a wait set and walking every
   entity in Python: a 1 kHz command subscription costs about a quarter of the CPU it costs on
-  SingleThreadedExecutor (docs/node_performance.md). It refuses guard conditions and installs
-  its own SIGINT/SIGTERM handler (rclpy's is bypassed); both ends of a run reach it anyway:
-  `spin_until_future_complete` adds ONE done-callback to `done` (stopping its event loop from
-  whichever thread completes it), and a signal stops the loop and shuts the context down.
+  SingleThreadedExecutor (docs/node_performance.md). It refuses guard conditions, and its own
+  SIGINT/SIGTERM handler (asio's, replacing rclpy's) did not end a node's spin. So it spins in a
+  thread of its own (`spin_until_future_complete`: ONE done-callback for the whole run), while
+  the main thread waits in Python for `done` with Python's handlers on SIGINT and SIGTERM: a
+  signal raises KeyboardInterrupt there at once, and `executor.shutdown` stops the loop.
 - `single`: rclpy's SingleThreadedExecutor, spun with `spin_once` until one guard condition,
   triggered when `done` completes, wakes it (rclpy's spin_until_future_complete would add a
   closure to `done` on every wake-up, a leak at 1 kHz). Kept for a node that owns guard
@@ -20,6 +21,8 @@ Both keep nothing from one wake-up to the next (test/ros/test_spin.py).
 from __future__ import annotations
 
 import contextlib
+import signal
+import threading
 
 from rclpy.exceptions import InvalidHandle
 from rclpy.executors import SingleThreadedExecutor
@@ -29,7 +32,15 @@ from rclpy.task import Future
 
 from finger_sim.runtime.parameters import Executor
 
-__all__ = ["spin_until_done"]
+__all__ = ["EXIT_SIGNALS", "spin_until_done"]
+
+#: The signals that end a run cleanly (log closed): Ctrl-C and a supervisor's stop.
+EXIT_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+#: Wall seconds granted to the executor's loop to stop once the run is over.
+SHUTDOWN_TIMEOUT_S = 5.0
+#: Longest wall time, s, one spin_once of the events executor waits: how soon its thread sees the
+#: end of the run. (Its blocking spin() busy-waited in the asio loop and starved shutdown's lock.)
+SPIN_SLICE_S = 0.1
 
 
 def spin_until_done(node: Node, done: Future, executor: Executor = Executor.EVENTS) -> None:
@@ -41,14 +52,40 @@ def spin_until_done(node: Node, done: Future, executor: Executor = Executor.EVEN
 
 
 def _spin_events(node: Node, done: Future) -> None:
-    events = EventsExecutor(context=node.context)
+    events = EventsExecutor(context=node.context)  # installs its own SIGINT/SIGTERM handler (asio) ...
+    in_main = threading.current_thread() is threading.main_thread()  # only it may set signal handlers
+    previous = {sig: signal.signal(sig, _interrupt) for sig in EXIT_SIGNALS} if in_main else {}  # ... replaced
     events.add_node(node)
+    finished = threading.Event()
+    failure: list[BaseException] = []
+
+    def spin() -> None:  # the executor's thread; also ends on the context's shutdown or a callback's exception
+        try:
+            while not finished.is_set() and node.context.ok():
+                events.spin_once(timeout_sec=SPIN_SLICE_S)
+        except BaseException as exc:  # handed to the main thread  # noqa: BLE001
+            failure.append(exc)
+        finally:
+            finished.set()
+
+    spinner = threading.Thread(target=spin, name="executor", daemon=True)
+    done.add_done_callback(lambda _: finished.set())
+    spinner.start()
     try:
-        # one blocking call for the whole run: its single done-callback stops the loop (also when
-        # `done` is already complete); a signal stops it too and shuts the context down on return
-        events.spin_until_future_complete(done)
+        finished.wait()  # in Python, where a signal's handler runs at once (never inside the C++ loop)
     finally:
-        events.shutdown(timeout_sec=0)
+        finished.set()
+        spinner.join(SHUTDOWN_TIMEOUT_S)
+        events.shutdown(timeout_sec=SHUTDOWN_TIMEOUT_S)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    if failure:
+        raise failure[0]
+
+
+def _interrupt(signum: int, _frame: object) -> None:
+    """SIGINT or SIGTERM: end the spin as Ctrl-C does (the caller's KeyboardInterrupt path)."""
+    raise KeyboardInterrupt(signal.Signals(signum).name)
 
 
 def _spin_single(node: Node, done: Future) -> None:
