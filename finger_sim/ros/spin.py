@@ -5,17 +5,19 @@ Two executors, chosen by the run's `executor` parameter (runtime.parameters.Exec
 - `events` (default): rclpy.experimental.EventsExecutor. Each message, service request or
   timer is dispatched from C++ as it arrives, without rebuilding a wait set and walking every
   entity in Python: a 1 kHz command subscription costs about a quarter of the CPU it costs on
-  SingleThreadedExecutor (docs/node_performance.md). It refuses guard conditions, and its own
-  SIGINT/SIGTERM handler (asio's, replacing rclpy's) did not end a node's spin. So it spins in a
-  thread of its own (`spin_until_future_complete`: ONE done-callback for the whole run), while
-  the main thread waits in Python for `done` with Python's handlers on SIGINT and SIGTERM: a
-  signal raises KeyboardInterrupt there at once, and `executor.shutdown` stops the loop.
+  SingleThreadedExecutor (docs/node_performance.md). It refuses guard conditions; its own
+  SIGINT/SIGTERM handler (asio's, replacing rclpy's) did not end a node's spin, and its blocking
+  spin() busy-waited holding the lock that shutdown() needs. So it spins in a thread of its own,
+  `spin_once` slices of at most SPIN_SLICE_S, while the main thread waits in Python for the run's
+  end with Python's handlers on SIGINT and SIGTERM: a signal raises KeyboardInterrupt there at
+  once, the spin thread sees the end within a slice, and the executor is shut down.
 - `single`: rclpy's SingleThreadedExecutor, spun with `spin_once` until one guard condition,
   triggered when `done` completes, wakes it (rclpy's spin_until_future_complete would add a
   closure to `done` on every wake-up, a leak at 1 kHz). Kept for a node that owns guard
   conditions of its own, and to measure the events executor against.
 
-Both keep nothing from one wake-up to the next (test/ros/test_spin.py).
+Neither keeps anything from one wake-up to the next (test/ros/test_spin.py checks `single`;
+`events` adds one done-callback per run and none per wake-up).
 """
 
 from __future__ import annotations
