@@ -42,7 +42,6 @@ and shows WARN.
 
 from __future__ import annotations
 
-import contextlib
 import gc
 import sys
 import time
@@ -53,8 +52,8 @@ import rclpy
 from rcl_interfaces.msg import ParameterEvent, SetParametersResult
 from rclpy.duration import Duration
 from rclpy.event_handler import PublisherEventCallbacks
-from rclpy.exceptions import InvalidHandle, NameValidationException
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.exceptions import NameValidationException
+from rclpy.executors import ExternalShutdownException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -70,6 +69,7 @@ from finger_sim.log import LogError
 from finger_sim.log.cdr_writer import clock_cdr
 from finger_sim.ros import conversions, parameters
 from finger_sim.ros.finger import Finger
+from finger_sim.ros.spin import spin_until_done
 from finger_sim.ros.state_output import BatchedStateOutput, StateOutput
 from finger_sim.runtime.drive_commands import input_refusal
 from finger_sim.ros.interfaces import COMMAND_INPUTS, OUTPUTS, Endpoint, InputSpec, OutputSpec, command_qos, finger_topic, raw_sender
@@ -328,31 +328,6 @@ class FingerNode(SteppingNode):
         return self.fingers[0].scene.name
 
 
-def spin_until_done(node: Node, done: Future) -> None:
-    """Run `node`'s callbacks until `done` completes or the context shuts down.
-
-    rclpy's spin_until_future_complete adds a done-callback closure to the future on every
-    executor wake-up (Jazzy's spin_once_until_future_complete): a future that stays pending for
-    a whole run (1 kHz of commands) grows without bound, and so does every full garbage
-    collection. Here one guard condition, triggered once when `done` completes, ends the
-    executor's plain spin_once loop, which keeps nothing from one wake-up to the next.
-    """
-    executor = SingleThreadedExecutor(context=node.context)
-    finished = node.create_guard_condition(lambda: None)  # destroyed with the node
-
-    def wake(_: Future) -> None:  # once, in the thread that completes `done` (a Future without executor)
-        with contextlib.suppress(InvalidHandle):  # the node is already destroyed: nobody waits
-            finished.trigger()
-
-    done.add_done_callback(wake)
-    executor.add_node(node)
-    try:
-        while node.context.ok() and not done.done():
-            executor.spin_once()
-    finally:
-        executor.shutdown(timeout_sec=0)
-
-
 def run(node_type: Callable[[], SteppingNode], name: str, args: Sequence[str] | None = None) -> int:
     """main() of a stepping node: start it, spin until it is done or interrupted, close its log."""
     rclpy.init(args=args)
@@ -362,7 +337,7 @@ def run(node_type: Callable[[], SteppingNode], name: str, args: Sequence[str] | 
         node = node_type()
         node.start()
         gc.freeze()  # what start-up built lives for the run: no full collection walks it again
-        spin_until_done(node, node.done)
+        spin_until_done(node, node.done, node.settings.executor)
         if node.done.done():
             status = node.done.result()
             node.stop()

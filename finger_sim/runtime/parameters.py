@@ -74,6 +74,13 @@ class TorqueSource(Enum):
     SCENE = "scene"
 
 
+class Executor(Enum):
+    """The rclpy executor that runs the node's callbacks (finger_sim.ros.spin)."""
+
+    EVENTS = "events"  # rclpy.experimental.EventsExecutor: callbacks dispatched from C++ as they arrive
+    SINGLE = "single"  # rclpy's SingleThreadedExecutor: a wait set rebuilt and walked in Python per wake-up
+
+
 class CommandQos(Enum):
     """QoS of the command subscriptions."""
 
@@ -122,6 +129,9 @@ RUN_PARAMETERS = (
           "one (counted in /diagnostics)", (0.001, 3600.0)),
     Param("record_time", "sim", "log time of the MCAP messages: 'sim' (sim time from 0, as /clock) or 'wall_start' "
           "(Unix time at the node's start + sim time); header stamps are sim time either way", choices=("sim", "wall_start")),
+    Param("executor", Executor.EVENTS.value, "rclpy executor of the node's callbacks: 'events' (rclpy.experimental.EventsExecutor, "
+          "about a quarter of the CPU per received message) or 'single' (SingleThreadedExecutor)",
+          choices=tuple(e.value for e in Executor)),
 )
 #: finger_node's parameters: the run's, its scene and frame prefix.
 NODE_PARAMETERS = (
@@ -171,6 +181,7 @@ class RunSettings:
     lockstep: bool
     lockstep_timeout: float
     record_time: str
+    executor: Executor
 
     @classmethod
     def from_values(cls, values: Mapping[str, Any]) -> Self:
@@ -183,6 +194,7 @@ class RunSettings:
         if v["lockstep"] and v["torque_source"] is TorqueSource.SCENE:
             raise ParameterError.expected("lockstep", "false with torque_source 'scene' (no controller to wait for)", True)
         v["command_qos"] = CommandQos(v["command_qos"])
+        v["executor"] = Executor(v["executor"])
         cls._rules(v)
         return cls(**v)
 

@@ -409,6 +409,36 @@ def test_sigterm_closes_the_log(launcher, ros_client, tmp_path):
     assert not read_log(path).truncated
 
 
+#: Wall seconds from a signal to the node's exit: stop the stepping, close the log, leave DDS.
+SIGNAL_EXIT_S = 10.0
+#: Wall seconds for the node to start and publish (imports and numba's cache load; a minute on a loaded machine).
+NODE_START_S = 120.0
+
+
+@pytest.mark.parametrize("executor", ["events", "single"])
+def test_sigint_to_the_node_alone_ends_it_with_a_complete_log(launcher, ros_client, tmp_path, executor):
+    """SIGINT to the node's own process (Ctrl-C in its terminal; not its group) ends it within
+    SIGNAL_EXIT_S with status 0 and a complete log, on both executors. The EventsExecutor spun in
+    the main thread never noticed a signal (its asio handler replaced rclpy's and never ended the
+    spin): the node ran on until SIGKILL."""
+    bags = tmp_path / "bags"
+    node = launcher.node(NODE, dict(scene=str(PAPER), realtime_factor=1.0, record_dir=str(bags), executor=executor))
+    states = ros_client.collect(JointState, "/joint_states")
+    ros_client.wait_for(lambda: len(states) >= 200, "200 joint states", NODE_START_S)
+    node.send_signal(signal.SIGINT)
+    assert node.wait(SIGNAL_EXIT_S) == 0, output(node)
+    path = the_log(bags)
+    reported, n_written, n_dropped = written(output(node))
+    assert (reported, n_dropped) == (path, 0)
+    with path.open("rb") as file:
+        summary = make_reader(file).get_summary()
+    assert summary is not None and summary.statistics is not None
+    assert summary.statistics.message_count == n_written
+    assert summary.statistics.channel_message_counts[
+        next(c.id for c in summary.channels.values() if c.topic == "/joint_states")] >= len(states)
+    assert not read_log(path).truncated
+
+
 def test_wall_start_log_time_and_publisher_qos(launcher, tmp_path):
     """record_time 'wall_start': every log time is the Unix time at the start plus the message's
     sim-time stamp, recorded in the metadata, and resim reads the log as it reads a sim-time

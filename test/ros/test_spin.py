@@ -1,4 +1,4 @@
-"""The stepping node's spin (finger_sim.ros.node.spin_until_done): nothing grows per wake-up.
+"""The stepping node's spin on SingleThreadedExecutor (finger_sim.ros.spin, executor:=single): nothing grows per wake-up.
 
 Reference: the number of callbacks the run's `done` future holds, and the objects the
 garbage collector tracks, before and after a thousand executor wake-ups (messages received
@@ -19,7 +19,8 @@ from rclpy.qos import QoSProfile  # noqa: E402
 from rclpy.task import Future  # noqa: E402
 from std_msgs.msg import Float64  # noqa: E402
 
-from finger_sim.ros.node import spin_until_done  # noqa: E402
+from finger_sim.ros.spin import spin_until_done  # noqa: E402
+from finger_sim.runtime.parameters import Executor  # noqa: E402
 
 WAKE_UPS = 1000
 #: Objects tracked by the gc that a thousand wake-ups may leave behind (caches, DDS
@@ -34,7 +35,7 @@ def test_a_thousand_wake_ups_leave_nothing_behind(ros_domain, ros_client):
     node.create_subscription(Float64, "wake", lambda m: received.append(m.data), QoSProfile(depth=WAKE_UPS))
     pub = ros_client.publisher(Float64, "wake", QoSProfile(depth=WAKE_UPS))
     done = Future()
-    spinner = threading.Thread(target=spin_until_done, args=(node, done), daemon=True)
+    spinner = threading.Thread(target=spin_until_done, args=(node, done, Executor.SINGLE), daemon=True)
     spinner.start()
     try:
         ros_client.wait_for(lambda: pub.get_subscription_count() > 0, "the subscription to match")
