@@ -35,6 +35,8 @@ NODE = "finger_sim.ros.node"
 REALTIME = {"1", "2"}  # SCHED_FIFO, SCHED_RR
 #: Share of a late wake-up a cause must cover to be named as the cause.
 CAUSE_SHARE = 0.5
+#: Run-queue wait (ms) over a stall from which a thread is listed as stopped with it.
+STOPPED_WAIT_MS = 20.0
 
 
 def cause(stall: dict[str, str]) -> str:
@@ -47,8 +49,25 @@ def cause(stall: dict[str, str]) -> str:
     return "blocked"
 
 
-def report_trace(directory: Path, late_ms: float, t_judged: float) -> None:
-    """Print the collections and the stalls of a stall_trace directory (wake-ups from wall `t_judged` on)."""
+def stopped_with(threads: dict[tuple[str, int], list[dict[str, str]]], start: float, end: float) -> str:
+    """The threads whose run-queue wait grew by at least STOPPED_WAIT_MS between the probe's samples
+    around wall s `start`..`end` (a throttled CPU stops all its real-time threads at once; a thread
+    stopped while holding the GIL blocks the stepping thread), as `name/tid +wait ms`, `; `-separated."""
+    out = []
+    for (proc, tid), rows in threads.items():
+        before = [r for r in rows if float(r["wall_s"]) <= start]
+        after = [r for r in rows if float(r["wall_s"]) >= end]
+        if before and after:
+            waited = (int(after[0]["wait_ns"]) - int(before[-1]["wait_ns"])) / 1e6
+            if waited >= STOPPED_WAIT_MS:
+                out.append(f"{proc.rsplit('.', 1)[-1]}:{after[0]['thread']}/{tid} +{waited:.0f} ms")
+    return "; ".join(out) or "none"
+
+
+def report_trace(directory: Path, late_ms: float, t_judged: float,
+                 threads: dict[tuple[str, int], list[dict[str, str]]]) -> None:
+    """Print the collections and the stalls of a stall_trace directory (wake-ups from wall `t_judged` on),
+    each stall with the threads of the probe stopped in the run queue over it."""
     collections_by_gen: dict[str, list[float]] = collections.defaultdict(list)
     for path in sorted(directory.glob("gc_*.csv")):
         for row in csv.DictReader(path.open()):
@@ -63,7 +82,8 @@ def report_trace(directory: Path, late_ms: float, t_judged: float) -> None:
     for s in stalls:
         print(f"stall at wall {float(s['wall_s']):.3f}: {float(s['late_ms']):.1f} ms late, cause {cause(s)}: "
               f"run-queue {float(s['runqueue_ms']):.1f} ms, gc {float(s['gc_ms']):.1f} ms, ran {float(s['run_ms']):.1f} ms; "
-              f"others {s['others']}")
+              f"others {s['others']}; stopped in the run queue over it: "
+              f"{stopped_with(threads, float(s['wall_s']) - float(s['late_ms']) / 1e3, float(s['wall_s']))}")
 
 
 def _percentile(sorted_values: list[float], p: float) -> float:
@@ -118,7 +138,7 @@ def main(argv: list[str] | None = None) -> int:
               f"steal {float(b['steal_s']) - float(a['steal_s']):.2f} s; real-time run per CPU, ms: "
               + ", ".join(f"cpu{c} {ms:.0f}" for c, ms in sorted(per_cpu.items())))
     if args.trace is not None:
-        report_trace(args.trace, args.late_ms, t0 + WARMUP_S)
+        report_trace(args.trace, args.late_ms, t0 + WARMUP_S, threads)
     return 0
 
 
