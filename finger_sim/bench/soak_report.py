@@ -9,9 +9,14 @@ process tree, sampled), and prints:
 - for each window with a wake-up later than `--late-ms`: the stepping thread's run-queue wait,
   major faults and forced switches around it, the machine's steal, and the real-time threads'
   run time per CPU in the second before (a CPU near kernel.sched_rt_runtime_us of real-time
-  run time gets throttled).
+  run time gets throttled);
+- with `--trace DIR` (the node's FINGER_SIM_STALL_TRACE directory, finger_sim.runtime.stall_trace):
+  the garbage collections per generation, and every wake-up at least `--late-ms` late with its
+  cause: `gc` (a collection covered at least half of it), `run queue` (the thread was runnable
+  but not run for at least half of it) or `blocked` (neither: the GIL or another lock held by
+  another thread, or a late timer), with where the other Python threads were.
 
-    python -m finger_sim.bench.soak_report --windows .../soak_windows.csv --probe probe.csv [--late-ms 10]
+    python -m finger_sim.bench.soak_report --windows .../soak_windows.csv --probe probe.csv [--late-ms 10] [--trace DIR]
 """
 
 from __future__ import annotations
@@ -28,6 +33,57 @@ MIN_WINDOW_RTF = 0.99
 #: The node's module name in the probe's `proc` column.
 NODE = "finger_sim.ros.node"
 REALTIME = {"1", "2"}  # SCHED_FIFO, SCHED_RR
+#: Share of a late wake-up a cause must cover to be named as the cause.
+CAUSE_SHARE = 0.5
+#: Run-queue wait (ms) over a stall from which a thread is listed as stopped with it.
+STOPPED_WAIT_MS = 20.0
+
+
+def cause(stall: dict[str, str]) -> str:
+    """The cause of one stall_trace row: gc, run queue or blocked (see the module doc)."""
+    late = float(stall["late_ms"])
+    if float(stall["gc_ms"]) >= CAUSE_SHARE * late:
+        return "gc"
+    if float(stall["runqueue_ms"]) >= CAUSE_SHARE * late:
+        return "run queue"
+    return "blocked"
+
+
+def stopped_with(threads: dict[tuple[str, int], list[dict[str, str]]], start: float, end: float) -> str:
+    """The threads whose run-queue wait grew by at least STOPPED_WAIT_MS between the probe's samples
+    around wall s `start`..`end` (a throttled CPU stops all its real-time threads at once; a thread
+    stopped while holding the GIL blocks the stepping thread), as `name/tid +wait ms`, `; `-separated."""
+    out = []
+    for (proc, tid), rows in threads.items():
+        before = [r for r in rows if float(r["wall_s"]) <= start]
+        after = [r for r in rows if float(r["wall_s"]) >= end]
+        if before and after:
+            waited = (int(after[0]["wait_ns"]) - int(before[-1]["wait_ns"])) / 1e6
+            if waited >= STOPPED_WAIT_MS:
+                out.append(f"{proc.rsplit('.', 1)[-1]}:{after[0]['thread']}/{tid} +{waited:.0f} ms")
+    return "; ".join(out) or "none"
+
+
+def report_trace(directory: Path, late_ms: float, t_judged: float,
+                 threads: dict[tuple[str, int], list[dict[str, str]]]) -> None:
+    """Print the collections and the stalls of a stall_trace directory (wake-ups from wall `t_judged` on),
+    each stall with the threads of the probe stopped in the run queue over it."""
+    collections_by_gen: dict[str, list[float]] = collections.defaultdict(list)
+    for path in sorted(directory.glob("gc_*.csv")):
+        for row in csv.DictReader(path.open()):
+            if float(row["wall_s"]) >= t_judged:
+                collections_by_gen[row["generation"]].append(float(row["duration_ms"]))
+    print("garbage collections written (gen 0 only when >= 0.5 ms): " + "; ".join(
+        f"gen {g}: {len(d)}, max {max(d):.2f} ms, total {sum(d):.0f} ms" for g, d in sorted(collections_by_gen.items())))
+    stalls = [row for path in sorted(directory.glob("stalls_*.csv")) for row in csv.DictReader(path.open())
+              if float(row["wall_s"]) >= t_judged and float(row["late_ms"]) >= late_ms]
+    print(f"wake-ups >= {late_ms:g} ms late: {len(stalls)}; by cause: " + ", ".join(
+        f"{c} {n}" for c, n in sorted(collections.Counter(cause(s) for s in stalls).items())))
+    for s in stalls:
+        print(f"stall at wall {float(s['wall_s']):.3f}: {float(s['late_ms']):.1f} ms late, cause {cause(s)}: "
+              f"run-queue {float(s['runqueue_ms']):.1f} ms, gc {float(s['gc_ms']):.1f} ms, ran {float(s['run_ms']):.1f} ms; "
+              f"others {s['others']}; stopped in the run queue over it: "
+              f"{stopped_with(threads, float(s['wall_s']) - float(s['late_ms']) / 1e3, float(s['wall_s']))}")
 
 
 def _percentile(sorted_values: list[float], p: float) -> float:
@@ -39,6 +95,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--windows", type=Path, required=True)
     parser.add_argument("--probe", type=Path, required=True)
     parser.add_argument("--late-ms", type=float, default=10.0, help="list the windows with a wake-up at least this late")
+    parser.add_argument("--trace", type=Path, help="the node's FINGER_SIM_STALL_TRACE directory")
     args = parser.parse_args(argv)
     windows = list(csv.DictReader(args.windows.open()))
     t0 = float(windows[0]["wall_s"])
@@ -80,6 +137,8 @@ def main(argv: list[str] | None = None) -> int:
               f"forced switches {int(b['forced_switches']) - int(a['forced_switches'])}, major faults {int(b['majflt']) - int(a['majflt'])}; "
               f"steal {float(b['steal_s']) - float(a['steal_s']):.2f} s; real-time run per CPU, ms: "
               + ", ".join(f"cpu{c} {ms:.0f}" for c, ms in sorted(per_cpu.items())))
+    if args.trace is not None:
+        report_trace(args.trace, args.late_ms, t0 + WARMUP_S, threads)
     return 0
 
 

@@ -38,7 +38,7 @@ from typing import Any
 
 from finger_sim.errors import SimulationDiverged
 from finger_sim.run_records import NS_PER_S, CommandEvent, stamp_ns
-from finger_sim.runtime import realtime
+from finger_sim.runtime import realtime, stall_trace
 from finger_sim.runtime.diagnostics import Level, LogStatus, Snapshot
 from finger_sim.runtime.pacing import Pacer
 from finger_sim.runtime.parameters import RunSettings, TorqueSource
@@ -84,6 +84,8 @@ class SteppingSession:
     """
 
     _shutdown_errors: tuple[type[BaseException], ...] = ()
+    #: The late wake-up probe of a soak (FINGER_SIM_STALL_TRACE), set by the stepping thread.
+    _stall_trace: stall_trace.StallTrace | None = None
 
     @property
     def sim(self) -> Any:
@@ -314,6 +316,7 @@ class SteppingSession:
     def _loop(self) -> None:
         try:
             realtime.prepare(self.get_logger().info, self.get_logger().warning)  # before the first step is due
+            self._stall_trace = stall_trace.from_environment()
             while not self._stopping.is_set():
                 self._serve()
                 if self.state is not RunState.RUNNING:
@@ -371,7 +374,11 @@ class SteppingSession:
         now = time.perf_counter()
         due = pacer.due(now)
         if not due:
+            if self._stall_trace is not None:
+                self._stall_trace.sleeping(pacer.next_due)
             self._sleep(pacer.next_due - now)
+            if self._stall_trace is not None:
+                self._stall_trace.woke()
         for _ in range(due):
             if not self._advance() or self.pacer is not pacer:  # a new realtime_factor: a new pacing run
                 return
