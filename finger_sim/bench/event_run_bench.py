@@ -6,7 +6,7 @@ The work-precision report's comparison at `auto`'s own error (`analysis.compare_
 reference, scipy's rows with their event handling, `runners.run_scipy`) for `auto` at 1 ms timed two
 ways in one process: one `Simulator.step` per step (the node's path, the report's row) and the whole
 run as `simulate` steps it (`runners.run_method(whole_run=True)`: stretches of steps in one kernel call,
-`simulation.run_stretch`), with the same states. Prints one row per scene: CPU per run (median of the
+`kernel.run_stretch`), with the same states. Prints one row per scene: CPU per run (median of the
 repeats) and scipy's best CPU at the same error over each. Load on the shared machine moves all
 rows of one scene alike (they run within seconds of each other); quote the ratios.
 """

@@ -1,4 +1,4 @@
-"""A stretch of `Simulator` steps on a scene with events, in one compiled call (`simulation.run_stretch`).
+"""A stretch of `Simulator` steps on a scene with events, in one compiled call (`kernel.run_stretch`).
 
 `run` loops the one compiled common step (`event_step.common_step`) over consecutive output steps
 k0, k0 + 1, … on the time grid t = k·dt, writing each step's (q, q', error estimate) into a

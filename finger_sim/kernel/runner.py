@@ -58,7 +58,7 @@ def advance(sim: "Simulator", n: int) -> np.ndarray:
 
 def _stepped(sim: "Simulator", n: int) -> np.ndarray:
     if sim._event_step is not None:  # noqa: SLF001  (a scene with events: stretches in one kernel call)
-        from finger_sim.simulation import run_stretch
+        from finger_sim.kernel import run_stretch
 
         return run_stretch.advance(sim, n)
     return np.array([(*s.q, *s.v) for s in (sim.step() for _ in range(n))]).reshape(n, 6)

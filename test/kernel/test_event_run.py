@@ -1,4 +1,4 @@
-"""Stretches of Simulator steps on scenes with events in one compiled call (`simulation.run_stretch`,
+"""Stretches of Simulator steps on scenes with events in one compiled call (`kernel.run_stretch`,
 `kernel.event_run`), and piecewise-constant profiles that restart DOP853 only at a switch.
 
 The reference for a stretch is the Simulator stepped one `step()` at a time (the node's path, itself
@@ -20,7 +20,7 @@ from finger_sim.inputs import Square, Step  # noqa: E402
 from finger_sim.integrators.dop853 import KEEP_OUTPUTS, MAX_OUTPUTS  # noqa: E402
 from finger_sim.scene import load_scene, scene_from_dict  # noqa: E402
 from finger_sim.simulate import Simulator, simulate  # noqa: E402
-from finger_sim.simulation import run_stretch  # noqa: E402
+from finger_sim.kernel import run_stretch  # noqa: E402
 
 CONFIG = Path(__file__).resolve().parents[2] / "config"
 #: The shipped scenes whose Simulator has the compiled event step (test_event_step's).

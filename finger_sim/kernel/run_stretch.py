@@ -21,6 +21,7 @@ import numpy as np
 
 from finger_sim.inputs import BREAK_EPS, PIECEWISE_CONSTANT, Profile
 from finger_sim.integrators.dop853 import KEEP_OUTPUTS, MAX_OUTPUTS
+from finger_sim.kernel import event_run
 from finger_sim.simulation.event_step import ZERO, EventStep
 
 if TYPE_CHECKING:
@@ -31,8 +32,6 @@ def advance(sim: Simulator, n: int) -> np.ndarray:
     """Step `sim` n times under its scene's torque; the (n, 6) states (q, q') after each step."""
     events = sim._event_step  # noqa: SLF001
     assert events is not None
-    from finger_sim.kernel import event_run  # (compiled: numba is there when the event step is)
-
     xs = np.empty((n, 6))
     rows = np.empty((n, event_run.ROW))
     done = 0
