@@ -22,9 +22,8 @@ from pathlib import Path
 
 import yaml
 
-from finger_sim.bench.node_bench import measure_window
+from finger_sim.bench.node_bench import alternate
 from finger_sim.bench.plan import config_dir
-from finger_sim.bench.processes import ros_env
 
 #: The drive's voltage: ±6 V (the default drive's rated voltage) switching every 0.5 s.
 VOLTAGE = {"type": "square", "amplitude": 6.0, "frequency": 1.0}
@@ -53,17 +52,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--rounds", type=int, default=2)
     parser.add_argument("--domain-id", type=int, default=80)
     args = parser.parse_args(argv)
-    rows: dict[str, list] = {}
     with tempfile.TemporaryDirectory(prefix="drive_node_") as tmp:
         folder = Path(tmp)
-        files = scenes(folder)
-        env = ros_env(args.domain_id)
-        for r in range(args.rounds):
-            for name, path in files.items():
-                print(f"drive_node: {name} round {r}", file=sys.stderr, flush=True)
-                params = dict(scene=str(path), torque_source="scene", physics_rate_hz=1000.0, realtime_factor=1.0)
-                rows.setdefault(name, []).append(measure_window(params, args.duration, args.domain_id, folder, env,
-                                                                f"{name}_{r}"))
+        params = dict(torque_source="scene", physics_rate_hz=1000.0, realtime_factor=1.0)
+        rows = alternate(scenes(folder), params, args.rounds, args.duration, args.domain_id, folder, "drive_node")
     when = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     print(f"{when}; {args.rounds} rounds of {args.duration:g} s, medians\n")
     print("| input | real-time factor: median of 1 s windows | lowest window | CPU s per sim s | dropped steps "

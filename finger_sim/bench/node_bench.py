@@ -235,6 +235,20 @@ def _hand_file(folder: Path) -> Path:
     return path
 
 
+def alternate(files: dict[str, Path], params: dict, rounds: int, duration: float, domain_id: int, workdir: Path,
+              label: str) -> dict[str, list]:
+    """A B A B: the node of each scene file in `files` (name → path) measured by `measure_window` in turn,
+    `rounds` times, under the same `params`; name → its windows, in round order. Progress on stderr."""
+    env = ros_env(domain_id)
+    rows: dict[str, list] = {}
+    for r in range(rounds):
+        for name, path in files.items():
+            print(f"{label}: {name} round {r}", file=sys.stderr, flush=True)
+            rows.setdefault(name, []).append(
+                measure_window({"scene": str(path), **params}, duration, domain_id, workdir, env, f"{name}_{r}"))
+    return rows
+
+
 def measure_window(params: dict, duration: float, domain_id: int, workdir: Path, env: dict[str, str], tag: str, *,
                    hand: bool = False) -> Window:
     """Start a stepping node, wait for its first /diagnostics, measure `duration` s after WARMUP_S,

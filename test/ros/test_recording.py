@@ -396,6 +396,12 @@ def test_sigterm_closes_the_log(launcher, ros_client, tmp_path):
     ros_client.wait_for(lambda: len(states) >= 200, "200 joint states")
     os.killpg(node.pid, signal.SIGTERM)
     assert node.wait(10.0) == 0, output(node)
+    assert_closed_log(node, bags, len(states))
+
+
+def assert_closed_log(node, bags: Path, n_states: int) -> None:
+    """The exited node's log is closed and whole: the file the node reported, nothing dropped, the end
+    magic, a summary counting every message written and at least the n_states joint states received."""
     path = the_log(bags)
     reported, n_written, n_dropped = written(output(node))
     assert (reported, n_dropped) == (path, 0)
@@ -405,7 +411,7 @@ def test_sigterm_closes_the_log(launcher, ros_client, tmp_path):
     assert summary is not None and summary.statistics is not None
     assert summary.statistics.message_count == n_written
     assert summary.statistics.channel_message_counts[
-        next(c.id for c in summary.channels.values() if c.topic == "/joint_states")] >= len(states)
+        next(c.id for c in summary.channels.values() if c.topic == "/joint_states")] >= n_states
     assert not read_log(path).truncated
 
 
@@ -427,16 +433,7 @@ def test_sigint_to_the_node_alone_ends_it_with_a_complete_log(launcher, ros_clie
     ros_client.wait_for(lambda: len(states) >= 200, "200 joint states", NODE_START_S)
     node.send_signal(signal.SIGINT)
     assert node.wait(SIGNAL_EXIT_S) == 0, output(node)
-    path = the_log(bags)
-    reported, n_written, n_dropped = written(output(node))
-    assert (reported, n_dropped) == (path, 0)
-    with path.open("rb") as file:
-        summary = make_reader(file).get_summary()
-    assert summary is not None and summary.statistics is not None
-    assert summary.statistics.message_count == n_written
-    assert summary.statistics.channel_message_counts[
-        next(c.id for c in summary.channels.values() if c.topic == "/joint_states")] >= len(states)
-    assert not read_log(path).truncated
+    assert_closed_log(node, bags, len(states))
 
 
 def test_wall_start_log_time_and_publisher_qos(launcher, tmp_path):
