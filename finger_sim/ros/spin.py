@@ -2,7 +2,7 @@
 
 Two executors, chosen by the run's `executor` parameter (runtime.parameters.Executor):
 
-- `events` (opt-in): rclpy.experimental.EventsExecutor. Each message, service request or
+- `events` (default): rclpy.experimental.EventsExecutor. Each message, service request or
   timer is dispatched from C++ as it arrives, without rebuilding a wait set and walking every
   entity in Python: a 1 kHz command subscription costs about a quarter of the CPU it costs on
   SingleThreadedExecutor (docs/node_performance.md). It refuses guard conditions; its own
@@ -11,9 +11,10 @@ Two executors, chosen by the run's `executor` parameter (runtime.parameters.Exec
   `spin_once` slices of at most SPIN_SLICE_S, while the main thread waits in Python for the run's
   end with Python's handlers on SIGINT and SIGTERM: a signal raises KeyboardInterrupt there at
   once, the spin thread sees the end within a slice, and the executor is shut down.
-- `single` (default): rclpy's SingleThreadedExecutor, spun with `spin_once` until one guard condition,
+- `single`: rclpy's SingleThreadedExecutor, spun with `spin_once` until one guard condition,
   triggered when `done` completes, wakes it (rclpy's spin_until_future_complete would add a
-  closure to `done` on every wake-up, a leak at 1 kHz).
+  closure to `done` on every wake-up, a leak at 1 kHz). Kept for a node that owns guard
+  conditions of its own, and to measure the events executor against.
 
 Neither keeps anything from one wake-up to the next (test/ros/test_spin.py checks `single`;
 `events` adds one done-callback per run and none per wake-up).
@@ -44,7 +45,7 @@ SHUTDOWN_TIMEOUT_S = 5.0
 SPIN_SLICE_S = 0.1
 
 
-def spin_until_done(node: Node, done: Future, executor: Executor = Executor.SINGLE) -> None:
+def spin_until_done(node: Node, done: Future, executor: Executor = Executor.EVENTS) -> None:
     """Run `node`'s callbacks until `done` completes or the context shuts down (SIGINT, SIGTERM)."""
     if executor is Executor.EVENTS:
         _spin_events(node, done)

@@ -129,8 +129,8 @@ RUN_PARAMETERS = (
           "one (counted in /diagnostics)", (0.001, 3600.0)),
     Param("record_time", "sim", "log time of the MCAP messages: 'sim' (sim time from 0, as /clock) or 'wall_start' "
           "(Unix time at the node's start + sim time); header stamps are sim time either way", choices=("sim", "wall_start")),
-    Param("executor", Executor.SINGLE.value, "rclpy executor of the node's callbacks: 'single' (SingleThreadedExecutor) or 'events' "
-          "(rclpy.experimental.EventsExecutor, about a quarter of the CPU per received message; opt-in)",
+    Param("executor", Executor.EVENTS.value, "rclpy executor of the node's callbacks: 'events' (rclpy.experimental.EventsExecutor, "
+          "about a quarter of the CPU per received message) or 'single' (SingleThreadedExecutor)",
           choices=tuple(e.value for e in Executor)),
 )
 #: finger_node's parameters: the run's, its scene and frame prefix.
