@@ -90,3 +90,20 @@ def blocked_recorder(directory: Path, **options: Any) -> Iterator[tuple[Any, lis
             recorder.close(timeout_s=BLOCKED_CLOSE_S)
         finally:
             os.close(reader_fd)
+
+
+#: The shipped scenes whose Simulator steps through the compiled event step (DOP853 with the gap check;
+#: not drive_grasp, whose drive steps its own mesh modes), the hand's finger among them.
+EVENT_SCENES = ("grasp_cylinder", "press_table", "grasp_impact", "grasp_rigid", "paper_to_stop", "finger_default",
+                "hard/chatter_wall", "hard/elastic_impact", "hard/grasp_release", "hard/rigid_fast",
+                "hard/soft_pass_through", "hard/stops_elastic")
+#: finger_default runs an hour (the node's default); its first seconds, s, hold its settling onto the stop.
+SETTLE_S = 3.0
+
+
+def event_scene(name: str) -> Any:
+    """The shipped scene `name` (config/), finger_default cut to its first SETTLE_S."""
+    from finger_sim.scene import load_scene
+
+    scene = load_scene(Path(__file__).resolve().parents[1] / "config" / f"{name}.yaml")
+    return scene.with_overrides(duration=SETTLE_S) if name == "finger_default" else scene

@@ -8,7 +8,6 @@ torque, the step index, the error estimate and the integrator's estimates, bit f
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,17 +17,11 @@ from finger_sim import stepper_slot  # noqa: E402
 from finger_sim.errors import SimulationDiverged  # noqa: E402
 from finger_sim.inputs import Square, Step  # noqa: E402
 from finger_sim.integrators.dop853 import KEEP_OUTPUTS, MAX_OUTPUTS  # noqa: E402
-from finger_sim.scene import load_scene, scene_from_dict  # noqa: E402
+from helpers import EVENT_SCENES, event_scene  # noqa: E402
+from finger_sim.scene import scene_from_dict  # noqa: E402
 from finger_sim.simulate import Simulator, simulate  # noqa: E402
 from finger_sim.kernel import run_stretch  # noqa: E402
 
-CONFIG = Path(__file__).resolve().parents[2] / "config"
-#: The shipped scenes whose Simulator has the compiled event step (test_event_step's).
-SCENES = ("grasp_cylinder", "press_table", "grasp_impact", "grasp_rigid", "paper_to_stop", "finger_default",
-          "hard/chatter_wall", "hard/elastic_impact", "hard/grasp_release", "hard/rigid_fast",
-          "hard/soft_pass_through", "hard/stops_elastic")
-#: finger_default runs an hour (the node's default); its first seconds hold its settling onto the stop.
-SETTLE = 3.0
 PROFILES = {
     "ramp": {"type": "ramp", "offset": 0.005, "slope": 0.04},
     "sine": {"type": "sine", "amplitude": 0.02, "frequency": 3.0, "offset": 0.01},
@@ -37,13 +30,8 @@ PROFILES = {
 }
 
 
-def shipped(name: str):
-    scene = load_scene(CONFIG / f"{name}.yaml")
-    return scene.with_overrides(duration=SETTLE) if name == "finger_default" else scene
-
-
 def with_profile(name: str, profile: dict):
-    data = shipped(name).to_dict()
+    data = event_scene(name).to_dict()
     data["input"] = {"torque": profile}
     return scene_from_dict(data)
 
@@ -87,9 +75,9 @@ def assert_same_as_stepping(scene, monkeypatch) -> float:
     return sum(counts) / n
 
 
-@pytest.mark.parametrize("name", SCENES)
+@pytest.mark.parametrize("name", EVENT_SCENES)
 def test_stretches_equal_stepping_on_every_shipped_event_scene(name, monkeypatch):
-    share = assert_same_as_stepping(shipped(name), monkeypatch)
+    share = assert_same_as_stepping(event_scene(name), monkeypatch)
     if name in ("paper_to_stop", "grasp_cylinder", "press_table"):
         assert share >= 0.9  # the ramp onto the stop and the rest on it, the hold in contact: in stretches
 
@@ -102,7 +90,7 @@ def test_stretches_equal_stepping_under_profiles(name, profile, monkeypatch):
 
 
 def test_simulate_outputs_equal_stepping():
-    scene = shipped("grasp_cylinder")
+    scene = event_scene("grasp_cylinder")
     traj = simulate(scene, kernel="compiled")
     sim = Simulator(scene)
     states = [sim.state, *(sim.step() for _ in range(scene.step_count))]
@@ -138,7 +126,7 @@ def test_piecewise_constant_profiles_restart_dop853_only_at_a_switch(profile):
     """On a segment the level is one function object, so DOP853 continues its solution across output steps:
     its internal steps are then fewer than the output steps (a restart at each output step costs at least
     one internal step per output step: main's 300 and more here)."""
-    data = shipped("paper_flexion").to_dict()
+    data = event_scene("paper_flexion").to_dict()
     data["input"] = {"torque": profile.to_dict()}
     scene = scene_from_dict(data).with_overrides(method="dop853")
     sim = Simulator(scene)

@@ -17,26 +17,15 @@ import pytest
 
 pytest.importorskip("numba")
 from finger_sim.errors import SimulationDiverged  # noqa: E402
+from helpers import EVENT_SCENES, event_scene  # noqa: E402
 from finger_sim.scene import load_scene, scene_from_dict  # noqa: E402
 from finger_sim.simulate import Simulator  # noqa: E402
 
 CONFIG = Path(__file__).resolve().parents[2] / "config"
-#: The shipped scenes that step through the Simulator's gap check with DOP853 (test_gap_screen's,
-#: without drive_grasp, whose drive steps its own mesh modes) and the hand's finger.
-SCENES = ("grasp_cylinder", "press_table", "grasp_impact", "grasp_rigid", "paper_to_stop", "finger_default",
-          "hard/chatter_wall", "hard/elastic_impact", "hard/grasp_release", "hard/rigid_fast",
-          "hard/soft_pass_through", "hard/stops_elastic")
-#: finger_default runs an hour (the node's default); its first seconds hold its settling onto the stop.
-SETTLE = 3.0
 #: Least share of the steps of a contact scene under its constant torque the kernel takes by itself.
 MIN_TAKEN = 0.9
 
 Command = Callable[[int, Simulator], "float | None"]
-
-
-def shipped(name: str):
-    scene = load_scene(CONFIG / f"{name}.yaml")
-    return scene.with_overrides(duration=SETTLE) if name == "finger_default" else scene
 
 
 def run(scene, compiled: bool, command: Command = lambda k, sim: None,
@@ -69,9 +58,9 @@ def assert_same(scene, command: Command = lambda k, sim: None,
     return share
 
 
-@pytest.mark.parametrize("name", SCENES)
+@pytest.mark.parametrize("name", EVENT_SCENES)
 def test_runs_under_the_scene_torque_equal_the_python_step_bit_for_bit(name):
-    scene = shipped(name)
+    scene = event_scene(name)
     assert Simulator(scene)._event_step is not None
     share = assert_same(scene)
     if name in ("grasp_cylinder", "press_table", "grasp_impact", "grasp_rigid"):
@@ -80,7 +69,7 @@ def test_runs_under_the_scene_torque_equal_the_python_step_bit_for_bit(name):
 
 @pytest.mark.parametrize("name", ["finger_default", "grasp_cylinder", "hard/grasp_release", "paper_to_stop"])
 def test_held_commands_as_the_node_sends_them_equal_the_python_step(name):
-    scene = shipped(name)
+    scene = event_scene(name)
     rng = np.random.default_rng(7)
     # runs of one held value (the solution continues) and a new value at every step (it restarts)
     values = np.repeat(rng.uniform(-0.03, 0.05, 40), rng.integers(1, 40, 40))
@@ -88,7 +77,7 @@ def test_held_commands_as_the_node_sends_them_equal_the_python_step(name):
 
 
 def test_a_closed_loop_command_every_step_equals_the_python_step():
-    scene = shipped("finger_default").with_overrides(duration=0.6)
+    scene = event_scene("finger_default").with_overrides(duration=0.6)
 
     def pd(k, sim):  # towards θ1 = 0.9 rad and back: the stops are reached
         goal = 0.9 if k < 300 else -0.2
@@ -123,7 +112,7 @@ PROFILES = {
 
 
 def with_profile(name: str, profile: dict):
-    data = shipped(name).to_dict()
+    data = event_scene(name).to_dict()
     data["input"] = {"torque": profile}
     return scene_from_dict(data)
 
@@ -137,7 +126,7 @@ def test_torque_profiles_on_stop_and_contact_scenes_equal_the_python_step_bit_fo
 
 @pytest.mark.parametrize("name", ["paper_to_stop", "hard/chatter_wall", "hard/grasp_release", "hard/stops_elastic"])
 def test_the_shipped_profile_scenes_step_in_the_kernel(name):
-    scene = shipped(name)
+    scene = event_scene(name)
     rows, error, share = run(scene, True)
     assert not error and share >= 0.5
     if name == "paper_to_stop":  # the ramp onto the stop and the rest on it (from ~0.43 s): all but the located impact
