@@ -75,12 +75,17 @@ def start_closed_loop(launcher, ros_client, tag: str) -> tuple:
     node = launcher.node(NODE, dict(lockstep=True, lockstep_timeout=LOCKSTEP_TIMEOUT_S, realtime_factor=0.0,
                                     command_qos="reliable", record_dir=f"bags_{tag}", marker_rate_hz=0.0),
                          name=f"node_{tag}", ros_args=remap)
-    return node, ros_client.collect(JointState, f"{ns}/joint_states", RELIABLE)
+    return node, ros_client.collect(JointState, f"{ns}/joint_states", RELIABLE), ros_client.collect(
+        DiagnosticArray, "/diagnostics", RELIABLE)
 
 
-def closed_loop_log(launcher, ros_client, tag: str, node, states: list) -> list[tuple[str, object]]:
-    """Once STEPS states of the run `tag` went out: the node stopped, its log."""
+def closed_loop_log(launcher, ros_client, tag: str, node, states: list, diagnostics: list) -> list[tuple[str, object]]:
+    """Once STEPS states of the run `tag` went out and the node reported /diagnostics after them (about
+    1 Hz of wall time: a run of STEPS lockstep states can take less): the node stopped, its log."""
     ros_client.wait_for(lambda: states and stamp_ns(states[-1]) >= STEPS * DT_NS, f"{STEPS} lockstep states of {tag}", 120.0)
+    ours = lambda: sum(any(s.name.startswith(f"{namespace(tag)}/") for s in d.status) for d in diagnostics)  # noqa: E731
+    reported = ours()
+    ros_client.wait_for(lambda: ours() > reported, f"/diagnostics of {tag} after its {STEPS} states", 30.0)
     status = node.stop()
     assert status == 0, f"exit status {status}:\n{node.output()}"
     return read_log(launcher.tmp / f"bags_{tag}")
