@@ -107,3 +107,21 @@ def event_scene(name: str) -> Any:
 
     scene = load_scene(Path(__file__).resolve().parents[1] / "config" / f"{name}.yaml")
     return scene.with_overrides(duration=SETTLE_S) if name == "finger_default" else scene
+
+#: Torque inputs (N·m, s) that exercise the event step: smooth ones evaluated at every stage, a step with
+#: its switch inside a step, a square wave switching on the grid.
+EVENT_PROFILES = {
+    "ramp": {"type": "ramp", "offset": 0.005, "slope": 0.04},
+    "sine": {"type": "sine", "amplitude": 0.02, "frequency": 3.0, "offset": 0.01},
+    "step": {"type": "step", "before": 0.03, "after": -0.01, "at": 0.2005},  # a switch inside a step
+    "square": {"type": "square", "amplitude": 0.02, "frequency": 4.0, "offset": 0.01},  # switches on the grid
+}
+
+
+def with_profile(name: str, profile: dict) -> Any:
+    """`event_scene(name)` under the torque input `profile` (an input dict as scene files give it)."""
+    from finger_sim.scene import scene_from_dict
+
+    data = event_scene(name).to_dict()
+    data["input"] = {"torque": profile}
+    return scene_from_dict(data)

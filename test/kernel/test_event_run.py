@@ -17,24 +17,10 @@ from finger_sim import stepper_slot  # noqa: E402
 from finger_sim.errors import SimulationDiverged  # noqa: E402
 from finger_sim.inputs import Square, Step  # noqa: E402
 from finger_sim.integrators.dop853 import KEEP_OUTPUTS, MAX_OUTPUTS  # noqa: E402
-from helpers import EVENT_SCENES, event_scene  # noqa: E402
+from helpers import EVENT_PROFILES as PROFILES, EVENT_SCENES, event_scene, with_profile  # noqa: E402
 from finger_sim.scene import scene_from_dict  # noqa: E402
 from finger_sim.simulate import Simulator, simulate  # noqa: E402
 from finger_sim.kernel import run_stretch  # noqa: E402
-
-PROFILES = {
-    "ramp": {"type": "ramp", "offset": 0.005, "slope": 0.04},
-    "sine": {"type": "sine", "amplitude": 0.02, "frequency": 3.0, "offset": 0.01},
-    "step": {"type": "step", "before": 0.03, "after": -0.01, "at": 0.2005},  # a switch inside a step
-    "square": {"type": "square", "amplitude": 0.02, "frequency": 4.0, "offset": 0.01},  # switches on the grid
-}
-
-
-def with_profile(name: str, profile: dict):
-    data = event_scene(name).to_dict()
-    data["input"] = {"torque": profile}
-    return scene_from_dict(data)
-
 
 def stretched_steps(monkeypatch) -> list[int]:
     """The number of steps each kernel stretch took, recorded as `advance` runs."""

@@ -17,8 +17,8 @@ import pytest
 
 pytest.importorskip("numba")
 from finger_sim.errors import SimulationDiverged  # noqa: E402
-from helpers import EVENT_SCENES, event_scene  # noqa: E402
-from finger_sim.scene import load_scene, scene_from_dict  # noqa: E402
+from helpers import EVENT_PROFILES as PROFILES, EVENT_SCENES, event_scene, with_profile  # noqa: E402
+from finger_sim.scene import load_scene  # noqa: E402
 from finger_sim.simulate import Simulator  # noqa: E402
 
 CONFIG = Path(__file__).resolve().parents[2] / "config"
@@ -103,20 +103,6 @@ def test_resets_a_state_set_from_outside_and_mixed_torques_equal_the_python_step
 
 #: Torque profiles stepped by the kernel: smooth ones evaluated at every stage, piecewise-constant ones
 #: held on each segment (switches inside a step go to Python). Levels near each scene's own torque.
-PROFILES = {
-    "ramp": {"type": "ramp", "offset": 0.005, "slope": 0.04},
-    "sine": {"type": "sine", "amplitude": 0.02, "frequency": 3.0, "offset": 0.01},
-    "step": {"type": "step", "before": 0.03, "after": -0.01, "at": 0.2005},  # a switch inside a step
-    "square": {"type": "square", "amplitude": 0.02, "frequency": 4.0, "offset": 0.01},  # switches on the grid
-}
-
-
-def with_profile(name: str, profile: dict):
-    data = event_scene(name).to_dict()
-    data["input"] = {"torque": profile}
-    return scene_from_dict(data)
-
-
 @pytest.mark.parametrize("profile", sorted(PROFILES))
 @pytest.mark.parametrize("name", ["paper_to_stop", "grasp_cylinder", "press_table", "hard/stops_elastic"])
 def test_torque_profiles_on_stop_and_contact_scenes_equal_the_python_step_bit_for_bit(name, profile):
