@@ -8,7 +8,9 @@ Context: an element declares what it owns, the integrators step the flat vector
 
 The discrete state is the modes the elements own, each with the guards whose crossings are located as
 events and switch it (`ModeSet`): the stops' rest mode, the drive's mesh mode, stick–slip friction's
-lock. A mode is not part of x: it selects which equations x follows.
+lock. A mode is not part of x: it selects which equations x follows. A run keeps their values in one
+home beside x (`ModeValues`, like Drake's discrete state): each owner reads and writes its own entries,
+an element whose laws read its mode through `OwnModes.mode`, bound to the run's entry.
 """
 
 from __future__ import annotations
@@ -28,13 +30,14 @@ class Slot(NamedTuple):
 
 
 class ModeSet(NamedTuple):
-    """A discrete mode an element owns: its name, its values (the first is the one a run starts in
-    unless the element decides otherwise at t = 0) and the guards whose crossings, located as events
-    inside a step, switch it."""
+    """A discrete mode an element owns: its name, its values, the guards whose crossings, located as
+    events inside a step, switch it, and the value a run starts in (an index into `values`) unless the
+    element decides otherwise at t = 0."""
 
     name: str
     values: tuple[str, ...]
     guards: tuple[str, ...]
+    initial: int = 0
 
 
 #: The linkage's slots: q then q', always first.
@@ -105,3 +108,67 @@ def layout_of(elements: Iterable[object], actuator: object | None = None) -> Sta
         owners.append((getattr(actuator, "name", type(actuator).__name__), tuple(actuator.slots),  # type: ignore[attr-defined]
                        tuple(actuator.modes)))  # type: ignore[attr-defined]
     return StateLayout(owners)
+
+
+class ModeValues:
+    """A run's discrete state, its one home: the value of each declared mode (an index into its
+    `ModeSet.values`), in `StateLayout.modes` order. Built from the same owners as the layout; each owner
+    that reads its modes in its laws (`OwnModes`) is bound to its entries here, any other (the frozen
+    stops, shared by one scene's runs) is read and written through `position`."""
+
+    def __init__(self, layout: StateLayout, owners: Iterable[object]) -> None:
+        self.sets: tuple[ModeSet, ...] = tuple(m for _, m in layout.modes)
+        #: the values, one int per mode: owners index into this list
+        self.values: list[int] = [m.initial for m in self.sets]
+        self._at: dict[int, int] = {}  # id(owner) → position of its first mode
+        at = 0
+        for owner in owners:
+            owned = tuple(getattr(owner, "modes", ()))
+            if owned:
+                self._at[id(owner)] = at
+                if isinstance(owner, OwnModes):
+                    owner.bind_modes(self.values, at)
+                at += len(owned)
+
+    def reset(self) -> None:
+        """Every mode back to its declared initial value."""
+        self.values[:] = [m.initial for m in self.sets]
+
+    def position(self, owner: object, name: str) -> int | None:
+        """Where `owner`'s mode `name` is in `values`; None if it declares none of that name."""
+        first = self._at.get(id(owner))
+        if first is None:
+            return None
+        names = [m.name for m in getattr(owner, "modes", ())]
+        return first + names.index(name) if name in names else None
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """The value of each mode by name, in `values` order."""
+        return tuple(m.values[v] for m, v in zip(self.sets, self.values))
+
+
+class OwnModes:
+    """Mixin of an element whose laws read its own mode (`mode`: the value of its first declared
+    `ModeSet`): bound to a run's `ModeValues` by the Simulator, before that in a home of its own (an
+    element on its own, a batch row). An element bound to a run belongs to that run alone."""
+
+    modes: tuple[ModeSet, ...] = ()
+    _mode_values: list[int]
+    _mode_at: int = 0
+
+    def bind_modes(self, values: list[int], at: int) -> None:
+        """Keep this element's modes at values[at:at + len(modes)] (a run's `ModeValues.values`)."""
+        self._mode_values, self._mode_at = values, at
+
+    def own_modes(self) -> None:
+        """A home of its own for its modes, at their initial values (call in __init__)."""
+        self.bind_modes([m.initial for m in self.modes], 0)
+
+    @property
+    def mode(self) -> int:
+        return self._mode_values[self._mode_at]
+
+    @mode.setter
+    def mode(self, value: int) -> None:
+        self._mode_values[self._mode_at] = value

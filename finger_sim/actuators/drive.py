@@ -37,7 +37,7 @@ from finger_sim.errors import SimulationDiverged
 from finger_sim.kinematics import Vec3
 from finger_sim.model import FingerParams
 from finger_sim.scene_yaml import mapping, number, whole
-from finger_sim.state_layout import ModeSet, Slot
+from finger_sim.state_layout import ModeSet, OwnModes, Slot
 
 #: Mesh modes (the `mesh_mode` output's codes, index into MESH_MODES).
 DRIVE, BACK, STUCK = 0, 1, 2
@@ -213,10 +213,11 @@ def linkage_inertia_at(r1: float, r2: float, r3: float, m11: float, m22: float, 
 KERNEL_BLOCK = 11
 
 
-class Drive(Actuator):
+class Drive(OwnModes, Actuator):
     """The actuator: the drive's parameters and its discrete state (mesh mode, direction of motion).
 
-    `mode` is DRIVE, BACK or STUCK (an ideal gear stays in DRIVE with c = 1); `direction` is the
+    `mode` is DRIVE, BACK or STUCK (an ideal gear stays in DRIVE with c = 1), kept in the run's
+    `ModeValues` once a Simulator binds it; `direction` is the
     sign of θ1' the rolling mode was entered with (its guards are signed by it). The compiled
     models made from it (`kernel_block`) follow every change of the mode. Declared (`actuators.base`):
     the input is the voltage, the mode is MESH, and with L > 0 the winding current is its own slot."""
@@ -228,7 +229,7 @@ class Drive(Actuator):
     def __init__(self, params: DriveParams) -> None:
         self.params = params
         self._mirrors: list[weakref.ref] = []  # compiled models whose block's first slot is the mode
-        self._mode = DRIVE
+        self.own_modes()  # DRIVE, MESH's initial value, until a run binds it
         self.direction = 1.0
         #: how often the mode was set: an integrator that keeps its own solution restarts when it changes
         self.changes = 0
@@ -246,11 +247,11 @@ class Drive(Actuator):
 
     @property
     def mode(self) -> int:
-        return self._mode
+        return self._mode_values[self._mode_at]
 
     @mode.setter
     def mode(self, value: int) -> None:
-        self._mode = value
+        self._mode_values[self._mode_at] = value
         self.changes += 1
         for ref in self._mirrors:
             model = ref()
@@ -260,7 +261,7 @@ class Drive(Actuator):
     def kernel_block(self) -> list[float]:
         """The drive as the compiled model's last KERNEL_BLOCK floats (`finger_sim.kernel.layout`)."""
         p = self.params
-        return [float(self._mode), self.c(DRIVE), self.c(BACK), p.gear_ratio, p.rotor_inertia, p.torque_constant,
+        return [float(self.mode), self.c(DRIVE), self.c(BACK), p.gear_ratio, p.rotor_inertia, p.torque_constant,
                 p.resistance, p.supply_voltage, p.current_limit, p.inductance, math.nan]
 
     def mirror(self, model) -> None:  # type: ignore[no-untyped-def]
@@ -275,12 +276,12 @@ class Drive(Actuator):
 
     def torque(self, system: FingerSystem, t: float, q: Vec3, v: Vec3, u: float, own: tuple[float, ...]) -> float:
         """τ_g (N·m) in the current mode (`DrivenSystem.mesh`)."""
-        return system.mesh(t, q, v, u, self._mode, own[0] if own else None)[0]  # type: ignore[attr-defined]
+        return system.mesh(t, q, v, u, self.mode, own[0] if own else None)[0]  # type: ignore[attr-defined]
 
     def accelerations(self, system: FingerSystem, t: float, q: Vec3, v: Vec3, u: float,
                       own: tuple[float, ...]) -> Vec3:
         """q'' in the current mode: the mesh is solved with the linkage (reflected inertia), not a torque."""
-        return system.mesh(t, q, v, u, self._mode, own[0] if own else None)[2]  # type: ignore[attr-defined]
+        return system.mesh(t, q, v, u, self.mode, own[0] if own else None)[2]  # type: ignore[attr-defined]
 
     def rates(self, t: float, q: Vec3, v: Vec3, u: float, own: tuple[float, ...]) -> tuple[float, ...]:
         """(i',) in A/s with L > 0 (`current_rate`), () with L = 0."""

@@ -30,7 +30,7 @@ from finger_sim.effects.contact_law import along_tangent
 from finger_sim.effects.contact_outputs import FRICTION_MODE, FRICTION_POWER, FRICTION_TORQUE
 from finger_sim.errors import ConfigError, SimulationDiverged
 from finger_sim.kinematics import Vec3
-from finger_sim.state_layout import ModeSet
+from finger_sim.state_layout import ModeSet, OwnModes
 
 REGULARIZED, STICK_SLIP = "regularized", "stick_slip"
 FRICTION_MODELS = (REGULARIZED, STICK_SLIP)
@@ -44,7 +44,7 @@ MIN_STRIBECK_VELOCITY, MAX_STRIBECK_VELOCITY = 1e-9, 10.0
 SLIDING, LOCKED = 0, 1
 #: The linkage's friction mode and its guards: the turn (θ1' reaches 0 sliding, then the holding test)
 #: and the breakaway (the locked holding margin turns negative).
-FRICTION = ModeSet("friction", ("sliding", "locked"), ("turn", "breakaway"))
+FRICTION = ModeSet("friction", ("sliding", "locked"), ("turn", "breakaway"), initial=LOCKED)
 #: Locked step ends whose holding torque an element remembers for `outputs` (the oldest go first):
 #: more than a streamed block's rows (`streaming.BLOCK_STEPS`), whose outputs are taken after the block.
 HOLD_MEMORY = 4096
@@ -147,11 +147,11 @@ def _is_number(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
 
 
-class StickSlipContact(Contact):
+class StickSlipContact(OwnModes, Contact):
     """The §7 contact (Hunt–Crossley normal force, the same candidates and gaps) with stick–slip
-    friction in place of the regularized law. It holds the linkage's friction mode (`mode`, LOCKED or
-    SLIDING, and the sliding `direction` ±1), which `finger_sim.stick_slip` switches; each Simulator
-    of such a scene builds its own element. Its compiled form (`kernel_code`: KERNEL_BLOCK floats, then the
+    friction in place of the regularized law. It owns the linkage's friction mode (`mode`, LOCKED or
+    SLIDING, kept in the run's `ModeValues`) and the sliding `direction` ±1, which `finger_sim.stick_slip`
+    switches; each Simulator of such a scene builds its own element. Its compiled form (`kernel_code`: KERNEL_BLOCK floats, then the
     contact's) reads the mode and direction from the flat model, whose slots follow them (`mirror`)."""
 
     #: the declared friction mode (`state_layout`), switched by `finger_sim.stick_slip`
@@ -160,7 +160,8 @@ class StickSlipContact(Contact):
 
     def __init__(self, *args: Any, law: FrictionLaw, **kwargs: Any) -> None:
         self._mirrors: list[tuple[weakref.ref, int]] = []  # (compiled model, offset of the mode slot)
-        self._mode, self._direction = LOCKED, 0.0
+        self.own_modes()  # LOCKED, FRICTION's initial value, until a run binds it
+        self._direction = 0.0
         super().__init__(*args, **kwargs)
         self.kinetic = self._mu
         self.static = self._mu if law.static_friction is None else law.static_friction
@@ -181,11 +182,11 @@ class StickSlipContact(Contact):
     # -- the mode, mirrored into compiled models -------------------------------------------
     @property
     def mode(self) -> int:
-        return self._mode
+        return self._mode_values[self._mode_at]
 
     @mode.setter
     def mode(self, value: int) -> None:
-        self._mode = value
+        self._mode_values[self._mode_at] = value
         self._mirror_modes()
 
     @property
@@ -200,11 +201,11 @@ class StickSlipContact(Contact):
     def law_state(self) -> tuple[int, float]:
         """(mode, direction): what the force law depends on besides the state (an integrator that keeps
         its own solution restarts when it changes)."""
-        return self._mode, self._direction
+        return self.mode, self._direction
 
     def kernel_params(self) -> tuple[float, ...]:
         """(mode, direction, μ_k, μ_s, v_st or 0, then the contact's `kernel_params`), read by the compiled law."""
-        return (float(self._mode), self._direction, self.kinetic, self.static, self._v_st, *super().kernel_params())
+        return (float(self.mode), self._direction, self.kinetic, self.static, self._v_st, *super().kernel_params())
 
     def mirror(self, model: np.ndarray, offset: int) -> None:
         """Keep the mode and direction slots of compiled model `model` (at `offset`, `offset` + 1) current."""
@@ -215,7 +216,7 @@ class StickSlipContact(Contact):
         for ref, offset in self._mirrors:
             model = ref()
             if model is not None:
-                model[offset], model[offset + 1] = float(self._mode), self._direction
+                model[offset], model[offset + 1] = float(self.mode), self._direction
 
     # -- the law -------------------------------------------------------------------------
     def _hits(self, q: Vec3, all_candidates: bool, t: float = 0.0) -> list[_Hit]:
@@ -237,7 +238,7 @@ class StickSlipContact(Contact):
         −μ F_n sgn(j_k θ1') (sign from the mode's `direction`, so a step's stages past θ1' = 0 keep the
         mode's law until the event). Locked: the normal force alone (the holding friction is τ_h)."""
         fn, fx, fy = super()._forces(hit, v, t)  # the normal force alone: this element's regularized μ is 0
-        if fn > 0.0 and self._mode == SLIDING and self.static:  # μ_s ≥ μ_k: zero only without friction
+        if fn > 0.0 and self.mode == SLIDING and self.static:  # μ_s ≥ μ_k: zero only without friction
             j = self._tangent_gain(hit)
             nx, ny = hit[5], hit[6]
             # the Stribeck term's speed: j θ1' at a fixed object, the relative t_c·(ṗ − ċ) at a moving one

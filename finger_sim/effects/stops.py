@@ -6,8 +6,8 @@ impact there (q' → −e q', or rest on the stop). Spec §3.
 
 The stop owns one discrete mode, resting: after an impact whose rebound would rise
 no higher than REST_HEIGHT (`rests`) q stays fixed and q' = 0 until the free acceleration pulls it off the
-stop (`release_time`, the mode's guard). The mode's value, the gap rested on, is kept by each
-Simulator (`Simulator._resting`): one scene's Simulators share this frozen element.
+stop (`release_time`, the mode's guard). The mode's value is kept in each run's home
+(`Simulator.mode_values`): one scene's Simulators share this frozen element.
 """
 
 from __future__ import annotations

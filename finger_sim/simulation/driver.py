@@ -6,7 +6,8 @@ bit-identical states. A torque profile's breakpoints cut the step into smooth se
 events of the non-smooth force elements (a stop impact, a contact onset) are located inside a
 segment (`simulation.crossings`) and the segment is split there; a stop's impact may start its
 rest mode (`simulation.impact`). A drive's mesh modes and stick–slip friction step their own
-events (`actuators.stepping`, `stick_slip`) with the same pieces.
+events (`actuators.stepping`, `stick_slip`) with the same pieces. The values of the declared modes live
+in one home per run (`mode_values`, `state_layout.ModeValues`), each owner's at its own entries.
 """
 
 from __future__ import annotations
@@ -18,7 +19,6 @@ from finger_sim import stick_slip
 from finger_sim.actuators import stepping as drive_stepping
 from finger_sim.actuators.base import Actuator
 from finger_sim.effects import EFFECTS
-from finger_sim.effects.stops import JointStops
 from finger_sim.errors import SimulationDiverged
 from finger_sim.inputs import BREAK_EPS, HELD_ARRAY, Profile
 from finger_sim.integrators import HeldTorque, Integrator, TorqueFn
@@ -27,8 +27,9 @@ from finger_sim.projection import OK as FAST_OK
 from finger_sim.scene import Scene
 from finger_sim.simulation import actuated, actuated_events, crossings, event_step, gap_screen, impact
 from finger_sim.simulation.crossings import Crossing, Gap
+from finger_sim.simulation.impact import REST_MODE
 from finger_sim.simulation.setup import hashable, setup_for
-from finger_sim.state_layout import StateLayout, layout_of
+from finger_sim.state_layout import ModeValues, OwnModes, StateLayout, layout_of
 from finger_sim.stepper_slot import BREAKPOINT
 from finger_sim.tip_force_profile import refuse_profile
 
@@ -71,6 +72,8 @@ class Simulator:
         # a drive holds its mesh mode: each Simulator of a drive scene builds its own system
         cached = hashable(scene) and scene.drive is None and not stick_slip.in_scene(scene)  # nor a friction mode
         setup = setup_for(scene, kernel, effects) if cached else setup_for.__wrapped__(scene, kernel, effects)
+        if cached and any(isinstance(e, OwnModes) for e in setup.system.elements):  # bound to this run's modes
+            setup = setup_for.__wrapped__(scene, kernel, effects)
         self.system, self.dt, self.method, self.method_reason = setup.system, scene.dt, setup.method, setup.reason
         #: steps in contact (or closing a contact within the step) are split in this many (auto only)
         self.substeps = setup.substeps
@@ -88,10 +91,13 @@ class Simulator:
         self._actuator = actuator
         #: the declared state: (q, q', then the drive's or `actuator`'s own slots), and the elements' modes
         self.layout: StateLayout = layout_of(self.system.elements, actuator or self._drive)
-        #: the owners of declared modes, in `layout.modes` order
-        self._mode_owners = tuple(o for o in (*self.system.elements, actuator or self._drive)
-                                  for _ in getattr(o, "modes", ()))
         self._gaps, self._kinks, self._gap_elements = setup.gaps, setup.kinks, setup.gap_elements
+        #: the run's discrete state: each declared mode's value, in `layout.modes` order
+        self.mode_values = ModeValues(self.layout, (*self.system.elements, actuator or self._drive))
+        self._mode_list = self.mode_values.values
+        #: where the rest mode of the impact gaps' owner (the stops' `rest`) is in `mode_values`, or None
+        self._rest_at = next((at for gap in self._gaps if gap.restitution is not None
+                              for at in (self.mode_values.position(gap.element, REST_MODE),) if at is not None), None)
         if actuator is not None and self.substeps > setup.substeps:  # auto's rk6 for the actuator: its contact substeps
             self._kinks = tuple(gap for gap in self._gaps if gap.restitution is None)
         #: the depth gaps (`DepthLimit`, last in `_gaps`): (position of the contact gap in `_gaps`, ρ) each
@@ -112,11 +118,12 @@ class Simulator:
         """Back to the scene's initial state at t = 0."""
         # A fresh integrator: a warm start kept from the last run (adaptive's step size,
         # rattle's Jacobian) would make the rerun differ in the last bits.
+        self.mode_values.reset()  # before the integrator: a compiled model takes the modes it is built in
         self.integrator: Integrator = self._integrator_cls(self.system, **self._options)
         self.step_index = 0
         self.q, self.v = self.scene.initial_state()
-        #: the stop's rest mode (`effects.stops.JointStops.rests`): the closed impact gap rested on, or None
-        self._resting: Gap | None = None
+        #: the impact gap rested on while the rest mode is `resting` (its release is located on it)
+        self._rest_gap: Gap | None = None
         #: `crossings.gap_states`' last (q, q', gaps and rates, t)
         self._gap_cache: tuple[Vec3, Vec3, list[tuple[float, float]], float] | None = None
         if self._gap_screen is not None:
@@ -151,11 +158,20 @@ class Simulator:
 
     @property
     def modes(self) -> tuple[str, ...]:
-        """The value of each declared mode (`layout.modes`) at the current step: the stops' rest is held
-        by this Simulator (`_resting`), every other owner holds its own (`mode`, an index into its values)."""
-        return tuple(m.values[int(self._resting is not None and self._resting.element is owner)]
-                     if isinstance(owner, JointStops) else m.values[owner.mode]
-                     for owner, (_, m) in zip(self._mode_owners, self.layout.modes))
+        """The value of each declared mode (`layout.modes`) at the current step, read from `mode_values`."""
+        return self.mode_values.names
+
+    @property
+    def _resting(self) -> Gap | None:
+        """The rest mode (its owner's entry in `mode_values`) as the closed impact gap rested on, or None: free."""
+        at = self._rest_at
+        return None if at is None or not self._mode_list[at] else self._rest_gap
+
+    @_resting.setter
+    def _resting(self, gap: Gap | None) -> None:
+        """Enter the rest on `gap` (an impact that `rests`), or leave it (None: its release)."""
+        self._mode_list[self._rest_at] = 0 if gap is None else 1  # type: ignore[index]  # free, resting
+        self._rest_gap = gap
 
     @property
     def error_estimate(self) -> float:

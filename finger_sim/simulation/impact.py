@@ -1,8 +1,8 @@
 """A located impact on a gap (a stop), and the rest mode it may start: the Simulator's side of both.
 
-The laws are the element's (`effects.stops.JointStops`: `rests`, `release_time`); the mode's value
-is the Simulator's own (`Simulator._resting`, the closed gap rested on, or None), so that one scene's
-Simulators share its elements.
+The laws are the element's (`effects.stops.JointStops`: `rests`, `release_time`); the mode is its
+declared REST_MODE, whose value each run keeps in its `Simulator.mode_values` (`Simulator._resting`
+reads it as the closed gap rested on, or None), so that one scene's Simulators share its elements.
 """
 
 from __future__ import annotations
@@ -17,6 +17,8 @@ if TYPE_CHECKING:
     from finger_sim.simulation.driver import Simulator
 
 ZERO: Vec3 = (0.0, 0.0, 0.0)
+#: The mode an element with impact gaps declares for the rest on them (`effects.stops.REST`).
+REST_MODE = "rest"
 
 
 def impact(sim: Simulator, crossing: Crossing, torque: TorqueFn) -> Vec3:
