@@ -27,7 +27,7 @@ from finger_sim.projection import OK as FAST_OK
 from finger_sim.scene import Scene
 from finger_sim.simulation import actuated, actuated_events, crossings, event_step, gap_screen, impact
 from finger_sim.simulation.crossings import Crossing, Gap
-from finger_sim.simulation.impact import REST_MODE
+from finger_sim.simulation.impact import FREE, REST_MODE, RESTING
 from finger_sim.simulation.setup import hashable, setup_for
 from finger_sim.state_layout import ModeValues, OwnModes, StateLayout, layout_of
 from finger_sim.stepper_slot import BREAKPOINT
@@ -96,8 +96,8 @@ class Simulator:
         self.mode_values = ModeValues(self.layout, (*self.system.elements, actuator or self._drive))
         self._mode_list = self.mode_values.values
         #: where the rest mode of the impact gaps' owner (the stops' `rest`) is in `mode_values`, or None
-        self._rest_at = next((at for gap in self._gaps if gap.restitution is not None
-                              for at in (self.mode_values.position(gap.element, REST_MODE),) if at is not None), None)
+        rest_owner = next((gap.element for gap in self._gaps if gap.restitution is not None), None)
+        self._rest_at = None if rest_owner is None else self.mode_values.position(rest_owner, REST_MODE)
         if actuator is not None and self.substeps > setup.substeps:  # auto's rk6 for the actuator: its contact substeps
             self._kinks = tuple(gap for gap in self._gaps if gap.restitution is None)
         #: the depth gaps (`DepthLimit`, last in `_gaps`): (position of the contact gap in `_gaps`, ρ) each
@@ -170,7 +170,7 @@ class Simulator:
     @_resting.setter
     def _resting(self, gap: Gap | None) -> None:
         """Enter the rest on `gap` (an impact that `rests`), or leave it (None: its release)."""
-        self._mode_list[self._rest_at] = 0 if gap is None else 1  # type: ignore[index]  # free, resting
+        self._mode_list[self._rest_at] = FREE if gap is None else RESTING  # type: ignore[index]
         self._rest_gap = gap
 
     @property

@@ -19,6 +19,8 @@ if TYPE_CHECKING:
 ZERO: Vec3 = (0.0, 0.0, 0.0)
 #: The mode an element with impact gaps declares for the rest on them (`effects.stops.REST`).
 REST_MODE = "rest"
+#: Its values: free, resting on a closed gap.
+FREE, RESTING = 0, 1
 
 
 def impact(sim: Simulator, crossing: Crossing, torque: TorqueFn) -> Vec3:
