@@ -163,6 +163,10 @@ def advance(sim: Simulator, t0: float, t1: float, torque: TorqueFn) -> None:
                 return
             t, v = release, ZERO
             _slide(sim, friction, t, q, torque, _break_direction(sim, t, _holding(sim, friction, t, q, torque), torque))
+        if t >= t1:  # freed on the step's end (breakaway, release from the stop): a zero-length step divides by zero
+            friction.remember(t1, q)
+            sim.q, sim.v = q, v
+            return
         q1, v1 = sim._step(t, q, v, t1 - t, torque)
         guard = drive_stepping.TURN
         if drive is None:

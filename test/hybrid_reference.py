@@ -6,8 +6,9 @@ force, regularized Coulomb friction, J_pᵀF with the material point's Jacobian 
 the MCP stops are spec §3's impacts v⁺ = −e v⁻. scipy's solve_ivp (DOP853 at rtol 1e-11) integrates
 each smooth piece and stops at every torque switch, contact onset or release (a zero of δ) and stop
 impact (solve_ivp events), where it restarts. A finger whose rebound off a stop would rise no
-higher than `rest_height` rests on the stop until the free acceleration stops pushing into it: the
-rest convention of the stepping code (a cut of the impacts' Zeno series), the one thing taken from it.
+higher than `rest_height` rests on the stop until the free acceleration stops pushing into it (located
+inside the piece as a solve_ivp event, `_release`): the rest convention of the stepping code (a cut of
+the impacts' Zeno series), the one thing taken from it.
 
 An object may carry its own `stiffness` and `damping` (spec §7's k_c, d_c for that object) and a
 prescribed `motion` (push or vibration, the scene schema's): its centre or point then moves by
@@ -22,7 +23,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.integrate import solve_ivp
-from scipy.optimize import brentq
 
 import reference as ref
 
@@ -182,13 +182,11 @@ def solve(data: dict, *, rest_height: float = 1e-11, torque=None) -> HybridRefer
             if resting:
                 q, side = y[:3], stop_side
                 if push(t, q, side) >= 0.0:
-                    if push(b, q, side) >= 0.0:
-                        out.pieces.append((t, b, y.copy()))
-                        t = b
-                        continue
-                    tr = brentq(lambda s: push(s, q, side), t, b, xtol=1e-15, rtol=4 * np.finfo(float).eps)
+                    tr = _release(lambda s: push(s, q, side), t, b)
                     out.pieces.append((t, tr, y.copy()))
                     t = tr
+                    if tr >= b:  # held to the piece's end
+                        continue
                 resting = False
             events = []
             for i in range(len(_candidates(y[:3], objects, law.rho, t))):
@@ -226,6 +224,18 @@ def solve(data: dict, *, rest_height: float = 1e-11, torque=None) -> HybridRefer
                 else:
                     y[3:] = v_plus
     return out
+
+
+def _release(push, t0: float, t1: float) -> float:
+    """The first time in [t0, t1] (s) where `push` (θ1'' into the stop at rest, ≥ 0 at t0) turns negative;
+    t1 itself if it never does. A terminal event of solve_ivp on the push's integral: its steps follow
+    the push's variation, so a release inside a long piece is located, not stepped over."""
+    def event(s, z):
+        return push(s) or math.ulp(0.0)  # held while ≥ 0: an exact 0 is on the holding side
+    event.terminal, event.direction = True, -1
+    sol = solve_ivp(lambda s, z: [push(s)], (t0, t1), [0.0], method="DOP853", rtol=RTOL, atol=ATOL, events=event)
+    assert sol.success, sol.message
+    return float(sol.t_events[0][0]) if sol.t_events[0].size else t1
 
 
 def kkt_with(q, v, tau: float, fx: ref.Effects, extra: np.ndarray) -> np.ndarray:

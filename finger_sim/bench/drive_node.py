@@ -13,16 +13,12 @@ steps run), recording on. Prints a Markdown table of medians over the rounds.
 
 from __future__ import annotations
 
-import argparse
 import statistics
 import sys
-import tempfile
-from datetime import datetime, timezone
-from pathlib import Path
 
 import yaml
 
-from finger_sim.bench.node_bench import alternate
+from finger_sim.bench.node_bench import side_by_side, window_medians
 from finger_sim.bench.plan import config_dir
 
 #: The drive's voltage: ±6 V (the default drive's rated voltage) switching every 0.5 s.
@@ -33,40 +29,26 @@ TWIN_TORQUE = {"type": "square", "amplitude": 0.1, "frequency": 1.0}
 RUN_S = 3600.0
 
 
-def scenes(folder: Path) -> dict[str, Path]:
-    """'drive' and 'torque' → a YAML file of the cup scene under its periodic input in `folder`."""
+def scenes() -> dict[str, dict]:
+    """'drive' and 'torque' → the cup scene under its periodic input (a scene mapping)."""
     data = yaml.safe_load((config_dir() / "drive_grasp.yaml").read_text())
     data["duration"] = RUN_S
     drive = {**data, "input": {"voltage": VOLTAGE}}
     torque = {**data, "model": {k: v for k, v in data["model"].items() if k != "drive"}, "input": {"torque": TWIN_TORQUE}}
-    out = {}
-    for name, d in (("drive", drive), ("torque", torque)):
-        out[name] = folder / f"cup_square_{name}.yaml"
-        out[name].write_text(yaml.safe_dump(d))
-    return out
+    return {"drive": drive, "torque": torque}
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--duration", type=float, default=20.0, help="measured s per node run")
-    parser.add_argument("--rounds", type=int, default=2)
-    parser.add_argument("--domain-id", type=int, default=80)
-    args = parser.parse_args(argv)
-    with tempfile.TemporaryDirectory(prefix="drive_node_") as tmp:
-        folder = Path(tmp)
-        params = dict(torque_source="scene", physics_rate_hz=1000.0, realtime_factor=1.0)
-        rows = alternate(scenes(folder), params, args.rounds, args.duration, args.domain_id, folder, "drive_node")
-    when = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-    print(f"{when}; {args.rounds} rounds of {args.duration:g} s, medians\n")
+    params = dict(torque_source="scene", physics_rate_hz=1000.0, realtime_factor=1.0)
+    rows = side_by_side(__doc__, argv, "drive_node", scenes(), params)
     print("| input | real-time factor: median of 1 s windows | lowest window | CPU s per sim s | dropped steps "
           "| log: states logged / expected, dropped |")
     print("|---|---|---|---|---|---|")
     base = statistics.median(w.cpu_per_sim_s for w in rows["torque"])
     for name, runs in rows.items():
-        rtf = [x for w in runs for x in w.rtf]
-        cpu = statistics.median(w.cpu_per_sim_s for w in runs)
+        rtf, lowest, cpu = window_medians(runs)
         logged = ", ".join(f"{w.states_logged} / {w.states_expected}, {w.log_dropped}" for w in runs)
-        print(f"| {name} | {statistics.median(rtf):.4f} | {min(rtf):.4f} | {cpu:.3f} ({cpu / base:.2f}×) | "
+        print(f"| {name} | {rtf:.4f} | {lowest:.4f} | {cpu:.3f} ({cpu / base:.2f}×) | "
               f"{sum(w.dropped_steps for w in runs)} | {logged} |")
     return 0
 

@@ -37,11 +37,13 @@ from __future__ import annotations
 
 import argparse
 import os
+import statistics
 import sys
 import tempfile
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
@@ -248,6 +250,36 @@ def alternate(files: dict[str, Path], params: dict, rounds: int, duration: float
                 measure_window({"scene": str(path), **params}, duration, domain_id, workdir, env, f"{name}_{r}"))
     return rows
 
+
+
+def side_by_side(doc: str, argv: list[str] | None, label: str, scenes: dict[str, dict], params: dict) -> dict[str, list]:
+    """An A B A B benchmark of node runs from the command line (`--duration` measured s per run, `--rounds`,
+    `--domain-id`): each scene mapping of `scenes` (name → mapping) written to `<label>_<name>.yaml` in a
+    temporary folder and run by `alternate` under `params`; name → its windows. Prints the table's heading
+    line (the time, rounds and duration) first."""
+    import yaml
+
+    parser = argparse.ArgumentParser(description=doc.splitlines()[0])
+    parser.add_argument("--duration", type=float, default=20.0, help="measured s per node run")
+    parser.add_argument("--rounds", type=int, default=2)
+    parser.add_argument("--domain-id", type=int, default=80)
+    args = parser.parse_args(argv)
+    with tempfile.TemporaryDirectory(prefix=f"{label}_") as tmp:
+        folder = Path(tmp)
+        files = {}
+        for name, data in scenes.items():
+            files[name] = folder / f"{label}_{name}.yaml"
+            files[name].write_text(yaml.safe_dump(data))
+        rows = alternate(files, params, args.rounds, args.duration, args.domain_id, folder, label)
+    when = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    print(f"{when}; {args.rounds} rounds of {args.duration:g} s, medians\n")
+    return rows
+
+
+def window_medians(runs: list[Window]) -> tuple[float, float, float]:
+    """(median real-time factor of the 1 s windows, lowest window, median CPU s per sim s) of some runs."""
+    rtf = [x for w in runs for x in w.rtf]
+    return statistics.median(rtf), min(rtf), statistics.median(w.cpu_per_sim_s for w in runs)
 
 def measure_window(params: dict, duration: float, domain_id: int, workdir: Path, env: dict[str, str], tag: str, *,
                    hand: bool = False) -> Window:

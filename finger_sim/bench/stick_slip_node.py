@@ -13,16 +13,12 @@ Markdown table of medians over the rounds.
 
 from __future__ import annotations
 
-import argparse
 import statistics
 import sys
-import tempfile
-from datetime import datetime, timezone
-from pathlib import Path
 
 import yaml
 
-from finger_sim.bench.node_bench import alternate
+from finger_sim.bench.node_bench import side_by_side, window_medians
 from finger_sim.bench.plan import config_dir
 
 #: The periodic torque that keeps the held finger sliding and locking, N·m and Hz.
@@ -32,40 +28,26 @@ FRICTION = {"friction": 0.3, "static_friction": 0.4}
 FRICTION_LAW_KEYS = ("friction_model", "static_friction", "stribeck_velocity")
 
 
-def scenes(folder: Path) -> dict[str, Path]:
-    """'stick_slip' and 'regularized' → a YAML file of the periodic hold_table scene in `folder`."""
+def scenes() -> dict[str, dict]:
+    """'stick_slip' and 'regularized' → the periodic hold_table scene (a scene mapping)."""
     data = yaml.safe_load((config_dir() / "friction" / "hold_table.yaml").read_text())
     data["input"] = {"torque": TORQUE}
     data["model"]["contact"].update(FRICTION)
     data["duration"] = 3600.0
     regularized = {**data, "model": {**data["model"], "contact": {
         k: v for k, v in data["model"]["contact"].items() if k not in FRICTION_LAW_KEYS}}}
-    out = {}
-    for name, d in (("stick_slip", data), ("regularized", regularized)):
-        out[name] = folder / f"hold_sine_{name}.yaml"
-        out[name].write_text(yaml.safe_dump(d))
-    return out
+    return {"stick_slip": data, "regularized": regularized}
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--duration", type=float, default=20.0, help="measured s per node run")
-    parser.add_argument("--rounds", type=int, default=2)
-    parser.add_argument("--domain-id", type=int, default=80)
-    args = parser.parse_args(argv)
-    with tempfile.TemporaryDirectory(prefix="stick_slip_node_") as tmp:
-        folder = Path(tmp)
-        params = dict(torque_source="scene", physics_rate_hz=1000.0, publish_rate_hz=0.0, realtime_factor=1.0, record=False)
-        rows = alternate(scenes(folder), params, args.rounds, args.duration, args.domain_id, folder, "stick_slip_node")
-    when = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-    print(f"{when}; {args.rounds} rounds of {args.duration:g} s, medians\n")
+    params = dict(torque_source="scene", physics_rate_hz=1000.0, publish_rate_hz=0.0, realtime_factor=1.0, record=False)
+    rows = side_by_side(__doc__, argv, "stick_slip_node", scenes(), params)
     print("| law | real-time factor: median of 1 s windows | lowest window | CPU s per sim s | dropped steps |")
     print("|---|---|---|---|---|")
     base = statistics.median(w.cpu_per_sim_s for w in rows["regularized"])
     for name, runs in rows.items():
-        rtf = [x for w in runs for x in w.rtf]
-        cpu = statistics.median(w.cpu_per_sim_s for w in runs)
-        print(f"| {name} | {statistics.median(rtf):.4f} | {min(rtf):.4f} | {cpu:.3f} ({cpu / base:.2f}×) | "
+        rtf, lowest, cpu = window_medians(runs)
+        print(f"| {name} | {rtf:.4f} | {lowest:.4f} | {cpu:.3f} ({cpu / base:.2f}×) | "
               f"{sum(w.dropped_steps for w in runs)} |")
     return 0
 

@@ -114,8 +114,8 @@ class Contact:
         if len(laws) > 1 or self.time_varying:
             self.kernel_code = None  # type: ignore[misc]  # no compiled form: see kernel.layout
         # Stiffness and damping of the contact law at DESIGN_FORCE: δ_d = (F_d / k)^(1/e),
-        # the stiffest object's.
-        k_max, d_max = max((self._k, *self._obj_k)), max((self._d, *self._obj_d))
+        # the stiffest object's (the scene's k_c and d_c count only where an object takes them).
+        k_max, d_max = max(self._obj_k, default=self._k), max(self._obj_d, default=self._d)
         delta_d = (DESIGN_FORCE / k_max) ** (1.0 / self._e)
         self._k_design = k_max * self._e * delta_d ** (self._e - 1.0)
         self._c_design = d_max * DESIGN_FORCE

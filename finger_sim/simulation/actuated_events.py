@@ -125,6 +125,10 @@ def advance_friction(sim: Simulator, t0: float, t1: float, u: TorqueFn) -> None:
             t, v = release, ZERO
             stick_slip._slide(sim, friction, t, q, held,
                               stick_slip._break_direction(sim, t, stick_slip._holding(sim, friction, t, q, held), held))
+        if t >= t1:  # freed on the step's end: no zero-length step (as `stick_slip.advance`)
+            friction.remember(t1, q)
+            _commit(sim, q, v, own)
+            return
         integ.begin(q, v, own)
         q1, v1 = sim._step(t, q, v, t1 - t, u)
         turn = stick_slip._turn_event(sim, friction, t, q, v, t1, q1, v1, u)
