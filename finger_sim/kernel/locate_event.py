@@ -12,8 +12,8 @@ the integrator as Python's trials would have (its last output and the estimates 
 Arguments, all float64 arrays but the scalars:
 
     segs (r × SEG_SIZE): the internal steps a trial may fall in, in time order, the integrator's current
-        one last: t_old, h_old (s), err_old, err (rad), y_old (6);
-    denses (r × 7 × 6): their dense outputs;
+        one last: t_old, h_old (s), err_old, err (rad);
+    y_olds (r × 6), denses (r × 7 × 6): their start states and dense outputs;
     meta: the META_* slots below;
     work (2 × n_gaps), x (6): scratch; log (n × LOG_SIZE): the trials (s, q, q', estimate).
 """
@@ -37,9 +37,8 @@ from finger_sim.simulation.crossings import MAX_LOCATE_ITERATIONS
 #: trials taken; the times the history rows answer, [from, to) (s); the end of the internal solution (s).
 META_ROWS, META_GAP, META_FAILED, META_COUNT, META_FROM, META_TO, META_END = 0, 1, 2, 3, 4, 5, 6
 META_SIZE = 7
-#: A segs row: t_old, h_old, err_old, err, y_old.
-SEG_T, SEG_H, SEG_ERR_OLD, SEG_ERR, SEG_Y = 0, 1, 2, 3, 4
-SEG_SIZE = SEG_Y + 6
+#: A segs row: t_old, h_old, err_old, err.
+SEG_T, SEG_H, SEG_ERR_OLD, SEG_ERR = 0, 1, 2, 3
 #: A log row: s (s), q (rad), q' (rad/s), the error estimate at q (rad).
 LOG_SIZE = 8
 
@@ -49,7 +48,7 @@ _estimate = njit(**LAW)(dop853.interpolated_estimate)
 @njit(**JIT)
 def _gap_at(ctx, q, v):
     """The located gap at the state (q, q') (its rate is not used), from the compiled gap plan."""
-    m, plan, segs, denses, meta, work, x, log = ctx
+    m, plan, segs, y_olds, denses, meta, work, x, log = ctx
     x[0], x[1], x[2], x[3], x[4], x[5] = q[0], q[1], q[2], v[0], v[1], v[2]
     gap_states(plan, x, work[0], work[1])
     return work[0, int(meta[META_GAP])]
@@ -59,7 +58,7 @@ def _gap_at(ctx, q, v):
 def _trial(ctx, s):
     """(g(s), q(s), q'(s)): the trial step to s answered as `DormandPrince853.step` answers it from its
     history (`_segment`, then `dop853_output`), logged with its estimate (`_remember`)."""
-    m, plan, segs, denses, meta, work, x, log = ctx
+    m, plan, segs, y_olds, denses, meta, work, x, log = ctx
     cur, n = segs.shape[0] - 1, int(meta[META_ROWS])
     i = cur
     if not (s >= segs[cur, SEG_T] or n == 0):  # an earlier internal step: `bisect_right` over their starts
@@ -71,7 +70,7 @@ def _trial(ctx, s):
         meta[META_FAILED] = 1.0  # past the internal solution: Python's trial would integrate further
         return math.nan, (s, s, s), (s, s, s)
     row = segs[i]
-    status, q1, v1 = dop853_output(m, row[SEG_T], row[SEG_H], row[SEG_Y:], denses[i], s, x)
+    status, q1, v1 = dop853_output(m, row[SEG_T], row[SEG_H], y_olds[i], denses[i], s, x)
     if status != OK:
         meta[META_FAILED] = 1.0  # Python's trial raises its error
         return math.nan, q1, v1
@@ -95,9 +94,9 @@ _regula_falsi = compiled(plain.regula_falsi_gap, illinois_update=njit(**LAW)(pla
 
 
 @njit(**JIT)
-def locate(m, plan, segs, denses, meta, work, x, log, t, q, v, a, ga, b, gb, qb, vb, kink):
+def locate(m, plan, segs, y_olds, denses, meta, work, x, log, t, q, v, a, ga, b, gb, qb, vb, kink):
     """Where in (a, b] (s) the gap meta[META_GAP] crosses inside the step from (t, q, q'):
-    `crossings.locate_gap`'s (s, q(s), q'(s)), on the internal steps in segs and denses (module docstring).
+    `crossings.locate_gap`'s (s, q(s), q'(s)), on the internal steps in segs, y_olds and denses (module docstring).
     Valid only where meta[META_FAILED] stays 0; the trials are in log[:meta[META_COUNT]]."""
-    ctx = (m, plan, segs, denses, meta, work, x, log)
+    ctx = (m, plan, segs, y_olds, denses, meta, work, x, log)
     return _regula_falsi(ctx, t, q, v, a, ga, b, gb, qb, vb, kink, MAX_LOCATE_ITERATIONS)

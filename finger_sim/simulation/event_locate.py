@@ -30,7 +30,7 @@ if TYPE_CHECKING:
 
 #: History rows kept on each side of the bracket's ends: a trial a rounding error outside the bracket
 #: still finds the internal step `DormandPrince853._segment` would.
-MARGIN_ROWS = 2
+MARGIN_ROWS = 1
 
 
 class CompiledLocate:
@@ -58,19 +58,15 @@ class CompiledLocate:
         i0 = max(0, bisect.bisect_right(starts, a) - MARGIN_ROWS) if n else 0
         i1 = min(n, bisect.bisect_right(starts, b) + MARGIN_ROWS) if n else 0
         rows = history[i0:i1]
-        segs = np.empty((len(rows) + 1, k.SEG_SIZE))
-        denses = np.empty((len(rows) + 1, 7, 6))
-        for j, (t_old, h_old, y_old, dense, err_old, err) in enumerate(rows):
-            segs[j, :k.SEG_Y] = t_old, h_old, err_old, err
-            segs[j, k.SEG_Y:] = y_old
-            denses[j] = dense
-        segs[-1, :k.SEG_Y] = integ._t_old, integ._h_old, integ._err_old, integ._err  # noqa: SLF001
-        segs[-1, k.SEG_Y:] = integ._y_old  # noqa: SLF001
-        denses[-1] = integ._dense  # noqa: SLF001
-        meta[:] = (len(rows), sim._gaps.index(gap), 0.0, 0.0, starts[i0] if i0 > 0 else -math.inf,  # noqa: SLF001
+        current = (integ._t_old, integ._h_old, integ._y_old, integ._dense, integ._err_old, integ._err)  # noqa: SLF001
+        rows.append(current)
+        segs = np.array([(t_old, h_old, err_old, err) for t_old, h_old, _, _, err_old, err in rows])
+        y_olds = np.array([row[2] for row in rows])
+        denses = np.array([row[3] for row in rows])
+        meta[:] = (len(rows) - 1, sim._gaps.index(gap), 0.0, 0.0, starts[i0] if i0 > 0 else -math.inf,  # noqa: SLF001
                    starts[i1] if i1 < n else math.inf, integ._t)  # noqa: SLF001
         s, qs, vs = k.locate(integ._model, self._plan,  # noqa: SLF001
-                             segs, denses, meta, self._work, self._x, self._log, t, q, v,
+                             segs, y_olds, denses, meta, self._work, self._x, self._log, t, q, v,
                              a, ga, b, gb, qb, vb, gap.restitution is None)
         if meta[k.META_FAILED] != 0.0:
             return None  # Python takes the trials again (their effects on the integrator are the same)
