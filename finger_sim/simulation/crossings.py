@@ -141,10 +141,9 @@ def locate_gap(sim: Simulator, gap: Gap, t: float, q: Vec3, v: Vec3, lo: tuple[f
     q(s) the step from (t, q, q') to s. lo = (s, gap), hi = (s, gap, q, q') (`bracket`).
 
     An impact is applied at the located point (|g| ≤ EVENT_TOLERANCE); a kink's step ends
-    on its far side, so that the rest of the step does not see the crossing again. The bracket's
-    update is `locate.illinois_update`; unlike `locate.illinois`, this loop stops on the gap's value
-    (or a trial outside the bracket, without bisecting) and keeps the last trial: an impact needs
-    the point on the gap.
+    on its far side, so that the rest of the step does not see the crossing again. The loop is
+    `locate.regula_falsi_gap`; with the compiled event step it runs in one kernel call on the step's
+    dense output (`simulation.event_locate`), else here with the Simulator's trial steps.
     """
     events = sim._event_step
     if events is not None and events.locate is not None:  # every trial from the logged dense output, compiled
