@@ -48,7 +48,8 @@ class CompiledLocate:
                  hi: tuple[float, float, Vec3, Vec3], torque: TorqueFn) -> tuple[float, Vec3, Vec3] | None:
         """(s, q(s), q'(s)) of `crossings.locate_gap(sim, gap, …)`, or None: Python locates it."""
         integ = sim.integrator
-        if not isinstance(integ, DormandPrince853) or torque is not integ._torque or integ._origin != (t, q, v):  # noqa: SLF001
+        if (not isinstance(integ, DormandPrince853) or torque is not integ._torque  # noqa: SLF001
+                or integ._origin != (t, q, v)):  # noqa: SLF001
             return None  # a trial would restart the solution: Python's step does that
         k, meta = self._k, self._meta
         a, ga = lo
