@@ -66,6 +66,10 @@ class CompiledKernel(Protocol):
         None without numba."""
         ...
 
+    def compiled_locate_event(self) -> ModuleType:
+        """A located gap crossing on the step's dense output in one call (`locate`: the Illinois loop)."""
+        ...
+
     def compiled_inductive(self) -> type:
         """The compiled Runge–Kutta class of an inductive drive (`actuators.inductive`'s twin)."""
         ...

@@ -219,10 +219,13 @@ class DormandPrince853(Integrator):
     def _remember(self, q: Vec3, target: float, t_old: float, h_old: float, err_old: float, err: float) -> None:
         """Record the estimate at an output q at time `target` (s), interpolated linearly over the
         internal step (t_old, h_old) that covers it, whose estimates at its ends are err_old and err."""
+        self.store_estimate(q, interpolated_estimate(target, t_old, h_old, err_old, err))
+
+    def store_estimate(self, q: Vec3, estimate: float) -> None:
+        """Record the estimate (rad) at an output q; at MAX_OUTPUTS the oldest are dropped down to KEEP_OUTPUTS."""
         if len(self._estimates) >= MAX_OUTPUTS:
             self._estimates = dict(list(self._estimates.items())[-KEEP_OUTPUTS:])
-        x = (target - t_old) / h_old if h_old > 0.0 else 1.0
-        self._estimates[q] = err_old + min(1.0, max(0.0, x)) * (err - err_old)
+        self._estimates[q] = estimate
 
     def run_grid(self, times: np.ndarray, q: Vec3, v: Vec3, torque: TorqueFn) -> np.ndarray:
         """Outputs at times[1:] from (q, q') at times[0], all under one smooth `torque`: the (n, 6)
@@ -341,6 +344,13 @@ class DormandPrince853(Integrator):
     @classmethod
     def is_stable(cls, z: complex) -> bool:
         return True  # error control shrinks the internal step as needed
+
+
+def interpolated_estimate(target: float, t_old: float, h_old: float, err_old: float, err: float) -> float:
+    """The θ error estimate (rad) at an output at time `target` (s), interpolated linearly over the
+    internal step (t_old, h_old) that covers it, whose estimates at its ends are err_old and err."""
+    x = (target - t_old) / h_old if h_old > 0.0 else 1.0
+    return err_old + min(1.0, max(0.0, x)) * (err - err_old)
 
 
 def _python_rhs(system: FingerSystem, t: float, y: np.ndarray, tau: float) -> list[float]:

@@ -232,6 +232,13 @@ def compiled_internal_steps() -> "ModuleType | None":
     return compiled
 
 
+def compiled_locate_event() -> "ModuleType":
+    """A located gap crossing on the step's dense output in one call (`kernel.locate_event`)."""
+    from finger_sim.kernel import locate_event as compiled
+
+    return compiled
+
+
 def compiled_inductive() -> type:
     """The inductive drive's compiled Runge–Kutta class (`kernel.inductive`)."""
     from finger_sim.kernel.inductive import CompiledInductiveRungeKutta

@@ -15,7 +15,7 @@ from finger_sim.depth_guard import DepthLimit
 from finger_sim.effects import ForceElement
 from finger_sim.integrators import TorqueFn
 from finger_sim.kinematics import Vec3
-from finger_sim.simulation.locate import EVENT_TOLERANCE, illinois_update, predicted_crossing
+from finger_sim.simulation.locate import EVENT_TOLERANCE, predicted_crossing, regula_falsi_gap
 
 if TYPE_CHECKING:
     from finger_sim.simulation.driver import Simulator
@@ -141,11 +141,15 @@ def locate_gap(sim: Simulator, gap: Gap, t: float, q: Vec3, v: Vec3, lo: tuple[f
     q(s) the step from (t, q, q') to s. lo = (s, gap), hi = (s, gap, q, q') (`bracket`).
 
     An impact is applied at the located point (|g| ≤ EVENT_TOLERANCE); a kink's step ends
-    on its far side, so that the rest of the step does not see the crossing again. The bracket's
-    update is `locate.illinois_update`; unlike `locate.illinois`, this loop stops on the gap's value
-    (or a trial outside the bracket, without bisecting) and keeps the last trial: an impact needs
-    the point on the gap.
+    on its far side, so that the rest of the step does not see the crossing again. The loop is
+    `locate.regula_falsi_gap`; with the compiled event step it runs in one kernel call on the step's
+    dense output (`simulation.event_locate`), else here with the Simulator's trial steps.
     """
+    events = sim._event_step
+    if events is not None and events.locate is not None:  # every trial from the logged dense output, compiled
+        found = events.locate(sim, gap, t, q, v, lo, hi, torque)
+        if found is not None:
+            return Crossing(*found, gap)
     step, element, index = sim._step, gap.element, gap.index
     timed = element in sim._timed
 
@@ -159,19 +163,6 @@ def locate_gap(sim: Simulator, gap: Gap, t: float, q: Vec3, v: Vec3, lo: tuple[f
     # g(a) and g(b) lie on opposite sides.
     a, ga = lo
     b, gb, qb, vb = hi
-    s, gs, qs, vs = b, gb, qb, vb
-    keep = 0
-    for _ in range(MAX_LOCATE_ITERATIONS):
-        s = b - gb * (b - a) / (gb - ga)
-        # A step that starts on the gap (g(t) = 0) crosses at t itself: stepping a
-        # zero-length interval would divide by zero in rattle and fail in scipy.
-        gs, qs, vs = at(s) if s > t else (gap_at(t, q), q, v)
-        if abs(gs) <= EVENT_TOLERANCE or s <= a or s >= b:
-            break
-        across = (gs > 0) == (gb > 0)
-        if across:
-            qb, vb = qs, vs
-        a, ga, b, gb, keep = illinois_update(a, ga, b, gb, keep, s, gs, across)
-    if gap.restitution is None and (gs < -EVENT_TOLERANCE) != (gap_at(b, qb) < -EVENT_TOLERANCE):
-        return Crossing(b, qb, vb, gap)  # the kink's far side
+    s, qs, vs = regula_falsi_gap((at, gap_at), t, q, v, a, ga, b, gb, qb, vb, gap.restitution is None,
+                                 MAX_LOCATE_ITERATIONS)
     return Crossing(s, qs, vs, gap)

@@ -36,7 +36,9 @@ from finger_sim import stepper_slot
 from finger_sim.inputs import BREAK_EPS, HELD, PIECEWISE_CONSTANT, Constant, Profile, profile_array
 from finger_sim.integrators.base import HeldTorque
 from finger_sim.integrators.dop853 import KEEP_OUTPUTS, MAX_OUTPUTS, DormandPrince853
+from finger_sim.simulation import event_locate
 from finger_sim.simulation.event_handover import hand_over
+from finger_sim.simulation.event_locate import CompiledLocate
 
 if TYPE_CHECKING:
     from finger_sim.simulation.driver import Simulator, State
@@ -95,6 +97,8 @@ class EventStep:
         self._v: tuple | None = None
         #: steps taken here (the rest went to Python), for tests and benchmarks
         self.taken = 0
+        #: the compiled location of a crossing (`simulation.event_locate`), or None: Python's
+        self.locate: CompiledLocate | None = None
 
     def step(self, sim: Simulator, torque: Profile | float | None) -> State | None:
         """Take `sim.step(torque)` in the kernel: the state after it (the Simulator's state, torque and
@@ -242,4 +246,6 @@ def for_simulator(sim: Simulator) -> EventStep | None:
         return None
     if type(integ) is not DormandPrince853 or not integ.compiled or (sim.substeps != 1 and sim._kinks):  # noqa: SLF001
         return None
-    return EventStep(sim, screen._plan, stepper_slot.kernel().compiled_event_step())  # noqa: SLF001
+    step = EventStep(sim, screen._plan, stepper_slot.kernel().compiled_event_step())  # noqa: SLF001
+    step.locate = event_locate.for_simulator(sim)
+    return step

@@ -55,6 +55,51 @@ def illinois_update(a: float, ga: float, b: float, gb: float, keep: int, s: floa
     return s, gs, b, gb / 2 if keep == -1 else gb, -1
 
 
+def regula_falsi_gap(ctx: object, t: float, q: tuple, v: tuple, a: float, ga: float, b: float, gb: float,
+                     qb: tuple, vb: tuple, kink: bool, iterations: int) -> tuple[float, tuple, tuple]:
+    """Where in (a, b] a gap crosses zero inside the step from (t, q, q'): Illinois regula falsi on
+    g(s) = gap(q(s)), q(s) the step from t to s (s). Returns (s, q(s), q'(s)) of the crossing.
+
+    g(a) = ga and g(b) = gb lie on opposite sides; (qb, vb) is the state at b. `trial(ctx, s)` →
+    (g(s), q(s), q'(s)) takes a trial step, `gap_value(ctx, s, q)` → g at a given state: the Python
+    path binds them to the Simulator's step and its element (`crossings.locate_gap`), the compiled one
+    to the step's dense output and the compiled gaps (`kernel.locate_event`), so this loop is written
+    once. The bracket's update is `illinois_update`; unlike `illinois`, this loop stops on the gap's
+    value (or a trial outside the bracket, without bisecting) and keeps the last trial: an impact needs
+    the point on the gap. A kink's crossing (`kink`) ends on the bracket's far side instead, so that the
+    rest of the step does not see the crossing again.
+    """
+    s, gs, qs, vs = b, gb, qb, vb
+    keep = 0
+    for _ in range(iterations):
+        s = b - gb * (b - a) / (gb - ga)
+        # A step that starts on the gap (g(t) = 0) crosses at t itself: stepping a
+        # zero-length interval would divide by zero in rattle and fail in scipy.
+        if s > t:
+            gs, qs, vs = trial(ctx, s)
+        else:
+            gs, qs, vs = gap_value(ctx, t, q), q, v
+        if abs(gs) <= EVENT_TOLERANCE or s <= a or s >= b:
+            break
+        across = (gs > 0) == (gb > 0)
+        if across:
+            qb, vb = qs, vs
+        a, ga, b, gb, keep = illinois_update(a, ga, b, gb, keep, s, gs, across)
+    if kink and (gs < -EVENT_TOLERANCE) != (gap_value(ctx, b, qb) < -EVENT_TOLERANCE):
+        return b, qb, vb  # the kink's far side
+    return s, qs, vs
+
+
+def trial(ctx: tuple, s: float) -> tuple[float, tuple, tuple]:
+    """The Python path's trial step of `regula_falsi_gap`: ctx = (at, gap_at), at(s) → (g, q, q')."""
+    return ctx[0](s)
+
+
+def gap_value(ctx: tuple, s: float, q: tuple) -> float:
+    """The Python path's gap at a given state of `regula_falsi_gap`: ctx[1](s, q)."""
+    return ctx[1](s, q)
+
+
 def predicted_crossing(ga: float, ra: float, gb: float, rb: float, h: float, closed: bool,
                        start_rate: bool = True) -> float | None:
     """Where (a fraction x of h, in (0, 1)) a gap that is on the same side at both ends of an
