@@ -70,6 +70,10 @@ class CompiledKernel(Protocol):
         """The compiled Runge–Kutta class of an inductive drive (`actuators.inductive`'s twin)."""
         ...
 
+    def inductive_fast_stepper(self, integrator: Integrator, dt: float, profile: Profile, drive: Any) -> Any:
+        """The lean step of an inductive drive scene without gaps: input, substeps and guards in one call."""
+        ...
+
     def compiled_drive(self) -> ModuleType:
         """The compiled drive (spec §8): its right-hand side and DOP853 attempt under the mesh mode."""
         ...

@@ -239,4 +239,11 @@ def compiled_inductive() -> type:
     return CompiledInductiveRungeKutta
 
 
+def inductive_fast_stepper(integrator: "Integrator", dt: float, profile: "Profile", drive: object) -> object:
+    """`inductive.InductiveFastStepper`: one compiled call per rolling step of an inductive drive scene."""
+    from finger_sim.kernel.inductive import InductiveFastStepper
+
+    return InductiveFastStepper(integrator, dt, profile, drive)  # type: ignore[arg-type]
+
+
 stepper_slot.install(sys.modules[__name__])  # type: ignore[arg-type]
