@@ -32,8 +32,8 @@ class CompiledKernel(Protocol):
         """The integrator class that steps `system` with `method` on the requested kernel, and the kernel's name."""
         ...
 
-    def offline_kernel(self, kernel: str, steps: int) -> str:
-        """The kernel for an offline run of `steps` steps ("auto" may become "python" for a short one)."""
+    def offline_kernel(self, kernel: str, steps: int, scene: Any = None) -> str:
+        """The kernel for an offline run of `steps` steps of `scene` ("auto" may become "python" for a short one)."""
         ...
 
     def model_array(self, system: FingerSystem) -> np.ndarray | None:

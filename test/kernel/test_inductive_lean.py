@@ -37,7 +37,7 @@ TOLERANCE = 1e-12
 
 def free_scene(drive: dict, voltage: dict | None) -> Scene:
     return scene_from_dict({"model": {"drive": {**drive, "inductance": INDUCTANCE}, "spring_stiffness": 0.2},
-                            "input": {"voltage": voltage or {"type": "constant", "value": 0.0}}, "duration": 0.4,
+                            "input": {"voltage": voltage or {"type": "constant", "value": 0.0}}, "duration": 0.3,
                             "integrator": {"method": "auto", "dt": 1e-3}})
 
 
