@@ -254,6 +254,29 @@ def inductive_guards(m, t, q0, q1, q2, v0, v1, v2, i, u, direction):
 
 
 @njit(**JIT)
+def substep_inputs(prof, held, tab, t, h, n):
+    """The input (V) at each distinct node of each of n substeps of h/n from t (s), n × nodes: what
+    `CompiledInductiveRungeKutta.advance_state` evaluates in Python, here from the profile's flat encoding."""
+    s = tab.shape[1]
+    nodes = 0
+    for r in range(s):
+        nodes = max(nodes, int(tab[s + 2, r]) + 1)
+    taus = np.empty((n, nodes))
+    sub = h / n
+    for j in range(n):
+        tk = t + j * sub
+        for r in range(s):
+            taus[j, int(tab[s + 2, r])] = torque_at(prof, held, tk + tab[s + 1, r] * sub)
+    return taus
+
+
+@njit(**JIT)
+def inductive_profile_step(m, tab, t, q, v, i, h, n, prof, held):
+    """`inductive_step_tuple` with the input from a profile's flat encoding (`substep_inputs`)."""
+    return inductive_step_tuple(m, tab, t, q, v, i, h, n, substep_inputs(prof, held, tab, t, h, n))
+
+
+@njit(**JIT)
 def inductive_fast_step(plan, prof, held, k, q, v, i, direction, n):
     """`Simulator.step` k of an inductive drive scene without gaps while its mesh rolls through the whole
     step, in one call: the input at every substep node, n substeps of `inductive_rk_step` (the integrator's
@@ -267,25 +290,15 @@ def inductive_fast_step(plan, prof, held, k, q, v, i, direction, n):
     if m[o] == STUCK:
         return BREAKPOINT, q, v, i, 0.0
     t0, t1 = k * dt, (k + 1) * dt
-    s = tab.shape[1]
-    nodes = 0
-    for r in range(s):
-        nodes = max(nodes, int(tab[s + 2, r]) + 1)
-    taus = np.empty((n, nodes))
     code = int(prof[0])
     if code == STEP or code == SQUARE:  # `on_segment`: the level of a segment without a switch
         if switches_inside(prof, t0, t1, BREAK_EPS * dt):
             return BREAKPOINT, q, v, i, 0.0
         start = end = torque_at(prof, held, 0.5 * (t0 + t1))
-        taus[:, :] = start
+        taus = substep_inputs(HELD_ARRAY, start, tab, t0, t1 - t0, n)
     else:
         start, end = torque_at(prof, held, t0), torque_at(prof, held, t1)
-        h = t1 - t0
-        sub = h / n
-        for j in range(n):
-            tk = t0 + j * sub
-            for r in range(s):
-                taus[j, int(tab[s + 2, r])] = torque_at(prof, held, tk + tab[s + 1, r] * sub)
+        taus = substep_inputs(prof, held, tab, t0, t1 - t0, n)
     status, q1, v1, i1 = inductive_step_tuple(m, tab, t0, q, v, i, t1 - t0, n, taus)
     if status != OK or not math.isfinite(q1[0] + q1[1] + q1[2] + v1[0] + v1[1] + v1[2] + i1):
         return BREAKPOINT, q, v, i, 0.0

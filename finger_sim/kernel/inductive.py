@@ -26,14 +26,36 @@ class CompiledInductiveRungeKutta(InductiveRungeKutta):
         self.tableau = tableau_array(ref.A, ref.B, ref.C)
         self.nodes = tuple(dict.fromkeys(float(x) for x in ref.C))
         self._kernel = kernel_drive.inductive_step_tuple
+        self._profile_kernel = kernel_drive.inductive_profile_step
         self._numerics = kernel_drive.numerics
+        #: the flat encodings of the profiles stepped under (`profile_array`; None: no compiled form)
+        self._profiles: dict[Profile, np.ndarray | None] = {}
+
+    def _compiled_input(self, torque: TorqueFn) -> tuple[np.ndarray | None, float]:
+        """(flat encoding, held value) of the input `torque` for `kernel.drive.substep_inputs`: a held value
+        (a command, a piecewise-constant segment's level) as HELD_ARRAY and the value, a profile with a
+        compiled form as its encoding; (None, 0.0): evaluate it in Python."""
+        value = getattr(torque, "value", None)
+        if type(value) is float:
+            return HELD_ARRAY, value
+        if isinstance(torque, Profile):
+            prof = self._profiles.get(torque, HELD_ARRAY)
+            if prof is HELD_ARRAY:
+                prof = self._profiles[torque] = profile_array(torque)
+            return prof, 0.0
+        return None, 0.0
 
     def advance_state(self, t: float, q: Vec3, v: Vec3, own: tuple[float, ...], dt: float, torque: TorqueFn,
                       n: int) -> tuple[Vec3, Vec3, tuple[float, ...]]:
-        h = dt / n
-        nodes = self.nodes
-        taus = np.array([torque(tk + c * h) for tk in [t + k * h for k in range(n)] for c in nodes]).reshape(n, len(nodes))
-        status, q1, v1, i1 = self._kernel(self.model, self.tableau, t, q, v, own[0], dt, n, taus)
+        prof, held = self._compiled_input(torque)
+        if prof is not None:  # the input at the substep nodes evaluated in the same call
+            status, q1, v1, i1 = self._profile_kernel(self.model, self.tableau, t, q, v, own[0], dt, n, prof, held)
+        else:
+            h = dt / n
+            nodes = self.nodes
+            taus = np.array([torque(tk + c * h) for tk in [t + k * h for k in range(n)]
+                             for c in nodes]).reshape(n, len(nodes))
+            status, q1, v1, i1 = self._kernel(self.model, self.tableau, t, q, v, own[0], dt, n, taus)
         if status != self._numerics.OK:
             check_status(status, self.name, t, q)
         return q1, v1, (i1,)
