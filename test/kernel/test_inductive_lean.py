@@ -129,3 +129,19 @@ def test_auto_says_which_kernel_carries_the_current():
     scene = free_scene({}, None)
     assert "each rolling step (input, substeps, guards) is one compiled call" in Simulator(scene).method_reason
     assert Simulator(scene, kernel="python").method_reason.endswith("; the Python path carries the current")
+
+
+def test_auto_runs_a_short_inductive_run_offline_on_the_compiled_kernel(monkeypatch):
+    """Loading numba (≈ 0.5 s) pays for itself within some 60 steps of an inductive drive (its Python step
+    costs 10–40 ms), not the 20 000 steps of a torque-driven rk6 run: a 100-step run is compiled, the same
+    run with L = 0 stays in Python while numba is not loaded."""
+    import sys
+
+    from finger_sim.kernel import offline_kernel
+
+    monkeypatch.delitem(sys.modules, "numba", raising=False)  # as in a fresh process
+    inductive = free_scene({}, None)
+    plain = scene_from_dict({"model": {"drive": {}}, "input": {"voltage": {"type": "constant", "value": 6.0}}})
+    assert offline_kernel("auto", 100, inductive) == "auto"
+    assert offline_kernel("auto", 100, plain) == offline_kernel("auto", 100) == "python"
+    assert offline_kernel("python", 100, inductive) == "python"
