@@ -156,7 +156,7 @@ def write_simulated(path: str | Path, scene: Scene, *, columns: str, every: int 
     ros: the torque column is the scene's profile τ(t) at each state's time (with a drive: the mesh
     torque on link 1). A drive's outputs are taken as the run goes (`actuators.record`).
     """
-    sim = Simulator(scene, kernel=offline_kernel(kernel, scene.step_count))
+    sim = Simulator(scene, kernel=offline_kernel(kernel, scene.step_count, scene))
     system = sim.system
     drive = scene.drive is not None
 

@@ -30,7 +30,7 @@ def simulate(scene: Scene, *, kernel: str = "auto") -> Trajectory:
     "auto" runs a short scene in Python (`kernel.offline_kernel`: loading numba costs more).
     """
     n = scene.step_count
-    sim = Simulator(scene, kernel=stepper_slot.kernel().offline_kernel(kernel, n))
+    sim = Simulator(scene, kernel=stepper_slot.kernel().offline_kernel(kernel, n, scene))
     x0 = (*sim.q, *sim.v)
     start = time.perf_counter()
     drive_outputs: dict[str, np.ndarray] = {}

@@ -32,8 +32,8 @@ class CompiledKernel(Protocol):
         """The integrator class that steps `system` with `method` on the requested kernel, and the kernel's name."""
         ...
 
-    def offline_kernel(self, kernel: str, steps: int) -> str:
-        """The kernel for an offline run of `steps` steps ("auto" may become "python" for a short one)."""
+    def offline_kernel(self, kernel: str, steps: int, scene: Any = None) -> str:
+        """The kernel for an offline run of `steps` steps of `scene` ("auto" may become "python" for a short one)."""
         ...
 
     def model_array(self, system: FingerSystem) -> np.ndarray | None:
@@ -72,6 +72,10 @@ class CompiledKernel(Protocol):
 
     def compiled_inductive(self) -> type:
         """The compiled Runge–Kutta class of an inductive drive (`actuators.inductive`'s twin)."""
+        ...
+
+    def inductive_fast_stepper(self, integrator: Integrator, dt: float, profile: Profile, drive: Any) -> Any:
+        """The lean step of an inductive drive scene without gaps: input, substeps and guards in one call."""
         ...
 
     def compiled_drive(self) -> ModuleType:

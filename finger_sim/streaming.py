@@ -59,7 +59,7 @@ def stream_csv(scene: Scene, path: str | Path, *, kernel: str = "auto") -> Strea
     kernel: as `Simulator`'s; "auto" keeps a short run in Python (`kernel.offline_kernel`).
     """
     steps = scene.step_count
-    sim = Simulator(scene, kernel=offline_kernel(kernel, steps))
+    sim = Simulator(scene, kernel=offline_kernel(kernel, steps, scene))
     names = output_names(sim.system.elements, sim.q)  # the elements' outputs follow the 9 base columns
     drive = sim._drive is not None  # then the drive's outputs follow, taken as the run goes (actuators.record)
     if drive:

@@ -115,6 +115,18 @@ class InductiveRungeKutta(StatefulRungeKutta):
         super().__init__(system, system.drive)
 
 
+def kernel_note(kernel: str, gaps: bool) -> str:
+    """What the method's reason says of the kernel that steps the current (`kernel`: the Setup's name,
+    "python" or "numba-…"); gaps: the scene has stops or contact."""
+    if kernel == "python":
+        return "; the Python path carries the current"
+    if gaps:
+        return (f"; {kernel} carries the current in its substeps, the events (mesh modes, current limit, stops, "
+                "contact) located in Python")
+    return (f"; {kernel} carries the current: each rolling step (input, substeps, guards) is one compiled call, "
+            "a step with an event is located in Python")
+
+
 def integrator_class(integrator_cls: type[Integrator], substeps: int) -> type[Integrator]:
     """The class that steps an inductive drive with the method of `integrator_cls` (a Python
     ExplicitRungeKutta or its compiled twin, `kernel.integrators.CompiledRungeKutta`)."""

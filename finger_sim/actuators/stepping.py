@@ -136,8 +136,14 @@ def start(sim: Simulator) -> None:
 
 def fast_stepper(sim: Simulator) -> object | None:
     """The lean compiled path of a drive scene's `Simulator.step` (`kernel.drive.DrivenFastStepper`):
-    a compiled fixed-step method on a scene without gaps (stops, contact); else None."""
-    if sim._gaps or not hasattr(sim.integrator, "step_plan"):
+    a compiled fixed-step method on a scene without gaps (stops, contact); else None. With L > 0 the
+    compiled inductive step's (`kernel.inductive.InductiveFastStepper`)."""
+    if sim._gaps:
+        return None
+    if sim.system.drive.inductive and hasattr(sim.integrator, "model"):  # type: ignore[attr-defined]
+        return stepper_slot.kernel().inductive_fast_stepper(sim.integrator, sim.dt, sim.scene.torque,
+                                                            sim.system.drive)  # type: ignore[attr-defined]
+    if not hasattr(sim.integrator, "step_plan"):
         return None
     driven = stepper_slot.kernel().compiled_drive()  # numba is loaded by now
     return driven.DrivenFastStepper(sim.integrator, sim.dt, sim.scene.torque, sim.system.drive)  # type: ignore[arg-type,attr-defined]

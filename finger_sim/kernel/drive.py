@@ -19,12 +19,12 @@ import numpy as np
 
 from finger_sim.actuators import drive as law
 from finger_sim.actuators.stepping import GUARD_TOLERANCE
-from finger_sim.inputs import HELD_ARRAY, SQUARE, STEP, Profile, profile_array
+from finger_sim.inputs import BREAK_EPS, HELD_ARRAY, SQUARE, STEP, Profile, profile_array
 from finger_sim.kernel import numerics
 from finger_sim.kernel.integrators import WARM_UP_STATE, CompiledRungeKutta, FastStepper, _entry_point
 from finger_sim.kernel.layout import BREAKPOINT, OK
-from finger_sim.kernel.numerics import (JIT, generalized_force, njit, plan_parts, project, solved_accelerations, torque_at,
-                                        trig)
+from finger_sim.kernel.numerics import (JIT, generalized_force, njit, plan_parts, project, solved_accelerations,
+                                        switches_inside, torque_at, trig)
 
 motor_current = njit(**JIT)(law.motor_current)
 unclamped_current = njit(**JIT)(law.unclamped_current)
@@ -233,3 +233,79 @@ def inductive_step_tuple(m, tab, t, q, v, i, h, n, taus):
         if status != OK:
             break
     return status, (x[0], x[1], x[2]), (x[3], x[4], x[5]), x[6]
+
+
+# -- L > 0, the lean step: one kernel call per rolling step (`kernel.inductive.InductiveFastStepper`) ----
+current_limit_guard = njit(**JIT)(law.current_limit_guard)
+
+
+@njit(**JIT)
+def inductive_guards(m, t, q0, q1, q2, v0, v1, v2, i, u, direction):
+    """(turn, flank, limit) of the rolling mesh at the winding current i (A) under u (V):
+    `inductive_stepping._guards` without stick–slip friction, compiled. NaN where the flank is not unique."""
+    o = m.shape[0] - BLOCK
+    limit = current_limit_guard(u, i, m[o + 3] * v0, m[o + 6], m[o + 5], m[o + 7], m[o + 8])
+    if m[o + 1] == 1.0 and m[o + 2] == 1.0:  # an ideal gear: no flanks, and no turn without friction
+        return math.inf, math.inf, limit
+    s1, c1, s2, c2, s3, c3, su, cu = _trig(m, q0, q1, q2)
+    tau_g = _mesh_torque_at(m, o, t, q0, q1, q2, v0, v1, v2, i, s1, c1, s2, c2, s3, c3, su, cu)
+    s = direction
+    return s * v0, (s if m[o] == DRIVE else -s) * tau_g, limit
+
+
+@njit(**JIT)
+def substep_inputs(prof, held, tab, t, h, n):
+    """The input (V) at each distinct node of each of n substeps of h/n from t (s), n × nodes: what
+    `CompiledInductiveRungeKutta.advance_state` evaluates in Python, here from the profile's flat encoding."""
+    s = tab.shape[1]
+    nodes = 0
+    for r in range(s):
+        nodes = max(nodes, int(tab[s + 2, r]) + 1)
+    taus = np.empty((n, nodes))
+    sub = h / n
+    for j in range(n):
+        tk = t + j * sub
+        for r in range(s):
+            taus[j, int(tab[s + 2, r])] = torque_at(prof, held, tk + tab[s + 1, r] * sub)
+    return taus
+
+
+@njit(**JIT)
+def inductive_profile_step(m, tab, t, q, v, i, h, n, prof, held):
+    """`inductive_step_tuple` with the input from a profile's flat encoding (`substep_inputs`)."""
+    return inductive_step_tuple(m, tab, t, q, v, i, h, n, substep_inputs(prof, held, tab, t, h, n))
+
+
+@njit(**JIT)
+def inductive_fast_step(plan, prof, held, k, q, v, i, direction, n):
+    """`Simulator.step` k of an inductive drive scene without gaps while its mesh rolls through the whole
+    step, in one call: the input at every substep node, n substeps of `inductive_rk_step` (the integrator's
+    `advance_state`) and the guards of `inductive_stepping._first_event` at both ends, on the same values.
+    Returns (status, q, q', i at the end (A), u at the end (V)). A step that starts stuck, holds a switch
+    of the input, crosses a guard (turn, flank, the current limit starting or ending) or leaves a
+    non-finite value is not done: status BREAKPOINT, state unchanged, and the Python event loop takes it
+    (locating the event there, and setting i = ±i_max exactly where the limit starts to act)."""
+    dt, m, tab = plan_parts(plan)
+    o = m.shape[0] - BLOCK
+    if m[o] == STUCK:
+        return BREAKPOINT, q, v, i, 0.0
+    t0, t1 = k * dt, (k + 1) * dt
+    code = int(prof[0])
+    if code == STEP or code == SQUARE:  # `on_segment`: the level of a segment without a switch
+        if switches_inside(prof, t0, t1, BREAK_EPS * dt):
+            return BREAKPOINT, q, v, i, 0.0
+        start = end = torque_at(prof, held, 0.5 * (t0 + t1))
+        taus = substep_inputs(HELD_ARRAY, start, tab, t0, t1 - t0, n)
+    else:
+        start, end = torque_at(prof, held, t0), torque_at(prof, held, t1)
+        taus = substep_inputs(prof, held, tab, t0, t1 - t0, n)
+    status, q1, v1, i1 = inductive_step_tuple(m, tab, t0, q, v, i, t1 - t0, n, taus)
+    if status != OK or not math.isfinite(q1[0] + q1[1] + q1[2] + v1[0] + v1[1] + v1[2] + i1):
+        return BREAKPOINT, q, v, i, 0.0
+    g0 = inductive_guards(m, t0, q[0], q[1], q[2], v[0], v[1], v[2], i, start, direction)
+    g1 = inductive_guards(m, t1, q1[0], q1[1], q1[2], v1[0], v1[1], v1[2], i1, end, direction)
+    if math.isnan(g0[2] + g1[0] + g1[1] + g1[2]):  # a flank that is not unique: the Python path says so
+        return BREAKPOINT, q, v, i, 0.0
+    if g1[0] < -GUARD_TOLERANCE or g1[1] < -GUARD_TOLERANCE or (g0[2] < 0.0) != (g1[2] < 0.0):
+        return BREAKPOINT, q, v, i, 0.0
+    return OK, q1, v1, i1, end

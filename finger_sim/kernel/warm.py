@@ -74,7 +74,23 @@ def warm() -> list[str]:
         task = dataclasses.replace(task, scene=task.scene.with_overrides(duration=STEPS * task.scene.dt))
         run_task_rows(task, factory, [("a", {}), ("b", {"ki": 2.0})])  # the drive tasks' closed loop
     _warm_stick_slip()
-    return [*done, "batch", "rollout", "task sweep", "drive task sweep", "stick-slip (L = 0, L > 0)"]
+    _warm_inductive_lean()
+    return [*done, "batch", "rollout", "task sweep", "drive task sweep", "stick-slip (L = 0, L > 0)",
+            "the inductive drive's lean step"]
+
+
+def _warm_inductive_lean() -> None:
+    """The lean step of an inductive drive without gaps (`kernel.drive.inductive_fast_step`), as the node
+    steps it: the scene's profile and a held command."""
+    from finger_sim.scene import scene_from_dict
+    from finger_sim.simulate import Simulator
+
+    free = scene_from_dict({"model": {"drive": {"inductance": STICK_SLIP_INDUCTANCE}},
+                            "input": {"voltage": STICK_SLIP_VOLTAGE}, "duration": STEPS * 0.001})
+    sim = Simulator(free, kernel="compiled")
+    for _ in range(STEPS):
+        sim.step()
+    sim.step(0.0)
 
 
 def _warm_stick_slip() -> None:

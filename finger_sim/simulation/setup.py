@@ -104,6 +104,10 @@ def setup_for(scene: Scene, kernel: str, effects: tuple[Effect, ...]) -> Setup:
         depth_sources = tuple((next(p for p, g in enumerate(gaps) if g.element is depth.contact and g.index == i), rho)
                               for i, rho in enumerate(depth.offsets))
         gaps += tuple(Gap(depth, i, None) for i in range(len(depth.offsets)))  # type: ignore[arg-type]
+    if inductive:
+        from finger_sim.actuators.inductive import kernel_note
+
+        reason += kernel_note(kernel_name, bool(gaps))
     fast_stepper = None
     if hasattr(integrator_cls, "step_plan") and not gaps and getattr(system, "drive", None) is None:
         fast_stepper = stepper_slot.kernel().fast_stepper(integrator_cls(system), scene.dt, scene.torque)
