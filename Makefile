@@ -5,7 +5,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
 
-.PHONY: run test test-half-ros test-half-rest test-noros bench clean browser
+.PHONY: run test test-serial test-half-ros test-half-rest test-noros bench clean browser
 
 $(STAMP): setup.py setup.cfg package.xml
 	test -x $(PY) || python3 -m venv $(VENV)
@@ -41,6 +41,11 @@ test: $(STAMP) browser
 	@mkdir -p out
 	@$(MAKE) --no-print-directory -k -j2 --output-sync=target test-half-ros test-half-rest; status=$$?; \
 	  for half in ros rest; do echo "make test, $$half half: $$(tail -n 1 out/test-$$half.txt)"; done; exit $$status
+
+# The same tests in one process, one after the other (the suite before the halves; for a side-by-side timing).
+test-serial: $(STAMP) browser
+	$(PY) -m finger_sim.kernel.warm
+	$(VENV)/bin/pytest -q
 
 HALF_MARK_ros  := ros
 HALF_MARK_rest := not ros
