@@ -5,7 +5,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
 
-.PHONY: run test test-noros bench clean browser
+.PHONY: run test test-serial test-half-ros test-half-rest test-noros bench clean browser
 
 $(STAMP): setup.py setup.cfg package.xml
 	test -x $(PY) || python3 -m venv $(VENV)
@@ -31,9 +31,27 @@ run: $(STAMP)
 
 # The numba cache is keyed by the compiled sources: after an edit it is warmed again (well under a
 # second when nothing changed), so that the suite's cache test sees what a fresh install leaves.
+#
+# Two halves at once, one per core (docs/test_suite.md): the ROS tests (marker `ros`: they mostly wait on
+# nodes and wall-clock time) and the ROS-free rest (CPU-bound); together they are every test, each once.
+# Each half's output is shown whole when it ends, both summary lines again at the end, and a failure in
+# either half fails `make test`. One half alone: make test-half-ros, make test-half-rest.
 test: $(STAMP) browser
 	$(PY) -m finger_sim.kernel.warm
+	@mkdir -p out
+	@$(MAKE) --no-print-directory -k -j2 --output-sync=target test-half-ros test-half-rest; status=$$?; \
+	  for half in ros rest; do echo "make test, $$half half: $$(tail -n 1 out/test-$$half.txt)"; done; exit $$status
+
+# The same tests in one process, one after the other (the suite before the halves; for a side-by-side timing).
+test-serial: $(STAMP) browser
+	$(PY) -m finger_sim.kernel.warm
 	$(VENV)/bin/pytest -q
+
+HALF_MARK_ros  := ros
+HALF_MARK_rest := not ros
+test-half-ros test-half-rest: test-half-%: $(STAMP)
+	@mkdir -p out
+	@$(VENV)/bin/pytest -q -m "$(HALF_MARK_$*)" > out/test-$*.txt 2>&1; status=$$?; cat out/test-$*.txt; exit $$status
 
 # The suite on a machine without ROS 2: a venv of its own without the ros extra (no rclpy), where the ROS
 # layer (test/ros/, marker `ros`) skips by importorskip and every other test runs (docs/test_suite.md).
