@@ -97,7 +97,7 @@ from .definitions import message_definition, normalize_type_name, type_name_of
 from .errors import LogArgumentError, RecorderStateError
 from . import writer_process
 from .qos import OFFERED_QOS_PROFILES, offered_qos_profiles
-from .writer_process import HEADER, MAX_CHANNELS, Close, Metadata, Register, Start, control_record
+from .writer_process import HEADER, MAX_CHANNELS, MESSAGE_FIELDS, MESSAGE_OPCODE, Close, Metadata, Register, Start, control_record
 
 DEFAULT_CHUNK_INTERVAL_S = 0.5  # log-time span of one chunk: what a kill -9 may lose
 DEFAULT_CHUNK_SIZE = 1 << 20  # uncompressed bytes; bounds memory if an interval holds many messages
@@ -147,7 +147,7 @@ class _Codec:
 
 @dataclass(slots=True)
 class _Channel:
-    index: int  # in the writer process's records (writer_process.HEADER)
+    index: int  # in the writer process's Register records
     type_name: str
     codec: _Codec
     last_sequence: int = 0
@@ -213,7 +213,7 @@ class McapRecorder:
         self._chunk_wall_s = chunk_wall_s
         self._on_problem = on_problem if on_problem is not None else _logger.warning
         self._handover_s = handover_s
-        # Records for the writer process (writer_process.HEADER + payload), taken under _lock
+        # Records for the writer process (a message: its MCAP Message record, writer_process.HEADER + data), taken under _lock
         self._buffer = bytearray()
         self._wake = threading.Event()  # set at close or when half of queue_size waits
         self._room = threading.Event()  # set by the status thread after each report of the writer process
@@ -395,7 +395,8 @@ class McapRecorder:
             else:
                 channel.last_sequence = (channel.last_sequence + 1) % _SEQUENCE_MODULUS
                 buffer = self._buffer
-                buffer += _pack_header(channel.index, channel.last_sequence, log_ns, publish_ns, len(data))
+                buffer += _pack_header(MESSAGE_OPCODE, MESSAGE_FIELDS + len(data), channel.index + 1, channel.last_sequence,
+                                       log_ns, publish_ns)
                 buffer += data
                 self._queued += 1
                 self._queued_bytes += len(data)
@@ -440,7 +441,7 @@ class McapRecorder:
         buffer, pack = self._buffer, _pack_header
         for channel, (_, data) in zip(channels, messages):
             sequence = channel.last_sequence = (channel.last_sequence + 1) % _SEQUENCE_MODULUS
-            buffer += pack(channel.index, sequence, log_ns, log_ns, len(data))
+            buffer += pack(MESSAGE_OPCODE, MESSAGE_FIELDS + len(data), channel.index + 1, sequence, log_ns, log_ns)
             buffer += data
         self._queued += len(messages)
         self._queued_bytes += size
