@@ -31,6 +31,14 @@ A B A B, medians over the rounds, and writes them between the TARGETS markers of
 every-step publishing and recording, and every joint state in the log; 5 kHz physics publishing
 at 1 kHz in real time; a 10-finger finger_hand at 1 kHz. No subscriber but the benchmark's
 /diagnostics client; the figures come from the node's own 1 s diagnostics windows and /proc.
+
+    python -m finger_sim.bench.node_bench --recording [--old <checkout>] [--target-duration 10] [--rounds 3]
+
+measures the two recording goals in one command: finger_node at 1 kHz with recording off and on
+(the CPU recording adds, goal ≤ 20 %) and the 10-finger hand with recording off and on (goal
+≤ 0.35 cores with it on), the four runs in turn each round (and each followed by the same run
+of `--old` if given), with the log writer process's share; writes them between the RECORDING
+markers of --out and prints them.
 """
 
 from __future__ import annotations
