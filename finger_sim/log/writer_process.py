@@ -331,16 +331,20 @@ class ChunkedFile:
         offsets = (pos - start + chunk.count).astype(np.uint64)
         with memoryview(records) as view:
             chunk.record_writer.write(view[start:stop])
+        # every message's index entry, grouped by channel (in order within each): one slice per channel
+        order = np.argsort(channels, kind="stable")
+        grouped = np.empty((len(pos), 2), np.uint64)
+        grouped[:, 0], grouped[:, 1] = log_ns[order], offsets[order]
         ids, first_at, counts = np.unique(channels, return_index=True, return_counts=True)
-        indexes = chunk.message_indices
-        for k in np.argsort(first_at, kind="stable"):
+        bounds = np.concatenate(([0], np.cumsum(counts))).tolist()
+        indexes, channel_counts = chunk.message_indices, stats.channel_message_counts
+        for k in np.argsort(first_at, kind="stable").tolist():
             channel_id = int(ids[k])
             entries = indexes.get(channel_id)
             if entries is None:
                 entries = indexes[channel_id] = PackedMessageIndex(channel_id=channel_id, records=[])
-            mine = channels == channel_id
-            entries.records.append(np.column_stack((log_ns[mine], offsets[mine])))
-            stats.channel_message_counts[channel_id] += int(counts[k])
+            entries.records.append(grouped[bounds[k]:bounds[k + 1]])
+            channel_counts[channel_id] += bounds[k + 1] - bounds[k]
         if self.pending == 0:
             self.opened_at = time.monotonic()
         added = len(pos)
