@@ -75,7 +75,7 @@ from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 HEADER = struct.Struct("<BQHIQQ")
 MESSAGE_OPCODE = int(Opcode.MESSAGE)
 #: A Message record's length less its data.
-MESSAGE_FIELDS = HEADER.size - 9
+MESSAGE_FIELDS = HEADER.size - struct.calcsize("<BQ")  # less its opcode and length
 #: The opcode of a control record, whose body is a pickled control item (MCAP leaves 0x80-0xFF to users).
 CONTROL = 0xFF
 #: Channels a recorder can have (indexes 0 … MAX_CHANNELS - 1; MCAP channel id = index + 1, a uint16).
