@@ -9,7 +9,8 @@ every 0.5 s of log time, zstd, as finger_node records. The input comes from a fi
 writer never waits for a caller. CPU: utime + stime of the writer process (os.wait4), less the
 median of the same process given no messages (interpreter start and imports), per message.
 Each round runs this checkout, then `--old` (put first on PYTHONPATH), then an empty input
-for each (A B A B); medians over the rounds and their ratio. The two files must hold the same
+for each (A B A B); medians over the rounds and their ratio. Each checkout writes its own input
+(its own stdin format), the same messages. The two files must hold the same
 messages (mcap's reader), and the new one must equal the old byte for byte when the old writes
 the same library string (the file is otherwise what mcap writes).
 """
@@ -25,7 +26,7 @@ import tempfile
 from datetime import datetime, timezone
 from pathlib import Path
 
-from finger_sim.log.writer_process import HEADER, Close, Register, Start, control_record
+from finger_sim.log.writer_process import Close, Register, Start, control_record, message_record
 
 ROOT = Path(__file__).resolve().parents[2]
 #: The node's three per-step messages: topic, type, CDR bytes (a JointState of three joints, a PoseStamped, a Clock).
@@ -47,16 +48,26 @@ def writer_input(path: Path, log: Path, messages: int) -> None:
         step, index = divmod(n, len(TOPICS))
         t = step * STEP_NS
         data = payloads[index][:-4] + (step % (1 << 32)).to_bytes(4, "little")  # a changing field, as in a real log
-        parts.append(HEADER.pack(index, step + 1, t, t, len(data)) + data)
+        parts.append(message_record(index, step + 1, t, t, data))
     parts.append(control_record(Close()))
     path.write_bytes(b"".join(parts))
 
 
-def run_writer(stdin: Path, pythonpath: str | None, workdir: Path) -> float:
-    """CPU seconds of one writer process fed `stdin`."""
+def _env(pythonpath: str) -> dict[str, str]:
     env = dict(os.environ)
-    if pythonpath:
-        env["PYTHONPATH"] = pythonpath + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    env["PYTHONPATH"] = pythonpath + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    return env
+
+
+def side_input(path: Path, log: Path, messages: int, pythonpath: str, workdir: Path) -> None:
+    """`writer_input` as the checkout at `pythonpath` writes it (its own stdin format)."""
+    code = f"from pathlib import Path; from finger_sim.bench.log_writer_bench import writer_input; writer_input(Path({str(path)!r}), Path({str(log)!r}), {messages})"
+    subprocess.run([sys.executable, "-c", code], env=_env(pythonpath), cwd=workdir, check=True)
+
+
+def run_writer(stdin: Path, pythonpath: str, workdir: Path) -> float:
+    """CPU seconds of one writer process fed `stdin`."""
+    env = _env(pythonpath)
     with stdin.open("rb") as f:
         # cwd outside any checkout: `python -c` puts the working folder first on sys.path
         proc = subprocess.Popen([sys.executable, "-c", WRITER], stdin=f, stdout=subprocess.DEVNULL, env=env, cwd=workdir)
@@ -81,15 +92,16 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
-        full, empty = work / "full.in", work / "empty.in"
-        writer_input(full, work / "log.mcap", args.messages)
-        writer_input(empty, work / "empty.mcap", 0)
+        sides = {"new": str(ROOT), "old": args.old}
+        for name, path in sides.items():  # each checkout's own stdin format
+            side_input(work / f"{name}_full.in", work / "log.mcap", args.messages, path, work)
+            side_input(work / f"{name}_empty.in", work / "empty.mcap", 0, path, work)
         cpu: dict[str, list[float]] = {"new": [], "old": [], "new empty": [], "old empty": []}
         for _ in range(args.rounds):
-            for name, path in (("new", None), ("old", args.old)):
-                cpu[name].append(run_writer(full, path or str(ROOT), work))
+            for name, path in sides.items():
+                cpu[name].append(run_writer(work / f"{name}_full.in", path, work))
                 os.replace(work / "log.mcap", work / f"{name}.mcap")
-                cpu[f"{name} empty"].append(run_writer(empty, path or str(ROOT), work))
+                cpu[f"{name} empty"].append(run_writer(work / f"{name}_empty.in", path, work))
         new_messages, old_messages = messages_in(work / "new.mcap"), messages_in(work / "old.mcap")
         if new_messages != old_messages or len(new_messages) != args.messages:
             raise RuntimeError("the new and the old writer's files hold different messages")

@@ -31,6 +31,14 @@ A B A B, medians over the rounds, and writes them between the TARGETS markers of
 every-step publishing and recording, and every joint state in the log; 5 kHz physics publishing
 at 1 kHz in real time; a 10-finger finger_hand at 1 kHz. No subscriber but the benchmark's
 /diagnostics client; the figures come from the node's own 1 s diagnostics windows and /proc.
+
+    python -m finger_sim.bench.node_bench --recording [--old <checkout>] [--target-duration 10] [--rounds 3]
+
+measures the two recording goals in one command: finger_node at 1 kHz with recording off and on
+(the CPU recording adds, goal ≤ 20 %) and the 10-finger hand with recording off and on (goal
+≤ 0.35 cores with it on), the four runs in turn each round (and each followed by the same run
+of `--old` if given), with the log writer process's share; writes them between the RECORDING
+markers of --out and prints them.
 """
 
 from __future__ import annotations
@@ -63,6 +71,8 @@ COST_TARGETS = dict(record_cpu=0.20, fast_rtf=30.0, rtf_5k=0.99, hand_cores=0.35
 HAND_FINGERS = 10
 TARGETS_BEGIN = "<!-- TARGETS begin: written by finger_sim/bench/node_bench.py --targets -->"
 TARGETS_END = "<!-- TARGETS end -->"
+RECORDING_BEGIN = "<!-- RECORDING begin: written by finger_sim/bench/node_bench.py --recording -->"
+RECORDING_END = "<!-- RECORDING end -->"
 
 
 @dataclass
@@ -220,6 +230,7 @@ class Window:
 
     cores: float = 0.0
     cpu_per_sim_s: float = 0.0  # CPU s per sim s: the cores real time takes, whatever the load allowed
+    writer_per_sim_s: float = 0.0  # of which the node's child processes (its log writer)
     rtf: list[float] = field(default_factory=list)  # sim s per wall s of each 1 s window
     dropped_steps: int = 0
     log_dropped: int = -1  # the log's status record; -1: not recording
@@ -301,12 +312,15 @@ def measure_window(params: dict, duration: float, domain_id: int, workdir: Path,
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
     windows: list[dict[str, str]] = []
-    cpu_at: list[float] = []  # the node's CPU s when each window arrived
+    cpu_at: list[float] = []  # the node's CPU s (with its children) when each window arrived
+    own_at: list[float] = []  # the node process's alone
 
     def on_diagnostics(msg: DiagnosticArray) -> None:
         first = [s for s in msg.status if s.name.endswith("simulation")][:1]
         windows.extend({kv.key: kv.value for kv in s.values} for s in first)
-        cpu_at.extend(tree_cpu_seconds(proc.pid) for _ in first)
+        for _ in first:
+            own_at.append(cpu_seconds(proc.pid))
+            cpu_at.append(tree_cpu_seconds(proc.pid))
 
     node.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, QoSProfile(depth=100))
     out = Window()
@@ -329,6 +343,8 @@ def measure_window(params: dict, duration: float, domain_id: int, workdir: Path,
         out.rtf = [float(w["realtime_factor"]) for w in measured]
         sim_s = float(windows[-1]["clock"]) - float(windows[first - 1]["clock"])
         out.cpu_per_sim_s = (cpu_at[-1] - cpu_at[first - 1]) / sim_s if sim_s > 0 else float("nan")
+        children = (cpu_at[-1] - own_at[-1]) - (cpu_at[first - 1] - own_at[first - 1])
+        out.writer_per_sim_s = children / sim_s if sim_s > 0 else float("nan")
         if measured:
             out.dropped_steps = int(measured[-1]["dropped_steps"]) - int(windows[first - 1]["dropped_steps"])
     finally:
@@ -346,23 +362,32 @@ def measure_window(params: dict, duration: float, domain_id: int, workdir: Path,
     return out
 
 
-def targets(old: Path, duration: float, rounds: int, domain_id: int, workdir: Path) -> dict[tuple[str, str], list[Window]]:
-    """Every target's runs, new then old, `rounds` times: (config, 'new' | 'old') → runs."""
+#: The configurations of `--targets`, and those of `--recording` (recording on and off side by side).
+TARGET_CONFIGS = ("1k_off", "1k_rec", "fast_rec", "5k_rec", "hand10_rec")
+RECORDING_CONFIGS = ("1k_off", "1k_rec", "hand10_off", "hand10_rec")
+
+
+def targets(old: Path | None, duration: float, rounds: int, domain_id: int, workdir: Path,
+            names: tuple[str, ...] = TARGET_CONFIGS) -> dict[tuple[str, str], list[Window]]:
+    """The runs of the configurations `names`, new then old (none without `old`), `rounds` times:
+    (config, 'new' | 'old') → runs."""
     base = dict(scene="paper_flexion", torque_source="topic", physics_rate_hz=1000.0, publish_rate_hz=0.0,
                 realtime_factor=1.0, command_timeout=0.5)
-    hand = str(_hand_file(workdir))
-    configs = {
+    hand = {k: v for k, v in base.items() if k != "scene"} | dict(hand=str(_hand_file(workdir)))
+    every = {
         "1k_off": (dict(base, record=False), False),
         "1k_rec": (base, False),
         "fast_rec": (dict(base, realtime_factor=0.0), False),
         "5k_rec": (dict(base, physics_rate_hz=5000.0, publish_rate_hz=1000.0), False),
-        "hand10_rec": ({k: v for k, v in base.items() if k != "scene"} | dict(hand=hand), True),
+        "hand10_off": (dict(hand, record=False), True),
+        "hand10_rec": (hand, True),
     }
-    envs = {"new": ros_env(domain_id), "old": dict(ros_env(domain_id), PYTHONPATH=str(old))}
+    configs = {name: every[name] for name in names}
+    envs = {"new": ros_env(domain_id)} | ({} if old is None else {"old": dict(ros_env(domain_id), PYTHONPATH=str(old))})
     runs: dict[tuple[str, str], list[Window]] = {}
     for r in range(rounds):
         for name, (params, is_hand) in configs.items():
-            for side in ("new", "old"):
+            for side in envs:
                 tag = f"{name}_{side}_{r}"
                 print(f"targets: {tag}", file=sys.stderr, flush=True)
                 runs.setdefault((name, side), []).append(
@@ -441,6 +466,68 @@ def targets_report(runs: dict[tuple[str, str], list[Window]], command: str, old:
         "|---|---|---|---|---|",
         *(f"| {a} | {b} | {c} | {d} | {e} |" for a, b, c, d, e in rows),
         TARGETS_END,
+    ])
+
+
+def recording_report(runs: dict[tuple[str, str], list[Window]], command: str, old: Path | None, duration: float,
+                     rounds: int, load: tuple[tuple, tuple]) -> str:
+    """The two recording goals (CPU added by recording at 1 kHz, the 10-finger hand's cores), each
+    run's figures and the medians, new (and old) side by side."""
+    import statistics
+    from datetime import datetime, timezone
+
+    sides = sorted({side for _, side in runs}, key=("new", "old").index)
+    t = COST_TARGETS
+
+    def med(name: str, side: str, value: Callable[[Window], float] = lambda w: w.cpu_per_sim_s) -> float:
+        return statistics.median(value(w) for w in runs[(name, side)])
+
+    def each(name: str, side: str, value: Callable[[Window], float] = lambda w: w.cpu_per_sim_s) -> str:
+        return ", ".join(f"{value(w):.3f}" for w in runs[(name, side)])
+
+    def added(rec: str, off: str, side: str) -> float:
+        return med(rec, side) / med(off, side) - 1.0
+
+    def ok(flag: bool) -> str:
+        return "yes" if flag else "**no**"
+
+    writer = lambda w: w.writer_per_sim_s  # noqa: E731
+    rows = []
+    for side in sides:
+        rows += [
+            (side, "finger_node 1 kHz, recording off", each("1k_off", side), f"{med('1k_off', side):.3f}", "", ""),
+            (side, "finger_node 1 kHz, recording on", each("1k_rec", side), f"{med('1k_rec', side):.3f}", "", ""),
+            (side, "  of which its log writer process", each("1k_rec", side, writer), f"{med('1k_rec', side, writer):.3f}", "", ""),
+            (side, "**CPU added by recording at 1 kHz**", "", f"{100 * added('1k_rec', '1k_off', side):+.0f} %",
+             f"≤ {100 * t['record_cpu']:.0f} %", ok(added("1k_rec", "1k_off", side) <= t["record_cpu"])),
+            (side, f"{HAND_FINGERS}-finger finger_hand 1 kHz, recording off", each("hand10_off", side),
+             f"{med('hand10_off', side):.3f}", "", ""),
+            (side, f"**{HAND_FINGERS}-finger finger_hand 1 kHz, recording on**", each("hand10_rec", side),
+             f"{med('hand10_rec', side):.3f}", f"≤ {t['hand_cores']:g}", ok(med("hand10_rec", side) <= t["hand_cores"])),
+            (side, "  of which its log writer process", each("hand10_rec", side, writer),
+             f"{med('hand10_rec', side, writer):.3f}", "", ""),
+            (side, "  CPU added by recording, hand", "", f"{100 * added('hand10_rec', 'hand10_off', side):+.0f} %", "", ""),
+            (side, "  real-time factor, median window (1 kHz off, on; hand off, on)", "",
+             " / ".join(f"{med(n, side, lambda w: statistics.median(w.rtf) if w.rtf else float('nan')):.3f}"
+                        for n in RECORDING_CONFIGS), "", ""),
+        ]
+    old_text = f", old = `{old}` first on PYTHONPATH (the same venv)" if old is not None else ""
+    return "\n".join([
+        RECORDING_BEGIN,
+        "## Recording's cost and the 10-finger hand, recording on and off side by side",
+        "",
+        f"Command: `{command}` ({datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC). New = this checkout{old_text}. "
+        f"The four runs (finger_node paper_flexion, recording off, on; a {HAND_FINGERS}-finger finger_hand of "
+        "finger_default, off, on; torque from the topic, nobody sending; publishing every step) in turn, "
+        f"{rounds} rounds (A B A B), {duration:g} s measured after {WARMUP_S:g} s of warm-up each; the node's "
+        "default executor. Figures: CPU s (utime + stime of the node process and its log writer process) per "
+        "sim s, from the node's 1 s /diagnostics windows: the cores the run takes at real time. "
+        f"Load average at start {load[0][0]:.1f}, at end {load[1][0]:.1f} on 2 cores.",
+        "",
+        "| side | run | CPU s per sim s, each round | median | goal | met |",
+        "|---|---|---|---|---|---|",
+        *(f"| {a} | {b} | {c} | {d} | {e} | {f} |" for a, b, c, d, e, f in rows),
+        RECORDING_END,
     ])
 
 
@@ -555,14 +642,25 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--domain-id", type=int, default=DEFAULT_DOMAIN_ID)
     parser.add_argument("--out", type=Path, default=ROOT / "docs" / "node_performance.md")
     parser.add_argument("--targets", action="store_true", help="measure the ROS layer's cost targets, new against --old")
-    parser.add_argument("--old", type=Path, default=Path("/work/main"), help="with --targets: the old checkout")
-    parser.add_argument("--target-duration", type=float, default=10.0, help="with --targets: measured s per run")
-    parser.add_argument("--rounds", type=int, default=2, help="with --targets: A B rounds")
+    parser.add_argument("--recording", action="store_true",
+                        help="measure recording's added CPU at 1 kHz and the 10-finger hand's cores, recording on and off")
+    parser.add_argument("--old", type=Path, default=None, help="with --targets (required) or --recording: the old checkout")
+    parser.add_argument("--target-duration", type=float, default=10.0, help="with --targets, --recording: measured s per run")
+    parser.add_argument("--rounds", type=int, default=2, help="with --targets, --recording: A B rounds")
     args = parser.parse_args(argv)
     isolate_dds(args.domain_id)
     command = "python -m finger_sim.bench.node_bench " + " ".join(argv if argv is not None else sys.argv[1:])
     load0 = os.getloadavg()
+    if args.recording:
+        with tempfile.TemporaryDirectory(prefix="node_recording_") as tmp:
+            runs = targets(args.old, args.target_duration, args.rounds, args.domain_id, Path(tmp), RECORDING_CONFIGS)
+        section = recording_report(runs, command.strip(), args.old, args.target_duration, args.rounds, (load0, os.getloadavg()))
+        write_section(args.out, section, RECORDING_BEGIN, RECORDING_END)
+        print(section)
+        return 0
     if args.targets:
+        if args.old is None:
+            parser.error("--targets needs --old (the checkout to compare with)")
         with tempfile.TemporaryDirectory(prefix="node_targets_") as tmp:
             runs = targets(args.old, args.target_duration, args.rounds, args.domain_id, Path(tmp))
         section = targets_report(runs, command.strip(), args.old, args.target_duration, args.rounds, (load0, os.getloadavg()))

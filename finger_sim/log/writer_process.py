@@ -9,10 +9,12 @@ message's bytes to one bytearray; a sender thread hands the bytearray over throu
 process's stdin every few tens of ms (one write, the GIL released), and everything mcap does
 happens in this process, on the other core.
 
-Stdin carries records, each a `HEADER` (channel index, sequence, log time ns, publish time ns,
-payload bytes) and its payload. Channel index `CONTROL` marks a pickled control item instead
-(`Start` first, then `Register`, `Metadata` and `Close`), so that controls keep their order
-among the messages. Stdout carries status lines back: `S taken taken_bytes written lost` after
+Stdin carries records, each an opcode and a length (`_RECORD_PREFIX`) and its body. A message
+comes as the MCAP Message record it becomes in the file (`HEADER`: opcode, length, channel id =
+the recorder's channel index + 1, sequence, log and publish time ns; then the data:
+`message_record`), so that a run of them is appended to the open chunk as it is. Opcode
+`CONTROL` (not an MCAP opcode) marks a pickled control item instead (`Start` first, then
+`Register`, `Metadata` and `Close`), so that controls keep their order among the messages. Stdout carries status lines back: `S taken taken_bytes written lost` after
 each change of the counts, `E text` once for the first I/O failure, `D` when the file is
 finished.
 
@@ -27,7 +29,11 @@ decides when the file ends, by `Close` or by dying.
 Cost: mcap's chunking, compression, chunk and message indexes and summary are used as they are,
 but the per-message part of Writer.add_message (a Message object written field by field, a
 quarter of it the message index written entry by entry) is done here in bulk, to the same bytes
-(`ChunkedFile.add_messages`, `PackedMessageIndex`): 2.3x less CPU per message. This works with
+(`ChunkedFile.add_messages`, `PackedMessageIndex`): the records arrive as mcap writes them, each
+run between two chunk boundaries is appended in one write, and its message index entries, time
+range and counts are taken with numpy over the whole run; Python touches a message only to find
+where the next one starts (docs/node_performance.md: 2.0 µs a message before, 22k messages a
+second for a 10-finger hand). This works with
 mcap's Writer's private state (its open chunk, statistics and chunk index list, mcap 1.x); a
 Writer without it is refused at start, and test/log/test_writer_memory.py compares whole files
 with what mcap's add_message writes.
@@ -43,7 +49,6 @@ writes alone). A kill -9 leaves no temporary file behind (it has no name).
 from __future__ import annotations
 
 import contextlib
-import itertools
 import os
 import pickle
 import select
@@ -53,32 +58,37 @@ import struct
 import sys
 import tempfile
 import time
-from collections import defaultdict
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, BinaryIO
 
+import numpy as np
 from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
 from mcap.records import ChunkIndex, MessageIndex
 from mcap.well_known import MessageEncoding, Profile, SchemaEncoding
 from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 
-#: One record: channel index (uint16), sequence (uint32), log and publish time (uint64 ns), payload bytes (uint32).
-HEADER = struct.Struct("<HIQQI")
-#: The channel index of a control record, whose payload is a pickled control item.
-CONTROL = 0xFFFF
-#: Channels a recorder can have (indexes 0 … MAX_CHANNELS - 1).
-MAX_CHANNELS = CONTROL
+#: A message's record on stdin, as in the file: an MCAP Message record's opcode, length, channel id,
+#: sequence, log and publish time (ns); the data follows.
+HEADER = struct.Struct("<BQHIQQ")
+MESSAGE_OPCODE = int(Opcode.MESSAGE)
+#: A Message record's length less its data.
+MESSAGE_FIELDS = HEADER.size - struct.calcsize("<BQ")  # less its opcode and length
+#: The opcode of a control record, whose body is a pickled control item (MCAP leaves 0x80-0xFF to users).
+CONTROL = 0xFF
+#: Channels a recorder can have (indexes 0 … MAX_CHANNELS - 1; MCAP channel id = index + 1, a uint16).
+MAX_CHANNELS = 0xFFFF
 LIBRARY = f"finger_sim.log; {LIBRARY_IDENTIFIER}"
 _READ_BYTES = 1 << 20  # largest read from stdin at a time
 _NO_SIZE_TRIGGER = 1 << 62  # chunk_size given to mcap's Writer so only this module closes chunks
 _RECORD_PREFIX = struct.Struct("<BQ")  # an MCAP record's opcode and body length
-#: An MCAP Message record's opcode, length, channel id, sequence, log and publish time (ns); the data follows.
-_MESSAGE = struct.Struct("<BQHIQQ")
-_MESSAGE_FIELDS = _MESSAGE.size - _RECORD_PREFIX.size  # the Message record's length less its data
+_LENGTH = struct.Struct("<Q")
+_LENGTH_AT = 1  # the body length's offset in a record
+_CHANNEL_AT, _LOG_TIME_AT = 9, 15  # a Message record's channel id and log time offsets
 _INDEX_ENTRY_BYTES = 16  # a MessageIndex entry: log time and offset, uint64 each
+_U16, _U64 = np.arange(2), np.arange(8)  # byte offsets of a little-endian uint16 and uint64 field
 # mcap.writer.Writer's private state that this module works with (mcap 1.x; checked at start):
 _CHUNK_INDEX_LIST = "_Writer__chunk_indices"  # the list of ChunkIndex kept until finish()
 _CHUNK_BUILDER = "_Writer__chunk_builder"  # the open chunk (mcap._chunk_builder.ChunkBuilder)
@@ -123,7 +133,12 @@ class Close:
 def control_record(item: Start | Register | Metadata | Close) -> bytes:
     """A control item as one stdin record."""
     payload = pickle.dumps(item, protocol=pickle.HIGHEST_PROTOCOL)
-    return HEADER.pack(CONTROL, 0, 0, 0, len(payload)) + payload
+    return _RECORD_PREFIX.pack(CONTROL, len(payload)) + payload
+
+
+def message_record(index: int, sequence: int, log_ns: int, publish_ns: int, data: bytes) -> bytes:
+    """A message of the recorder's channel `index` as one stdin record (its MCAP Message record)."""
+    return HEADER.pack(MESSAGE_OPCODE, MESSAGE_FIELDS + len(data), index + 1, sequence, log_ns, publish_ns) + data
 
 
 class _Record:
@@ -139,14 +154,15 @@ class _Record:
 
 
 class PackedMessageIndex(MessageIndex):
-    """mcap's MessageIndex record, written with one struct call (mcap's makes two calls per entry,
-    a quarter of the writer's time per message): the same bytes."""
+    """mcap's MessageIndex record whose `records` are arrays of (log time, offset) rows (uint64),
+    one per run of messages, written as one block (mcap's makes two struct calls per entry): the
+    same bytes."""
 
     def write(self, stream: RecordBuilder) -> None:
-        entries = len(self.records)
+        entries = np.concatenate(self.records) if self.records else np.empty((0, 2), np.uint64)
         stream.start_record(Opcode.MESSAGE_INDEX)
-        stream.write(struct.pack(f"<HI{2 * entries}Q", self.channel_id, entries * _INDEX_ENTRY_BYTES,
-                                 *itertools.chain.from_iterable(self.records)))
+        stream.write(struct.pack("<HI", self.channel_id, len(entries) * _INDEX_ENTRY_BYTES))
+        stream.write(entries.astype("<u8", copy=False).tobytes())
         stream.finish_record()
 
 
@@ -240,8 +256,6 @@ class ChunkedFile:
         self.opened_at = 0.0  # time.monotonic() at the open chunk's first message
         self._pending_bytes = 0
         self._first_ns = self._last_ns = 0  # log-time range of the open chunk
-        self._unsynced = 0  # messages in the open chunk not yet counted in mcap's state (see _append)
-        self._counts: defaultdict[int, int] = defaultdict(int)  # the same, per mcap channel id
 
     def register(self, item: Register) -> None:
         schema_id = self._schema_ids.get(item.type_name)
@@ -249,84 +263,99 @@ class ChunkedFile:
             schema_id = self._writer.register_schema(
                 name=item.type_name, encoding=SchemaEncoding.ROS2, data=item.definition.encode())
             self._schema_ids[item.type_name] = schema_id
-        self._channel_ids[item.index] = self._writer.register_channel(
+        channel_id = self._writer.register_channel(
             topic=item.topic, message_encoding=MessageEncoding.CDR, schema_id=schema_id, metadata=item.metadata)
+        if channel_id != item.index + 1:  # the records carry index + 1 as their channel id
+            raise RuntimeError(f"channel {item.topic}: mcap gave id {channel_id}, the records carry {item.index + 1}")
 
     def add_metadata(self, item: Metadata) -> None:
         self._writer.add_metadata(item.name, item.data)
         self._file.flush()  # the record is outside chunks: push it out without cutting the chunk
 
-    def add_messages(self, records: bytearray, start: int, stop: int) -> int:
-        """Add the HEADER-framed messages in records[start:stop] (no control among them), in order;
-        returns the messages newly committed to the file (chunks closed).
+    def add_messages(self, records: bytearray, start: int, stop: int, positions: list[int] | None = None) -> int:
+        """Add the Message records in records[start:stop] (no control among them; `positions`:
+        where each starts, if known), in order; returns the messages newly committed to the file
+        (chunks closed).
 
-        This is the writer's per-message path. Each message becomes the MCAP Message record that
-        mcap's Writer.add_message would write (the same bytes: test_writer_memory compares whole
-        files), appended to the open chunk in one write per run, and the chunk's message index,
-        time range and the file's statistics are updated as mcap updates them; mcap still closes,
-        compresses and indexes the chunks. Less than half the CPU per message of add_message, which
-        builds a record object and writes it field by field (docs/recording_performance.md).
+        This is the writer's per-message path: the records are what mcap's Writer.add_message
+        would write (the same bytes: test_writer_memory compares whole files); each run of them
+        within one chunk is appended to the open chunk in one write, and the chunk's message
+        index, time range and the file's statistics are updated as mcap updates them, with numpy
+        over the run; mcap still closes, compresses and indexes the chunks.
         """
-        committed = 0
-        channel_ids, interval, size_limit = self._channel_ids, self._interval_ns, self._chunk_size
-        header_size, unpack_from, pack = HEADER.size, HEADER.unpack_from, _MESSAGE.pack
-        out = bytearray()  # the open chunk's new records
-        base = self._chunk.count  # offset of `out` in the chunk's uncompressed records
-        indexes = self._chunk.message_indices
-        counts = self._counts
-        with memoryview(records) as view:
-            at = start
-            while at < stop:
-                index, sequence, log_ns, publish_ns, size = unpack_from(view, at)
-                body, at = at + header_size, at + header_size + size
-                if self.pending:
-                    first, last = self._first_ns, self._last_ns
-                    if (last if last > log_ns else log_ns) - (first if first < log_ns else log_ns) >= interval:
-                        self._append(out)
-                        committed += self.close_chunk()
-                        out, base = bytearray(), self._chunk.count
-                channel_id = channel_ids[index]
-                entries = indexes.get(channel_id)
-                if entries is None:
-                    entries = indexes[channel_id] = PackedMessageIndex(channel_id=channel_id, records=[])
-                entries.records.append((log_ns, base + len(out)))
-                out += pack(Opcode.MESSAGE, _MESSAGE_FIELDS + size, channel_id, sequence, log_ns, publish_ns)
-                out += view[body:at]
-                counts[channel_id] += 1
-                if self.pending == 0:
-                    self._first_ns = self._last_ns = log_ns
-                    self.opened_at = time.monotonic()
-                elif log_ns < self._first_ns:
-                    self._first_ns = log_ns
-                elif log_ns > self._last_ns:
-                    self._last_ns = log_ns
-                self.pending += 1
-                self._unsynced += 1
-                self._pending_bytes += size
-                if self._pending_bytes >= size_limit:
-                    self._append(out)
-                    committed += self.close_chunk()
-                    out, base = bytearray(), self._chunk.count
-        self._append(out)
+        if positions is None:
+            positions, at, length_at = [], start, _RECORD_PREFIX.size
+            unpack_length = _LENGTH.unpack_from
+            while at < stop:  # the one per-message Python step: where each record starts
+                positions.append(at)
+                at += length_at + unpack_length(records, at + _LENGTH_AT)[0]
+        if not positions:
+            return 0
+        pos = np.array(positions, dtype=np.int64)
+        ends = np.append(pos[1:], stop)
+        raw = np.frombuffer(records, dtype=np.uint8)
+        try:  # copies: `records` must not stay exported (the caller resizes it)
+            channels = raw[(pos + _CHANNEL_AT)[:, None] + _U16].view("<u2")[:, 0].astype(np.int64)
+            log_ns = raw[(pos + _LOG_TIME_AT)[:, None] + _U64].view("<u8")[:, 0].copy()
+        finally:
+            del raw
+        sizes = ends - pos - HEADER.size  # the data bytes of each
+        committed, i, n = 0, 0, len(pos)
+        while i < n:
+            times = log_ns[i:]
+            first = np.uint64(self._first_ns if self.pending else times[0])
+            last = np.uint64(self._last_ns if self.pending else times[0])
+            lo = np.minimum.accumulate(np.minimum(times, first))
+            hi = np.maximum.accumulate(np.maximum(times, last))
+            too_long = np.flatnonzero(hi - lo >= self._interval_ns)  # closes the chunk before that message
+            full = np.flatnonzero(self._pending_bytes + np.cumsum(sizes[i:]) >= self._chunk_size)  # ... after it
+            take = min(too_long[0] if too_long.size else n - i, full[0] + 1 if full.size else n - i)
+            if take == 0:  # the open chunk cannot take the next message's log time
+                committed += self.close_chunk()
+                continue
+            self._append(records, pos[i:i + take], int(ends[i + take - 1]), channels[i:i + take], log_ns[i:i + take],
+                         int(sizes[i:i + take].sum()), int(lo[take - 1]), int(hi[take - 1]))
+            i += take
+            if full.size and take == full[0] + 1:
+                committed += self.close_chunk()
         return committed
 
-    def _append(self, out: bytearray) -> None:
-        """Hand the open chunk's new records to mcap's chunk builder, with the counts that
-        Writer.add_message keeps per message: the chunk's message count and log-time range, the
-        file's message counts and range."""
-        added, self._unsynced = self._unsynced, 0
-        if not added:
-            return
+    def _append(self, records: bytearray, pos: np.ndarray, stop: int, channels: np.ndarray, log_ns: np.ndarray,
+                data_bytes: int, first_ns: int, last_ns: int) -> None:
+        """Append the Message records at `pos` (up to `stop`) to the open chunk, with what
+        Writer.add_message keeps per message: the chunk's message index, message count and
+        log-time range (`first_ns`, `last_ns`: the open chunk's with these), the file's
+        message counts and range. Channels are indexed in the order they first appear, as mcap does."""
         chunk, stats = self._chunk, self._stats
-        chunk.record_writer.write(out)
-        chunk.message_start_time, chunk.message_end_time = self._first_ns, self._last_ns  # the whole open chunk's
+        start = int(pos[0])
+        offsets = (pos - start + chunk.count).astype(np.uint64)
+        with memoryview(records) as view:
+            chunk.record_writer.write(view[start:stop])
+        # every message's index entry, grouped by channel (in order within each): one slice per channel
+        order = np.argsort(channels, kind="stable")
+        grouped = np.empty((len(pos), 2), np.uint64)
+        grouped[:, 0], grouped[:, 1] = log_ns[order], offsets[order]
+        ids, first_at, counts = np.unique(channels, return_index=True, return_counts=True)
+        bounds = np.concatenate(([0], np.cumsum(counts))).tolist()
+        indexes, channel_counts = chunk.message_indices, stats.channel_message_counts
+        for k in np.argsort(first_at, kind="stable").tolist():
+            channel_id = int(ids[k])
+            entries = indexes.get(channel_id)
+            if entries is None:
+                entries = indexes[channel_id] = PackedMessageIndex(channel_id=channel_id, records=[])
+            entries.records.append(grouped[bounds[k]:bounds[k + 1]])
+            channel_counts[channel_id] += bounds[k + 1] - bounds[k]
+        if self.pending == 0:
+            self.opened_at = time.monotonic()
+        added = len(pos)
+        self.pending += added
+        self._pending_bytes += data_bytes
+        self._first_ns, self._last_ns = first_ns, last_ns
+        chunk.message_start_time, chunk.message_end_time = first_ns, last_ns  # the whole open chunk's
         chunk.num_messages += added
-        stats.message_start_time = self._first_ns if stats.message_count == 0 else min(stats.message_start_time, self._first_ns)
-        stats.message_end_time = max(stats.message_end_time, self._last_ns)
+        stats.message_start_time = first_ns if stats.message_count == 0 else min(stats.message_start_time, first_ns)
+        stats.message_end_time = max(stats.message_end_time, last_ns)
         stats.message_count += added
-        for channel_id, count in self._counts.items():
-            stats.channel_message_counts[channel_id] += count
-        self._counts.clear()
 
     def close_chunk(self) -> int:
         """Write the open chunk (if any) and flush; returns the messages it held."""
@@ -385,15 +414,16 @@ class _Writer:
         except Exception as exc:  # OSError, or mcap's UnsupportedCompressionError
             self._fail(exc)
 
-    def messages(self, records: bytearray, start: int, stop: int, count: int, payload_bytes: int) -> None:
-        """`count` HEADER-framed messages (`payload_bytes` of data) in records[start:stop]."""
+    def messages(self, records: bytearray, positions: list[int], stop: int) -> None:
+        """The Message records that start at `positions` in `records`, the last ending at `stop`."""
+        count = len(positions)
         self.taken += count
-        self.taken_bytes += payload_bytes
+        self.taken_bytes += stop - positions[0] - count * HEADER.size
         if self.file is None:
             self.lost += count
             return
         self.handed += count
-        self._do(lambda file: file.add_messages(records, start, stop))
+        self._do(lambda file: file.add_messages(records, positions[0], stop, positions))
 
     def control(self, item: object) -> bool:
         """Apply a control item; True at Close (the file is finished)."""
@@ -451,7 +481,7 @@ def main() -> int:
     fd, status = sys.stdin.buffer.fileno(), sys.stdout.buffer
     pending = bytearray()
     writer: _Writer | None = None
-    header_size, unpack_from = HEADER.size, HEADER.unpack_from
+    prefix_size, unpack_from = _RECORD_PREFIX.size, _RECORD_PREFIX.unpack_from
     while True:
         wait = writer.start.handover_s if writer is not None else None
         chunk = os.read(fd, _READ_BYTES) if select.select([fd], [], [], wait)[0] else None
@@ -464,31 +494,31 @@ def main() -> int:
         if chunk:
             pending += chunk
             at, end = 0, len(pending)
-            run, count, payload_bytes = 0, 0, 0  # the messages since the last control: where, how many, data bytes
-            while end - at >= header_size:
-                index, _, _, _, size = unpack_from(pending, at)
-                stop = at + header_size + size
+            positions: list[int] = []  # where each message since the last control starts
+            while end - at >= prefix_size:
+                opcode, length = unpack_from(pending, at)
+                stop = at + prefix_size + length
                 if stop > end:
                     break
-                if index != CONTROL:
-                    at, count, payload_bytes = stop, count + 1, payload_bytes + size
+                if opcode != CONTROL:
+                    positions.append(at)
+                    at = stop
                     continue
-                if count:  # the messages before a control go first
+                if positions:  # the messages before a control go first
                     assert writer is not None
-                    writer.messages(pending, run, at, count, payload_bytes)
-                    got = True
-                item = pickle.loads(pending[at + header_size:stop])
-                at = run = stop
-                count = payload_bytes = 0
+                    writer.messages(pending, positions, at)
+                    got, positions = True, []
+                item = pickle.loads(pending[at + prefix_size:stop])
+                at = stop
                 if isinstance(item, Start):
                     writer = _Writer(item, status)
                 elif writer is not None and writer.control(item):
                     writer.report()
                     writer._line("D")
                     return 0
-            if count:
+            if positions:
                 assert writer is not None
-                writer.messages(pending, run, at, count, payload_bytes)
+                writer.messages(pending, positions, at)
                 got = True
             del pending[:at]
         if writer is not None:

@@ -82,3 +82,15 @@ def test_a_killed_caller_ends_its_writer_which_keeps_the_open_chunk(tmp_path: Pa
         except (McapError, struct.error):  # the end of the file, where the summary would be
             pass
     assert values == [i * 1_000_000 for i in range(COUNT)]
+
+
+def test_a_handover_fits_the_pipe_to_the_writer_process(tmp_path: Path) -> None:
+    """The pipe takes a whole handover (a 10-finger hand's 50 ms: ~170 kB), so the writer process
+    reads it in one or two reads: the kernel's own figure for the pipe's capacity (F_GETPIPE_SZ)."""
+    import fcntl
+
+    from finger_sim.log import McapRecorder
+
+    with McapRecorder(tmp_path / "pipe.mcap") as recorder:
+        assert recorder._process is not None and recorder._process.stdin is not None
+        assert fcntl.fcntl(recorder._process.stdin.fileno(), fcntl.F_GETPIPE_SZ) == 1 << 20

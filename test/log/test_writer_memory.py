@@ -24,7 +24,7 @@ from mcap.well_known import MessageEncoding, Profile, SchemaEncoding
 from mcap.writer import CompressionType, Writer
 from rosbags.highlevel import AnyReader
 
-from finger_sim.log.writer_process import HEADER, LIBRARY, ChunkedFile, Register, _NO_SIZE_TRIGGER
+from finger_sim.log.writer_process import LIBRARY, ChunkedFile, Register, _NO_SIZE_TRIGGER, message_record
 
 TOPICS = ("/a", "/b", "/c", "/d", "/e", "/f")  # a node logs about six topics
 WARMUP_CHUNKS = 200  # chunks before the heap is first measured (buffers, caches, first allocations)
@@ -46,10 +46,10 @@ def chunk_messages(chunk: int) -> list[tuple[int, int, int, int, bytes]]:
 
 
 def framed(messages: list[tuple[int, int, int, int, bytes]]) -> bytearray:
-    """Messages as the writer process reads them: a HEADER and the data each."""
+    """Messages as the writer process reads them: each its MCAP Message record."""
     out = bytearray()
     for index, sequence, log_ns, publish_ns, data in messages:
-        out += HEADER.pack(index, sequence, log_ns, publish_ns, len(data)) + data
+        out += message_record(index, sequence, log_ns, publish_ns, data)
     return out
 
 
