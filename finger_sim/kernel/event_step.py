@@ -214,13 +214,21 @@ def stays_at_rest(ws, t, t1, command, flags, sign, q0, q1, q2):
     `command` (N·m) or, with flag PROFILE, st's profile, as `JointStops.release_time` decides it (the push
     −sign·θ1'' into the gap > 0 at t and at t1; sign: the gap gradient's θ1 component), with REST_MARGIN to
     spare (else False: the Simulator decides). Returns (stays, τ at t1 in N·m)."""
+    if not pushes_at(ws, t, command, flags, sign, q0, q1, q2)[0]:
+        return False, 0.0
+    stays, tau = pushes_at(ws, t1, command, flags, sign, q0, q1, q2)
+    return (True, tau) if stays else (False, 0.0)
+
+
+@njit(**JIT)
+def pushes_at(ws, s, command, flags, sign, q0, q1, q2):
+    """`stays_at_rest`'s test at one time s (s): (whether the push into the stop at rest at q exceeds
+    REST_MARGIN, τ at s in N·m)."""
     m, _, st, arr, _ = parts(ws)
     prof = st[PROFILE_AT:PROFILE_AT + PROFILE_SIZE] if flags & PROFILE else st[HELD_AT:HELD_AT + 1]
     y, f = arr[OUT], arr[Y_NEW]  # scratch rows: neither is read across steps
-    for s in (t, t1):
-        y[0], y[1], y[2], y[3], y[4], y[5] = q0, q1, q2, 0.0, 0.0, 0.0
-        _rhs(m, s, y, torque_at(prof, command, s), f)
-        push = -sign * f[3]
-        if not push > REST_MARGIN * max(1.0, abs(f[3])):
-            return False, 0.0
-    return True, torque_at(prof, command, t1)
+    y[0], y[1], y[2], y[3], y[4], y[5] = q0, q1, q2, 0.0, 0.0, 0.0
+    tau = torque_at(prof, command, s)
+    _rhs(m, s, y, tau, f)
+    push = -sign * f[3]
+    return push > REST_MARGIN * max(1.0, abs(f[3])), tau
