@@ -61,7 +61,7 @@ class Profile:
 
     def kernel_params(self) -> tuple[float, ...]:
         """The numbers the compiled form `kernel_code` reads, in its order (SI): the fields."""
-        return tuple(float(x) for x in asdict(self).values())
+        return tuple(float(getattr(self, f.name)) for f in fields(self))  # (not `asdict`: its deep copies cost ≈ 20 µs)
 
     def breakpoints(self, t0: float, t1: float) -> list[float]:
         """Switching times strictly inside (t0, t1), s."""

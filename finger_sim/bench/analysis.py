@@ -12,8 +12,8 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 from finger_sim.auto import Row, Table
-from finger_sim.bench.plan import KINDS, RATES
-from finger_sim.bench.runners import AUTO, FAMILY_MUJOCO, FAMILY_PROJECT, FAMILY_SCIPY, Run
+from finger_sim.bench.plan import AUTO_DT, KINDS, RATES
+from finger_sim.bench.runners import AUTO, AUTO_WHOLE_RUN, FAMILY_MUJOCO, FAMILY_PROJECT, FAMILY_SCIPY, WHOLE_RUN_SUFFIX, Run
 
 #: Not recommended, whatever they measure: the error-controlled methods. `adaptive` restarts
 #: scipy's DOP853 at every step (0.2-60 ms per step); `dop853` takes as many internal steps as
@@ -102,7 +102,7 @@ def candidates(runs: Sequence[Run], kind: str, rate: int) -> list[Candidate]:
         if (
             r.family == FAMILY_PROJECT
             and r.method not in NOT_RECOMMENDED
-            and r.method != AUTO  # the table's user (run on every scene for the goal at its error), not a candidate
+            and r.method not in (AUTO, AUTO_WHOLE_RUN)  # the table's user (run for the goal at its error), not a candidate
             and r.scene in scenes
             and math.isclose(r.value, dt, rel_tol=1e-9)
         ):
@@ -184,11 +184,13 @@ class ScipyComparison:
 
 
 def _project(runs: Sequence[Run], scene: str, max_dt: float | None) -> list[Run]:
-    """The project's runs on a scene; with max_dt, only those whose step (so output interval) is ≤ max_dt."""
+    """The project's runs on a scene, each timed one `Simulator.step` at a time (not a whole run); with max_dt,
+    only those whose step (so output interval) is ≤ max_dt."""
     return [
         r
         for r in runs
-        if r.scene == scene and r.family == FAMILY_PROJECT and (max_dt is None or r.value <= max_dt * (1 + 1e-9))
+        if r.scene == scene and r.family == FAMILY_PROJECT and not r.method.endswith(WHOLE_RUN_SUFFIX)
+        and (max_dt is None or r.value <= max_dt * (1 + 1e-9))
     ]
 
 
@@ -211,20 +213,19 @@ def compare_scipy(runs: Sequence[Run], scene: str, *, max_dt: float | None = Non
     return ScipyComparison(scene, ours, ours_m, cost, method)
 
 
-#: `auto` is compared with scipy at the error it delivers at this dt (s): the shipped scenes' own step.
-AUTO_DT = 1e-3
-
-
 @dataclass(frozen=True)
 class AutoScipyComparison:
     """`auto` at AUTO_DT on one scene against the CPU scipy's best method and the project's cheapest run need
-    for the same error: auto's own, or the reference floor where auto is below it (`at`). CPU in s, errors in rad."""
+    for the same error: auto's own, or the reference floor where auto is below it (`at`). CPU in s, errors in rad.
+    auto is timed two ways: one `Simulator.step` at a time (`auto_cpu`, the node's path) and its whole run as
+    `simulate` steps it (`whole_cpu`, what a user running the scene offline gets; NaN where not measured)."""
 
     scene: str
     pick: str  # what auto ran
     error: float  # auto's error
     at: float  # the error compared at: max(error, the reference floor)
     auto_cpu: float
+    whole_cpu: float
     cheapest: float  # the project's cheapest run (any method, any step) to `at`
     cheapest_method: str
     scipy: float  # scipy's best to `at`; where no scipy run reaches it, its most accurate run's CPU
@@ -233,20 +234,33 @@ class AutoScipyComparison:
 
     @property
     def ratio(self) -> float:
-        """scipy's best CPU over auto's."""
-        return self.scipy / self.auto_cpu if 0 < self.auto_cpu < math.inf and self.scipy < math.inf else math.nan
+        """scipy's best CPU over auto's, like for like: over auto's whole run (scipy's is a whole run too), or
+        over its step-by-step run where the whole run was not measured."""
+        return self.step_ratio if math.isnan(self.whole_cpu) else _over(self.scipy, self.whole_cpu)
+
+    @property
+    def step_ratio(self) -> float:
+        """scipy's best CPU over auto's stepped one `Simulator.step` at a time."""
+        return _over(self.scipy, self.auto_cpu)
 
     @property
     def cheapest_ratio(self) -> float:
         """scipy's best CPU over the project's cheapest."""
-        return self.scipy / self.cheapest if 0 < self.cheapest < math.inf and self.scipy < math.inf else math.nan
+        return _over(self.scipy, self.cheapest)
 
 
-def compare_auto(runs: Sequence[Run], scene: str, floor: float, *, auto_label: str = "auto") -> AutoScipyComparison | None:
+def _over(scipy: float, ours: float) -> float:
+    """scipy's CPU over ours; NaN where either is missing (inf, NaN) or ours is 0."""
+    return scipy / ours if 0 < ours < math.inf and scipy < math.inf else math.nan
+
+
+def compare_auto(runs: Sequence[Run], scene: str, floor: float) -> AutoScipyComparison | None:
     """`auto`'s run at AUTO_DT on `scene` against scipy's best and the project's cheapest at its error; None
     when auto's run or every scipy run is missing or failed. floor: the scene's reference floor, rad."""
-    mine = next((r for r in runs if r.scene == scene and r.family == FAMILY_PROJECT and r.method == auto_label
+    mine = next((r for r in runs if r.scene == scene and r.family == FAMILY_PROJECT and r.method == AUTO
                  and math.isclose(r.value, AUTO_DT) and r.ok), None)
+    whole = next((r for r in runs if r.scene == scene and r.family == FAMILY_PROJECT
+                  and r.method == AUTO_WHOLE_RUN and math.isclose(r.value, AUTO_DT) and r.ok), None)
     theirs = [r for r in runs if r.scene == scene and r.family == FAMILY_SCIPY and "numpy" not in r.method and r.ok]
     if mine is None or not theirs:
         return None
@@ -257,8 +271,8 @@ def compare_auto(runs: Sequence[Run], scene: str, floor: float, *, auto_label: s
     if not reaches:  # a lower bound: the CPU of scipy's most accurate run, still short of `at`
         best = min(theirs, key=lambda r: (r.error, r.cpu))
         cost, method = best.cpu, best.method
-    return AutoScipyComparison(scene, mine.note, mine.error, at, mine.cpu, cheapest, cheapest_method, cost, method,
-                               reaches)
+    return AutoScipyComparison(scene, mine.note, mine.error, at, mine.cpu, math.nan if whole is None else whole.cpu,
+                               cheapest, cheapest_method, cost, method, reaches)
 
 
 @dataclass(frozen=True)

@@ -4,8 +4,8 @@
 
 The work-precision report's comparison at `auto`'s own error (`analysis.compare_auto`, the bench's
 reference, scipy's rows with their event handling, `runners.run_scipy`) for `auto` at 1 ms timed two
-ways in one process: one `Simulator.step` per step (the node's path, the report's row) and the whole
-run as `simulate` steps it (`runners.run_method(whole_run=True)`: stretches of steps in one kernel call,
+ways in one process: one `Simulator.step` per step (the node's path) and the whole
+run as `simulate` steps it (`runners.run_method(whole_run=True)`, the report's goal row: stretches of steps in one kernel call,
 `kernel.run_stretch`), with the same states. Prints one row per scene: CPU per run (median of the
 repeats) and scipy's best CPU at the same error over each. Load on the shared machine moves all
 rows of one scene alike (they run within seconds of each other); quote the ratios.
@@ -14,6 +14,7 @@ rows of one scene alike (they run within seconds of each other); quote the ratio
 from __future__ import annotations
 
 import argparse
+import math
 import os
 from datetime import datetime, timezone
 
@@ -25,8 +26,6 @@ from finger_sim.scene import load_scene
 
 #: The shipped scenes whose `auto` steps through the compiled event step (stops or contact).
 EVENT_SCENES = ("paper_to_stop", "grasp_cylinder", "press_table", "grasp_impact", "grasp_rigid")
-#: The row label of the whole run (the report's `auto` row is the step-by-step one).
-WHOLE_RUN = "auto (whole run)"
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -45,17 +44,14 @@ def main(argv: list[str] | None = None) -> None:
         kw = {"spacing": SPACING, "repeats": args.repeats}
         stepped = run_method(scene, AUTO, an.AUTO_DT, ref, **kw)
         whole = run_method(scene, AUTO, an.AUTO_DT, ref, whole_run=True, **kw)
-        whole.method = WHOLE_RUN
         runs = [stepped, whole] + [run_scipy(scene, m, rtol, ref, **kw) for m in SCIPY_METHODS for rtol in args.rtols]
-        a = an.compare_auto(runs, name, ref.check_difference)
-        b = an.compare_auto(runs, name, ref.check_difference, auto_label=WHOLE_RUN)
-        if a is None or b is None:
+        c = an.compare_auto(runs, name, ref.check_difference)
+        if c is None or math.isnan(c.whole_cpu):
             print(f"{name} | no comparison (auto or every scipy run failed)")
             continue
-        bound = "" if a.scipy_reaches else " (scipy short of it: a lower bound)"
-        print(f"{name} | {a.error:.2e} / {b.error:.2e} | {1e3 * a.auto_cpu:.3f} | {1e3 * b.auto_cpu:.3f} | "
-              f"{1e3 * a.scipy:.3f} {a.scipy_method}{bound} | {a.scipy / a.auto_cpu:.1f}× | {b.scipy / b.auto_cpu:.1f}×",
-              flush=True)
+        bound = "" if c.scipy_reaches else " (scipy short of it: a lower bound)"
+        print(f"{name} | {c.error:.2e} / {whole.error:.2e} | {1e3 * c.auto_cpu:.3f} | {1e3 * c.whole_cpu:.3f} | "
+              f"{1e3 * c.scipy:.3f} {c.scipy_method}{bound} | {c.step_ratio:.1f}× | {c.ratio:.1f}×", flush=True)
 
 
 if __name__ == "__main__":

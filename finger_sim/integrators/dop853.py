@@ -68,6 +68,9 @@ MAX_ATTEMPTS = 60
 MAX_STEP = 0.1
 #: Weight of the 3rd-order estimate in DOP853's error combination |e5|²/√(|e5|² + w|e3|²) (scipy's).
 E3_WEIGHT = 0.01
+#: `initial_step`: the first internal step is this share of ‖y‖/‖y'‖ (both scaled), or TINY_FIRST_STEP (s)
+#: where either scaled norm is below TINY_NORM (a state at rest, or at zero): Hairer's and scipy's constants.
+FIRST_STEP_SHARE, TINY_FIRST_STEP, TINY_NORM = 0.01, 1e-6, 1e-5
 #: Internal steps per call of the compiled loop (`DormandPrince853._advance_compiled`): rows of history.
 COMPILED_CHUNK = 32
 #: `error_estimate` remembers this many recent outputs (the states event location tried within
@@ -268,7 +271,7 @@ class DormandPrince853(Integrator):
         else:
             self._f[:] = _python_rhs(self.system, t, self._y, torque(t))
         if self._h <= 0.0:
-            self._h = _initial_step(self._y, self._f, self.rtol, self.atol, dt)
+            self._h = initial_step(self._y, self._f, self.rtol, self.atol, dt)
 
     def _advance_compiled(self, target: float, held: float) -> None:
         """`while _t < target: _advance(torque)` under the held torque `held` (N·m) in compiled chunks of
@@ -384,9 +387,17 @@ def _python_attempt(system: FingerSystem, t: float, y: np.ndarray, f: np.ndarray
     return norm
 
 
-def _initial_step(y: np.ndarray, f: np.ndarray, rtol: float, atol: float, dt: float) -> float:
-    """A first internal step: Hairer's d0/d1 rule without the second derivative, capped at dt."""
-    scale = atol + np.abs(y) * rtol
-    d0, d1 = float(np.linalg.norm(y / scale)), float(np.linalg.norm(f / scale))
-    h = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
+def initial_step(y: np.ndarray, f: np.ndarray, rtol: float, atol: float, dt: float) -> float:
+    """A first internal step (s) from the state y = (q, q') with y' = f: Hairer's d0/d1 rule (scipy's
+    `select_initial_step` without its second-derivative estimate), h = 0.01·‖y/sc‖/‖f/sc‖ with
+    sc = atol + |y|·rtol (1e-6 s where either norm is tiny), capped at the output step dt (s). A plain
+    function: `_restart` calls it and the kernel compiles it (`kernel.event_step`), on the same numbers."""
+    s0 = s1 = 0.0
+    for i in range(6):
+        scale = atol + abs(y[i]) * rtol
+        a, b = y[i] / scale, f[i] / scale
+        s0 += a * a
+        s1 += b * b
+    d0, d1 = math.sqrt(s0), math.sqrt(s1)
+    h = TINY_FIRST_STEP if d0 < TINY_NORM or d1 < TINY_NORM else FIRST_STEP_SHARE * d0 / d1
     return min(h, dt)

@@ -16,7 +16,7 @@ from finger_sim.kernel import use_writable_cache
 use_writable_cache()  # before numba reads NUMBA_CACHE_DIR
 from numba import njit  # noqa: E402  (after the cache folder is set)
 
-from finger_sim.kernel.event_step import AT_LAST, EVENT, SAME, common_step, restore, stays_at_rest  # noqa: E402
+from finger_sim.kernel.event_step import AT_LAST, EVENT, SAME, common_step, pushes_at, restore, stays_at_rest  # noqa: E402
 from finger_sim.kernel.numerics import JIT, OK  # noqa: E402
 
 #: Columns of `run`'s output rows: q (3), q' (3), the θ error estimate (rad).
@@ -47,11 +47,16 @@ def run(ws, k0, n, dt, command, flags, out):
 @njit(**JIT)
 def rest_run(ws, k0, n, dt, command, flags, sign, q0, q1, q2):
     """Up to n steps from step index k0 resting on a stop at q (q' = 0), while `stays_at_rest` keeps the
-    rest (its arguments). Returns (steps taken, τ at the last one's end in N·m)."""
-    end = 0.0
-    for i in range(n):
+    rest (its arguments). Returns (steps taken, τ at the last one's end in N·m). A step's test at its start
+    is the last one's at its end (the same state, time and torque): taken once (`pushes_at`)."""
+    if n == 0:
+        return 0, 0.0
+    stays, end = stays_at_rest(ws, k0 * dt, (k0 + 1) * dt, command, flags, sign, q0, q1, q2)
+    if not stays:
+        return 0, 0.0
+    for i in range(1, n):
         k = k0 + i
-        stays, tau = stays_at_rest(ws, k * dt, (k + 1) * dt, command, flags, sign, q0, q1, q2)
+        stays, tau = pushes_at(ws, (k + 1) * dt, command, flags, sign, q0, q1, q2)
         if not stays:
             return i, end
         end = tau

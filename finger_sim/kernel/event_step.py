@@ -6,8 +6,8 @@ checks every step's end for a gap crossing (`simulation.crossings`); nearly ever
 held over the step (its continuation and restart rules; `closed_loop._advance`'s internal steps,
 i.e. the attempt, error control and step-size update; the θ error estimate; the projected dense
 output) and the step-end gap check (`gap_screen.screen`). Where the step may hold a crossing, or
-needs what only Python does (DOP853's first internal step, an earlier internal step's output, a
-failure, an error estimate it does not hold), it puts the solution back as it was and answers
+needs what only Python does (an earlier internal step's output, a failure, an error estimate it
+does not hold), it puts the solution back as it was and answers
 PYTHON: the Simulator takes that step in Python, as always (`simulation.event_step`).
 
 Everything the call reads and keeps is one float64 array (one argument: numba's dispatch costs
@@ -74,6 +74,8 @@ REST_MARGIN = 1e-9
 #: A continuation matches the last output's time within this fraction of a step (`DormandPrince853.step`).
 LAST_OUTPUT_SLACK = 1e-9
 E53, E3_WEIGHT = dop853._E53, dop853.E3_WEIGHT
+#: DOP853's first internal step (`DormandPrince853._restart`), its one plain function compiled.
+initial_step = njit(**JIT)(dop853.initial_step)
 
 
 def workspace_size(n_model: int, n_plan: int, n_gaps: int) -> int:
@@ -165,14 +167,17 @@ def _step(m, plan, st, arr, work, t, t1, command, prof, same, q, v, log):
         _put(st, ORIGIN_Q, q, v)
         log[BRANCH] = CONTINUED
     else:  # `DormandPrince853._restart`, from the last output's q (whose error estimate is kept)
-        if not (st[HAS_LAST] == 1.0 and st[LAST_Q] == q[0] and st[LAST_Q + 1] == q[1] and st[LAST_Q + 2] == q[2]):
+        if st[HAS_LAST] == 1.0 and st[LAST_Q] == q[0] and st[LAST_Q + 1] == q[1] and st[LAST_Q + 2] == q[2]:
+            st[ERR] = st[ERR_OLD] = st[LAST_EST]
+        elif st[HAS_LAST] == 0.0 and st[HAS_ORIGIN] == 0.0 and st[H] <= 0.0:
+            st[ERR] = st[ERR_OLD] = 0.0  # a new solution's first step (`simulation.event_step`: no estimates yet)
+        else:
             return PYTHON, q, v, 0.0
-        st[ERR] = st[ERR_OLD] = st[LAST_EST]
         st[T] = st[T_OLD] = t
         y[0], y[1], y[2], y[3], y[4], y[5] = q[0], q[1], q[2], v[0], v[1], v[2]
         _rhs(m, t, y, torque_at(prof, command, t), f)
-        if st[H] <= 0.0:  # the first internal step: its initial size is Python's
-            return PYTHON, q, v, 0.0
+        if st[H] <= 0.0:  # the first internal step
+            st[H] = initial_step(y, f, st[RTOL], st[ATOL], h)
         st[HAS_ORIGIN], st[ORIGIN_T] = 1.0, t
         _put(st, ORIGIN_Q, q, v)
         log[BRANCH] = RESTARTED
@@ -209,13 +214,21 @@ def stays_at_rest(ws, t, t1, command, flags, sign, q0, q1, q2):
     `command` (N·m) or, with flag PROFILE, st's profile, as `JointStops.release_time` decides it (the push
     −sign·θ1'' into the gap > 0 at t and at t1; sign: the gap gradient's θ1 component), with REST_MARGIN to
     spare (else False: the Simulator decides). Returns (stays, τ at t1 in N·m)."""
+    if not pushes_at(ws, t, command, flags, sign, q0, q1, q2)[0]:
+        return False, 0.0
+    stays, tau = pushes_at(ws, t1, command, flags, sign, q0, q1, q2)
+    return (True, tau) if stays else (False, 0.0)
+
+
+@njit(**JIT)
+def pushes_at(ws, s, command, flags, sign, q0, q1, q2):
+    """`stays_at_rest`'s test at one time s (s): (whether the push into the stop at rest at q exceeds
+    REST_MARGIN, τ at s in N·m)."""
     m, _, st, arr, _ = parts(ws)
     prof = st[PROFILE_AT:PROFILE_AT + PROFILE_SIZE] if flags & PROFILE else st[HELD_AT:HELD_AT + 1]
     y, f = arr[OUT], arr[Y_NEW]  # scratch rows: neither is read across steps
-    for s in (t, t1):
-        y[0], y[1], y[2], y[3], y[4], y[5] = q0, q1, q2, 0.0, 0.0, 0.0
-        _rhs(m, s, y, torque_at(prof, command, s), f)
-        push = -sign * f[3]
-        if not push > REST_MARGIN * max(1.0, abs(f[3])):
-            return False, 0.0
-    return True, torque_at(prof, command, t1)
+    y[0], y[1], y[2], y[3], y[4], y[5] = q0, q1, q2, 0.0, 0.0, 0.0
+    tau = torque_at(prof, command, s)
+    _rhs(m, s, y, tau, f)
+    push = -sign * f[3]
+    return push > REST_MARGIN * max(1.0, abs(f[3])), tau

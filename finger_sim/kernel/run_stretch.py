@@ -48,9 +48,8 @@ def _stretch(sim: Simulator, events: EventStep, compiled: Any, rows: np.ndarray,
     """Up to n steps of `sim` in one kernel call, their states into xs; the number taken (0: the next
     step is Python's, or the kernel must take it over first through `EventStep.step`)."""
     integ = sim.integrator
-    token = events._token  # noqa: SLF001
-    if integ._last is not token or token is None or integ is not events._integ:  # noqa: SLF001
-        return 0  # as `EventStep.step`: another hand stepped the solution
+    if not events.follows(integ):
+        return 0  # as `EventStep.step`: another hand stepped the solution (or none yet)
     k, dt, profile = sim.step_index, sim.dt, sim.scene.torque
     n = min(n, _steps_on_segment(profile, k, dt, n))
     if n <= 0:

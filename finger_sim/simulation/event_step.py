@@ -5,8 +5,8 @@ compiled attempts, then checks the step's end gaps (`simulation.gap_screen`). `E
 takes a step that holds no crossing in one kernel call on the same numbers: the internal solution
 (`DormandPrince853`'s state) is kept in the kernel's arrays while the kernel steps, and written back
 to the integrator's attributes before Python takes a step (a possible crossing, a release from a
-stop, a switch of a piecewise-constant profile inside the step, a profile without a compiled form,
-DOP853's first step), so that Python's step, its event location included, runs exactly as it always
+stop, a switch of a piecewise-constant profile inside the step, a profile without a compiled form),
+so that Python's step, its event location included, runs exactly as it always
 did. The estimates of `error_estimate` are written at every step.
 
 A smooth profile (ramp, sine) is evaluated in the kernel (its compiled form, `inputs.profile_array`);
@@ -18,9 +18,10 @@ the push is near zero, Python decides.
 
 Who stepped last is told by the integrator's last output (`DormandPrince853._last`, a new tuple at
 every Python step): the kernel continues only a solution whose last output is still the one it saw
-after the Simulator's own last step; anything else (a new integrator after `reset`, a caller that set
-the solution, as the task sweep's hand-over does) lets Python take the step, and the kernel
-continues from the step after.
+after the Simulator's own last step, or one it started itself: a new integrator (a run's first step,
+after `reset`) has its first step, the initial step size included, taken here (`_fresh`). Anything else
+(a caller that set the solution, as the task sweep's hand-over does) lets Python take the step, and the
+kernel continues from the step after.
 
 Exists when the Simulator runs the compiled gap screen, steps with the compiled DOP853, and has
 no drive, no stick–slip friction and no substeps near contact.
@@ -104,10 +105,11 @@ class EventStep:
         """Take `sim.step(torque)` in the kernel: the state after it (the Simulator's state, torque and
         step index set); None: Python must take it (the integrator is then up to date)."""
         integ = sim.integrator
-        token = self._token
-        if integ._last is not token or token is None or integ is not self._integ:  # noqa: SLF001
+        if not self.follows(integ):
             self._holds = self._moved = False  # another hand stepped or set it: the integrator is the truth
-            return None
+            if not _fresh(integ):
+                return None
+            self._integ = integ  # a new solution (the run's first step): its initial step is taken here too
         k, dt = sim.step_index, sim.dt
         flags = 0
         continues = True  # Python's step integrates under fn itself (not a new segment's function)
@@ -157,6 +159,14 @@ class EventStep:
         self._q, self._v = q, v
         self.taken += 1
         return _new_state(self._state, ((k + 1) * dt, q, v))
+
+    def follows(self, integ: DormandPrince853) -> bool:
+        """Whether the kernel may continue `integ`'s solution: the one it took over, last stepped by the
+        Simulator (its last output is the one seen then) or by the kernel since a first step taken here."""
+        token = self._token
+        if integ is not self._integ or integ._last is not token:  # noqa: SLF001
+            return False
+        return token is not None or (self._holds and _untouched(integ))
 
     def _rest(self, sim: Simulator, value: float, flags: int, k: int) -> State | None:
         """A step resting on a stop throughout (`Simulator._advance`'s rest mode, no release inside), checked
@@ -209,10 +219,11 @@ class EventStep:
         st[k.ERR], st[k.ERR_OLD] = integ._err, integ._err_old  # noqa: SLF001
         arr[k.Y], arr[k.F], arr[k.Y_OLD], arr[k.DENSE:k.KK] = integ._y, integ._f, integ._y_old, integ._dense  # noqa: SLF001
         last, origin = integ._last, integ._origin  # noqa: SLF001
-        assert last is not None
-        st[k.HAS_LAST], st[k.LAST_T] = 1.0, last[0]
-        st[k.LAST_Q:k.LAST_Q + 3], st[k.LAST_V:k.LAST_V + 3] = last[1], last[2]
-        st[k.LAST_EST] = integ._estimates.get(last[1], 0.0)  # noqa: SLF001  (what a restart from it reads)
+        st[k.HAS_LAST] = float(last is not None)  # none: a new solution (`_fresh`)
+        if last is not None:
+            st[k.LAST_T] = last[0]
+            st[k.LAST_Q:k.LAST_Q + 3], st[k.LAST_V:k.LAST_V + 3] = last[1], last[2]
+            st[k.LAST_EST] = integ._estimates.get(last[1], 0.0)  # noqa: SLF001  (what a restart from it reads)
         st[k.HAS_ORIGIN] = float(origin is not None)
         if origin is not None:
             st[k.ORIGIN_T] = origin[0]
@@ -228,13 +239,26 @@ class EventStep:
         integ._err, integ._err_old = st[k.ERR], st[k.ERR_OLD]  # noqa: SLF001
         integ._y, integ._y_old = arr[k.Y].copy(), arr[k.Y_OLD].copy()  # noqa: SLF001
         integ._f[:], integ._dense[:] = arr[k.F], arr[k.DENSE:k.KK]  # noqa: SLF001
-        integ._last = (st[k.LAST_T], tuple(st[k.LAST_Q:k.LAST_Q + 3]), tuple(st[k.LAST_V:k.LAST_V + 3]))  # noqa: SLF001
+        integ._last = ((st[k.LAST_T], tuple(st[k.LAST_Q:k.LAST_Q + 3]), tuple(st[k.LAST_V:k.LAST_V + 3]))  # noqa: SLF001
+                       if st[k.HAS_LAST] else None)
         integ._origin = ((st[k.ORIGIN_T], tuple(st[k.ORIGIN_Q:k.ORIGIN_Q + 3]), tuple(st[k.ORIGIN_V:k.ORIGIN_V + 3]))  # noqa: SLF001
                          if st[k.HAS_ORIGIN] else None)
         integ._history[:] = [(integ._t_old, integ._h_old, integ._y_old, integ._dense.copy(), integ._err_old,  # noqa: SLF001
                               integ._err)]  # noqa: SLF001
         integ._history_starts[:] = [integ._t_old]  # noqa: SLF001
         self._token = integ._last  # noqa: SLF001
+
+
+def _untouched(integ: DormandPrince853) -> bool:
+    """Whether `integ`'s own solution attributes are as built: no output, no origin, no step size, no history
+    (nobody stepped it or set it; the kernel's steps leave them so)."""
+    return integ._last is None and integ._origin is None and integ._h <= 0.0 and not integ._history  # noqa: SLF001
+
+
+def _fresh(integ: DormandPrince853) -> bool:
+    """Whether `integ` has not stepped yet (untouched, no estimates): its first step, the initial step size
+    included, may be taken by the kernel from its start."""
+    return _untouched(integ) and not integ._estimates  # noqa: SLF001
 
 
 def for_simulator(sim: Simulator) -> EventStep | None:

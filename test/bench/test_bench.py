@@ -44,7 +44,7 @@ from finger_sim.bench.plan import (
 )
 from finger_sim.bench.reference import build_reference
 from finger_sim.bench.report import measure, write_report
-from finger_sim.bench.runners import AUTO, FAMILY_MUJOCO, FAMILY_PROJECT, FAMILY_SCIPY, Run, grip_forces
+from finger_sim.bench.runners import AUTO, AUTO_WHOLE_RUN, FAMILY_MUJOCO, FAMILY_PROJECT, FAMILY_SCIPY, Run, grip_forces
 from finger_sim.bench.tables import auto_pick, same_choices, shipped_pick
 from finger_sim.integrators import METHODS
 from finger_sim.scene import load_scene
@@ -298,6 +298,7 @@ def test_goals(bench):
     assert [c.scene for c in tables.auto_scipy] == list(SHIPPED_SCENES)
     for c in tables.auto_scipy:
         assert c.at >= c.error and c.auto_cpu > 0.0 and c.scipy > 0.0 and 0.0 < c.cheapest <= c.auto_cpu * (1 + 1e-12), c
+        assert c.whole_cpu > 0.0 and c.ratio == c.scipy / c.whole_cpu, c  # the goal: whole run against whole run
     for row in tables.scipy:  # the dense-output comparison counts fewer project runs: never cheaper
         assert row.dense.ours >= row.any_step.ours
     assert tables.naive_scipy.scipy > 0.0
@@ -438,6 +439,27 @@ def test_auto_is_compared_with_scipy_at_its_own_error_or_the_floor():
     below = an.compare_auto(runs, "s", floor=1e-13)
     assert not below.scipy_reaches and below.scipy == 1e-1 and below.ratio == pytest.approx(1e-1 / 2e-3)
     assert an.compare_auto(runs[1:], "s", floor=1e-13) is None  # no auto row
+
+
+def test_auto_goal_ratio_is_its_whole_run_and_the_stepped_one_is_kept_beside_it():
+    """With auto's whole run measured, the goal's ratio is scipy over it (both whole runs) and the step-by-step
+    ratio is kept; the whole run is neither the project's cheapest (timed per step) nor a table candidate."""
+    runs = [
+        _run("s", FAMILY_PROJECT, AUTO, 1e-3, 2e-3, 1e-8),
+        _run("s", FAMILY_PROJECT, AUTO_WHOLE_RUN, 1e-3, 5e-4, 1e-8),
+        _run("s", FAMILY_PROJECT, "rk4", 1e-3, 1e-3, 1e-8),
+        _run("s", FAMILY_SCIPY, "scipy DOP853", 1e-4, 1e-2, 1e-6),
+        _run("s", FAMILY_SCIPY, "scipy DOP853", 1e-8, 1e-1, 1e-10),
+    ]
+    c = an.compare_auto(runs, "s", floor=1e-12)
+    assert c.auto_cpu == 2e-3 and c.whole_cpu == 5e-4
+    assert c.ratio == pytest.approx(10 ** -1.5 / 5e-4) and c.step_ratio == pytest.approx(10 ** -1.5 / 2e-3)
+    assert c.cheapest_method == "rk4" and c.cheapest == pytest.approx(1e-3)
+    without = an.compare_auto([r for r in runs if r.method != AUTO_WHOLE_RUN], "s", floor=1e-12)
+    assert math.isnan(without.whole_cpu) and without.ratio == without.step_ratio
+    for r in runs[:3]:
+        r.scene = KINDS["discontinuous"][0]
+    assert [c.method for c in an.candidates(runs, "discontinuous", 1000)] == ["rk4"]
 
 
 def test_cost_at_interpolates_log_log_and_never_extrapolates():
