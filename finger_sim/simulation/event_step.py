@@ -109,7 +109,8 @@ class EventStep:
             self._holds = self._moved = False  # another hand stepped or set it: the integrator is the truth
             if not _fresh(integ):
                 return None
-            self._integ = integ  # a new solution (the run's first step): its initial step is taken here too
+            self._integ, self._token = integ, None  # a new solution (the run's first step, a reset's): its initial
+            # step is taken here too, and no output of an earlier solution may stand for it
         k, dt = sim.step_index, sim.dt
         flags = 0
         continues = True  # Python's step integrates under fn itself (not a new segment's function)
