@@ -172,3 +172,7 @@ class OwnModes:
     @mode.setter
     def mode(self, value: int) -> None:
         self._mode_values[self._mode_at] = value
+        self.mode_changed(value)
+
+    def mode_changed(self, value: int) -> None:
+        """Called after every write of `mode` (an element mirrors it into compiled models here); nothing by default."""

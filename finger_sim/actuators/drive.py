@@ -245,13 +245,8 @@ class Drive(OwnModes, Actuator):
         #: an `actuators.stepping.EnergyLedger` the steps add their energy integrals to, or None
         self.ledger = None
 
-    @property
-    def mode(self) -> int:
-        return self._mode_values[self._mode_at]
-
-    @mode.setter
-    def mode(self, value: int) -> None:
-        self._mode_values[self._mode_at] = value
+    def mode_changed(self, value: int) -> None:
+        """Count the switch and mirror the mesh mode into every compiled model of this drive."""
         self.changes += 1
         for ref in self._mirrors:
             model = ref()

@@ -39,9 +39,12 @@ def scene(drive: bool, objects: list[dict]) -> Scene:
     return scene_from_dict(data)
 
 
-def step_times(sc: Scene, kernel: str) -> tuple[list[float], str]:
-    """µs of each step of one whole run (after the Simulator is built), and the method auto chose."""
+def step_times(sc: Scene, kernel: str, lean: bool = True) -> tuple[list[float], str]:
+    """µs of each step of one whole run (after the Simulator is built), and the method auto chose;
+    lean=False: without the Simulator's one-call step of a smooth stretch (`Simulator._lean`)."""
     sim = Simulator(sc, kernel=kernel)
+    if not lean:
+        sim._lean = None  # noqa: SLF001
     out = []
     clock = time.perf_counter
     for _ in range(sc.step_count):

@@ -16,31 +16,15 @@ import argparse
 import os
 import platform
 import statistics
-import time
 from datetime import datetime, timezone
 
-from finger_sim.bench.drive_bench import CUP, DURATION, REPEATS
+from finger_sim.bench.drive_bench import CUP, DURATION, REPEATS, step_times
 from finger_sim.bench.inductance_bench import INDUCTANCE, scene
-from finger_sim.scene import Scene
 from finger_sim.simulate import Simulator
 
 #: The four ways a scene is stepped: (label, inductance on or off, kernel, lean call kept).
 WAYS = (("A python", True, "python", True), ("B compiled, events loop", True, "compiled", False),
         ("C compiled, lean", True, "compiled", True), ("D L = 0 compiled", False, "compiled", True))
-
-
-def step_times(sc: Scene, kernel: str, lean: bool) -> list[float]:
-    """µs of each step of one whole run (after the Simulator is built)."""
-    sim = Simulator(sc, kernel=kernel)
-    if not lean:
-        sim._lean = None
-    out = []
-    clock = time.perf_counter
-    for _ in range(sc.step_count):
-        start = clock()
-        sim.step()
-        out.append((clock() - start) * 1e6)
-    return out
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -56,7 +40,7 @@ def main(argv: list[str] | None = None) -> int:
         times: dict[str, list[float]] = {way[0]: [] for way in WAYS}
         for _ in range(args.repeats):
             for name, inductive, kernel, lean in WAYS:
-                times[name] += step_times(scenes[inductive], kernel, lean)
+                times[name] += step_times(scenes[inductive], kernel, lean)[0]
         medians = {name: statistics.median(t) for name, t in times.items()}
         for name, inductive, kernel, _ in WAYS:
             sim = Simulator(scenes[inductive], kernel=kernel)

@@ -180,13 +180,8 @@ class StickSlipContact(OwnModes, Contact):
         self._slope: tuple[Vec3 | None, float] = (None, 0.0)  # (q, dθ3/dθ1 at q), see `_tangent_gain`
 
     # -- the mode, mirrored into compiled models -------------------------------------------
-    @property
-    def mode(self) -> int:
-        return self._mode_values[self._mode_at]
-
-    @mode.setter
-    def mode(self, value: int) -> None:
-        self._mode_values[self._mode_at] = value
+    def mode_changed(self, value: int) -> None:
+        """Mirror the mode into compiled models."""
         self._mirror_modes()
 
     @property
