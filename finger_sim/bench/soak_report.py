@@ -6,6 +6,8 @@ process tree, sampled), and prints:
 - the windows after the warm-up: how many fell below the real-time rule, and the distribution
   of each window's latest wake-up (a window below 0.99 needs a wake-up at least 10 ms late);
 - per thread: policy, priority, CPU time, run-queue wait and page faults over the soak;
+- the process tree's CPU time per policy, in cores (the real-time part is what the kernel's
+  real-time throttling budgets: kernel.sched_rt_runtime_us of each CPU's second);
 - for each window with a wake-up later than `--late-ms`: the stepping thread's run-queue wait,
   major faults and forced switches around it, the machine's steal, and the real-time threads'
   run time per CPU in the second before (a CPU near kernel.sched_rt_runtime_us of real-time
@@ -86,6 +88,21 @@ def report_trace(directory: Path, late_ms: float, t_judged: float,
               f"{stopped_with(threads, float(s['wall_s']) - float(s['late_ms']) / 1e3, float(s['wall_s']))}")
 
 
+def print_cores_per_policy(threads: dict[tuple[str, int], list[dict[str, str]]]) -> None:
+    """Print the CPU time of the probed threads over the probe's wall span, in cores, real-time
+    (SCHED_FIFO/RR at the last sample) and normal, each with its number of threads."""
+    span = (max(float(rows[-1]["wall_s"]) for rows in threads.values())
+            - min(float(rows[0]["wall_s"]) for rows in threads.values()))
+    cpu_s: dict[str, float] = collections.defaultdict(float)
+    count: collections.Counter[str] = collections.Counter()
+    for rows in threads.values():
+        kind = "real-time" if rows[-1]["policy"] in REALTIME else "normal"
+        cpu_s[kind] += (int(rows[-1]["run_ns"]) - int(rows[0]["run_ns"])) / 1e9
+        count[kind] += 1
+    print(f"CPU over the probe's {span:.1f} s, cores: " + ", ".join(
+        f"{kind} {cpu_s[kind] / span:.3f} ({count[kind]} threads)" for kind in ("real-time", "normal")))
+
+
 def _percentile(sorted_values: list[float], p: float) -> float:
     return sorted_values[min(int(p / 100 * len(sorted_values)), len(sorted_values) - 1)]
 
@@ -120,6 +137,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{key[0].rsplit('.', 1)[-1][:18]:18s} {key[1]:8d} {last['thread'][:16]:16s} {last['policy']:>6s} {last['rtprio']:>4s} "
               f"{(int(last['run_ns']) - int(first['run_ns'])) / 1e9:7.2f} {(int(last['wait_ns']) - int(first['wait_ns'])) / 1e9:7.2f} "
               f"{int(last['majflt']) - int(first['majflt']):6d}{mark}")
+    print_cores_per_policy(threads)
     for w in [w for w in judged if float(w["late_wakeup_max_ms"]) >= args.late_ms]:
         end = float(w["wall_s"])
         rows = [r for r in threads[stepping] if end - 1.1 <= float(r["wall_s"]) <= end + 0.05]

@@ -19,7 +19,8 @@ def test_report_on_a_hand_made_soak(tmp_path, capsys):
         rows.append(f"{i:.3f},{rtf},{t0 + i:.3f},{late},0\n")
     windows = tmp_path / "soak_windows.csv"
     windows.write_text("".join(rows))
-    # the node (pid 7): main thread 7, DDS thread 8 (many switches), stepping thread 9; sampled at 0.5 s
+    # the node (pid 7, SCHED_FIFO): main thread 7, DDS thread 8 (many switches), stepping thread 9; the controller
+    # (pid 20, SCHED_OTHER): thread 20; sampled at 0.5 s
     probe = [PROBE_HEADER]
     for k in range(330):
         t = t0 + 0.5 * k
@@ -27,6 +28,7 @@ def test_report_on_a_hand_made_soak(tmp_path, capsys):
         for tid, name, vol, run, wait, cpu in ((7, "python", 10 * k, 5e6 * k, 0, 0), (8, "dds.ev.0", 900 * k, 1e6 * k, 0, 1),
                                               (9, "python", 600 * k, 2e6 * k, stall, 1)):
             probe.append(f"{t:.3f},7,{tid},finger_sim.ros.node,{name},{cpu},1,20,{run:.0f},{wait:.0f},0,0,0,{vol},0,0.0,0\n")
+        probe.append(f"{t:.3f},20,20,finger_sim.ros.pd_controller,python,0,0,0,{3e6 * k:.0f},0,0,0,0,{k},0,0.0,0\n")
     probe_csv = tmp_path / "probe.csv"
     probe_csv.write_text("".join(probe))
     assert soak_report.main(["--windows", str(windows), "--probe", str(probe_csv), "--late-ms", "10"]) == 0
@@ -36,6 +38,8 @@ def test_report_on_a_hand_made_soak(tmp_path, capsys):
     assert out[1] == ("latest wake-up per window, ms: median 5.00, p90 9.10, p99 42.00, max 42.00; windows with one >= 5 ms: 50, "
                       ">= 10 ms: 1, >= 20 ms: 1")
     assert any(line.endswith("<- stepping") and " 9 " in line for line in out)
+    # 164.5 s of samples: the node's three FIFO threads ran (5 + 1 + 2) ms per 0.5 s, the controller 3 ms per 0.5 s
+    assert "CPU over the probe's 164.5 s, cores: real-time 0.016 (3 threads), normal 0.006 (1 threads)" in out
     late = [line for line in out if line.startswith("window at sim")]
     assert len(late) == 1 and "latest wake-up 42.0 ms" in late[0] and "run-queue wait 40.0 ms" in late[0]
     # samples at 149.0, 149.5 and 150.0 s fall in [end - 1.1 s, end + 0.05 s]: two intervals; CPU 0 has the main thread

@@ -1,20 +1,28 @@
 """Soak (opt-in: FINGER_SIM_SOAK_S=<seconds>, e.g. 3600): finger_node at 1 kHz in real time with
 recording on and the PD controller in a closed loop, answering every state.
 
+Only the node runs under SCHED_FIFO (`chrt -f NODE_FIFO_PRIORITY`, as a real-time simulation is
+deployed; FINGER_SIM_SOAK_FIFO=<priority>, 0 for a normal policy): the controller, this test and
+anything beside it run at a normal policy. The controller is not part of the real-time budget: in
+real time (not lockstep) the node never waits for it. The test checks both policies from /proc.
+
 References: the node's resident memory with its child processes' (/proc/<pid>/status VmRSS), sampled every RSS_PERIOD_S,
 must stay within RSS_BAND_MB of its value at the end of the warm-up; every /diagnostics window
 after the warm-up must show a real-time factor of at least MIN_WINDOW_RTF. The samples are
 written to soak.csv in the test's folder (and its path printed) for the report in docs/, the windows
 (sim time, real-time factor, wall time received, latest wake-up, dropped steps) to soak_windows.csv.
 
-    FINGER_SIM_SOAK_S=3600 FINGER_SIM_TEST_DOMAINS=65-69 chrt -f 20 .venv/bin/pytest -q -s -m soak test/ros/test_soak.py
+    FINGER_SIM_SOAK_S=3600 FINGER_SIM_TEST_DOMAINS=65-69 .venv/bin/pytest -q -s -m soak test/ros/test_soak.py
 
-(under SCHED_FIFO as deployed; docs/soak_realtime.md has the probe to run beside it and the report.)
+(as root, at a normal policy: the test starts the node itself under SCHED_FIFO; docs/soak_realtime.md
+has the probe to run beside it and the report.)
 """
 
 from __future__ import annotations
 
 import os
+import shutil
+import sys
 import time
 from pathlib import Path
 
@@ -23,8 +31,10 @@ import pytest
 rclpy = pytest.importorskip("rclpy")
 
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+import yaml  # noqa: E402
 from rclpy.qos import QoSProfile  # noqa: E402
 
+from conftest import Launcher, RosProcess  # noqa: E402
 from finger_sim.ros import conversions  # noqa: E402
 
 SOAK_S = float(os.environ.get("FINGER_SIM_SOAK_S", "0"))
@@ -37,6 +47,26 @@ WARMUP_S = 60.0
 RSS_PERIOD_S = 5.0
 RSS_BAND_MB = 5.0
 MIN_WINDOW_RTF = 0.99
+#: SCHED_FIFO priority of the node (its stepping thread one above, its log writer one below:
+#: finger_sim.runtime.realtime); 0 runs it at a normal policy.
+NODE_FIFO_PRIORITY = int(os.environ.get("FINGER_SIM_SOAK_FIFO", "20"))
+
+
+def policies(pid: int) -> set[tuple[int, int]]:
+    """(policy, real-time priority) of every thread of `pid`, from /proc/<pid>/task/*/stat (fields 41 and 40)."""
+    out = set()
+    for stat in Path(f"/proc/{pid}/task").glob("*/stat"):
+        fields = stat.read_text().rsplit(")", 1)[1].split()
+        out.add((int(fields[38]), int(fields[37])))
+    return out
+
+
+def start_node(launcher: Launcher, params: dict) -> RosProcess:
+    """finger_node with `params`, under `chrt -f NODE_FIFO_PRIORITY` unless that is 0."""
+    path = launcher.tmp / "node.params.yaml"
+    path.write_text(yaml.safe_dump({"/**": {"ros__parameters": params}}))
+    chrt = ["chrt", "-f", str(NODE_FIFO_PRIORITY)] if NODE_FIFO_PRIORITY else []
+    return launcher.start(chrt + [sys.executable, "-m", "finger_sim.ros.node", "--ros-args", "--params-file", str(path)], "node")
 
 
 def rss_mb(pid: int) -> float:
@@ -53,12 +83,19 @@ def rss_mb(pid: int) -> float:
 
 
 def test_closed_loop_soak_holds_memory_and_real_time(launcher, ros_client, tmp_path):
-    launcher.node("finger_sim.ros.pd_controller", dict(setpoint=0.8))
-    node = launcher.node("finger_sim.ros.node", dict(realtime_factor=1.0, command_qos="reliable", command_timeout=0.0))
+    assert os.sched_getscheduler(0) == os.SCHED_OTHER, \
+        "run the soak at a normal policy (no chrt): it starts the node alone under SCHED_FIFO"
+    if NODE_FIFO_PRIORITY:
+        assert os.geteuid() == 0 and shutil.which("chrt"), "a node under SCHED_FIFO needs root and chrt"
+    controller = launcher.node("finger_sim.ros.pd_controller", dict(setpoint=0.8))
+    node = start_node(launcher, dict(realtime_factor=1.0, command_qos="reliable", command_timeout=0.0))
     diagnostics: list[tuple[float, DiagnosticArray]] = []  # (wall time received, time.time() s, message)
     ros_client.node.create_subscription(DiagnosticArray, "/diagnostics", lambda m: diagnostics.append((time.time(), m)),
                                         QoSProfile(depth=10_000))
     ros_client.wait_for(lambda: diagnostics, "the first /diagnostics", 60.0)
+    assert policies(controller.pid) == {(os.SCHED_OTHER, 0)}
+    node_policy = os.SCHED_FIFO if NODE_FIFO_PRIORITY else os.SCHED_OTHER
+    assert {p for p, _ in policies(node.pid)} == {node_policy}, node.output()
     start = time.monotonic()
     samples: list[tuple[float, float]] = []  # (wall s since start, RSS MB)
     while (elapsed := time.monotonic() - start) < SOAK_S:
