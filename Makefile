@@ -49,9 +49,11 @@ test-serial: $(STAMP) browser
 
 HALF_MARK_ros  := ros
 HALF_MARK_rest := not ros
+# The CPU-bound rest yields to the ROS half (its nodes' wall-clock deadlines): it runs on what they leave.
+HALF_NICE_rest := nice -n 19
 test-half-ros test-half-rest: test-half-%: $(STAMP)
 	@mkdir -p out
-	@$(VENV)/bin/pytest -q -m "$(HALF_MARK_$*)" > out/test-$*.txt 2>&1; status=$$?; cat out/test-$*.txt; exit $$status
+	@$(HALF_NICE_$*) $(VENV)/bin/pytest -q -m "$(HALF_MARK_$*)" > out/test-$*.txt 2>&1; status=$$?; cat out/test-$*.txt; exit $$status
 
 # The suite on a machine without ROS 2: a venv of its own without the ros extra (no rclpy), where the ROS
 # layer (test/ros/, marker `ros`) skips by importorskip and every other test runs (docs/test_suite.md).
