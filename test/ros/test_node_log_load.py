@@ -96,7 +96,10 @@ def read_rosbags(path: Path) -> dict[str, list]:
 
 
 FAST_STEPS = 5000  # the run as fast as possible, 1 kHz steps
-DROP_STEPS = 3000  # the real-time run that drops
+#: The real-time run that drops: long enough that, with its writer process stopped, its handovers
+#: (about 460 B a step with markers) fill the recorder's 1 MB pipe (about 2300 steps), then the queue, with
+#: a margin for a slow start; 3000 steps sometimes ended first.
+DROP_STEPS = 8000
 
 
 @pytest.fixture(scope="module")
