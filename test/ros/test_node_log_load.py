@@ -7,6 +7,7 @@ file is read up to its last whole chunk) and by rosbags (an independent reader).
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import time
@@ -22,6 +23,7 @@ from std_srvs.srv import SetBool  # noqa: E402
 
 from finger_sim.cli import EXIT_INCOMPLETE  # noqa: E402
 from finger_sim.log import RECORDING_STATUS  # noqa: E402
+from finger_sim.log import writer_process  # noqa: E402
 from finger_sim.log.reader import LogReader  # noqa: E402
 from finger_sim.ros import conversions  # noqa: E402
 from conftest import Launcher, allocate_domain_id, ros_environment, wait_until  # noqa: E402
@@ -74,6 +76,17 @@ def test_a_kill_after_a_pause_keeps_the_paused_second(launcher, ros_client, tmp_
     assert logged == [n * DT_NS for n in range(step + 1)]
 
 
+def writer_pid(node_pid: int) -> int | None:
+    """The node's log writer process once it runs the writer's code, else None. A child caught
+    between fork and exec still runs the node's command line: stopping that one would stop the
+    writer before it starts (the loaded CI did, and no message was ever dropped)."""
+    for pid in child_pids(node_pid):
+        with contextlib.suppress(OSError):
+            if writer_process.__name__.encode() in Path(f"/proc/{pid}/cmdline").read_bytes():
+                return pid
+    return None
+
+
 def scene_file(tmp_path: Path, duration: float) -> Path:
     """finger_default driven by a constant scripted torque for `duration` s."""
     text = (CONFIG / "finger_default.yaml").read_text()
@@ -98,7 +111,7 @@ def read_rosbags(path: Path) -> dict[str, list]:
 FAST_STEPS = 5000  # the run as fast as possible, 1 kHz steps
 #: The real-time run that drops: long enough that, with its writer process stopped, its handovers
 #: (about 460 B a step with markers) fill the recorder's 1 MB pipe (about 2300 steps), then the queue, with
-#: a margin for a slow start; 3000 steps sometimes ended first.
+#: a margin for a slow start.
 DROP_STEPS = 8000
 
 
@@ -115,7 +128,7 @@ def loaded_runs(tmp_path_factory) -> dict[str, tuple[int, str, Path]]:
             runs[kind] = (launchers[-1].node(NODE, dict(scene=str(scene_file(folder, steps / 1000)), torque_source="scene",
                                                         realtime_factor=factor, record_queue_size=SMALL_QUEUE)), folder)
         node = runs["drops"][0]
-        writer = wait_until(lambda: child_pids(node.pid), 60.0, "the log's writer process")[0]
+        writer = wait_until(lambda: writer_pid(node.pid), 60.0, "the log's writer process")
         os.kill(writer, signal.SIGSTOP)  # a writer that cannot keep up: the pipe fills, then the queue
         try:
             wait_until(lambda: "dropping messages" in node.output(), 60.0, "the node's report of dropped messages")
