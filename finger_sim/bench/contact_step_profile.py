@@ -111,6 +111,9 @@ def profile_scene(name: str, runs: int) -> dict[str, float]:
             if k < first_event:
                 sums["before"] += t
                 sums["n before"] += 1
+    for count in (0, 1):  # the kernel call with no internal step (the dense output, projection, screen), and one
+        calls = [statistics.median(call[k]) for k, kind in enumerate(kinds) if kind == "kernel" and internal[k] == count]
+        sums[f"call {count}"] = statistics.median(calls) if calls else float("nan")
     sums["impacts"], sums["steps"] = sim.impacts, n
     return sums
 
@@ -140,9 +143,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"free step ({FREE_SCENE}, auto = rk6 lean): {free:.2f} µs; rk6 {RK6_RHS} right-hand sides per step, "
           f"DOP853 {DOP853_RHS} per accepted internal step (median of {args.runs} runs)")
     print("| scene | steps | µs/step (× free) | first step µs | kernel steps: n, µs/step, of it in the kernel "
-          "| internal steps / output (rhs / rk6's) | before contact µs/step (× free) | event steps: n, µs in all, "
+          "| internal steps / output (rhs / rk6's) | kernel call with 0 / 1 internal steps µs | before contact µs/step (× free) | event steps: n, µs in all, "
           "of it in the kernel | impacts | share of the run: kernel steps / their Python / events / first |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for name in args.scenes:
         p = profile_scene(name, args.runs)
         n = p["steps"]
@@ -153,7 +156,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         whole = p["whole"]
         print(f"| {name} | {n:.0f} | {per:.2f} ({per / free:.2f}×) | {p['first']:.0f} "
               f"| {p['n kernel']:.0f}, {p['kernel'] / nk:.2f}, {p['kernel call'] / nk:.2f} "
-              f"| {internal:.2f} ({internal * DOP853_RHS / RK6_RHS:.1f}×) | {before:.2f} ({before / free:.2f}×) "
+              f"| {internal:.2f} ({internal * DOP853_RHS / RK6_RHS:.1f}×) | {p['call 0']:.2f} / {p['call 1']:.2f} | {before:.2f} ({before / free:.2f}×) "
               f"| {p['n event']:.0f}, {p['event']:.0f}, {p['event call']:.0f} | {p['impacts']:.0f} "
               f"| {p['kernel call'] / whole:.0%} / {(p['kernel'] - p['kernel call']) / whole:.0%} "
               f"/ {p['event'] / whole:.0%} / {p['first'] / whole:.0%} |")
