@@ -5,7 +5,8 @@ a whole run is timed (`time.perf_counter`) and sorted by who took it (the kernel
 takes):
 
 - *kernel*: the common step, one compiled call (`simulation.event_step`); its compiled call is timed
-  on its own in the runs between (the timer's Python kept out of the step times), so (a) the Python around it and (b) the kernel's time are apart;
+  on its own in every other run (the timer's Python kept out of the step times), so (a) the Python
+  around it and (b) the kernel's time are apart;
 - *event*: a step Python takes (a possible crossing handed over by the kernel, or one the kernel
   declines): the location, an impact's velocity jump and restart, the hand-over; its kernel call
   (the attempt that found the possible crossing) timed apart;
@@ -18,8 +19,8 @@ the same scene before the first event (the same method, no contact yet).
 (d) Event steps: how many per run, the impacts counted by the Simulator.
 
 Each step's median over the runs (every run takes the same path; the median drops the shared
-machine's preemptions), summed by kind; one Simulator per scene, reset between runs, after one
-warm-up run. The free step is paper_flexion under `auto` (rk6's lean compiled step), timed the
+machine's preemptions), summed by kind; one Simulator per scene, reset between runs, after two
+warm-up runs (one with the timer, one without). The free step is paper_flexion under `auto` (rk6's lean compiled step), timed the
 same way.
 """
 
@@ -38,7 +39,7 @@ from finger_sim.simulate import Simulator
 #: The scenes profiled (task: the grasp, and the two with impacts).
 SCENES = ("grasp_cylinder", "grasp_impact", "grasp_rigid")
 FREE_SCENE = "paper_flexion"
-#: Whole runs per scene (median).
+#: Whole runs per scene and per timing (median).
 RUNS = 25
 #: DOP853's right-hand sides per accepted internal step with its dense output, and rk6's per step.
 DOP853_RHS, RK6_RHS = 15, 7
