@@ -292,10 +292,11 @@ class DormandPrince853(Integrator):
                 self._t, self._h, self._t_old, self._h_old, self._err, self._err_old = st.tolist()
                 self._y, self._f[:] = y.copy(), f  # a new array for y, as `_advance` makes one per step
                 self.accepted += done
-                for (t_old, h_old, err_old, err), row in zip(rows[:done, :4].tolist(), rows[:done]):
-                    self._y_old = row[k.ROW_Y_OLD:k.ROW_DENSE]
+                y_olds, denses = rows[:done, k.ROW_Y_OLD:k.ROW_DENSE], rows[:done, k.ROW_DENSE:].reshape(done, 7, 6)
+                for (t_old, h_old, err_old, err), y_old, dense in zip(rows[:done, :4].tolist(), y_olds, denses):
+                    self._y_old = y_old
                     if self._keep_history:
-                        self._history.append((t_old, h_old, self._y_old, row[k.ROW_DENSE:].reshape(7, 6), err_old, err))
+                        self._history.append((t_old, h_old, y_old, dense, err_old, err))
                         self._history_starts.append(t_old)
             if n < 0:
                 return

@@ -39,9 +39,9 @@ def hand_over(step: EventStep, integ: DormandPrince853, fn: Any) -> None:
                         saved[k.ERR_OLD], saved[k.ERR]))
     n = int(log[steps.COUNT])
     rows = log[steps.ROWS_AT:steps.ROWS_AT + n * steps.ROW_SIZE].reshape(n, steps.ROW_SIZE).copy()
-    for (t_old, h_old, err_old, err), row in zip(rows[:, :steps.ROW_Y_OLD].tolist(), rows):
-        history.append((t_old, h_old, row[steps.ROW_Y_OLD:steps.ROW_DENSE], row[steps.ROW_DENSE:].reshape(7, 6),
-                        err_old, err))
+    y_olds, denses = rows[:, steps.ROW_Y_OLD:steps.ROW_DENSE], rows[:, steps.ROW_DENSE:].reshape(n, 7, 6)  # views
+    for (t_old, h_old, err_old, err), y_old, dense in zip(rows[:, :steps.ROW_Y_OLD].tolist(), y_olds, denses):
+        history.append((t_old, h_old, y_old, dense, err_old, err))
     integ._history[:] = history  # noqa: SLF001
     integ._history_starts[:] = [entry[0] for entry in history]  # noqa: SLF001
     integ._torque = fn  # noqa: SLF001

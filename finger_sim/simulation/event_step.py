@@ -105,7 +105,9 @@ class EventStep:
         """Take `sim.step(torque)` in the kernel: the state after it (the Simulator's state, torque and
         step index set); None: Python must take it (the integrator is then up to date)."""
         integ = sim.integrator
-        if not self.follows(integ):
+        token = self._token  # `follows(integ)`, inline (a method call is a tenth of this step's Python)
+        if integ is not self._integ or integ._last is not token or (  # noqa: SLF001
+                token is None and not (self._holds and _untouched(integ))):
             self._holds = self._moved = False  # another hand stepped or set it: the integrator is the truth
             if not _fresh(integ):
                 return None
@@ -129,7 +131,8 @@ class EventStep:
         if fn is None:  # a profile's step that Python takes
             self.release()
             return None
-        if sim._resting is not None:  # noqa: SLF001  (the stop's rest mode)
+        at = sim._rest_at  # noqa: SLF001  (`sim._resting is not None`, the stop's rest mode, without the property)
+        if at is not None and sim._mode_list[at] and sim._rest_gap is not None:  # noqa: SLF001
             return self._rest(sim, value, flags, k)
         if not self._holds:
             self._take_over(integ)
