@@ -10,7 +10,8 @@ state (q, q' carry over), only the set of objects.
 
 A scene change at a step boundary (the object removed, a new `tip_force` of a piecewise-constant
 tip-force profile) builds a Simulator of the changed scene and hands it the state: q, q', the
-step count, the last torque and every mode the new scene declares too (a rest on a joint stop,
+step count, the last torque, an actuator in the slot with its own slots, and every mode the new
+scene declares too (a rest on a joint stop,
 stick–slip friction's, the drive's mesh). The new integrator starts fresh (a warm start would have
 been dropped by `Simulator.reset` anyway).
 """
@@ -87,11 +88,14 @@ def with_tip_force(scene: Scene, force: tuple[float, float]) -> Scene:
 
 def carry_over(sim: Simulator, scene: Scene) -> Simulator:
     """A Simulator of `scene` (the same kernel) in the state `sim` has reached: q, q', step, torque, and
-    the discrete state (`_carry_modes`). An error-controlled method (dop853) starts its step size afresh
-    there, as at any change of the scene."""
-    new = Simulator(scene, kernel=sim.kernel)
+    the discrete state (`_carry_modes`), and an actuator in the slot with its own slots. An error-controlled
+    method (dop853) starts its step size afresh there, as at any change of the scene."""
+    actuator = sim._actuator
+    new = Simulator(scene, kernel=sim.kernel, actuator=actuator)
     new.q, new.v, new.step_index, new.torque = sim.q, sim.v, sim.step_index, sim.torque
     new.impacts = sim.impacts
+    if actuator is not None:  # its own slots go with (q, q'): `StatefulRungeKutta.begin`
+        new.integrator.begin(new.q, new.v, sim.integrator.own_of(sim.q, sim.v))  # type: ignore[attr-defined]
     _carry_modes(sim, new)
     return new
 

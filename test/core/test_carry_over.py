@@ -47,3 +47,24 @@ def test_carrying_a_run_over_to_the_same_scene_changes_nothing(name: str, method
         assert (a.q, a.v, straight.modes) == (b.q, b.v, carried.modes), (k, a.t)
         seen.add(straight.modes[at])
     assert carried_in_mode > 0  # a carry-over fell inside the mode in question
+
+
+@pytest.mark.parametrize("name", ["paper_flexion.yaml", "paper_to_stop.yaml"])
+def test_an_actuator_and_its_own_state_are_carried_over(name: str) -> None:
+    """A run with an actuator in the slot (the torque lag declared in test_state_layout.py) keeps the
+    actuator and its own slot (the lagged torque) across a carry-over: the same states and slots as the
+    run left alone. (Before, the new Simulator was built without the actuator: the command acted as the
+    torque itself.)"""
+    from test_state_layout import LAG, TorqueLag
+
+    scene = load_scene(CONFIG / name).with_overrides(method="rk4")
+    straight = Simulator(scene, kernel="python", actuator=TorqueLag(LAG))
+    carried = Simulator(scene, kernel="python", actuator=TorqueLag(LAG))
+    for k in range(scene.step_count):
+        if k % CARRY_EVERY == CARRY_AT:
+            carried = carry_over(carried, carried.scene)
+        straight.step()
+        carried.step()
+        assert straight.state_vector == carried.state_vector, (k, straight.state_vector, carried.state_vector)
+        assert straight.modes == carried.modes
+    assert straight.state_vector[6] != 0.0
