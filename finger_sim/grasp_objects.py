@@ -11,9 +11,8 @@ state (q, q' carry over), only the set of objects.
 A scene change at a step boundary (the object removed, a new `tip_force` of a piecewise-constant
 tip-force profile) builds a Simulator of the changed scene and hands it the state: q, q', the
 step count, the last torque, an actuator in the slot with its own slots, and every mode the new
-scene declares too (a rest on a joint stop,
-stick–slip friction's, the drive's mesh). The new integrator starts fresh (a warm start would have
-been dropped by `Simulator.reset` anyway).
+scene declares too (a rest on a joint stop, stick–slip friction's, the drive's mesh). The new
+integrator starts fresh (a warm start would have been dropped by `Simulator.reset` anyway).
 """
 
 from __future__ import annotations
