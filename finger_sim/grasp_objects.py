@@ -10,9 +10,9 @@ state (q, q' carry over), only the set of objects.
 
 A scene change at a step boundary (the object removed, a new `tip_force` of a piecewise-constant
 tip-force profile) builds a Simulator of the changed scene and hands it the state: q, q', the
-step count and the last torque. The new integrator starts fresh (a warm start would have been
-dropped by `Simulator.reset` anyway); a finger resting on a joint stop at that instant is let go
-and, if still pushed into the stop, lands on it again within the next step.
+step count, the last torque, an actuator in the slot with its own slots, and every mode the new
+scene declares too (a rest on a joint stop, stick–slip friction's, the drive's mesh). The new
+integrator starts fresh (a warm start would have been dropped by `Simulator.reset` anyway).
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from finger_sim.effects.contact import Contact
 from finger_sim.scene import Scene
 from finger_sim.simulate import Simulator
+from finger_sim.simulation.crossings import Gap
 
 
 @dataclass(frozen=True)
@@ -86,12 +87,33 @@ def with_tip_force(scene: Scene, force: tuple[float, float]) -> Scene:
 
 def carry_over(sim: Simulator, scene: Scene) -> Simulator:
     """A Simulator of `scene` (the same kernel) in the state `sim` has reached: q, q', step, torque, and
-    a drive's mesh mode, direction and current. An error-controlled method (dop853) starts its step
-    size afresh there, as at any change of the scene."""
-    new = Simulator(scene, kernel=sim.kernel)
+    the discrete state (`_carry_modes`), and an actuator in the slot with its own slots. An error-controlled
+    method (dop853) starts its step size afresh there, as at any change of the scene."""
+    actuator = sim._actuator
+    new = Simulator(scene, kernel=sim.kernel, actuator=actuator)
     new.q, new.v, new.step_index, new.torque = sim.q, sim.v, sim.step_index, sim.torque
     new.impacts = sim.impacts
-    if sim.scene.drive is not None:  # the mesh mode is discrete state (spec §8): it carries over too
-        drive, old = new.system.drive, sim.system.drive  # type: ignore[attr-defined]
-        drive.mode, drive.direction, drive.i = old.mode, old.direction, old.i
+    if actuator is not None:  # its own slots go with (q, q'): `StatefulRungeKutta.begin`
+        new.integrator.begin(new.q, new.v, sim.integrator.own_of(sim.q, sim.v))  # type: ignore[attr-defined]
+    _carry_modes(sim, new)
     return new
+
+
+def _carry_modes(sim: Simulator, new: Simulator) -> None:
+    """Every declared mode of `sim` that `new` declares too (same owner, same name) takes its value in
+    `new`, with the data that goes with it: the gap the stops' rest rests on, stick–slip friction's
+    sliding direction and holding torque, the drive's direction and current (spec §7, §8)."""
+    values = {(owner, mode.name): value for (owner, mode), value in zip(sim.layout.modes, sim.mode_values.values)}
+    for k, (owner, mode) in enumerate(new.layout.modes):
+        new.mode_values.values[k] = values.get((owner, mode.name), new.mode_values.values[k])
+    gap = sim._resting
+    if gap is not None and new._rest_at is not None:  # the same gap of the new run's element of that kind
+        element = next(e for e in new.system.elements if type(e) is type(gap.element))
+        new._resting = Gap(element, gap.index, gap.restitution)
+    friction, old_friction = new._friction, sim._friction
+    if friction is not None and old_friction is not None:
+        friction.direction, friction.hold = old_friction.direction, old_friction.hold  # mirrors the mode too
+        friction.holds.update(old_friction.holds)
+    if sim.scene.drive is not None:
+        drive, old = new.system.drive, sim.system.drive  # type: ignore[attr-defined]
+        drive.mode, drive.direction, drive.i = old.mode, old.direction, old.i  # the setter mirrors and counts

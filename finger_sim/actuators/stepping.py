@@ -172,6 +172,9 @@ def advance(sim: Simulator, t0: float, t1: float, u_fn: TorqueFn) -> None:
                 return
             t, v = release, ZERO
             _roll(system, t, q, v, u_fn(t), _break_direction(system, t, q, u_fn(t)))
+            if t >= t1:  # freed on the step's end: no zero-length step (as `stick_slip.advance`)
+                sim.q, sim.v = q, v
+                return
         q1, v1 = sim._step(t, q, v, t1 - t, u_fn)
         event = _first_event(sim, system, t, q, v, t1, q1, v1, u_fn)
         end, qe, ve = (t1, q1, v1) if event is None else (event.t, event.q, event.v)

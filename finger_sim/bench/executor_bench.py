@@ -11,12 +11,13 @@ single, events … (A B A B); the table gives each run and the medians of the CP
 
 from __future__ import annotations
 
-import argparse
 import os
 import statistics
 import subprocess
 import sys
 import time
+
+from finger_sim.bench.processes import executor_command
 
 KINDS = ("single", "events")
 PERIOD_S = 0.001  # the publisher's period, wall s
@@ -67,13 +68,7 @@ def receive(kind: str, seconds: float, env: dict[str, str]) -> tuple[int, float,
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="executor_bench", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--seconds", type=float, default=12.0)
-    parser.add_argument("--rounds", type=int, default=3)
-    parser.add_argument("--domain-id", type=int, default=140)
-    args = parser.parse_args(argv)
-    env = {**os.environ, "ROS_DOMAIN_ID": str(args.domain_id), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
-    print(f"load average at start: {os.getloadavg()}")
+    args, env = executor_command("executor_bench", __doc__, argv, seconds=12.0, rounds=3, domain_id=140)
     publisher = subprocess.Popen([sys.executable, "-c", _PUBLISHER, str(PERIOD_S)], env=env,
                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     per_message: dict[str, list[float]] = {k: [] for k in KINDS}

@@ -11,7 +11,6 @@ events, single … (A B A B); the table gives each run and the medians, in cores
 
 from __future__ import annotations
 
-import argparse
 import os
 import statistics
 import subprocess
@@ -19,7 +18,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from finger_sim.bench.processes import cpu_seconds, ros_env, start_node, stop, tree_cpu_seconds
+from finger_sim.bench.processes import cpu_seconds, executor_command, start_node, stop, tree_cpu_seconds
 
 KINDS = ("events", "single")
 #: Wall s after the node's start line before measuring: the controller joins, caches warm up.
@@ -55,13 +54,7 @@ def run(kind: str, seconds: float, env: dict[str, str], workdir: Path) -> tuple[
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="executor_node_bench", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--seconds", type=float, default=10.0)
-    parser.add_argument("--rounds", type=int, default=2)
-    parser.add_argument("--domain-id", type=int, default=62)
-    args = parser.parse_args(argv)
-    env = ros_env(args.domain_id)
-    print(f"load average at start: {os.getloadavg()}")
+    args, env = executor_command("executor_node_bench", __doc__, argv, seconds=10.0, rounds=2, domain_id=62)
     cores: dict[str, list[tuple[float, float]]] = {k: [] for k in KINDS}
     with tempfile.TemporaryDirectory(prefix="executor_node_") as tmp:
         for r in range(args.rounds):

@@ -7,6 +7,7 @@ the machine a report names.
 
 from __future__ import annotations
 
+import argparse
 import os
 import platform
 import signal
@@ -38,6 +39,20 @@ def ros_env(domain_id: int) -> dict[str, str]:
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", PYTHONUNBUFFERED="1")
     env.pop("ROS_LOCALHOST_ONLY", None)
     return env
+
+
+def executor_command(prog: str, doc: str, argv: list[str] | None, *, seconds: float, rounds: int,
+                     domain_id: int) -> tuple[argparse.Namespace, dict[str, str]]:
+    """The command line of the executor benchmarks (`--seconds` measured per run, `--rounds`, `--domain-id`,
+    defaults as given) and the environment of their child processes in that domain (`ros_env`). Prints
+    the load average at start."""
+    parser = argparse.ArgumentParser(prog=prog, description=doc.split("\n\n")[0])
+    parser.add_argument("--seconds", type=float, default=seconds)
+    parser.add_argument("--rounds", type=int, default=rounds)
+    parser.add_argument("--domain-id", type=int, default=domain_id)
+    args = parser.parse_args(argv)
+    print(f"load average at start: {os.getloadavg()}")
+    return args, ros_env(args.domain_id)
 
 
 def _stat_cpu(stat: str) -> float:

@@ -13,29 +13,35 @@ from finger_sim.projection import project
 if TYPE_CHECKING:
     from finger_sim.actuators.base import Actuator
 
-#: A tableau's stages as the stage loop takes them: (c, the non-zero (j, a_j) of its row) each.
-Stages = tuple[tuple[float, tuple[tuple[int, float], ...]], ...]
-#: A tableau's non-zero weights (j, b_j).
-Weights = tuple[tuple[int, float], ...]
+#: A tableau as the stage loop takes it: per stage (c, the non-zero (j, a_j) of its row), then the
+#: weights as a last row (None, the non-zero (j, b_j)): the step's result, combined as a stage is.
+Rows = tuple[tuple[float | None, tuple[tuple[int, float], ...]], ...]
 
 
-def rk_stage_loop(stages: Stages, weights: Weights, system: FingerSystem, t: float, q: Vec3, v: Vec3,
-                  own: tuple[float, ...], dt: float, torque: TorqueFn,
-                  actuator: Actuator | None = None) -> tuple[Vec3, Vec3, tuple[float, ...]]:
+def tableau_rows(a: tuple[tuple[float, ...], ...], b: tuple[float, ...], c: tuple[float, ...]) -> Rows:
+    """The rows of a Butcher tableau (A, B, C) for `rk_stage_loop`, zero entries left out (the loop then
+    skips nothing)."""
+    stages = tuple((ci, tuple((j, x) for j, x in enumerate(row) if x != 0.0)) for ci, row in zip(c, a))
+    return (*stages, (None, tuple((j, x) for j, x in enumerate(b) if x != 0.0)))
+
+
+def rk_stage_loop(rows: Rows, system: FingerSystem, t: float, q: Vec3, v: Vec3, own: tuple[float, ...], dt: float,
+                  torque: TorqueFn, actuator: Actuator | None = None) -> tuple[Vec3, Vec3, tuple[float, ...]]:
     """One explicit Runge-Kutta step of (q, q', own) from t to t + dt (s), before any projection: the one
     stage loop of `ExplicitRungeKutta` and `integrators.stateful.StatefulRungeKutta` (as scipy's `rk_step`).
 
-    stages: (c, the non-zero (j, a_j) of its row) per stage; weights: the non-zero (j, b_j). Without an
-    actuator q'' is the system's under the torque τ(s) on θ1 and `own` is empty; with one, q'' and the
-    rates of its own slots `own` come from it (`actuators.base.Actuator`) under the input u(s) = torque(s).
-    q and q' take the same operations in the same order either way."""
+    rows: `tableau_rows`. Each row combines the stages before it, x + dt Σ a_j k_j; a stage row then
+    evaluates its stage there, the last row (the weights) is the result. Without an actuator q'' is the
+    system's under the torque τ(s) on θ1 and `own` is empty; with one, q'' and the rates of its own slots
+    `own` come from it (`actuators.base.Actuator`) under the input u(s) = torque(s). q and q' take the
+    same operations in the same order either way."""
     acc = system.accelerations
     kq: list[Vec3] = []  # stage velocities: dq/dt
     kv: list[Vec3] = []  # stage accelerations: dv/dt
     ko: list[tuple[float, ...]] = []  # stage rates of the own slots
     q0, q1, q2 = q
     v0, v1, v2 = v
-    for c, row in stages:
+    for c, row in rows:
         x0, x1, x2, w0, w1, w2, xo = q0, q1, q2, v0, v1, v2, own
         for j, a in row:
             ha = dt * a
@@ -48,6 +54,8 @@ def rk_stage_loop(stages: Stages, weights: Weights, system: FingerSystem, t: flo
             w2 += ha * dv[2]
             if own:
                 xo = tuple([x + ha * k for x, k in zip(xo, ko[j])])
+        if c is None:  # the weights' row: the step's end
+            return (x0, x1, x2), (w0, w1, w2), xo
         ts = t + c * dt
         kq.append((w0, w1, w2))
         if actuator is None:
@@ -56,18 +64,7 @@ def rk_stage_loop(stages: Stages, weights: Weights, system: FingerSystem, t: flo
             u = torque(ts)
             kv.append(actuator.accelerations(system, ts, (x0, x1, x2), (w0, w1, w2), u, xo))
             ko.append(actuator.rates(ts, (x0, x1, x2), (w0, w1, w2), u, xo))
-    for j, b in weights:
-        hb = dt * b
-        dq, dv = kq[j], kv[j]
-        q0 += hb * dq[0]
-        q1 += hb * dq[1]
-        q2 += hb * dq[2]
-        v0 += hb * dv[0]
-        v1 += hb * dv[1]
-        v2 += hb * dv[2]
-        if own:
-            own = tuple([x + hb * k for x, k in zip(own, ko[j])])
-    return (q0, q1, q2), (v0, v1, v2), own
+    raise ValueError("a tableau's rows end with its weights (tableau_rows)")
 
 
 class PaperEuler(Integrator):
@@ -114,14 +111,10 @@ class ExplicitRungeKutta(Integrator):
 
     def __init__(self, system: FingerSystem) -> None:
         super().__init__(system)
-        # keep only the non-zero tableau entries: the step loop then skips nothing
-        self._stages = tuple(
-            (c, tuple((j, a) for j, a in enumerate(row) if a != 0.0)) for c, row in zip(self.C, self.A)
-        )
-        self._weights = tuple((j, b) for j, b in enumerate(self.B) if b != 0.0)
+        self._rows = tableau_rows(self.A, self.B, self.C)
 
     def step(self, t: float, q: Vec3, v: Vec3, dt: float, torque: TorqueFn) -> tuple[Vec3, Vec3]:
-        q, v, _ = rk_stage_loop(self._stages, self._weights, self.system, t, q, v, (), dt, torque)
+        q, v, _ = rk_stage_loop(self._rows, self.system, t, q, v, (), dt, torque)
         return project(self.system.params, q, v)
 
     @classmethod

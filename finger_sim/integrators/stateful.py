@@ -19,7 +19,7 @@ from finger_sim.actuators.base import Actuator
 from finger_sim.dynamics import FingerSystem
 from finger_sim.errors import ConfigError
 from finger_sim.integrators.base import Integrator, TorqueFn
-from finger_sim.integrators.explicit import ExplicitRungeKutta, rk_stage_loop
+from finger_sim.integrators.explicit import ExplicitRungeKutta, rk_stage_loop, tableau_rows
 from finger_sim.kinematics import Vec3
 from finger_sim.projection import project
 
@@ -43,10 +43,7 @@ class StatefulRungeKutta(Integrator):
         if actuator is None:
             raise TypeError(f"{type(self).__name__} needs an actuator")
         ref = self.reference
-        self._stages = tuple(
-            (c, tuple((j, a) for j, a in enumerate(row) if a != 0.0)) for c, row in zip(ref.C, ref.A)
-        )
-        self._weights = tuple((j, b) for j, b in enumerate(ref.B) if b != 0.0)
+        self._rows = tableau_rows(ref.A, ref.B, ref.C)
         self.actuator = actuator
         #: the own slots of a state this integrator neither produced nor was told of
         self.own: tuple[float, ...] = actuator.initial()
@@ -102,13 +99,13 @@ class StatefulRungeKutta(Integrator):
         held = _Held(self.actuator, q)
         h = dt / self.substeps
         for k in range(self.substeps):
-            own = rk_stage_loop(self._stages, self._weights, self.system, t + k * h, q, ZERO, own, h, torque, held)[2]
+            own = rk_stage_loop(self._rows, self.system, t + k * h, q, ZERO, own, h, torque, held)[2]
         return own
 
     def _substep(self, t: float, q: Vec3, v: Vec3, own: tuple[float, ...], dt: float,
                  torque: TorqueFn) -> tuple[Vec3, Vec3, tuple[float, ...]]:
         """`ExplicitRungeKutta.step` on the flat state: the same stage loop, then the same projection."""
-        q, v, own = rk_stage_loop(self._stages, self._weights, self.system, t, q, v, own, dt, torque, self.actuator)
+        q, v, own = rk_stage_loop(self._rows, self.system, t, q, v, own, dt, torque, self.actuator)
         qn, vn = project(self.system.params, q, v)
         return qn, vn, own
 
