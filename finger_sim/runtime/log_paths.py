@@ -119,10 +119,6 @@ class UnwritableLog:
         self.dropped += 1
         return False
 
-    def write_batch(self, messages: Sequence[tuple[str, bytes]], log_time_ns: int) -> int:
-        self.dropped += len(messages)
-        return 0
-
     def write_records(self, topics: Sequence[str], datas: Sequence[bytes], log_time_ns: int) -> int:
         self.dropped += len(datas)
         return 0
