@@ -106,7 +106,9 @@ DEFAULT_QUEUE_SIZE = 10_000  # pending messages (~1 s of a 1 kHz node's six topi
 MAX_QUEUED_BYTES = 64 << 20  # pending payload bytes before dropping: a few huge messages cannot fill memory
 DEFAULT_IDLE_FLUSH_S = 1.0  # wall seconds without messages after which the open chunk is closed
 DEFAULT_CHUNK_WALL_S = 1.0  # wall seconds after which an open chunk is closed, whatever its log-time span
-DEFAULT_HANDOVER_S = 0.1  # wall seconds between handovers to the writer process: its CPU is mostly per handover (0.05 s cost about twice as much, docs/node_performance.md)
+#: Wall seconds between handovers to the writer process. Its CPU at a node's few messages a step is
+#: mostly per handover: 0.05 s cost it about twice as much (docs/node_performance.md).
+DEFAULT_HANDOVER_S = 0.1
 _PIPE_BYTES = 1 << 20  # the pipe to the writer process: Linux's default pipe-max-size (its default is 64 kB)
 MAX_METADATA_BYTES = 1 << 16  # UTF-8 bytes of one metadata record's keys and values
 _MAX_TIME_NS = 1 << 64  # MCAP timestamps are uint64
@@ -243,8 +245,8 @@ class McapRecorder:
         self._start = Start(str(self._path), self._interval_ns, chunk_size, compression.value, idle_flush_s,
                             chunk_wall_s, handover_s)
         self._channels: dict[str, _Channel] = {}
-        self._batch_topics: list[str] = []  # write_records' last topic list and its channels
-        self._batch_channels: list[_Channel] = []
+        # write_records' last topic list and its channels, one tuple: replaced whole, read whole (threads)
+        self._last_batch: tuple[list[str], list[_Channel]] = ([], [])
         self._codecs: dict[str, _Codec] = {}
         self._reported: set[_Problem] = set()
         self._written = 0  # reported by the writer process (status thread only)
@@ -428,13 +430,12 @@ class McapRecorder:
         the channels of the last topic list are looked up once (compared, not hashed)."""
         if len(topics) != len(datas):
             raise LogArgumentError("datas", f"one CDR message per topic ({len(topics)})", f"{len(datas)} messages")
-        if topics == self._batch_topics:  # the last state's topics: equal str objects compare by identity
-            channels = self._batch_channels
-        else:
+        last_topics, channels = self._last_batch
+        if topics != last_topics:  # not the last state's topics (equal str objects compare by identity)
             get = self._channels.get
-            channels = [get(topic) for topic in topics]
+            channels = [get(topic) for topic in topics]  # type: ignore[misc]
             if None not in channels:
-                self._batch_topics, self._batch_channels = list(topics), channels  # type: ignore[assignment]
+                self._last_batch = (list(topics), channels)
         if (None in channels or {*map(type, datas)} - _BYTES_ONLY or self._state is not _State.OPEN
                 or not (type(log_time_ns) is int and 0 <= log_time_ns < self._time_limit_ns)):
             return sum(self.write(topic, data, log_time_ns) for topic, data in zip(topics, datas))  # its checks and errors
