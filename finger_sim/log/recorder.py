@@ -106,11 +106,14 @@ DEFAULT_QUEUE_SIZE = 10_000  # pending messages (~1 s of a 1 kHz node's six topi
 MAX_QUEUED_BYTES = 64 << 20  # pending payload bytes before dropping: a few huge messages cannot fill memory
 DEFAULT_IDLE_FLUSH_S = 1.0  # wall seconds without messages after which the open chunk is closed
 DEFAULT_CHUNK_WALL_S = 1.0  # wall seconds after which an open chunk is closed, whatever its log-time span
-DEFAULT_HANDOVER_S = 0.05  # wall seconds between the writer thread's takes of the buffer
+#: Wall seconds between handovers to the writer process. Its CPU at a node's few messages a step is
+#: mostly per handover: 0.05 s cost it about twice as much (docs/node_performance.md).
+DEFAULT_HANDOVER_S = 0.1
 _PIPE_BYTES = 1 << 20  # the pipe to the writer process: Linux's default pipe-max-size (its default is 64 kB)
 MAX_METADATA_BYTES = 1 << 16  # UTF-8 bytes of one metadata record's keys and values
 _MAX_TIME_NS = 1 << 64  # MCAP timestamps are uint64
 _SEQUENCE_MODULUS = 1 << 32  # MCAP sequence numbers are uint32: they wrap
+_BYTES_ONLY = {bytes}  # the types write_records takes as they are (immutable: no copy)
 #: The usual name of the status record (finger_sim's nodes write it; LogReader.dropped reads it).
 RECORDING_STATUS = "recording"
 #: The keys of the status record written at close (see `status_record`).
@@ -147,12 +150,16 @@ class _Codec:
     decode: Callable[[bytes], Any]
 
 
-@dataclass(slots=True)
+@dataclass(slots=True, eq=False)  # compared by identity (`None in channels` in C, no __eq__ call)
 class _Channel:
     index: int  # in the writer process's Register records
     type_name: str
     codec: _Codec
     last_sequence: int = 0
+    record_id: int = 0  # the channel id in the file's records: index + 1
+
+    def __post_init__(self) -> None:
+        self.record_id = self.index + 1
 
 
 class McapRecorder:
@@ -238,6 +245,8 @@ class McapRecorder:
         self._start = Start(str(self._path), self._interval_ns, chunk_size, compression.value, idle_flush_s,
                             chunk_wall_s, handover_s)
         self._channels: dict[str, _Channel] = {}
+        # write_records' last topic list and its channels, one tuple: replaced whole, read whole (threads)
+        self._last_batch: tuple[list[str], list[_Channel]] = ([], [])
         self._codecs: dict[str, _Codec] = {}
         self._reported: set[_Problem] = set()
         self._written = 0  # reported by the writer process (status thread only)
@@ -413,41 +422,51 @@ class McapRecorder:
         order: what write() does for each, under one lock and one check of the queue's room
         (a node's state of one step, ~22 messages for a 10-finger hand). Returns how many were
         buffered; the rest were dropped and counted exactly as write() would have."""
-        get, size = self._channels.get, 0
-        channels: list[_Channel] = []
-        for topic, data in messages:
-            channel = get(topic)
-            if channel is None or type(data) is not bytes:
-                break
-            channels.append(channel)
-            size += len(data)
-        if (len(channels) < len(messages) or self._state is not _State.OPEN
+        return self.write_records([topic for topic, _ in messages], [data for _, data in messages], log_time_ns)
+
+    def write_records(self, topics: Sequence[str], datas: Sequence[bytes], log_time_ns: int) -> int:
+        """write_batch with the topics and their CDR bytes as two parallel sequences: a caller that
+        hands over the same topics every step (a node's state) builds no object per message, and
+        the channels of the last topic list are looked up once (compared, not hashed)."""
+        if len(topics) != len(datas):
+            raise LogArgumentError("datas", f"one CDR message per topic ({len(topics)})", f"{len(datas)} messages")
+        last_topics, channels = self._last_batch
+        if topics != last_topics:  # not the last state's topics (equal str objects compare by identity)
+            get = self._channels.get
+            channels = [get(topic) for topic in topics]  # type: ignore[misc]
+            if None not in channels:
+                self._last_batch = (list(topics), channels)
+        if (None in channels or {*map(type, datas)} - _BYTES_ONLY or self._state is not _State.OPEN
                 or not (type(log_time_ns) is int and 0 <= log_time_ns < self._time_limit_ns)):
-            return sum(self.write(topic, data, log_time_ns) for topic, data in messages)  # its checks and errors
+            return sum(self.write(topic, data, log_time_ns) for topic, data in zip(topics, datas))  # its checks and errors
+        size = sum(map(len, datas))
         if self.back_pressure:
             self._wait_for_room()
         log_ns = log_time_ns + self._offset_ns
         with self._lock:
             waiting = self._queued - self._taken
-            fits = (self._state is _State.OPEN and waiting + len(messages) <= self._queue_size
+            fits = (self._state is _State.OPEN and waiting + len(datas) <= self._queue_size
                     and not (waiting and self._queued_bytes - self._taken_bytes + size > MAX_QUEUED_BYTES))
             if fits:
-                self._append_batch(channels, messages, log_ns, size, waiting)
+                self._append_records(channels, datas, log_ns, size, waiting)  # type: ignore[arg-type]
         if not fits:  # outside the lock: a blocked write() (back-pressure) must let the sender take the buffer
-            return sum(self.write(topic, data, log_time_ns) for topic, data in messages)
-        return len(messages)
+            return sum(self.write(topic, data, log_time_ns) for topic, data in zip(topics, datas))
+        return len(datas)
 
-    def _append_batch(self, channels: list[_Channel], messages: Sequence[tuple[str, bytes]], log_ns: int, size: int,
-                      waiting: int) -> None:
-        """write_batch's records into the buffer (under _lock)."""
+    def _append_records(self, channels: list[_Channel], datas: Sequence[bytes], log_ns: int, size: int,
+                        waiting: int) -> None:
+        """write_records' records into the buffer (under _lock)."""
         buffer, pack = self._buffer, _pack_header
-        for channel, (_, data) in zip(channels, messages):
-            sequence = channel.last_sequence = (channel.last_sequence + 1) % _SEQUENCE_MODULUS
-            buffer += pack(MESSAGE_OPCODE, MESSAGE_FIELDS + len(data), channel.index + 1, sequence, log_ns, log_ns)
+        for channel, data in zip(channels, datas):
+            sequence = channel.last_sequence + 1
+            if sequence == _SEQUENCE_MODULUS:  # uint32: wraps
+                sequence = 0
+            channel.last_sequence = sequence
+            buffer += pack(MESSAGE_OPCODE, MESSAGE_FIELDS + len(data), channel.record_id, sequence, log_ns, log_ns)
             buffer += data
-        self._queued += len(messages)
+        self._queued += len(datas)
         self._queued_bytes += size
-        if waiting < self._queue_size // 2 <= waiting + len(messages):
+        if waiting < self._queue_size // 2 <= waiting + len(datas):
             self._wake.set()  # a burst: take it before the bound is reached
 
     @property

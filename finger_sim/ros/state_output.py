@@ -3,9 +3,10 @@
 A step's state goes out as several messages (finger_node: /clock, joint_states, fingertip_pose;
 a 10-finger finger_hand: 22). Logged one by one, each costs a McapRecorder.write (its checks,
 its lock, its queue test). `StateOutput` collects the CDR messages published while
-SteppingSession._publish_state runs, hands them to the log in one McapRecorder.write_batch
+SteppingSession._publish_state runs, hands them to the log in one McapRecorder.write_records
 (the same records, sequence numbers and times as write() gives them) and then sends them in the
-order they were published. Logged before sent: a controller's answer to a state, logged by the
+order they were published. The state's topics, bytes and senders are kept in three lists reused
+step after step: no object per message, and the recorder finds the same topic list every step. Logged before sent: a controller's answer to a state, logged by the
 executor thread, never lands in the log before that state.
 
 Outside a state (an idle /clock repeat, diagnostics, command-log events) and without a log, a
@@ -26,8 +27,10 @@ class StateOutput:
     def __init__(self, recorder: Any) -> None:
         self._recorder = recorder
         self._open = False
-        self._sends: list[tuple[Callable[[bytes], None], bytes]] = []
-        self._logged: list[tuple[str, bytes]] = []
+        # the open state's messages, in the order published (cleared at flush, never reallocated)
+        self._topics: list[str] = []
+        self._datas: list[bytes] = []
+        self._sends: list[Callable[[bytes], None]] = []
 
     def add(self, out: Endpoint, data: bytes, stamp: int) -> None:
         """Publish (and log, at `stamp` ns) a publisher's CDR bytes: now, or at `flush` inside a state."""
@@ -35,8 +38,9 @@ class StateOutput:
         if recorder is None or not out.recorded:
             out.send(data)  # type: ignore[misc]  # a publisher's endpoint
         elif self._open:
-            self._sends.append((out.send, data))  # type: ignore[arg-type]
-            self._logged.append((out.topic, data))
+            self._topics.append(out.topic)
+            self._datas.append(data)
+            self._sends.append(out.send)  # type: ignore[arg-type]
         else:
             out.send(data)  # type: ignore[misc]
             recorder.write(out.topic, data, stamp)
@@ -48,13 +52,17 @@ class StateOutput:
     def flush(self, stamp: int) -> None:
         """The state is complete: log what was collected at `stamp` ns in one hand-over, then send it."""
         self._open = False
-        if not self._sends:
+        datas, sends = self._datas, self._sends
+        if not datas:
             return
-        sends, logged = self._sends, self._logged
-        self._sends, self._logged = [], []
-        self._recorder.write_batch(logged, stamp)
-        for send, data in sends:
-            send(data)
+        try:
+            self._recorder.write_records(self._topics, datas, stamp)
+            for send, data in zip(sends, datas):
+                send(data)
+        finally:
+            self._topics.clear()
+            datas.clear()
+            sends.clear()
 
 
 class BatchedStateOutput:

@@ -119,8 +119,8 @@ class UnwritableLog:
         self.dropped += 1
         return False
 
-    def write_batch(self, messages: Sequence[tuple[str, bytes]], log_time_ns: int) -> int:
-        self.dropped += len(messages)
+    def write_records(self, topics: Sequence[str], datas: Sequence[bytes], log_time_ns: int) -> int:
+        self.dropped += len(datas)
         return 0
 
     def close(self) -> None:

@@ -121,3 +121,62 @@ def test_back_pressure_keeps_every_message_of_batches_larger_than_the_room(tmp_p
     assert counts == [1 + 2 * FINGERS] * 50
     assert (recorder.written, recorder.dropped) == (50 * (1 + 2 * FINGERS), 0)
     assert len(messages_of(path)) == 50 * (1 + 2 * FINGERS)
+
+
+def record_reusing_lists(path: Path) -> McapRecorder:
+    """The steps of `record`, handed over as StateOutput does: two lists cleared and refilled in
+    place every step; every third step leaves out the fingertip poses and every fifth reverses
+    the order, so the recorder's remembered topic list must notice each change."""
+    rng = random.Random(5)
+    topics: list[str] = []
+    datas: list[bytes] = []
+    with McapRecorder(path, chunk_interval_s=0.05) as recorder:
+        register(recorder)
+        for k in range(STEPS):
+            messages = step_messages(k, rng)
+            if k % 3 == 1:
+                messages = [m for m in messages if not m[0].endswith("fingertip_pose")]
+            if k % 5 == 2:
+                messages.reverse()
+            topics.clear()
+            datas.clear()
+            for topic, data in messages:
+                topics.append(topic)
+                datas.append(data)
+            assert recorder.write_records(topics, datas, T0_NS + k * DT_NS) == len(messages)
+    return recorder
+
+
+def test_records_from_lists_reused_in_place_write_what_single_writes_write(tmp_path: Path) -> None:
+    rng = random.Random(5)
+    with McapRecorder(tmp_path / "single.mcap", chunk_interval_s=0.05) as single:
+        register(single)
+        for k in range(STEPS):
+            messages = step_messages(k, rng)
+            if k % 3 == 1:
+                messages = [m for m in messages if not m[0].endswith("fingertip_pose")]
+            if k % 5 == 2:
+                messages.reverse()
+            assert all(single.write(topic, data, T0_NS + k * DT_NS) for topic, data in messages)
+    reused = record_reusing_lists(tmp_path / "reused.mcap")
+    expected = messages_of(tmp_path / "single.mcap")
+    assert len(expected) == STEPS * (1 + 2 * FINGERS) - len(range(1, STEPS, 3)) * FINGERS
+    assert messages_of(tmp_path / "reused.mcap") == expected
+    assert (reused.written, reused.dropped) == (len(expected), 0)
+
+
+def test_records_other_than_bytes_go_the_way_of_write(tmp_path: Path) -> None:
+    """A bytearray is copied (write()'s path), so changing it afterwards changes nothing logged."""
+    with McapRecorder(tmp_path / "x.mcap") as recorder:
+        recorder.register_channel("/clock", "rosgraph_msgs/msg/Clock")
+        data = bytearray(clock_cdr(T0_NS))
+        assert recorder.write_records(["/clock"], [data], T0_NS) == 1
+        data[:] = clock_cdr(0)
+    assert [m[4] for m in messages_of(tmp_path / "x.mcap")] == [clock_cdr(T0_NS)]
+
+
+def test_records_need_one_message_per_topic(tmp_path: Path) -> None:
+    with McapRecorder(tmp_path / "x.mcap") as recorder:
+        recorder.register_channel("/clock", "rosgraph_msgs/msg/Clock")
+        with pytest.raises(LogArgumentError, match="one CDR message per topic"):
+            recorder.write_records(["/clock", "/clock"], [clock_cdr(0)], 0)

@@ -279,6 +279,7 @@ def test_unwritable_record_dir_leaves_nothing(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["afile"]
     log = UnwritableLog(str(afile / "bags"), "cannot create a log")
     assert log.write("/joint_states", b"", 0) is False and (log.written, log.dropped) == (0, 1)
+    assert log.write_records(["/clock", "/joint_states"], [b"", b""], 0) == 0 and (log.written, log.dropped) == (0, 3)
 
 
 

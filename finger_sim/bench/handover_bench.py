@@ -1,0 +1,133 @@
+"""What recording costs a paced 1 kHz loop, without ROS: the node's hand-over path alone.
+
+    python -m finger_sim.bench.handover_bench [--old <checkout>] [--messages 3 22] [--seconds 8] [--rounds 3]
+
+Each run is a fresh process that steps a 1 kHz loop paced like the node (sleep to the next
+1 ms deadline) and hands each step's state of N CDR messages (JointState-sized, 160 bytes,
+one topic each) through finger_sim.ros.state_output.StateOutput, as the node's
+_publish_state does, into a McapRecorder with the default handover; sending is a no-op. The
+same loop with no recorder is the baseline. Figures: CPU s per sim s (cores at real time) of
+the loop's process and of its log writer process, over SECONDS after WARMUP_S (the writer
+process's start-up excluded). With --old, every run of this checkout is followed by the same
+run of the old one (first on PYTHONPATH): A B A B, medians over the rounds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+WARMUP_S = 3.0  # wall s after open before measuring: the writer process imports mcap, numpy, zstd
+RATE_HZ = 1000.0
+PAYLOAD_BYTES = 160  # about a 3-joint JointState's CDR
+NS = 1_000_000_000
+
+
+def _cpu_s(stat_path: str) -> float:
+    """utime + stime of /proc/<...>/stat, s."""
+    with open(stat_path) as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def run_loop(messages: int, seconds: float, record: bool) -> dict[str, float]:
+    """One paced loop in this process: {'loop': cores, 'writer': cores, 'rtf': sim s per wall s}."""
+    from finger_sim.log import McapRecorder
+    from finger_sim.ros.interfaces import Endpoint
+    from finger_sim.ros.state_output import StateOutput
+
+    folder = tempfile.mkdtemp(prefix="handover_bench_")
+    recorder = McapRecorder(Path(folder) / "bench.mcap").open() if record else None
+    endpoints = []
+    for i in range(messages):
+        topic = f"/f{i}/joint_states"
+        if recorder is not None:
+            recorder.register_channel(topic, "sensor_msgs/msg/JointState")
+        endpoints.append(Endpoint(None, topic, object, True, False, lambda data: None))
+    output = StateOutput(recorder)
+    time.sleep(WARMUP_S)
+    writer_stat = f"/proc/{recorder.writer_pid}/stat" if recorder is not None else None
+    w0, c0 = (_cpu_s(writer_stat) if writer_stat else 0.0), time.process_time()
+    steps, dt_ns = round(seconds * RATE_HZ), round(NS / RATE_HZ)
+    start = time.perf_counter()
+    for k in range(steps):
+        stamp = k * dt_ns
+        data = stamp.to_bytes(8, "little") * (PAYLOAD_BYTES // 8)
+        output.begin()
+        for endpoint in endpoints:
+            output.add(endpoint, data, stamp)
+        output.flush(stamp)
+        wait = start + (k + 1) / RATE_HZ - time.perf_counter()
+        if wait > 0:
+            time.sleep(wait)
+    wall = time.perf_counter() - start
+    loop, writer = time.process_time() - c0, (_cpu_s(writer_stat) - w0) if writer_stat else 0.0
+    if recorder is not None:
+        recorder.close()
+        assert (recorder.written, recorder.dropped) == (steps * messages, 0), "the log lost messages"
+    sim = steps / RATE_HZ
+    import finger_sim
+
+    return {"loop": loop / sim, "writer": writer / sim, "rtf": sim / wall, "package": str(Path(finger_sim.__file__).parent)}
+
+
+def _run(checkout: Path | None, messages: int, seconds: float, record: bool) -> dict[str, float]:
+    env = dict(os.environ)
+    if checkout is not None:
+        env["PYTHONPATH"] = os.pathsep.join([str(checkout), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
+    # this file run by path: the old checkout need not have it, and its finger_sim is the one imported
+    argv = ["handover_bench", "--one", str(messages), str(seconds), "1" if record else "0"]
+    code = f"import runpy, sys; sys.argv = {argv!r}; runpy.run_path({__file__!r}, run_name='__main__')"
+    expected = Path(checkout if checkout is not None else Path(__file__).parents[2]).resolve()
+    # run in the checkout: `-c` puts the working folder first on sys.path
+    out = subprocess.run([sys.executable, "-c", code], env=env, check=True, capture_output=True, text=True, cwd=expected)
+    result = json.loads(out.stdout.strip().splitlines()[-1])
+    assert Path(result.pop("package")).resolve().parent == expected, f"{result}: not the checkout {expected}"
+    return result
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--old", type=Path, default=None, help="a checkout of the old code, run after each new run")
+    parser.add_argument("--messages", type=int, nargs="+", default=[3, 22], help="CDR messages per state")
+    parser.add_argument("--seconds", type=float, default=8.0, help="measured sim (= wall) s per run")
+    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--one", nargs=3, help=argparse.SUPPRESS)  # a single run in this process (JSON out)
+    args = parser.parse_args(argv)
+    if args.one:
+        print(json.dumps(run_loop(int(args.one[0]), float(args.one[1]), args.one[2] == "1")))
+        return 0
+    sides = {"new": None} | ({"old": args.old} if args.old is not None else {})
+    runs: dict[tuple[str, int, bool], list[dict[str, float]]] = {}
+    load0 = os.getloadavg()[0]
+    for _ in range(args.rounds):
+        for n in args.messages:
+            for record in (False, True):
+                for side, checkout in sides.items():
+                    runs.setdefault((side, n, record), []).append(_run(checkout, n, args.seconds, record))
+    print(f"load average {load0:.1f} → {os.getloadavg()[0]:.1f}; medians of {args.rounds} rounds, cores (CPU s per sim s)")
+    print("| side | messages a state | loop, no log | loop, recording | its writer process | added by recording | "
+          "the same, µs a step | real-time factor (lowest run) |")
+    print("|---|---|---|---|---|---|---|---|")
+    for n in args.messages:
+        for side in sides:
+            off, on = runs[(side, n, False)], runs[(side, n, True)]
+            base = statistics.median(r["loop"] for r in off)
+            loop = statistics.median(r["loop"] for r in on)
+            writer = statistics.median(r["writer"] for r in on)
+            rtf = min(r["rtf"] for r in off + on)
+            added = loop + writer - base
+            print(f"| {side} | {n} | {base:.4f} | {loop:.4f} | {writer:.4f} | +{added:.4f} | {added * 1e6 / RATE_HZ:.1f} | "
+                  f"{rtf:.3f} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
