@@ -240,6 +240,8 @@ class Drive(OwnModes, Actuator):
         self.i = 0.0
         #: (q, q', (t, u, mode, direction), guards) of the last guard evaluation (`stepping._guards`)
         self.guard_cache: tuple | None = None
+        #: (q, (t, u), holding margin) of the last stuck state tested (`stepping._release_time`)
+        self.margin_cache: tuple | None = None
         #: the compiled model the Simulator steps with (None: the Python kernel)
         self.kernel_model = None
         #: an `actuators.stepping.EnergyLedger` the steps add their energy integrals to, or None
