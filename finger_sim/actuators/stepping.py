@@ -119,6 +119,7 @@ def start(sim: Simulator) -> None:
     system: DrivenSystem = sim.system  # type: ignore[assignment]
     model = getattr(sim.integrator, "model", None)  # a compiled integrator's model: its guards are compiled
     system.drive.kernel_model, system.drive.guard_cache, system.drive.margin_cache = model, None, None
+    system.keeps_holding_torque, system._held = sim._friction is None and sim._actuator is None, None
     if model is not None:
         _compiled_guards = stepper_slot.kernel().compiled_drive().drive_guards
         _compiled_guards(model, 0.0, *ZERO, *ZERO, 0.0, 1.0)  # load it now, not at the first event of a paced step
