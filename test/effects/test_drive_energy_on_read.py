@@ -71,3 +71,20 @@ def test_the_report_made_on_read_equals_the_one_filled_during_the_run(name, kern
     scale = max(abs(report["electrical_work"]), abs(report["dissipated"]), abs(report["linkage_energy_change"]))
     assert scale > 0.0 and abs(report["residual"]) <= 1e-3 * scale
     assert report["mesh_loss"] >= -1e-12
+
+
+@pytest.mark.parametrize("name", ["drive_grasp", "drive_grasp_backdrivable"])
+def test_the_kept_holding_torque_of_a_stuck_step_changes_no_bit(name):
+    """A stuck step asks τ_h at its end twice (release test, outputs) and the next step once more at its start;
+    kept (`DrivenSystem.keeps_holding_torque`) or evaluated each time, the run is the same bit for bit."""
+    from finger_sim.actuators import record
+    from finger_sim.simulate import Simulator
+
+    scene = shipped(name)
+    kept, fresh = Simulator(scene, kernel="python"), Simulator(scene, kernel="python")
+    assert kept.system.keeps_holding_torque
+    fresh.system.keeps_holding_torque = False
+    (xs_a, rows_a), (xs_b, rows_b) = record.steps(kept, scene.step_count), record.steps(fresh, scene.step_count)
+    assert bits(xs_a) == bits(xs_b) and bits(rows_a) == bits(rows_b)
+    mode = list(kept.system.output_names()).index("mesh_mode")
+    assert np.count_nonzero(rows_a[:, mode] == 2.0) > 100  # it held for most of the run (mesh_mode 2: stuck)
