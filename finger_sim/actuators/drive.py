@@ -325,6 +325,8 @@ class DrivenSystem(FingerSystem):
         #: whether τ_h at a held state may be kept (`holding_torque`): set where no element carries a state
         #: of its own (stick–slip friction, an actuator's slots), which would change it at the same (t, q)
         self.keeps_holding_torque = False
+        #: whether τ_h at a fixed q is the same at every t (no element depends on time): kept across steps then
+        self.holding_torque_is_steady = False
         self._held: tuple | None = None  # (t, q, τ_h) of the last held state asked
 
     def effective_inertia(self, q: Vec3) -> float:
@@ -335,9 +337,10 @@ class DrivenSystem(FingerSystem):
     def holding_torque(self, t: float, q: Vec3, v: Vec3) -> float:
         """τ_h, N·m: the torque on θ1 that keeps θ1'' = 0 (§8), from the §4 system without mesh torque.
         At a held state (q' is ZERO) it is kept for the same t and q (the same tuple) when
-        `keeps_holding_torque`: a stuck step's release test and its outputs ask for it at its end."""
+        `keeps_holding_torque`: a stuck step's release test and its outputs ask for it at its end; for any t
+        at that q when `holding_torque_is_steady` as well: a held stretch evaluates it once."""
         held = v is ZERO and self.keeps_holding_torque
-        if held and self._held is not None and self._held[1] is q and self._held[0] == t:
+        if held and self._held is not None and self._held[1] is q and (self._held[0] == t or self.holding_torque_is_steady):
             return self._held[2]
         a0 = FingerSystem.accelerations(self, t, q, v, 0.0)[0][0]
         tau_h = -a0 * self.effective_inertia(q)

@@ -120,6 +120,7 @@ def start(sim: Simulator) -> None:
     model = getattr(sim.integrator, "model", None)  # a compiled integrator's model: its guards are compiled
     system.drive.kernel_model, system.drive.guard_cache, system.drive.margin_cache = model, None, None
     system.keeps_holding_torque, system._held = sim._friction is None and sim._actuator is None, None
+    system.holding_torque_is_steady = all(_steady(e) for e in system.elements)
     if model is not None:
         _compiled_guards = stepper_slot.kernel().compiled_drive().drive_guards
         _compiled_guards(model, 0.0, *ZERO, *ZERO, 0.0, 1.0)  # load it now, not at the first event of a paced step
@@ -133,6 +134,20 @@ def start(sim: Simulator) -> None:
         sim.v = _turn(system, 0.0, sim.q, u)
     else:
         _roll(system, 0.0, sim.q, sim.v, u, math.copysign(1.0, sim.v[0]))
+
+
+def _steady(element: object) -> bool:
+    """Whether a force element's force at (q, q') is the same at every t: the ones known to be (a contact
+    only with objects that do not move); an element not listed counts as depending on time."""
+    from finger_sim.effects.contact import Contact
+    from finger_sim.effects.damping import JointDamping
+    from finger_sim.effects.gravity import Gravity
+    from finger_sim.effects.spring import PipSpring
+    from finger_sim.effects.stops import JointStops
+
+    if isinstance(element, Contact):
+        return type(element) is Contact and not element.time_varying
+    return type(element) in (PipSpring, JointDamping, Gravity, JointStops)
 
 
 def fast_stepper(sim: Simulator) -> object | None:
