@@ -78,7 +78,7 @@ def _simulate(args: argparse.Namespace) -> int:
             print(note)
         print(f"wrote {csv}")
         return 0
-    traj = simulate(scene, kernel=args.kernel)
+    traj = simulate(scene, kernel=args.kernel, energy_report=True)  # the summary prints it: one run, not two
     print(traj.summary())
     if traj.method_reason:
         print(f"method auto → {traj.method}: {traj.method_reason}")

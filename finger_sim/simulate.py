@@ -8,6 +8,7 @@ results (`Trajectory`, the per-state columns). This module is the public face of
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -23,24 +24,27 @@ __all__ = ["BREAK_EPS", "Simulator", "State", "Trajectory", "output_names", "out
            "state_columns", "summary_line"]
 
 
-def simulate(scene: Scene, *, kernel: str = "auto") -> Trajectory:
+def simulate(scene: Scene, *, kernel: str = "auto", energy_report: bool = False) -> Trajectory:
     """Run `scene` from t = 0 to its duration (rounded up to whole steps) and record every step.
 
     On the compiled kernel a smooth scene's steps run in one kernel loop (`kernel.runner`);
     "auto" runs a short scene in Python (`kernel.offline_kernel`: loading numba costs more).
+    A drive scene's `energy_report` is filled during the run when asked for here, else on its first
+    read by running the scene again with the energy ledger (the same states, bit for bit).
     """
     n = scene.step_count
-    sim = Simulator(scene, kernel=stepper_slot.kernel().offline_kernel(kernel, n, scene))
+    chosen = stepper_slot.kernel().offline_kernel(kernel, n, scene)
+    sim = Simulator(scene, kernel=chosen)
     x0 = (*sim.q, *sim.v)
     start = time.perf_counter()
     drive_outputs: dict[str, np.ndarray] = {}
-    report: dict[str, float] = {}
+    report: Mapping[str, float] = {}
     if sim._friction is not None:  # its holding torques are read back after the run: keep every row's
         sim._friction.memory = n + 1
     if sim._drive is not None:  # the mesh mode is discrete state: its outputs are taken as the run goes
         from finger_sim.actuators import record
 
-        xs, drive_outputs, report = record.run(sim, n)
+        xs, drive_outputs, report = record.run(sim, n, None if energy_report else lambda: Simulator(scene, kernel=chosen))
     else:
         xs = stepper_slot.kernel().advance(sim, n)  # in the kernel where it can, else step by step
     wall = time.perf_counter() - start

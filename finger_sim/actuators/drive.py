@@ -240,6 +240,8 @@ class Drive(OwnModes, Actuator):
         self.i = 0.0
         #: (q, q', (t, u, mode, direction), guards) of the last guard evaluation (`stepping._guards`)
         self.guard_cache: tuple | None = None
+        #: (q, (t, u), holding margin) of the last stuck state tested (`stepping._release_time`)
+        self.margin_cache: tuple | None = None
         #: the compiled model the Simulator steps with (None: the Python kernel)
         self.kernel_model = None
         #: an `actuators.stepping.EnergyLedger` the steps add their energy integrals to, or None
@@ -320,6 +322,12 @@ class DrivenSystem(FingerSystem):
         super().__init__(params, elements)
         self.drive = drive
         self._inductive = drive.inductive
+        #: whether τ_h at a held state may be kept (`holding_torque`): set where no element carries a state
+        #: of its own (stick–slip friction, an actuator's slots), which would change it at the same (t, q)
+        self.keeps_holding_torque = False
+        #: whether τ_h at a fixed q is the same at every t (no element depends on time): kept across steps then
+        self.holding_torque_is_steady = False
+        self._held: tuple | None = None  # (t, q, τ_h) of the last held state asked
 
     def effective_inertia(self, q: Vec3) -> float:
         """M_eff = nᵀ M n, kg·m²: the linkage's inertia about θ1 (`linkage_inertia`)."""
@@ -327,9 +335,18 @@ class DrivenSystem(FingerSystem):
         return linkage_inertia(r1, r2, r3, self._m11, self._m22, self._m33, self._c, self.alpha, q[0], q[1], q[2])
 
     def holding_torque(self, t: float, q: Vec3, v: Vec3) -> float:
-        """τ_h, N·m: the torque on θ1 that keeps θ1'' = 0 (§8), from the §4 system without mesh torque."""
+        """τ_h, N·m: the torque on θ1 that keeps θ1'' = 0 (§8), from the §4 system without mesh torque.
+        At a held state (q' is ZERO) it is kept for the same t and q (the same tuple) when
+        `keeps_holding_torque`: a stuck step's release test and its outputs ask for it at its end; for any t
+        at that q when `holding_torque_is_steady` as well: a held stretch evaluates it once."""
+        held = v is ZERO and self.keeps_holding_torque
+        if held and self._held is not None and self._held[1] is q and (self._held[0] == t or self.holding_torque_is_steady):
+            return self._held[2]
         a0 = FingerSystem.accelerations(self, t, q, v, 0.0)[0][0]
-        return -a0 * self.effective_inertia(q)
+        tau_h = -a0 * self.effective_inertia(q)
+        if held:
+            self._held = (t, q, tau_h)
+        return tau_h
 
     def mesh(self, t: float, q: Vec3, v: Vec3, u: float, mode: int,
              current: float | None = None) -> tuple[float, float, Vec3, tuple[float, float]]:
@@ -375,7 +392,10 @@ class DrivenSystem(FingerSystem):
         mode = drive.mode
         if self._inductive and current is None:
             current = drive.i
-        tau_g, i, a, _ = self.mesh(t, q, v, u, mode, current)
+        if mode == STUCK and v is ZERO:  # τ_g = τ_h, as `mesh` gives it (the same arithmetic), kept
+            tau_g, i, a = self.holding_torque(t, q, v), drive.current(u, v[0]) if current is None else current, ZERO
+        else:
+            tau_g, i, a, _ = self.mesh(t, q, v, u, mode, current)
         omega = p.gear_ratio * v[0]
         tau_a = p.torque_constant * i - p.rotor_inertia * p.gear_ratio * a[0]
         voltage = p.resistance * i + p.torque_constant * omega

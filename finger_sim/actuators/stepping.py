@@ -118,7 +118,9 @@ def start(sim: Simulator) -> None:
     global _compiled_guards
     system: DrivenSystem = sim.system  # type: ignore[assignment]
     model = getattr(sim.integrator, "model", None)  # a compiled integrator's model: its guards are compiled
-    system.drive.kernel_model, system.drive.guard_cache = model, None
+    system.drive.kernel_model, system.drive.guard_cache, system.drive.margin_cache = model, None, None
+    system.keeps_holding_torque, system._held = sim._friction is None and sim._actuator is None, None
+    system.holding_torque_is_steady = all(_steady(e) for e in system.elements)
     if model is not None:
         _compiled_guards = stepper_slot.kernel().compiled_drive().drive_guards
         _compiled_guards(model, 0.0, *ZERO, *ZERO, 0.0, 1.0)  # load it now, not at the first event of a paced step
@@ -132,6 +134,20 @@ def start(sim: Simulator) -> None:
         sim.v = _turn(system, 0.0, sim.q, u)
     else:
         _roll(system, 0.0, sim.q, sim.v, u, math.copysign(1.0, sim.v[0]))
+
+
+def _steady(element: object) -> bool:
+    """Whether a force element's force at (q, q') is the same at every t: the ones known to be (a contact
+    only with objects that do not move); an element not listed counts as depending on time."""
+    from finger_sim.effects.contact import Contact
+    from finger_sim.effects.damping import JointDamping
+    from finger_sim.effects.gravity import Gravity
+    from finger_sim.effects.spring import PipSpring
+    from finger_sim.effects.stops import JointStops
+
+    if isinstance(element, Contact):
+        return type(element) is Contact and not element.time_varying
+    return type(element) in (PipSpring, JointDamping, Gravity, JointStops)
 
 
 def fast_stepper(sim: Simulator) -> object | None:
@@ -327,16 +343,27 @@ def crossing_test(k: int, ga: float) -> Callable[[float], bool]:
 def _release_time(system: DrivenSystem, t: float, t1: float, q: Vec3, u_fn: TorqueFn) -> float | None:
     """When in [t, t1] a stuck mesh breaks free; None if it holds throughout. q is fixed and q' = 0,
     so the holding margin is a function of time alone: its root, by brentq."""
-    p = system.drive.params
+    drive = system.drive
+    p = drive.params
 
     def margin(s: float) -> float:
-        tau_a = p.torque_constant * system.drive.current(u_fn(s), 0.0)
+        tau_a = p.torque_constant * drive.current(u_fn(s), 0.0)
         return holding_margin(system.holding_torque(s, q, ZERO), tau_a, p.gear_ratio, p.efficiency,
                               p.backward_efficiency)
 
-    if margin(t) < 0.0:
+    def end_margin(s: float) -> float:
+        """margin(s), kept: a held step's end is the next one's start (the same s, u and q)."""
+        key = (s, u_fn(s))
+        cached = drive.margin_cache
+        if cached is not None and cached[0] is q and cached[1] == key:
+            return cached[2]
+        value = margin(s)
+        drive.margin_cache = (q, key, value)
+        return value
+
+    if end_margin(t) < 0.0:
         return t
-    if margin(t1) >= 0.0:
+    if end_margin(t1) >= 0.0:
         return None
     return brentq(margin, t, t1, xtol=LOCATE_TOLERANCE * (t1 - t), rtol=4 * np.finfo(float).eps)
 

@@ -4,7 +4,7 @@ per-state columns (energy, |Φ|, the elements' outputs) that `simulate` and `str
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -77,7 +77,7 @@ class Trajectory:
     #: the integrator's estimate of the θ error at the end (rad; NaN: a fixed-step method, none)
     error_estimate: float = math.nan
     #: a drive scene's energy balance, J (`finger_sim.actuators.stepping.EnergyLedger.report`); else empty
-    energy_report: dict[str, float] = field(default_factory=dict)
+    energy_report: Mapping[str, float] = field(default_factory=dict)
 
     #: The columns every run has; the elements' outputs follow them (`csv_header`).
     CSV_HEADER = "t,theta1,theta2,theta3,theta1_dot,theta2_dot,theta3_dot,energy,constraint_residual"
