@@ -10,7 +10,8 @@ piecewise-constant profile; that step goes through `sim.step()`, and the next st
 the solution over from Python's step as `EventStep.step` does).
 
 What `EventStep.step` does after each of its steps is done once per stretch: the Simulator's state,
-torque and step index, the integrator's torque function and its estimates (`_remember_all`).
+torque and step index, the integrator's torque function and its estimates (`DormandPrince853.defer_estimates`,
+which builds the dict of estimates only when it is read; `_remember_all` where a drop is due).
 """
 
 from __future__ import annotations
@@ -23,6 +24,9 @@ from finger_sim.inputs import BREAK_EPS, PIECEWISE_CONSTANT, Profile
 from finger_sim.integrators.dop853 import KEEP_OUTPUTS, MAX_OUTPUTS
 from finger_sim.kernel import event_run
 from finger_sim.simulation.event_step import ZERO, EventStep
+
+#: The columns of `event_run.run`'s rows that `DormandPrince853.defer_estimates` keeps: q, the estimate.
+ESTIMATE_COLUMNS = [0, 1, 2, 6]
 
 if TYPE_CHECKING:
     from finger_sim.simulation.driver import Simulator
@@ -85,7 +89,9 @@ def _stretch(sim: Simulator, events: EventStep, compiled: Any, rows: np.ndarray,
         q, v = (last[0], last[1], last[2]), (last[3], last[4], last[5])
         events._moved = True  # noqa: SLF001
         integ._torque = fn  # noqa: SLF001
-        _remember_all(integ, rows[:count], q, last[6])
+        block = rows[:count - 1, ESTIMATE_COLUMNS]  # (a copy: rows is the next stretch's buffer)
+        if not integ.defer_estimates(block, q, last[6]):  # the dict is built when read, if ever
+            _remember_all(integ, rows[:count], q, last[6])
         sim.q, sim.v, sim.torque, sim.step_index = q, v, end, k + count
         events._q, events._v = q, v  # noqa: SLF001
         events.taken += count
