@@ -4,8 +4,8 @@
 run (`kernel.advance`, the work-precision report's "whole run", Simulator built outside the timing) split
 into its phases: the stretches of steps in one kernel call (`kernel.run_stretch._stretch`; free ones and
 resting ones apart) and the steps taken one `Simulator.step` at a time (the first step, an impact step, a
-release), the impact steps apart. Each phase is timed with `time.perf_counter` around the call (wall
-time, within one process); medians over the repeats, after one warm-up run. The split's total is the
+release), the impact steps apart. Each phase is timed in CPU time around the call (`time.process_time`:
+the machine is shared, wall time measures the other users); medians over the repeats, after one warm-up run. The split's total is the
 run's own total.
 """
 
@@ -37,9 +37,9 @@ def phases(scene: Any, repeats: int) -> tuple[dict[str, float], dict[str, int]]:
 
     def stretch(sim: Simulator, *args: Any) -> int:
         phase = "stretches resting" if sim._resting is not None else "stretches free"  # noqa: SLF001
-        start = time.perf_counter()
+        start = time.process_time()
         count = inner_stretch(sim, *args)
-        current[phase] += time.perf_counter() - start
+        current[phase] += time.process_time() - start
         steps[phase] += count
         return count
 
@@ -53,17 +53,17 @@ def phases(scene: Any, repeats: int) -> tuple[dict[str, float], dict[str, int]]:
 
             def step(torque: Any = None, sim: Simulator = sim, inner_step: Callable[..., Any] = inner_step) -> Any:
                 impacts = sim.impacts
-                start = time.perf_counter()
+                start = time.process_time()
                 state = inner_step(torque)
                 phase = "steps one by one, impact" if sim.impacts > impacts else "steps one by one"
-                current[phase] += time.perf_counter() - start
+                current[phase] += time.process_time() - start
                 steps[phase] += 1
                 return state
 
             sim.step = step  # type: ignore[method-assign]
-            start = time.perf_counter()
+            start = time.process_time()
             stepper_slot.kernel().advance(sim, scene.step_count)
-            current["whole run"] = time.perf_counter() - start
+            current["whole run"] = time.process_time() - start
             if k:
                 for phase, seconds in current.items():
                     times[phase].append(seconds)
