@@ -76,6 +76,8 @@ COMPILED_CHUNK = 32
 #: `error_estimate` remembers this many recent outputs (the states event location tried within
 #: a step); older ones are dropped down to KEEP_OUTPUTS.
 MAX_OUTPUTS, KEEP_OUTPUTS = 4096, 256
+#: An empty block of deferred estimates (`DormandPrince853.defer_estimates`): a single output's.
+NO_ROWS = np.empty((0, 4))
 
 _N_STAGES = coefficients.N_STAGES
 #: Stage nodes of one attempt: the 12 stages, t + h, then the 3 extra dense-output stages.
@@ -139,7 +141,10 @@ class DormandPrince853(Integrator):
         self.accepted = self.rejected = 0
         self._err = 0.0  # Σ local θ error estimates of the internal solution since its start, rad
         self._err_old = 0.0  # `_err` at the start of the last accepted step
-        self._estimates: dict[Vec3, float] = {}  # output q → estimated θ error there
+        self._settled: dict[Vec3, float] = {}  # output q → estimated θ error there (`_estimates`)
+        #: blocks of estimates not yet in it (`defer_estimates`), oldest first, and their row count
+        self._deferred: list[tuple[np.ndarray, Vec3, float]] = []
+        self._deferred_rows = 0
         #: (t, q, q') the internal solution started from at its last restart, or continued from
         self._origin: tuple[float, Vec3, Vec3] | None = None
         #: accepted internal steps since then, (t_old, h_old, y_old, dense, err_old, err), and their starts
@@ -158,7 +163,45 @@ class DormandPrince853(Integrator):
         led to it, each bounded as √6·norm·(atol + rtol·|θ|), carried through restarts from an
         earlier output (an impact keeps q). Linear accumulation: error growth or decay along the
         flow is not modelled."""
-        return self._estimates.get(q, 0.0)
+        for block, last_q, estimate in reversed(self._deferred):  # the newest entry for q wins, as in the dict
+            if last_q == q:
+                return estimate
+            hits = np.flatnonzero((block[:, 0] == q[0]) & (block[:, 1] == q[1]) & (block[:, 2] == q[2]))
+            if len(hits):
+                return float(block[hits[-1], 3])
+        return self._settled.get(q, 0.0)
+
+    @property
+    def _estimates(self) -> dict[Vec3, float]:
+        """Output q → estimated θ error there (rad), insertion-ordered, at most MAX_OUTPUTS: the deferred
+        blocks settled into it first."""
+        if self._deferred:
+            self._settle()
+        return self._settled
+
+    @_estimates.setter
+    def _estimates(self, value: dict[Vec3, float]) -> None:
+        self._settled, self._deferred, self._deferred_rows = value, [], 0
+
+    def defer_estimates(self, rows: np.ndarray, q: Vec3, estimate: float) -> bool:
+        """Record the estimates of consecutive outputs later, when `_estimates` is read (`error_estimate`
+        reads them as they are): rows (n × 4: q, estimate in rad) then the last output q with `estimate`,
+        the same entries as n + 1 calls of `store_estimate`. False (nothing recorded): they would reach
+        MAX_OUTPUTS, whose drops the caller applies to the dict."""
+        count = len(rows) + 1
+        if len(self._settled) + self._deferred_rows + count > MAX_OUTPUTS:
+            return False
+        self._deferred.append((rows, q, estimate))
+        self._deferred_rows += count
+        return True
+
+    def _settle(self) -> None:
+        """The deferred blocks into the dict, oldest first (none reaches MAX_OUTPUTS: `defer_estimates`)."""
+        settled = self._settled
+        for block, q, estimate in self._deferred:
+            settled.update(zip(map(tuple, block[:, :3].tolist()), block[:, 3].tolist()))
+            settled[q] = estimate
+        self._deferred, self._deferred_rows = [], 0
 
     def carry(self, q_from: Vec3, q_to: Vec3, error: float) -> None:
         """Give q_to, a state another solver reached from q_from (a ride with a moving object,
@@ -226,6 +269,8 @@ class DormandPrince853(Integrator):
 
     def store_estimate(self, q: Vec3, estimate: float) -> None:
         """Record the estimate (rad) at an output q; at MAX_OUTPUTS the oldest are dropped down to KEEP_OUTPUTS."""
+        if self._deferred and self.defer_estimates(NO_ROWS, q, estimate):  # after the deferred ones, in order
+            return
         if len(self._estimates) >= MAX_OUTPUTS:
             self._estimates = dict(list(self._estimates.items())[-KEEP_OUTPUTS:])
         self._estimates[q] = estimate
@@ -259,7 +304,7 @@ class DormandPrince853(Integrator):
         self._origin = (t, q, v)
         self._history.clear()
         self._history_starts.clear()
-        self._err = self._err_old = self._estimates.get(q, 0.0)
+        self._err = self._err_old = self.error_estimate(q)  # (the deferred estimates left as they are)
         self._t = self._t_old = t
         self._y[:3], self._y[3:] = q, v
         if self._drive is not None:

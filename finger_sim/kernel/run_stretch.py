@@ -5,12 +5,13 @@ would, with the same numbers. Where the Simulator's compiled common step (`simul
 holds the solution, the steps that need no Python decision run in one kernel call
 (`kernel.event_run`): the same compiled step, looped, its outputs in a preallocated array. The
 call returns at the first step that needs Python (a crossing to locate, an impact, a release from a
-stop the kernel does not decide, DOP853's first step), and at the last step before a switch of a
+stop the kernel does not decide), and at the last step before a switch of a
 piecewise-constant profile; that step goes through `sim.step()`, and the next stretch follows (taking
 the solution over from Python's step as `EventStep.step` does).
 
 What `EventStep.step` does after each of its steps is done once per stretch: the Simulator's state,
-torque and step index, the integrator's torque function and its estimates (`_remember_all`).
+torque and step index, the integrator's torque function and its estimates (`DormandPrince853.defer_estimates`,
+which builds the dict of estimates only when it is read; `_remember_all` where a drop is due).
 """
 
 from __future__ import annotations
@@ -22,7 +23,10 @@ import numpy as np
 from finger_sim.inputs import BREAK_EPS, PIECEWISE_CONSTANT, Profile
 from finger_sim.integrators.dop853 import KEEP_OUTPUTS, MAX_OUTPUTS
 from finger_sim.kernel import event_run
-from finger_sim.simulation.event_step import ZERO, EventStep
+from finger_sim.simulation.event_step import ZERO, EventStep, _fresh
+
+#: The columns of `event_run.run`'s rows that `DormandPrince853.defer_estimates` keeps: q, the estimate.
+ESTIMATE_COLUMNS = [0, 1, 2, 6]
 
 if TYPE_CHECKING:
     from finger_sim.simulation.driver import Simulator
@@ -48,8 +52,11 @@ def _stretch(sim: Simulator, events: EventStep, compiled: Any, rows: np.ndarray,
     """Up to n steps of `sim` in one kernel call, their states into xs; the number taken (0: the next
     step is Python's, or the kernel must take it over first through `EventStep.step`)."""
     integ = sim.integrator
-    if not events.follows(integ):
-        return 0  # as `EventStep.step`: another hand stepped the solution (or none yet)
+    if not events.follows(integ):  # as `EventStep.step`: another hand stepped the solution (Python takes the step),
+        if not _fresh(integ):
+            return 0
+        events._holds = events._moved = False  # noqa: SLF001  (or a new solution's first step is taken here too)
+        events._integ, events._token = integ, None  # noqa: SLF001
     k, dt, profile = sim.step_index, sim.dt, sim.scene.torque
     n = min(n, _steps_on_segment(profile, k, dt, n))
     if n <= 0:
@@ -85,7 +92,9 @@ def _stretch(sim: Simulator, events: EventStep, compiled: Any, rows: np.ndarray,
         q, v = (last[0], last[1], last[2]), (last[3], last[4], last[5])
         events._moved = True  # noqa: SLF001
         integ._torque = fn  # noqa: SLF001
-        _remember_all(integ, rows[:count], q, last[6])
+        block = rows[:count - 1, ESTIMATE_COLUMNS]  # (a copy: rows is the next stretch's buffer)
+        if not integ.defer_estimates(block, q, last[6]):  # the dict is built when read, if ever
+            _remember_all(integ, rows[:count], q, last[6])
         sim.q, sim.v, sim.torque, sim.step_index = q, v, end, k + count
         events._q, events._v = q, v  # noqa: SLF001
         events.taken += count

@@ -227,7 +227,7 @@ class EventStep:
         if last is not None:
             st[k.LAST_T] = last[0]
             st[k.LAST_Q:k.LAST_Q + 3], st[k.LAST_V:k.LAST_V + 3] = last[1], last[2]
-            st[k.LAST_EST] = integ._estimates.get(last[1], 0.0)  # noqa: SLF001  (what a restart from it reads)
+            st[k.LAST_EST] = integ.error_estimate(last[1])  # what a restart from it reads
         st[k.HAS_ORIGIN] = float(origin is not None)
         if origin is not None:
             st[k.ORIGIN_T] = origin[0]
