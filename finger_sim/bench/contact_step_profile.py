@@ -67,7 +67,6 @@ def profile_scene(name: str, runs: int) -> dict[str, float]:
     events = sim._event_step  # noqa: SLF001
     plain = events._call if events is not None else None  # noqa: SLF001
     timed = _TimedCall(events) if events is not None else None
-    ok = events._ok if events is not None else None  # noqa: SLF001
     n = sim.scene.step_count
     took: list[list[float]] = [[] for _ in range(n)]
     call: list[list[float]] = [[] for _ in range(n)]
