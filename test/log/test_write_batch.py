@@ -123,21 +123,29 @@ def test_back_pressure_keeps_every_message_of_batches_larger_than_the_room(tmp_p
     assert len(messages_of(path)) == 50 * (1 + 2 * FINGERS)
 
 
-def record_reusing_lists(path: Path) -> McapRecorder:
-    """The steps of `record`, handed over as StateOutput does: two lists cleared and refilled in
-    place every step; every third step leaves out the fingertip poses and every fifth reverses
-    the order, so the recorder's remembered topic list must notice each change."""
+def changing_steps() -> list[list[tuple[str, bytes]]]:
+    """Each step's (topic, CDR) messages, seeded: every third step leaves out the fingertip poses
+    and every fifth reverses the order."""
     rng = random.Random(5)
+    steps = []
+    for k in range(STEPS):
+        messages = step_messages(k, rng)
+        if k % 3 == 1:
+            messages = [m for m in messages if not m[0].endswith("fingertip_pose")]
+        if k % 5 == 2:
+            messages.reverse()
+        steps.append(messages)
+    return steps
+
+
+def record_reusing_lists(path: Path) -> McapRecorder:
+    """`changing_steps()`, handed over as StateOutput does: two lists cleared and refilled in
+    place every step, so the recorder's remembered topic list must notice each change."""
     topics: list[str] = []
     datas: list[bytes] = []
     with McapRecorder(path, chunk_interval_s=0.05) as recorder:
         register(recorder)
-        for k in range(STEPS):
-            messages = step_messages(k, rng)
-            if k % 3 == 1:
-                messages = [m for m in messages if not m[0].endswith("fingertip_pose")]
-            if k % 5 == 2:
-                messages.reverse()
+        for k, messages in enumerate(changing_steps()):
             topics.clear()
             datas.clear()
             for topic, data in messages:
@@ -148,15 +156,9 @@ def record_reusing_lists(path: Path) -> McapRecorder:
 
 
 def test_records_from_lists_reused_in_place_write_what_single_writes_write(tmp_path: Path) -> None:
-    rng = random.Random(5)
     with McapRecorder(tmp_path / "single.mcap", chunk_interval_s=0.05) as single:
         register(single)
-        for k in range(STEPS):
-            messages = step_messages(k, rng)
-            if k % 3 == 1:
-                messages = [m for m in messages if not m[0].endswith("fingertip_pose")]
-            if k % 5 == 2:
-                messages.reverse()
+        for k, messages in enumerate(changing_steps()):
             assert all(single.write(topic, data, T0_NS + k * DT_NS) for topic, data in messages)
     reused = record_reusing_lists(tmp_path / "reused.mcap")
     expected = messages_of(tmp_path / "single.mcap")
