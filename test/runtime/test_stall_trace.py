@@ -19,6 +19,8 @@ from finger_sim.runtime import stall_trace
 
 #: Slack for the gaps between the trace's clock readings and the test's, ms.
 SLACK_MS = 2.0
+#: Lateness and run-queue waits against a thread's GIL hold: in make test's half at normal priority.
+pytestmark = pytest.mark.timing
 
 
 def rows(directory, prefix):
