@@ -5,7 +5,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
 
-.PHONY: run test test-halves test-half-ros test-half-rest test-noros bench clean browser
+.PHONY: run test test-serial test-halves test-half-ros test-half-rest test-noros bench clean browser
 
 $(STAMP): setup.py setup.cfg package.xml
 	test -x $(PY) || python3 -m venv $(VENV)
@@ -31,21 +31,24 @@ run: $(STAMP)
 
 # The numba cache is keyed by the compiled sources: after an edit it is warmed again (well under a
 # second when nothing changed), so that the suite's cache test sees what a fresh install leaves.
-test: $(STAMP) browser
+test: test-halves
+
+# The same tests as one process (about 8-9 min on a quiet 2-core machine).
+test-serial: $(STAMP) browser
 	$(PY) -m finger_sim.kernel.warm
 	$(VENV)/bin/pytest -q
 
-# Opt-in, faster (about 5 min 45 s against 7.5-8.5 on a quiet 2-core machine), not the default: the ROS tests
-# (marker `ros`) and the ROS-free rest at once, the rest at nice 19; together every test, each once. Its
-# timing tests flaked in 1 of 2 fresh-clone CI runs (docs/test_suite.md). One half alone: make test-half-ros.
+# The default (about 5 min 45 s against 8-9 serially on a quiet 2-core machine): the ROS tests (marker `ros`)
+# with the timing tests (marker `timing`, at normal priority) and the rest at once, the rest at nice 19;
+# together every test, each once (docs/test_suite.md). One half alone: make test-half-ros.
 test-halves: $(STAMP) browser
 	$(PY) -m finger_sim.kernel.warm
 	@mkdir -p out
 	@$(MAKE) --no-print-directory -k -j2 --output-sync=target test-half-ros test-half-rest; status=$$?; \
 	  for half in ros rest; do echo "make test-halves, $$half half: $$(tail -n 1 out/test-$$half.txt)"; done; exit $$status
 
-HALF_MARK_ros  := ros
-HALF_MARK_rest := not ros
+HALF_MARK_ros  := ros or timing
+HALF_MARK_rest := not ros and not timing
 # The CPU-bound rest yields to the ROS half (its nodes' wall-clock deadlines): it runs on what they leave.
 HALF_NICE_rest := nice -n 19
 test-half-ros test-half-rest: test-half-%: $(STAMP)

@@ -40,6 +40,8 @@ CHUNK_BYTES = 2048  # small chunks: the log has several, to damage one of them
 MAX_LINE = 1000
 #: Wall time within which a hostile input must be refused (the unbounded cases took minutes).
 PROMPT_S = 20.0
+#: That wall-time bound: in make test's half at normal priority (at nice 19 under load a sweep of 8 runs took 26 s).
+pytestmark = pytest.mark.timing
 
 
 def states() -> list[tuple[int, list[float], list[float]]]:

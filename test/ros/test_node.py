@@ -201,7 +201,8 @@ def test_commands_take_effect_at_the_logged_steps(launcher, ros_client):
 
     first = publish_until(ros_client, torque_pub, Float64(data=0.003), log, lambda v: v["event"] == "accepted", "0.003 N·m accepted")
     later = (int(first["step"]) + 50) * DT_NS  # let the first torque act for a while
-    ros_client.wait_for(lambda: any(stamp(m) >= later for m in states), "50 steps under the first torque")
+    # the newest state only (they arrive in order): scanning every state on each poll is quadratic and fell behind
+    ros_client.wait_for(lambda: states and stamp(states[-1]) >= later, "50 steps under the first torque")
     second = publish_until(ros_client, effort_pub, Float64MultiArray(data=[-0.002]), log,
                            lambda v: v["event"] == "accepted" and v["source"] == "/effort_commands", "-0.002 N·m accepted")
     s1, s2 = int(first["step"]), int(second["step"])
@@ -210,7 +211,7 @@ def test_commands_take_effect_at_the_logged_steps(launcher, ros_client):
     assert int(first["stamp_ns"]) == s1 * DT_NS and int(second["stamp_ns"]) == s2 * DT_NS
     assert 0 < s1 < s2
     end = s2 + 200
-    ros_client.wait_for(lambda: any(stamp(m) >= end * DT_NS for m in states), f"states up to step {end}")
+    ros_client.wait_for(lambda: states and stamp(states[-1]) >= end * DT_NS, f"states up to step {end}")
 
     scene = load_scene(PAPER).with_overrides(dt=1.0 / RATE)
     schedule = {s1: float(first["torque"]), s2: float(second["torque"])}
@@ -662,7 +663,10 @@ def test_run_time_parameters_apply_from_the_next_step(launcher, ros_client, tmp_
     assert result.successful, result.reason
     _, step_s, _ = where(ros_client.call(Trigger, "/finger_node/step").message)
     assert step_s == step_p + 1
-    got = state_by_step(ros_client.wait_for(lambda: [m for m in states if stamp(m) == step_s * DT_NS], "the stepped state"))
+    # the newest state only (they arrive in order): the as-fast-as-possible run left hundreds to thousands of states
+    # queued, taken one per spin, and scanning all of them on each poll made this wait quadratic (20 s under load)
+    ros_client.wait_for(lambda: states and stamp(states[-1]) >= step_s * DT_NS, "the stepped state")
+    got = state_by_step([m for m in states if stamp(m) == step_s * DT_NS])
     before = state_by_step([m for m in states if stamp(m) == step_p * DT_NS])
     assert (before[step_p].effort[0], got[step_s].effort[0]) == (0.008, 0.002)
     cut = ros_client.wait_for(lambda: next((values(e) for e in log if values(e)["source"] == "max_torque"), None), "the cut")
