@@ -45,4 +45,4 @@ def test_event_steps_and_internal_steps_are_those_of_the_python_step(name):
     assert profile["internal"] == accepted
     parts = profile["first"] + profile["kernel"] + profile["event"]
     assert profile["whole"] == pytest.approx(parts, rel=1e-12)
-    assert 0.0 < profile["kernel call"] < profile["kernel"]
+    assert profile["kernel call"] > 0.0  # timed in other runs than the steps: no order between the two under load
