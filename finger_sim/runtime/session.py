@@ -226,7 +226,7 @@ class SteppingSession:
         if s.realtime_factor == 0.0:
             self.pacer = None
         elif self.pacer is None:
-            self.pacer = Pacer(self.dt, s.realtime_factor)
+            self.pacer = Pacer(self.dt, s.realtime_factor, s.catchup_limit)
         elif self.pacer.wall_per_step != self.dt / s.realtime_factor:
             self.pacer.set_realtime_factor(s.realtime_factor)
 
