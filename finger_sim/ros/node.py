@@ -69,6 +69,7 @@ from finger_sim.log import LogError
 from finger_sim.log.cdr_writer import clock_cdr
 from finger_sim.ros import conversions, parameters
 from finger_sim.ros.finger import Finger
+from finger_sim.ros.publication_mode import prefer_async_publication
 from finger_sim.ros.spin import spin_until_done
 from finger_sim.ros.state_output import BatchedStateOutput, StateOutput
 from finger_sim.runtime.drive_commands import input_refusal
@@ -330,6 +331,7 @@ class FingerNode(SteppingNode):
 
 def run(node_type: Callable[[], SteppingNode], name: str, args: Sequence[str] | None = None) -> int:
     """main() of a stepping node: start it, spin until it is done or interrupted, close its log."""
+    prefer_async_publication()
     rclpy.init(args=args)
     node = None
     status = 0

@@ -19,6 +19,7 @@ from enum import Enum
 from typing import Any, ClassVar, Self
 
 from finger_sim.errors import FingerSimError
+from finger_sim.runtime.pacing import CATCHUP_LIMIT_S
 
 Value = bool | int | float | str
 
@@ -98,6 +99,8 @@ RUN_PARAMETERS = (
     Param("physics_rate_hz", 1000.0, "physics steps per second of sim time; dt = 1/rate replaces the scene's dt", (1.0, 100000.0)),
     Param("publish_rate_hz", 0.0, "joint_states, fingertip_pose and /clock per second of sim time; 0 = every step "
           "(settable while running)", (0.0, 100000.0), read_only=False),
+    Param("catchup_limit", CATCHUP_LIMIT_S, "real time: wall seconds of backlog (a stall of the node) run in one burst to catch "
+          "up; a longer backlog is dropped and counted (dropped_steps in /diagnostics), sim time then slips", (0.0, 10.0)),
     Param("marker_rate_hz", 30.0, "finger_markers per second of sim time; 0 = none", (0.0, 100000.0)),
     Param("realtime_factor", 1.0, "sim seconds per wall second; 0 = as fast as possible (settable while running)",
           (0.0, 1000.0), read_only=False),
@@ -163,6 +166,7 @@ class RunSettings:
 
     physics_rate_hz: float
     publish_rate_hz: float
+    catchup_limit: float
     marker_rate_hz: float
     realtime_factor: float
     torque_source: TorqueSource

@@ -52,6 +52,9 @@ DIAGNOSTICS_PERIOD_S = 1.0
 #: Period of the repeated (unchanging) /clock while not running, wall s: a use_sim_time client
 #: that joins late, or lost the last tick of a burst (/clock is best effort), has the time within it.
 IDLE_CLOCK_PERIOD_S = 0.1
+#: Rounds of due steps one paced turn runs at most: the due ones, then those that fell due while
+#: they ran (a stall within a step); further backlog waits for the next turn.
+CATCHUP_PASSES = 2
 #: Minimum wall time between two warnings about refused commands.
 WARN_THROTTLE_S = 1.0
 #: Wall time a service call waits for the stepping loop to run its job.
@@ -226,7 +229,7 @@ class SteppingSession:
         if s.realtime_factor == 0.0:
             self.pacer = None
         elif self.pacer is None:
-            self.pacer = Pacer(self.dt, s.realtime_factor)
+            self.pacer = Pacer(self.dt, s.realtime_factor, s.catchup_limit)
         elif self.pacer.wall_per_step != self.dt / s.realtime_factor:
             self.pacer.set_realtime_factor(s.realtime_factor)
 
@@ -370,7 +373,10 @@ class SteppingSession:
                     future.set_exception(exc)
 
     def _paced(self, pacer: Pacer) -> None:
-        """Run every step the wall clock says is due, or sleep until one is."""
+        """Run every step the wall clock says is due, or sleep until one is. The steps that fell
+        due meanwhile (a late wake-up, a stall within a step) run before the loop's next
+        diagnostics report, so that a caught-up stall does not read as a slow window; at most
+        CATCHUP_PASSES rounds, so that a node that cannot keep up still serves and reports."""
         now = time.perf_counter()
         due = pacer.due(now)
         if not due:
@@ -379,9 +385,13 @@ class SteppingSession:
             self._sleep(pacer.next_due - now)
             if self._stall_trace is not None:
                 self._stall_trace.woke()
-        for _ in range(due):
-            if not self._advance() or self.pacer is not pacer:  # a new realtime_factor: a new pacing run
-                return
+            due = pacer.due(time.perf_counter())
+        for round_ in range(CATCHUP_PASSES):
+            if round_:
+                due = pacer.due(time.perf_counter())
+            for _ in range(due):
+                if not self._advance() or self.pacer is not pacer:  # a new realtime_factor: a new pacing run
+                    return
 
     def _lockstep_turn(self) -> None:
         """Lockstep: step once every finger's command answering the published state has arrived,

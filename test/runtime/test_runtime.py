@@ -19,7 +19,7 @@ from finger_sim.run_log import CommandEvent
 from finger_sim.runtime.commands import REFUSED_NOT_FINITE, REFUSED_SCENE, Inbox, TorqueCommands, timeout_steps
 from finger_sim.runtime.diagnostics import ClockWatch, DiagnosticsWindow, Level, LogStatus, Snapshot
 from finger_sim.runtime.log_paths import LogFolder, UnwritableLog, create_log_file, safe_component
-from finger_sim.runtime.pacing import Lateness, Pacer
+from finger_sim.runtime.pacing import CATCHUP_LIMIT_S, Lateness, Pacer
 from finger_sim.runtime.parameters import NODE_PARAMETERS, RUNTIME_PARAMETERS, CommandQos, NodeSettings, Param, ParameterError, TorqueSource
 from finger_sim.runtime.timeline import Timeline
 
@@ -43,7 +43,7 @@ def test_runtime_imports_no_ros_or_mcap():
 # -- pacing ----------------------------------------------------------------------------------
 def test_pacing_due_steps_from_wall_times():
     """realtime_factor 2 at dt 1 ms: a step every 0.5 ms of wall time, step 1 due at the first tick."""
-    p = Pacer(DT, 2.0)
+    p = Pacer(DT, 2.0, catchup_limit_s=0.05)
     assert p.wall_per_step == 0.0005 and p.catchup_steps == 100  # 50 ms of backlog
     assert p.due(10.0) == 1  # anchor = 10.0 − 0.0005: step 1 due now
     assert p.next_due == pytest.approx(10.0005, abs=1e-12)
@@ -56,12 +56,59 @@ def test_pacing_due_steps_from_wall_times():
 
 
 def test_pacing_drops_a_backlog_beyond_the_catchup_limit():
-    p = Pacer(DT, 1.0)  # 1 ms per step, catch up at most 50 steps
+    p = Pacer(DT, 1.0, catchup_limit_s=0.05)  # 1 ms per step, catch up at most 50 steps
     assert p.due(0.0) == 1
     assert p.due(0.2) == 50  # 200 steps due: 150 dropped, 50 run
     assert (p.dropped_steps, p.overruns) == (150, 1)
     assert p.next_due == pytest.approx(0.201, abs=1e-12)  # the anchor slipped by the dropped steps
     assert p.due(0.201) == 1 and p.dropped_steps == 150
+
+
+def paced_run(pacer: Pacer, wall_s: float, stall: tuple[float, float], tick_s: float = 1e-4) -> int:
+    """Steps `pacer` hands out to a loop that ticks every `tick_s` wall s from 0 to `wall_s` but
+    is off its CPU over stall = (start, end) wall s (its first tick after the stall is at `end`);
+    the last tick is half a tick after `wall_s`, clear of the float edge of the step grid."""
+    steps = 0
+    for i in range(round(wall_s / tick_s) + 1):
+        now = (i + 0.5) * tick_s if i == round(wall_s / tick_s) else i * tick_s
+        if not stall[0] + tick_s / 2 < now < stall[1] - tick_s / 2:
+            steps += pacer.due(now)
+    return steps
+
+
+@pytest.mark.parametrize("stall_s", [0.07, 0.08, 0.1, 0.2])
+def test_pacing_catches_up_a_stall_within_the_default_limit(stall_s):
+    """The soak's stalls (70-100 ms, up to 0.2 s): run in one burst, nothing dropped, so the steps
+    at the end equal wall time × rate (+1: step 1 is due at t = 0), as without a stall."""
+    p = Pacer(DT, 1.0)
+    assert p.catchup_limit_s == CATCHUP_LIMIT_S == 0.25 and p.catchup_steps == 250
+    assert paced_run(p, 1.0, (0.5, 0.5 + stall_s)) == 1001
+    assert p.dropped_steps == 0 and p.lateness.max == pytest.approx(stall_s - 1e-3, abs=2e-4)
+    assert p.overruns == 1  # the burst is counted, not hidden
+
+
+def test_pacing_drops_only_the_backlog_beyond_the_limit():
+    """A 0.4 s stall with a 0.25 s limit: 0.15 s of steps dropped and counted, sim time slips by as much."""
+    p = Pacer(DT, 1.0)
+    steps = paced_run(p, 1.0, (0.5, 0.9))
+    assert p.dropped_steps == pytest.approx(150, abs=1) and steps + p.dropped_steps == 1001
+
+
+def test_a_caught_up_stall_keeps_the_diagnostics_window_at_real_time():
+    """/diagnostics' window real-time factor (steps × dt / wall s of the window) over 1 s holding an
+    80 ms stall: 1.0 when it is caught up (the default), 0.97 when the old 50 ms limit drops 30 steps."""
+    for limit, rtf in ((CATCHUP_LIMIT_S, 1.0), (0.05, 0.97)):
+        p = Pacer(DT, 1.0, catchup_limit_s=limit)
+        first = paced_run(p, 1.0, (0.0, 0.0))  # the first second: no stall (steps 1..1001)
+        window = DiagnosticsWindow(now=1.0)
+        window.report(snapshot(steps_total=first), commands(), p, now=1.0)
+        steps = first
+        for i in range(1, 1001):  # the second second, ticking every ms but off CPU from 1.4 s to 1.48 s
+            if not 400 < i < 480:
+                steps += p.due(1.0 + i * 1e-3)
+        _, _, values = window.report(snapshot(steps_total=steps), commands(), p, now=2.0)
+        assert values["realtime_factor"] == pytest.approx(rtf, abs=1e-9)
+        assert values["dropped_steps"] == round((1 - rtf) * 1000)
 
 
 def test_pacing_restart_and_windows():
@@ -227,7 +274,7 @@ def test_diagnostics_levels_and_counts():
     assert level == Level.WARN and "2 publishers on /clock" in message and values["clock_publishers"] == 2
 
     c.take("/motor_torque", (math.nan,), 0)
-    pacer = Pacer(DT, 1.0)
+    pacer = Pacer(DT, 1.0, catchup_limit_s=0.05)
     pacer.due(0.0)
     pacer.due(0.2)  # 150 steps dropped
     level, message, values = window.report(snapshot(), c, pacer, now=4.5)

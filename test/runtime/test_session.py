@@ -168,3 +168,49 @@ def test_no_log_folder_means_an_unwritable_log_that_says_why(tmp_path: Path) -> 
     session = Session(record_dir=str(tmp_path / "file"))
     log = open_run_log(session.settings, "paper", "", session.fingers, [], on_problem=pytest.fail)
     assert isinstance(log, UnwritableLog) and str(tmp_path / "file") in log.error
+
+
+class _FakeClock:
+    """perf_counter for the session module: wall s that only the test moves."""
+
+    def __init__(self) -> None:
+        self.now = 0.0
+
+    def perf_counter(self) -> float:
+        return self.now
+
+
+@pytest.mark.parametrize("where", ["sleep", "step"])
+def test_a_stall_at_a_window_end_is_caught_up_before_the_report(monkeypatch: pytest.MonkeyPatch, where: str) -> None:
+    """Paced at 1 kHz on a fake wall clock, 0.1 s off the CPU across the end of the first 1 s
+    window (in the sleep before a step, or within a step): the backlog (within catchup_limit)
+    runs before /diagnostics reports, so the windows read steps × dt / wall s = 1.0 each and
+    nothing is dropped; the reference is the wall time × rate. Before, the first window read ~0.9."""
+    import finger_sim.runtime.session as session_module
+
+    clock = _FakeClock()
+    monkeypatch.setattr(session_module, "time", clock)
+    reports: list[dict] = []
+    stall_at, stall_s, end = 0.98, 0.1, 2.5
+
+    class Stalled(Session):
+        def _sleep(self, timeout: float) -> None:
+            late = stall_s if where == "sleep" and clock.now < stall_at <= clock.now + timeout else 0.0
+            clock.now += max(timeout, 0.0) + late
+            if clock.now >= end:
+                self.stop()
+
+        def _advance(self) -> bool:
+            if where == "step" and clock.now < stall_at <= clock.now + 1e-3:
+                clock.now += stall_s  # this step waited on a lock
+            return super()._advance()
+
+        def _publish_diagnostics(self) -> None:
+            reports.append(self._reports(None)[0][2])
+
+    session = Stalled(realtime_factor=1.0, record=False)
+    session.fingers[0].diagnostics.restart(0.0)
+    session._loop()
+    assert len(reports) == 2 and session.pacer is not None and session.pacer.dropped_steps == 0
+    assert [r["realtime_factor"] for r in reports] == pytest.approx([1.0, 1.0], abs=2e-3)
+    assert session.steps_total == pytest.approx(clock.now * RATE_HZ, abs=2)
