@@ -23,7 +23,7 @@ import numpy as np
 from finger_sim.inputs import BREAK_EPS, PIECEWISE_CONSTANT, Profile
 from finger_sim.integrators.dop853 import KEEP_OUTPUTS, MAX_OUTPUTS
 from finger_sim.kernel import event_run
-from finger_sim.simulation.event_step import ZERO, EventStep, _fresh
+from finger_sim.simulation.event_step import ZERO, EventStep
 
 #: The columns of `event_run.run`'s rows that `DormandPrince853.defer_estimates` keeps: q, the estimate.
 ESTIMATE_COLUMNS = [0, 1, 2, 6]
@@ -52,11 +52,8 @@ def _stretch(sim: Simulator, events: EventStep, compiled: Any, rows: np.ndarray,
     """Up to n steps of `sim` in one kernel call, their states into xs; the number taken (0: the next
     step is Python's, or the kernel must take it over first through `EventStep.step`)."""
     integ = sim.integrator
-    if not events.follows(integ):  # as `EventStep.step`: another hand stepped the solution (Python takes the step),
-        if not _fresh(integ):
-            return 0
-        events._holds = events._moved = False  # noqa: SLF001  (or a new solution's first step is taken here too)
-        events._integ, events._token = integ, None  # noqa: SLF001
+    if not events.claim(integ):  # as `EventStep.step`: another hand stepped the solution (Python takes the step)
+        return 0
     k, dt, profile = sim.step_index, sim.dt, sim.scene.torque
     n = min(n, _steps_on_segment(profile, k, dt, n))
     if n <= 0:

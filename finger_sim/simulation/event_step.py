@@ -105,14 +105,8 @@ class EventStep:
         """Take `sim.step(torque)` in the kernel: the state after it (the Simulator's state, torque and
         step index set); None: Python must take it (the integrator is then up to date)."""
         integ = sim.integrator
-        token = self._token  # `follows(integ)`, inline (a method call is a tenth of this step's Python)
-        if integ is not self._integ or integ._last is not token or (  # noqa: SLF001
-                token is None and not (self._holds and _untouched(integ))):
-            self._holds = self._moved = False  # another hand stepped or set it: the integrator is the truth
-            if not _fresh(integ):
-                return None
-            self._integ, self._token = integ, None  # a new solution (the run's first step, a reset's): its initial
-            # step is taken here too, and no output of an earlier solution may stand for it
+        if not self.claim(integ):
+            return None
         k, dt = sim.step_index, sim.dt
         flags = 0
         continues = True  # Python's step integrates under fn itself (not a new segment's function)
@@ -131,8 +125,7 @@ class EventStep:
         if fn is None:  # a profile's step that Python takes
             self.release()
             return None
-        at = sim._rest_at  # noqa: SLF001  (`sim._resting is not None`, the stop's rest mode, without the property)
-        if at is not None and sim._mode_list[at] and sim._rest_gap is not None:  # noqa: SLF001
+        if sim._resting is not None:  # noqa: SLF001  (the stop's rest mode)
             return self._rest(sim, value, flags, k)
         if not self._holds:
             self._take_over(integ)
@@ -163,6 +156,19 @@ class EventStep:
         self._q, self._v = q, v
         self.taken += 1
         return _new_state(self._state, ((k + 1) * dt, q, v))
+
+    def claim(self, integ: DormandPrince853) -> bool:
+        """Whether the kernel may take `integ`'s next step: it `follows` the solution, or the solution is
+        new (a run's first step, a reset's), whose initial step is taken here too and for which no output
+        of an earlier solution may stand. Otherwise another hand stepped or set it: the integrator is the
+        truth, and Python takes the step."""
+        if self.follows(integ):
+            return True
+        self._holds = self._moved = False
+        if not _fresh(integ):
+            return False
+        self._integ, self._token = integ, None
+        return True
 
     def follows(self, integ: DormandPrince853) -> bool:
         """Whether the kernel may continue `integ`'s solution: the one it took over, last stepped by the
