@@ -6,8 +6,9 @@ its lock, its queue test). `StateOutput` collects the CDR messages published whi
 SteppingSession._publish_state runs, hands them to the log in one McapRecorder.write_records
 (the same records, sequence numbers and times as write() gives them) and then sends them in the
 order they were published. The state's topics, bytes and senders are kept in three lists reused
-step after step: no object per message, and the recorder finds the same topic list every step. Logged before sent: a controller's answer to a state, logged by the
-executor thread, never lands in the log before that state.
+step after step: no object per message, and the recorder finds the same topic list every step.
+Logged before sent: a controller's answer to a state, logged by the executor thread, never lands
+in the log before that state.
 
 Outside a state (an idle /clock repeat, diagnostics, command-log events) and without a log, a
 message is sent (and logged) at once.
