@@ -41,7 +41,9 @@ class CommandEvent:
     """One `~/command_log` entry: `torque` (N·m) is applied from `step` of `episode` on.
 
     The state at that step is stamped `stamp_ns`. Events 'accepted', 'timeout' and 'reset'
-    change the applied torque; 'refused' only records a command that was not applied.
+    change the applied torque; 'refused' only records a command that was not applied, and
+    'lockstep_timeout' a state of a lockstep run that had no answer within lockstep_timeout: the
+    torque held (`torque`) acts over step `step` without the controller's word.
     """
 
     event: str
@@ -55,7 +57,7 @@ class CommandEvent:
     reason: str = ""
 
     APPLIES = ("accepted", "timeout", "reset")
-    EVENTS = (*APPLIES, "refused")
+    EVENTS = (*APPLIES, "refused", "lockstep_timeout")
 
     @property
     def applies_torque(self) -> bool:

@@ -1,8 +1,11 @@
-"""The Jazzy `main()` shape shared by the example controllers: init, spin, clean shutdown."""
+"""What the example controllers share: the Jazzy `main()` shape (init, spin, clean shutdown) and
+a command publisher whose first answer waits for the node's subscription (`AnswerPublisher`)."""
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
+from typing import Any
 
 import rclpy
 from rclpy.executors import ExternalShutdownException
@@ -13,6 +16,29 @@ from finger_sim.runtime.parameters import ParameterError
 
 #: Exit status for a parameter that cannot start the controller.
 EXIT_CONFIG = 2
+#: Wall s a controller's first answer waits for a subscriber of its command topic, and the poll period.
+MATCH_TIMEOUT_S = 10.0
+MATCH_POLL_S = 0.002
+
+
+class AnswerPublisher:
+    """A command publisher whose first message waits (up to MATCH_TIMEOUT_S) until a subscription
+    is matched to it. DDS discovery completes on each side apart: finger_node in lockstep sees the
+    controller's publisher and sends its first state, and the controller's answer can go out before
+    its publisher knows the node's subscription; a volatile message sent then is lost, and the node
+    waits lockstep_timeout for it, then holds the last command (a run that does not repeat)."""
+
+    def __init__(self, publisher: Any) -> None:
+        self._publisher = publisher
+        self._matched = False
+
+    def publish(self, msg: Any) -> None:
+        if not self._matched:
+            deadline = time.monotonic() + MATCH_TIMEOUT_S
+            while self._publisher.get_subscription_count() == 0 and time.monotonic() < deadline:
+                time.sleep(MATCH_POLL_S)
+            self._matched = True
+        self._publisher.publish(msg)
 
 
 def spin_controller(make_node: Callable[[], Node], node_name: str, args: list[str] | None = None) -> int:

@@ -27,7 +27,7 @@ from std_msgs.msg import Float64
 
 from finger_sim.effects.contact_outputs import GRIP_FORCE
 from finger_sim.ros import parameters
-from finger_sim.ros.controller_main import spin_controller
+from finger_sim.ros.controller_main import AnswerPublisher, spin_controller
 from finger_sim.runtime.grip import GRIP_PARAMETERS, GripController, GripSettings
 
 NODE_NAME = "finger_grip_controller"
@@ -48,7 +48,7 @@ class GripControllerNode(Node):
         self.law = GripController(s)
         self._clock_ns: int | None = None  # the newest /clock, ns
         self._sampled_ns: int | None = None  # /clock at the last sample, ns
-        self._pub = self.create_publisher(Float64, "motor_torque", COMMAND_QOS)
+        self._pub = AnswerPublisher(self.create_publisher(Float64, "motor_torque", COMMAND_QOS))
         # the setpoint first: rclpy's executor serves ready subscriptions in creation order, so a
         # setpoint and a sample waiting together are taken setpoint first (the task runner's order)
         self.create_subscription(Float64, "grip_setpoint", self._on_setpoint, COMMAND_QOS)

@@ -31,7 +31,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
 from finger_sim.ros import parameters
-from finger_sim.ros.controller_main import spin_controller
+from finger_sim.ros.controller_main import AnswerPublisher, spin_controller
 from finger_sim.runtime.parameters import Param
 
 NODE_NAME = "finger_pd_controller"
@@ -69,7 +69,7 @@ class PdController(Node):
         self.max_torque, self.joint = values["max_torque"], values["joint"]
         self._index: int | None = None
         self._warned = False
-        self._pub = self.create_publisher(Float64, "motor_torque", COMMAND_QOS)
+        self._pub = AnswerPublisher(self.create_publisher(Float64, "motor_torque", COMMAND_QOS))
         self.create_subscription(JointState, "joint_states", self._on_state, STATE_QOS)
         self.create_subscription(Float64, "mcp_setpoint", self._on_setpoint, COMMAND_QOS)
         self.get_logger().info(f"PD on {self.joint}: kp {self.kp:g} N·m/rad, kd {self.kd:g} N·m·s/rad, "

@@ -23,7 +23,7 @@ from std_msgs.msg import Float64
 
 from finger_sim.effects.contact_outputs import GRIP_FORCE
 from finger_sim.errors import ConfigError, shown
-from finger_sim.ros.controller_main import spin_controller
+from finger_sim.ros.controller_main import AnswerPublisher, spin_controller
 from finger_sim.runtime.parameters import ParameterError
 from finger_sim.tasks.controllers import commanded_input, load_factory
 
@@ -58,7 +58,7 @@ class TaskControllerNode(Node):
             raise ParameterError(exc.key.removeprefix("parameter "), f"expected {exc.allowed}, got {shown(exc.got)}") from None
         self.samples = 0
         topic = TOPICS[commanded_input(factory)]
-        self._pub = self.create_publisher(Float64, topic, COMMAND_QOS)
+        self._pub = AnswerPublisher(self.create_publisher(Float64, topic, COMMAND_QOS))
         # the setpoint first: rclpy's executor serves ready subscriptions in creation order, so a
         # setpoint and a sample waiting together are taken setpoint first (the task runner's order)
         self.create_subscription(Float64, "grip_setpoint", self._on_setpoint, COMMAND_QOS)

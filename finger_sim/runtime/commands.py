@@ -200,6 +200,12 @@ class TorqueCommands:
             shown += f", … ({len(values)} elements)"
         return self._event("refused", step, requested=shown, source=source, reason=reason)
 
+    def unanswered(self, step: int, timeout: float) -> CommandEvent:
+        """Lockstep: the state before step `step` had no answer within `timeout` wall s; the
+        command held acts over that step (the 'lockstep_timeout' event)."""
+        return self._event("lockstep_timeout", step, reason=f"no command within lockstep_timeout {timeout:g} s "
+                                                             "of wall time: holding the last command")
+
     def torque_for_step(self, n: int) -> tuple[float | None, CommandEvent | None]:
         """The torque of step n (None: the scene's profile), N·m, and the event if it changed."""
         if not self.accepting:

@@ -416,6 +416,7 @@ class SteppingSession:
                 return
             for f in waiting:
                 f.lockstep_timeouts += 1
+                self._event(f, f.commands.unanswered(self.sim.step_index, self.settings.lockstep_timeout), Level.WARN)
             self.get_logger().warning(
                 f"lockstep: no command for the state at {self.stamp_ns * 1e-9!r} s within lockstep_timeout "
                 f"{self.settings.lockstep_timeout:g} s from {', '.join(f.spec.name or 'the finger' for f in waiting)}; "

@@ -155,7 +155,8 @@ def run_ros_task(task: Task, executable: str, workdir: Path, *, label: str = "",
 def read_samples(log_dir: Path, n: int, setpoints: tuple[tuple[float, float], ...],
                  scene: Scene) -> tuple[dict[str, np.ndarray], list[Crush]]:
     """The COLUMNS of states 0..n from finger_node's log (rosbags), and with a drive its
-    DRIVE_COLUMNS, and the crushes of `~/crush_log`: joint_states by stamp, the other topics by
+    DRIVE_COLUMNS, and the crushes of `~/crush_log`; FingerSimError if the node held a command for
+    want of an answer (a 'lockstep_timeout' event of `~/command_log`): joint_states by stamp, the other topics by
     log time (sim time); command k is what acted over step k → k+1 (the mcp effort of state k+1,
     with a drive the motor voltage of state k+1); the tip force is the scene's profile at step k."""
     from rosbags.highlevel import AnyReader
@@ -169,11 +170,15 @@ def read_samples(log_dir: Path, n: int, setpoints: tuple[tuple[float, float], ..
     topics = {f"/{o.topic}": o.name for o in (GRIP_FORCE, MOTOR_VOLTAGE, MOTOR_CURRENT)}
     series: dict[str, dict[int, float]] = {name: {} for name in topics.values()}
     crushes: list[Crush] = []
+    held = 0  # states finger_node stepped on without the controller's answer ('lockstep_timeout' events)
     with AnyReader(logs) as reader:
-        wanted = [c for c in reader.connections if c.topic in ("/joint_states", "/finger_node/crush_log", *topics)]
+        wanted = [c for c in reader.connections
+                  if c.topic in ("/joint_states", "/finger_node/crush_log", "/finger_node/command_log", *topics)]
         for conn, log_time, raw in reader.messages(connections=wanted):
             msg = reader.deserialize(raw, conn.msgtype)
-            if conn.topic == "/joint_states":
+            if conn.topic == "/finger_node/command_log":
+                held += any(kv.key == "event" and kv.value == "lockstep_timeout" for kv in msg.values)
+            elif conn.topic == "/joint_states":
                 k = (msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec) // step_ns
                 states[k] = (msg.position[0], msg.velocity[0], msg.effort[0])
             elif conn.topic == "/finger_node/crush_log":
@@ -182,6 +187,10 @@ def read_samples(log_dir: Path, n: int, setpoints: tuple[tuple[float, float], ..
                 crushes.append(Crush(v["object"], float(v["t"]), step, float(v["force"]), float(v["break_force"])))
             else:
                 series[topics[conn.topic]][log_time // step_ns] = msg.data
+    if held:
+        raise FingerSimError(f"finger_node stepped {held} time(s) on the last command: no answer came within "
+                             f"lockstep_timeout ({LOCKSTEP_TIMEOUT:g} s), so the run is not the controller's; "
+                             "see finger_node.out in the run's folder")
     drive = scene.drive is not None
     needed = [series[GRIP_FORCE.name], *((series[MOTOR_VOLTAGE.name], series[MOTOR_CURRENT.name]) if drive else ())]
     missing = [k for k in range(n + 1) if k not in states or any(k not in s for s in needed)]

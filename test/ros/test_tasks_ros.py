@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +21,7 @@ import yaml
 
 pytest.importorskip("rclpy")
 
-from finger_sim.errors import ConfigError  # noqa: E402
+from finger_sim.errors import ConfigError, FingerSimError  # noqa: E402
 from finger_sim.log import read_log  # noqa: E402
 from finger_sim.run_log import load_run, resimulate  # noqa: E402
 from finger_sim.tasks.controllers import AGGRESSIVE, grip_pi, grip_pi_aggressive, grip_voltage  # noqa: E402
@@ -132,3 +133,47 @@ def test_task_controller_node_refuses_a_bad_controller_in_one_line(params, messa
     assert node.wait(60.0) == 2
     (line,) = [l for l in node.output().splitlines() if "cannot start" in l]
     assert message in line
+
+
+#: A controller node (with the setpoint subscription the runner waits for) that never answers the
+#: first grip_force sample, then answers 0 N·m to every other (finger_node in lockstep holds the
+#: last command once lockstep_timeout has passed).
+SKIPS_FIRST = """\
+import sys
+import rclpy
+from rclpy.qos import QoSProfile
+from std_msgs.msg import Float64
+from finger_sim.ros.controller_main import AnswerPublisher
+
+rclpy.init(args=sys.argv)
+node = rclpy.create_node("skips_first")
+pub = AnswerPublisher(node.create_publisher(Float64, "motor_torque", QoSProfile(depth=10)))
+seen = []
+
+def on_force(msg):
+    seen.append(msg.data)
+    if len(seen) > 1:
+        pub.publish(Float64(data=0.0))
+
+node.create_subscription(Float64, "grip_setpoint", lambda msg: None, QoSProfile(depth=10))
+node.create_subscription(Float64, "grip_force", on_force, QoSProfile(depth=1))
+try:
+    rclpy.spin(node)
+except BaseException:
+    pass
+"""
+
+
+def test_a_run_in_which_the_node_held_a_command_for_want_of_an_answer_is_refused(ros_domain, tmp_path, monkeypatch):
+    """The node stepped without the controller's answer (after lockstep_timeout): the run is not the
+    controller's, and the runner says so instead of scoring it."""
+    import finger_sim.tasks.ros_runner as ros_runner
+
+    script = tmp_path / "skips_first"
+    script.write_text(f"#!{sys.executable}\n{SKIPS_FIRST}")
+    script.chmod(0o755)
+    monkeypatch.setattr(ros_runner, "LOCKSTEP_TIMEOUT", 0.5)
+    task = dataclasses.replace(short_staircase(), scene=dataclasses.replace(short_staircase().scene, duration=0.05))
+    with pytest.raises(FingerSimError, match=r"stepped 1 time\(s\) on the last command: no answer came within "
+                                             r"lockstep_timeout \(0.5 s\)"):
+        run_ros_task(task, str(script), tmp_path / "ros", label="ros")
