@@ -112,7 +112,7 @@ def test_two_lockstep_runs_of_the_pd_controller_are_identical_under_load(launche
 def test_joint_command_stamps_and_a_silent_controller(launcher, ros_client):
     """joint_command answers the state whose stamp it carries; a stale stamp is refused; once the
     controller stops answering, each state waits lockstep_timeout, then the held command goes on,
-    and /diagnostics counts it and turns WARN."""
+    /diagnostics counts it and turns WARN, and ~/command_log records each held step."""
     answers = {0: 0.01, 1: 0.02, 2: 0.03}  # state index → the effort answered
     pub = ros_client.publisher(JointState, "/joint_command", RELIABLE)
     states: list[JointState] = []
@@ -143,29 +143,34 @@ def test_joint_command_stamps_and_a_silent_controller(launcher, ros_client):
     assert all(by_step[k].effort[0] == 0.03 for k in by_step if k >= 4)  # held through the timeouts
     refused = [conversions.parse_values(e) for e in events if conversions.parse_values(e)["event"] == "refused"]
     assert len(refused) == 1 and "lockstep" in refused[0]["reason"] and refused[0]["requested"] == "0.04"
+    # ~/command_log (and so the log) names every held step: state k's missing answer, the torque held over step k
+    held = lambda: [(int(v["step"]), float(v["torque"])) for v in map(conversions.parse_values, list(events))  # noqa: E731
+                    if v["event"] == "lockstep_timeout"]
+    ros_client.wait_for(lambda: len(held()) >= 3, "three lockstep_timeout events on ~/command_log")
+    assert held()[:3] == [(3, 0.03), (4, 0.03), (5, 0.03)]
 
 
 def test_a_lockstep_hand_waits_for_every_fingers_controller(launcher, ros_client):
     """finger_hand in lockstep with one PD controller per finger (its namespace, its setpoint):
-    every finger's state k+1 shows the torque its own controller computed from its state k."""
+    every finger's state k+1 shows the torque its own controller computed from its state k. The
+    states are the node's log's (every one): the controllers answer within milliseconds, so the run
+    can be hundreds of states on before this client's late-matched subscription gets its first."""
     fingers = {"index": 0.4, "middle": 0.8, "ring": 1.2}  # name → setpoint, rad
     for name, setpoint in fingers.items():
         launcher.node(PD, dict(setpoint=setpoint, joint=f"{name}_mcp_joint"), name=f"pd_{name}",
                       ros_args=["-r", f"__ns:=/{name}"])
     states = {name: ros_client.collect(JointState, f"/{name}/joint_states", RELIABLE) for name in fingers}
     node = launcher.node("finger_sim.ros.hand", dict(lockstep=True, lockstep_timeout=LOCKSTEP_TIMEOUT_S,
-                                                     realtime_factor=0.0, command_qos="reliable", marker_rate_hz=0.0))
+                                                     realtime_factor=0.0, command_qos="reliable", marker_rate_hz=0.0,
+                                                     record_dir="bags_hand"))
     steps = 200
     ros_client.wait_for(lambda: all(s and stamp_ns(s[-1]) >= steps * DT_NS for s in states.values()),
                         f"{steps} lockstep states of every finger", 120.0)
     status = node.stop()
     assert status == 0, f"exit status {status}:\n{node.output()}"
+    log = read_log(launcher.tmp / "bags_hand")
     for name, setpoint in fingers.items():
-        by_step = {stamp_ns(m) // DT_NS: m for m in states[name]}
-        # the node waits for the controllers, not for this client: its first states may go out before
-        # this subscription matched (volatile); from the first one it got, every state is there
-        first = min(by_step)
-        assert first < steps // 2, (name, first)
-        for k in range(first, steps):
-            s, nxt = by_step[k], by_step[k + 1]
-            assert nxt.effort[0] == pd_torque(setpoint, s.position[0], s.velocity[0], KP, KD, MAX_TORQUE), (name, k)
+        logged = states_of(log, f"/{name}")
+        assert [s[0] for s in logged[:steps + 1]] == [n * DT_NS for n in range(steps + 1)], name  # each state once
+        for (_, pos, vel, _), (_, _, _, effort) in zip(logged[:steps], logged[1:steps + 1]):
+            assert effort[0] == pd_torque(setpoint, pos[0], vel[0], KP, KD, MAX_TORQUE), name
