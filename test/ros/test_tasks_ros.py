@@ -174,6 +174,7 @@ def test_a_run_in_which_the_node_held_a_command_for_want_of_an_answer_is_refused
     script.chmod(0o755)
     monkeypatch.setattr(ros_runner, "LOCKSTEP_TIMEOUT", 0.5)
     task = dataclasses.replace(short_staircase(), scene=dataclasses.replace(short_staircase().scene, duration=0.05))
-    with pytest.raises(FingerSimError, match=r"stepped 1 time\(s\) on the last command: no answer came within "
-                                             r"lockstep_timeout \(0.5 s\)"):
+    # the first state at least (a loaded machine may hold later ones too: 0.5 s of wall time is short)
+    with pytest.raises(FingerSimError, match=r"stepped [1-9]\d* time\(s\) on the last command: no answer came "
+                                             r"within lockstep_timeout \(0.5 s\)"):
         run_ros_task(task, str(script), tmp_path / "ros", label="ros")
