@@ -32,6 +32,12 @@ class CompiledKernel(Protocol):
         """The integrator class that steps `system` with `method` on the requested kernel, and the kernel's name."""
         ...
 
+    def select_stateful(self, integrator_cls: type[Integrator], system: FingerSystem,
+                        kernel: str) -> tuple[type[Integrator], str, str]:
+        """The class stepping an actuator with its own state (a `StatefulRungeKutta` class, its actuator
+        bound) on the requested kernel, the kernel's name, and why it runs in Python ('' when compiled)."""
+        ...
+
     def offline_kernel(self, kernel: str, steps: int, scene: Any = None) -> str:
         """The kernel for an offline run of `steps` steps of `scene` ("auto" may become "python" for a short one)."""
         ...

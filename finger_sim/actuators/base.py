@@ -7,6 +7,10 @@ force (`accelerations`) and for the rates of its own slots (`rates`), both at th
 own) and input u. `integrators.stateful.StatefulRungeKutta` steps any actuator this way: a new one
 is a module (or a class in a test), not a change to the integrators.
 
+An actuator that declares its law (`ActuatorLaw`: its torque and its slots' rates as plain functions of
+floats, `LawActuator`) has a compiled form too: the kernel compiles the same functions into its stateful
+step (`kernel.stateful`), so `kernel="auto"` runs it compiled, with the same numbers.
+
 Without an actuator (`Simulator(scene)`) the input is applied as the torque on θ1 (spec §3's ideal
 source) and the state is (q, q') alone.
 """
@@ -14,7 +18,8 @@ source) and the state is (q, q') alone.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from typing import TYPE_CHECKING, ClassVar
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, ClassVar, NamedTuple
 
 from finger_sim.kinematics import Vec3
 from finger_sim.state_layout import ModeSet, Slot
@@ -54,3 +59,35 @@ class Actuator(ABC):
                       own: tuple[float, ...]) -> Vec3:
         """q'' (rad/s²) of `system` with this actuator's torque on θ1 (spec §4)."""
         return system.accelerations(t, q, v, self.torque(system, t, q, v, u, own))[0]
+
+
+class ActuatorLaw(NamedTuple):
+    """An actuator's law as plain functions, its one definition: the Python path calls them (`LawActuator`)
+    and the compiled kernel compiles them (`kernel.stateful`).
+
+    Both take (p, t, q0, q1, q2, v0, v1, v2, u, own): p the actuator's parameters (`kernel_params`, floats),
+    t (s), q (rad), q' (rad/s), u the input (its `input` unit), own its slots in `slots` order (a sequence of
+    floats: a tuple in Python, an array in the kernel). `torque` returns the generalized force on θ1 (N·m),
+    `rates` the tuple of d/dt of the own slots (one float per slot). `callees`: plain functions the two call
+    by name, compiled with them."""
+
+    torque: Callable[..., float]
+    rates: Callable[..., tuple[float, ...]]
+    callees: tuple[Callable[..., object], ...] = ()
+
+
+class LawActuator(Actuator):
+    """An actuator whose torque and rates are its declared `law` (`ActuatorLaw`) at its `kernel_params`:
+    it has a compiled form. Subclasses declare `name`, `slots`, `law` and write `initial` and `kernel_params`."""
+
+    law: ClassVar[ActuatorLaw]
+
+    @abstractmethod
+    def kernel_params(self) -> tuple[float, ...]:
+        """The law's parameters p, floats (SI)."""
+
+    def torque(self, system: FingerSystem, t: float, q: Vec3, v: Vec3, u: float, own: Sequence[float]) -> float:
+        return self.law.torque(self.kernel_params(), t, q[0], q[1], q[2], v[0], v[1], v[2], u, own)
+
+    def rates(self, t: float, q: Vec3, v: Vec3, u: float, own: Sequence[float]) -> tuple[float, ...]:
+        return self.law.rates(self.kernel_params(), t, q[0], q[1], q[2], v[0], v[1], v[2], u, own)

@@ -8,6 +8,8 @@ and its slots' rates (`Actuator.rates`); after the step (q, q') are projected on
 The Simulator's events (trial steps, location, substeps) pass (q, q') alone; the integrator keeps the
 own slots of the states it produced (`own_of`, by the identity of the q and q' objects), so each trial
 continues a state with its own slots, and `begin` tells it the slots of a state it did not produce.
+An actuator that declares its law (`actuators.base.ActuatorLaw`) has a compiled twin of this class,
+`kernel.stateful.CompiledStatefulRungeKutta`: the same step, the same numbers.
 """
 
 from __future__ import annotations

@@ -38,6 +38,7 @@ if TYPE_CHECKING:
 
     import numpy as np
 
+    from finger_sim.actuators.base import Actuator
     from finger_sim.dynamics import FingerSystem
     from finger_sim.inputs import Profile
     from finger_sim.integrators.base import Integrator
@@ -146,8 +147,7 @@ def select(method: type["Integrator"], system: "FingerSystem", kernel: str = "au
     element has one; else Python), "compiled" (refused when it cannot run), "python", or a name
     recorded by an earlier run ("numba-…", taken as "compiled", or "python").
     """
-    if not isinstance(kernel, str) or not (kernel in KERNELS or kernel.startswith("numba-")):
-        raise ConfigError("kernel", f"one of {list(KERNELS)} or a recorded 'numba-<version>'", kernel)
+    _check_kernel(kernel)
     if method.name == "dop853":  # compiled by construction (plain Python without numba), its stages where they can be
         from finger_sim.kernel.layout import model_array
 
@@ -163,6 +163,48 @@ def select(method: type["Integrator"], system: "FingerSystem", kernel: str = "au
     if kernel == "auto":
         return method, PYTHON
     raise ConfigError("kernel", f"a kernel that can run here ({reason})", kernel)
+
+
+def select_stateful(integrator_cls: type["Integrator"], system: "FingerSystem",
+                    kernel: str = "auto") -> tuple[type["Integrator"], str, str]:
+    """The class stepping an actuator with its own state (`integrator_cls`, a `StatefulRungeKutta` class
+    with its actuator bound) on the requested kernel, the kernel's name, and why it runs on the Python
+    path ('' when compiled). kernel: as `select`; "compiled" is refused (ConfigError) when it cannot run."""
+    _check_kernel(kernel)
+    if kernel == PYTHON:
+        return integrator_cls, PYTHON, ""
+    actuator = integrator_cls.bound  # type: ignore[attr-defined]
+    reason = _why_not_stateful(actuator)
+    if reason is None:
+        reason = _why_not_compiled(integrator_cls.reference, system, compiled_name())  # type: ignore[attr-defined]
+    if reason is None:
+        from finger_sim.kernel.stateful import CompiledStatefulRungeKutta
+
+        return CompiledStatefulRungeKutta.of(integrator_cls), compiled_name(), ""  # type: ignore[arg-type,return-value]
+    if kernel == "auto":
+        return integrator_cls, PYTHON, reason
+    raise ConfigError("kernel", f"a kernel that can run here ({reason})", kernel)
+
+
+def _check_kernel(kernel: object) -> None:
+    """ConfigError unless `kernel` is one of KERNELS or a recorded "numba-<version>"."""
+    if not isinstance(kernel, str) or not (kernel in KERNELS or kernel.startswith("numba-")):
+        raise ConfigError("kernel", f"one of {list(KERNELS)} or a recorded 'numba-<version>'", kernel)
+
+
+def _why_not_stateful(actuator: "Actuator") -> str | None:
+    """Why the actuator has no compiled form (no declared law, no own slots, its own accelerations), or None."""
+    from finger_sim.actuators.base import Actuator
+
+    if getattr(actuator, "law", None) is None:
+        why = "has no compiled form"
+    elif not actuator.slots:
+        why = "has no own slots"
+    elif type(actuator).accelerations is not Actuator.accelerations:
+        why = "writes its own accelerations"
+    else:
+        return None
+    return f"the actuator {actuator.name!r} {why}"
 
 
 def _why_not_compiled(method: type["Integrator"], system: "FingerSystem", name: str | None) -> str | None:

@@ -1,13 +1,15 @@
 """A Simulator with a stateful actuator in the slot (`actuators.base.Actuator`): its integrator.
 
 The actuator's own slots are stepped with q and q' in the flat state (`integrators.stateful`) by the
-scene's explicit Runge-Kutta tableau, on the Python path; with stops or contact the Simulator's events
-carry them (`simulation.actuated_events`). An actuator that declares a `time_constant` (s) has its
+scene's explicit Runge-Kutta tableau; an actuator that declares its law (`actuators.base.ActuatorLaw`)
+runs on the compiled kernel where the scene's elements do (`kernel.stateful`, picked by auto), any other
+on the Python path. With stops or contact the Simulator's events carry its slots
+(`simulation.actuated_events`). An actuator that declares a `time_constant` (s) has its
 own mode s = −1/T checked like the linkage's: auto splits each step to resolve it, a named method that
 is unstable on it is refused. What it does not carry is refused in one line: stick–slip friction on a
-moving object, a constrained actuator (its own `accelerations`)
-with gaps, a drive scene (the drive is the scene's actuator already), the compiled kernel, and a method
-without an explicit tableau. auto's kernel falls back to the Python path and says so in the method's reason.
+moving object, a constrained actuator (its own `accelerations`) with gaps, a drive scene (the drive is the
+scene's actuator already), the compiled kernel for an actuator without a declared law, and a method
+without an explicit tableau. auto's kernel falls back to the Python path and says why in the method's reason.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-from finger_sim import stick_slip
+from finger_sim import stepper_slot, stick_slip
 from finger_sim.actuators.base import Actuator
 from finger_sim.auto import contact_substeps
 from finger_sim.errors import ConfigError
@@ -35,17 +37,20 @@ MAX_OWN_SUBSTEPS = 1024
 
 class Actuated(NamedTuple):
     """What a Simulator with a stateful actuator runs: its integrator class, the contact substeps
-    (`Simulator.substeps`) and what the method's reason adds."""
+    (`Simulator.substeps`), its kernel and what the method's reason adds."""
 
     integrator_cls: type[Integrator]
     substeps: int
+    #: the kernel it runs on: "numba-<version>" or "python"
+    kernel: str
     note: str
 
 
 def integrator_class(scene: Scene, setup: Setup, actuator: Actuator, kernel: str) -> Actuated:
-    """The class stepping (q, q', the actuator's slots) for `scene`, its contact substeps and the reason's
-    note; ConfigError for what it cannot carry."""
-    if kernel == "compiled":
+    """The class stepping (q, q', the actuator's slots) for `scene` on `kernel` (compiled where the actuator
+    declares its law, `actuators.base.ActuatorLaw`), its contact substeps and the reason's note; ConfigError
+    for what it cannot carry."""
+    if kernel not in ("python", "auto") and getattr(actuator, "law", None) is None:
         raise ConfigError("kernel", f"python or auto for the actuator {actuator.name!r} with its own state "
                           "(it has no compiled form)", kernel)
     if scene.drive is not None:
@@ -59,7 +64,7 @@ def integrator_class(scene: Scene, setup: Setup, actuator: Actuator, kernel: str
         raise ConfigError("model", f"a scene without stops or contact for the actuator {actuator.name!r}, which "
                           "writes its own accelerations (a constrained actuator)", f"{len(setup.gaps)} gaps")
     method, substeps = setup.method_cls, setup.substeps
-    note = python_note(actuator, kernel)
+    note = ""
     if not issubclass(method, ExplicitRungeKutta) and scene.method == AUTO:
         method, substeps = METHODS[ACTUATED_DEFAULT], contact_substeps(scene)
         check_stability(scene, setup.system, method, substeps)
@@ -67,7 +72,11 @@ def integrator_class(scene: Scene, setup: Setup, actuator: Actuator, kernel: str
     n = own_substeps(scene, method, actuator)
     if n > 1:
         note += f"; {n} substeps per step resolve the time constant {actuator.time_constant:g} s of the actuator {actuator.name!r}"
-    return Actuated(StatefulRungeKutta.of(method, n, actuator), substeps, note)
+    integrator_cls, name, why_python = stepper_slot.kernel().select_stateful(
+        StatefulRungeKutta.of(method, n, actuator), setup.system, kernel)
+    if why_python:
+        note = f"; {why_python}: the Python path{note}"
+    return Actuated(integrator_cls, substeps, name, note)
 
 
 def own_substeps(scene: Scene, method: type[Integrator], actuator: Actuator) -> int:
@@ -92,10 +101,3 @@ def own_substeps(scene: Scene, method: type[Integrator], actuator: Actuator) -> 
                           method.name, problem=f"{method.name} is unstable on the time constant {tau:g} s of the "
                           f"actuator {actuator.name!r} at dt = {scene.dt:g} s")
     return 1
-
-
-def python_note(actuator: Actuator, kernel: str) -> str:
-    """What the method's reason says when auto's kernel runs the actuator on the Python path ('' otherwise)."""
-    if kernel == "python":
-        return ""
-    return f"; the actuator {actuator.name!r} has no compiled form: the Python path"

@@ -67,7 +67,7 @@ class Simulator:
         self.scene = scene
         # the registered effects are part of the key: a plug-in registered later builds another system
         effects = tuple(EFFECTS.values())
-        if actuator is not None:  # the Python path (`simulation.actuated`)
+        if actuator is not None:  # its integrator and kernel are chosen below (`simulation.actuated`)
             requested, kernel = kernel, "python"
         # a drive holds its mesh mode: each Simulator of a drive scene builds its own system
         cached = hashable(scene) and scene.drive is None and not stick_slip.in_scene(scene)  # nor a friction mode
@@ -85,7 +85,8 @@ class Simulator:
         self._friction = stick_slip.element(self.system)
         self._method_cls, self._integrator_cls, self.kernel = setup.method_cls, setup.integrator_cls, setup.kernel
         if actuator is not None:
-            self._integrator_cls, self.substeps, note = actuated.integrator_class(scene, setup, actuator, requested)
+            self._integrator_cls, self.substeps, self.kernel, note = actuated.integrator_class(scene, setup, actuator,
+                                                                                              requested)
             self.method, self._options, self.method_reason = self._integrator_cls.name, {}, self.method_reason + note
         #: the actuator with its own state in the slot, or None
         self._actuator = actuator
