@@ -7,8 +7,10 @@ Each run is a fresh process that steps a 1 kHz loop paced like the node (sleep t
 one topic each) through finger_sim.ros.state_output.StateOutput, as the node's
 _publish_state does, into a McapRecorder with the default handover; sending is a no-op. The
 same loop with no recorder is the baseline. Figures: CPU s per sim s (cores at real time) of
-the loop's process and of its log writer process, over SECONDS after WARMUP_S (the writer
-process's start-up excluded). With --old, every run of this checkout is followed by the same
+the loop's process (every thread: the recorder's sender thread included) and of its log writer
+process, over SECONDS after WARMUP_S (the writer process's start-up excluded); and the loop
+thread's own CPU for one state's begin, adds and flush (median µs, thread CPU clock): what the
+stepping thread pays per state, paced. With --old, every run of this checkout is followed by the same
 run of the old one (first on PYTHONPATH): A B A B, medians over the rounds.
 """
 
@@ -56,14 +58,17 @@ def run_loop(messages: int, seconds: float, record: bool) -> dict[str, float]:
     writer_stat = f"/proc/{recorder.writer_pid}/stat" if recorder is not None else None
     w0, c0 = (_cpu_s(writer_stat) if writer_stat else 0.0), time.process_time()
     steps, dt_ns = round(seconds * RATE_HZ), round(NS / RATE_HZ)
+    thread_ns, states_ns = time.thread_time_ns, []
     start = time.perf_counter()
     for k in range(steps):
         stamp = k * dt_ns
         data = stamp.to_bytes(8, "little") * (PAYLOAD_BYTES // 8)
+        state_start = thread_ns()
         output.begin()
         for endpoint in endpoints:
             output.add(endpoint, data, stamp)
         output.flush(stamp)
+        states_ns.append(thread_ns() - state_start)
         wait = start + (k + 1) / RATE_HZ - time.perf_counter()
         if wait > 0:
             time.sleep(wait)
@@ -75,7 +80,8 @@ def run_loop(messages: int, seconds: float, record: bool) -> dict[str, float]:
     sim = steps / RATE_HZ
     import finger_sim
 
-    return {"loop": loop / sim, "writer": writer / sim, "rtf": sim / wall, "package": str(Path(finger_sim.__file__).parent)}
+    return {"loop": loop / sim, "writer": writer / sim, "rtf": sim / wall, "state_us": statistics.median(states_ns) / 1e3,
+            "package": str(Path(finger_sim.__file__).parent)}
 
 
 def _run(checkout: Path | None, messages: int, seconds: float, record: bool) -> dict[str, float]:
@@ -114,8 +120,8 @@ def main(argv: list[str] | None = None) -> int:
                     runs.setdefault((side, n, record), []).append(_run(checkout, n, args.seconds, record))
     print(f"load average {load0:.1f} → {os.getloadavg()[0]:.1f}; medians of {args.rounds} rounds, cores (CPU s per sim s)")
     print("| side | messages a state | loop, no log | loop, recording | its writer process | added by recording | "
-          "the same, µs a step | real-time factor (lowest run) |")
-    print("|---|---|---|---|---|---|---|---|")
+          "the same, µs a step | loop thread a state, µs (no log, recording) | real-time factor (lowest run) |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for n in args.messages:
         for side in sides:
             off, on = runs[(side, n, False)], runs[(side, n, True)]
@@ -124,8 +130,9 @@ def main(argv: list[str] | None = None) -> int:
             writer = statistics.median(r["writer"] for r in on)
             rtf = min(r["rtf"] for r in off + on)
             added = loop + writer - base
+            state_us = [statistics.median(r["state_us"] for r in runs) for runs in (off, on)]
             print(f"| {side} | {n} | {base:.4f} | {loop:.4f} | {writer:.4f} | +{added:.4f} | {added * 1e6 / RATE_HZ:.1f} | "
-                  f"{rtf:.3f} |")
+                  f"{state_us[0]:.1f}, {state_us[1]:.1f} | {rtf:.3f} |")
     return 0
 
 

@@ -1,6 +1,6 @@
 """The stepping thread's CPU per step of a real finger_node or finger_hand, in this process.
 
-    python -m finger_sim.bench.step_loop_bench [--hand FILE | --scene NAME] [--steps 10000] [--profile]
+    python -m finger_sim.bench.step_loop_bench [--hand FILE | --scene NAME] [--steps 10000] [--profile | --paced]
 
 Builds the node (paper_flexion or --scene, or the fingers of a hand file; torque from the topics, nobody
 sends; realtime_factor 0, publishing every step, markers at 30 Hz, recording on unless
@@ -8,7 +8,11 @@ sends; realtime_factor 0, publishing every step, markers at 30 Hz, recording on 
 loop's `_advance()` --steps times back to back: the work of one step (physics, CDR packing,
 publishing, handing the log over) without the pacing. Prints wall and CPU µs per step of this
 process (every thread: the recorder's sender thread included, the log writer process not), or
-with --profile cProfile's table. Old against new: run it with PYTHONPATH set to the old checkout.
+with --profile cProfile's table. With --paced, each step starts at the next 1 ms deadline (a sleep
+in between, as the node's real-time loop: caches cold) and the figure is this thread's CPU per
+`_advance()` (median and mean µs; the thread CPU clock, so neither the sleep nor other threads).
+Old against new: run this file by path with PYTHONPATH set to the old checkout (its finger_sim is
+the one imported).
 """
 
 from __future__ import annotations
@@ -17,11 +21,13 @@ import argparse
 import cProfile
 import gc
 import pstats
+import statistics
 import sys
 import tempfile
 import time
 
 WARMUP_STEPS = 500
+PACED_DT_S = 1e-3  # --paced: wall s between step deadlines
 PROFILE_ROWS = 35
 
 
@@ -32,6 +38,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--steps", type=int, default=10_000)
     parser.add_argument("--no-record", action="store_true")
     parser.add_argument("--profile", action="store_true", help="cProfile's table instead of the timing")
+    parser.add_argument("--paced", action="store_true", help="steps at 1 ms deadlines; this thread's CPU per step")
     args = parser.parse_args(argv)
 
     import rclpy
@@ -53,6 +60,9 @@ def main(argv: list[str] | None = None) -> int:
             for _ in range(WARMUP_STEPS):
                 node._advance()
             gc.freeze()
+            if args.paced:
+                print(paced(node, args.steps))
+                return 0
             profile = cProfile.Profile() if args.profile else None
             wall, cpu = time.perf_counter(), time.process_time()
             if profile is not None:
@@ -70,6 +80,21 @@ def main(argv: list[str] | None = None) -> int:
             node.destroy_node()
             rclpy.try_shutdown()
     return 0
+
+
+def paced(node: object, steps: int) -> str:
+    """`steps` calls of node._advance(), each at the next 1 ms deadline; this thread's CPU per call."""
+    thread_ns, costs = time.thread_time_ns, []
+    start = time.perf_counter()
+    for k in range(steps):
+        before = thread_ns()
+        node._advance()  # type: ignore[attr-defined]
+        costs.append(thread_ns() - before)
+        wait = start + (k + 1) * PACED_DT_S - time.perf_counter()
+        if wait > 0:
+            time.sleep(wait)
+    return (f"paced: thread cpu median {statistics.median(costs) / 1e3:.1f} us/step, "
+            f"mean {statistics.fmean(costs) / 1e3:.1f} us/step")
 
 
 if __name__ == "__main__":

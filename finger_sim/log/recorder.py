@@ -41,11 +41,13 @@ the trailing bytes.
 
 Processes: all file I/O and all of mcap's writing run in a writer process
 (finger_sim.log.writer_process), so that building chunks and compressing them never holds the
-caller's GIL. The caller only checks, serializes and appends each message's bytes to one
-buffer (a bytearray: no object per message, no wake-up); a sender thread hands the buffer over
-through a pipe every `handover_s` wall seconds (earlier when half of `queue_size` is waiting, or
-at close), so a 1 kHz node hands over a batch of steps at a time, and a status thread takes the
-writer process's counts. A message waits until the writer process has read it; more than
+caller's GIL. The caller only checks, serializes and appends one reference to a pending list
+(a message's channel and bytes, or write_records' whole state: no record built, no wake-up); a
+sender thread takes the list every `handover_s` wall seconds (earlier when half of `queue_size`
+is waiting, or at close), builds the MCAP records of a batch of states at once (numbering each
+channel's messages in order) and hands them over through a pipe, so a 1 kHz node's stepping
+thread pays neither the packing nor the hand-over; a status thread takes the writer process's
+counts. A message waits until the writer process has read it; more than
 `queue_size` waiting messages, an unwritable path or a full disk never raise and never block the
 caller: each kind of trouble is reported once through `on_problem` (default: logger
 'finger_sim.log'; called from the status thread for I/O trouble), the first I/O failure is kept
@@ -222,8 +224,8 @@ class McapRecorder:
         self._chunk_wall_s = chunk_wall_s
         self._on_problem = on_problem if on_problem is not None else _logger.warning
         self._handover_s = handover_s
-        # Records for the writer process (a message: its MCAP Message record, writer_process.HEADER + data), taken under _lock
-        self._buffer = bytearray()
+        # What the writer process is to get, in order (appended and taken under _lock; `_records` builds it)
+        self._pending: list[_Pending] = []
         self._wake = threading.Event()  # set at close or when half of queue_size waits
         self._room = threading.Event()  # set by the status thread after each report of the writer process
         self.back_pressure = back_pressure
@@ -262,7 +264,7 @@ class McapRecorder:
             if self._state is not _State.NEW:
                 raise RecorderStateError("open", self._state.value)
             self._state = _State.OPEN
-            self._buffer += control_record(self._start)
+            self._pending.append(control_record(self._start))
         self._start_process()
         return self
 
@@ -278,8 +280,8 @@ class McapRecorder:
             was_open, self._state = self._state is _State.OPEN, _State.CLOSED
             if was_open:
                 if self._status_record is not None:
-                    self._buffer += control_record(Metadata(self._status_record, self._status()))
-                self._buffer += control_record(Close())
+                    self._pending.append(control_record(Metadata(self._status_record, self._status())))
+                self._pending.append(control_record(Close()))
                 self._wake.set()
         if not was_open or self._process is None:
             return
@@ -339,7 +341,7 @@ class McapRecorder:
             if len(self._channels) >= MAX_CHANNELS:
                 raise LogArgumentError("topic", f"one of at most {MAX_CHANNELS} channels", topic)
             channel = self._channels[topic] = _Channel(len(self._channels), type_name, codec)
-            self._buffer += control_record(Register(channel.index, topic, type_name, codec.definition, metadata))
+            self._pending.append(control_record(Register(channel.index, topic, type_name, codec.definition, metadata)))
 
     def add_metadata(self, name: str, data: Mapping[str, str]) -> None:
         """Queue a metadata record (e.g. scene YAML, parameters, version) of at most
@@ -353,7 +355,7 @@ class McapRecorder:
             raise LogArgumentError(f"metadata record {name!r}", f"at most {MAX_METADATA_BYTES} bytes", f"{size} bytes")
         with self._lock:
             self._require_open("add metadata")
-            self._buffer += control_record(Metadata(name, dict(data)))
+            self._pending.append(control_record(Metadata(name, dict(data))))
 
     # -- hot path -----------------------------------------------------------------------------
 
@@ -396,19 +398,14 @@ class McapRecorder:
                   or (waiting and self._queued_bytes - self._taken_bytes + len(data) > MAX_QUEUED_BYTES)):
                 self._dropped += 1
                 self._dropped_by_topic[topic] = self._dropped_by_topic.get(topic, 0) + 1
-                # The number is spent: the gap tells a reader where the drop was.
-                channel.last_sequence = (channel.last_sequence + 1) % _SEQUENCE_MODULUS
+                self._pending.append(channel)  # its number is spent: the gap tells a reader where the drop was
                 problem, text = _Problem.QUEUE_FULL, (
                     f"MCAP recorder {self._path}: {waiting} messages wait for the writer "
                     f"({self._queued_bytes - self._taken_bytes} bytes; limits {self._queue_size} and {MAX_QUEUED_BYTES}); "
                     "dropping messages (see the dropped count)"
                 )
             else:
-                channel.last_sequence = (channel.last_sequence + 1) % _SEQUENCE_MODULUS
-                buffer = self._buffer
-                buffer += _pack_header(MESSAGE_OPCODE, MESSAGE_FIELDS + len(data), channel.index + 1, channel.last_sequence,
-                                       log_ns, publish_ns)
-                buffer += data
+                self._pending.append(((channel,), (data,), log_ns, publish_ns))
                 self._queued += 1
                 self._queued_bytes += len(data)
                 if waiting == self._queue_size // 2:
@@ -426,8 +423,9 @@ class McapRecorder:
 
     def write_records(self, topics: Sequence[str], datas: Sequence[bytes], log_time_ns: int) -> int:
         """write_batch with the topics and their CDR bytes as two parallel sequences: a caller that
-        hands over the same topics every step (a node's state) builds no object per message, and
-        the channels of the last topic list are looked up once (compared, not hashed)."""
+        hands over the same topics every step (a node's state) builds no object per message, the
+        channels of the last topic list are looked up once (compared, not hashed), and the state
+        is kept as one reference (its records are built by the sender thread, `_records`)."""
         if len(topics) != len(datas):
             raise LogArgumentError("datas", f"one CDR message per topic ({len(topics)})", f"{len(datas)} messages")
         last_topics, channels = self._last_batch
@@ -448,26 +446,14 @@ class McapRecorder:
             fits = (self._state is _State.OPEN and waiting + len(datas) <= self._queue_size
                     and not (waiting and self._queued_bytes - self._taken_bytes + size > MAX_QUEUED_BYTES))
             if fits:
-                self._append_records(channels, datas, log_ns, size, waiting)  # type: ignore[arg-type]
+                self._pending.append((channels, tuple(datas), log_ns, log_ns))  # type: ignore[arg-type]
+                self._queued += len(datas)
+                self._queued_bytes += size
+                if waiting < self._queue_size // 2 <= waiting + len(datas):
+                    self._wake.set()  # a burst: take it before the bound is reached
         if not fits:  # outside the lock: a blocked write() (back-pressure) must let the sender take the buffer
             return sum(self.write(topic, data, log_time_ns) for topic, data in zip(topics, datas))
         return len(datas)
-
-    def _append_records(self, channels: list[_Channel], datas: Sequence[bytes], log_ns: int, size: int,
-                        waiting: int) -> None:
-        """write_records' records into the buffer (under _lock)."""
-        buffer, pack = self._buffer, _pack_header
-        for channel, data in zip(channels, datas):
-            sequence = channel.last_sequence + 1
-            if sequence == _SEQUENCE_MODULUS:  # uint32: wraps
-                sequence = 0
-            channel.last_sequence = sequence
-            buffer += pack(MESSAGE_OPCODE, MESSAGE_FIELDS + len(data), channel.record_id, sequence, log_ns, log_ns)
-            buffer += data
-        self._queued += len(datas)
-        self._queued_bytes += size
-        if waiting < self._queue_size // 2 <= waiting + len(datas):
-            self._wake.set()  # a burst: take it before the bound is reached
 
     @property
     def path(self) -> Path:
@@ -571,19 +557,20 @@ class McapRecorder:
         self._listener.start()
 
     def _send(self) -> None:
-        """Sender thread: every handover_s (earlier when woken), hand what was buffered to the
-        writer process in one write; the GIL is released while the pipe takes it."""
+        """Sender thread: every handover_s (earlier when woken), build the records of what is
+        pending and hand them to the writer process in one write; the GIL is released while the
+        pipe takes it."""
         assert self._process is not None and self._process.stdin is not None
         pipe = self._process.stdin
         while True:
             self._wake.wait(self._handover_s)
             self._wake.clear()
             with self._lock:
-                block, self._buffer = self._buffer, bytearray()
+                pending, self._pending = self._pending, []
                 closing = self._state is _State.CLOSED
-            if block and not self._broken:
+            if pending and not self._broken:
                 try:
-                    pipe.write(block)
+                    pipe.write(_records(pending))
                     pipe.flush()
                 except OSError as exc:  # the writer process died (BrokenPipeError)
                     self._broken = True
@@ -614,6 +601,33 @@ class McapRecorder:
             self._error = f"cannot write {self._path}: {reason}"
         self._report(_Problem.IO, f"MCAP recorder cannot write {self._path}: {reason}; "
                      "dropping every further message")
+
+
+#: A pending item: a control record (bytes), messages (their channels, CDR bytes, log and publish
+#: time in ns), or a channel whose next sequence number a dropped message spent.
+_Pending = bytes | tuple[Sequence[_Channel], Sequence[bytes], int, int] | _Channel
+
+
+def _records(pending: list[_Pending]) -> bytearray:
+    """The writer process's input for `pending`, in order: control records as they are, messages
+    as MCAP Message records (writer_process.HEADER + data) numbered per channel from its last
+    number (uint32: wraps). Sender thread only: it alone counts the channels' numbers."""
+    out, pack = bytearray(), _pack_header
+    for item in pending:
+        if type(item) is tuple:
+            channels, datas, log_ns, publish_ns = item
+            for channel, data in zip(channels, datas):
+                sequence = channel.last_sequence + 1
+                if sequence == _SEQUENCE_MODULUS:
+                    sequence = 0
+                channel.last_sequence = sequence
+                out += pack(MESSAGE_OPCODE, MESSAGE_FIELDS + len(data), channel.record_id, sequence, log_ns, publish_ns)
+                out += data
+        elif type(item) is _Channel:
+            item.last_sequence = (item.last_sequence + 1) % _SEQUENCE_MODULUS
+        else:
+            out += item  # type: ignore[arg-type]
+    return out
 
 
 def _codec(type_name: str, definition: str) -> _Codec:

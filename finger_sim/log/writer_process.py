@@ -4,10 +4,10 @@ Started by finger_sim.log.recorder.McapRecorder, which runs `main()` in a new in
 
 Why a process: the mcap library's writer is Python, about 10 µs a message, and a writer
 thread in the caller's process holds the GIL against the caller (a node's stepping thread)
-for that long: recording tripled a node's per-step cost. Here the caller only appends each
-message's bytes to one bytearray; a sender thread hands the bytearray over through this
-process's stdin every few tens of ms (one write, the GIL released), and everything mcap does
-happens in this process, on the other core.
+for that long: recording tripled a node's per-step cost. Here the caller only appends a
+reference to each message (or state) to a list; a sender thread builds their records and hands
+them over through this process's stdin every handover_s (one write, the GIL released), and
+everything mcap does happens in this process, on the other core.
 
 Stdin carries records, each an opcode and a length (`_RECORD_PREFIX`) and its body. A message
 comes as the MCAP Message record it becomes in the file (`HEADER`: opcode, length, channel id =

@@ -42,6 +42,7 @@ and shows WARN.
 
 from __future__ import annotations
 
+import contextlib
 import gc
 import sys
 import time
@@ -227,6 +228,16 @@ class SteppingNode(Node, BatchedStateOutput, SteppingSession):
         for out in self._endpoints():
             if out.acked:
                 out.handle.wait_for_all_acked(timeout)
+
+    def _loop(self) -> None:
+        """The session's stepping loop, holding every publisher's use guard for its run: the
+        endpoints send with the C publisher's publish_raw alone (interfaces.raw_sender), and a
+        destroy_node meanwhile is deferred until the loop ends, as each message's guard did."""
+        with contextlib.ExitStack() as held:
+            for out in self._endpoints():
+                if out.send is not None:
+                    held.enter_context(out.handle.handle)
+            super()._loop()  # type: ignore[misc]
 
     # -- the session's output (stepping thread) -----------------------------------------------
     def _event(self, finger: Finger, event: CommandEvent, level: Level = Level.OK) -> None:
