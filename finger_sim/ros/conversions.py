@@ -52,8 +52,9 @@ GRIP_FORCE = contact_outputs.GRIP_FORCE.name
 #: (N, a magnitude, not a direction of header.frame_id), every other field 0; a stamped type of
 #: common_interfaces that a controller pairs with its time (std_msgs has no stamped Float64).
 GRIP_FORCE_STAMPED = "grip_force_stamped"
-#: The declared wrenches (`effects.base.Wrench`): each one's topic (a key of OUTPUTS) carries its sum over elements.
+#: The declared wrenches (`effects.base.Wrench`) and their topics (keys of OUTPUTS), each one's sum over elements.
 WRENCHES = declared_wrenches()
+WRENCH_KEYS = tuple(w.topic for w in WRENCHES)
 
 #: Line width of the link markers and diameter of the fingertip sphere, m.
 LINK_WIDTH = 0.002
@@ -315,7 +316,7 @@ class ContactReport:
     def messages(self, t: float, q: Vec3, v: Vec3, stamp_ns: int) -> list[tuple[str, Float64 | WrenchStamped]]:
         """[(output key, message)]: grip_force, grip_force_stamped, then each declared wrench's topic
         (contact_wrench/proximal and /distal)."""
-        grip, sums = 0.0, [[0.0, 0.0, 0.0] for _ in WRENCHES]
+        grip, sums = 0.0, [[0.0, 0.0, 0.0] for _ in WRENCH_KEYS]
         for e, slots in zip(self.elements, self._slots):
             grip += e.outputs(t, q, v)[GRIP_FORCE]
             for slot, wrench in zip(slots, e.wrenches(t, q, v)):
@@ -326,9 +327,9 @@ class ContactReport:
         self._grip.data = self._grip_stamped.wrench.force.x = grip
         to_time(stamp_ns, self._grip_stamped.header.stamp)
         out: list[tuple[str, Float64 | WrenchStamped]] = [(GRIP_FORCE, self._grip), (GRIP_FORCE_STAMPED, self._grip_stamped)]
-        for i, (declared, acc) in enumerate(zip(WRENCHES, sums)):
+        for i, (key, acc) in enumerate(zip(WRENCH_KEYS, sums)):
             self._wrenches[i] = contact_wrench(self.frames, (acc[0], acc[1], acc[2]), stamp_ns, out=self._wrenches[i])
-            out.append((declared.topic, self._wrenches[i]))
+            out.append((key, self._wrenches[i]))
         return out
 
 
