@@ -214,7 +214,7 @@ def pick(rows: Sequence[Sequence[object]], root: complex, dt: float, target: flo
 
 
 def contact_substeps(scene: Scene, implicit: bool = False) -> int:
-    """Substeps m of a step in contact under `method: auto`: 1 without objects.
+    """Substeps m of a step in contact under `method: auto`: 1 without contact (no element with kinks).
 
     Explicit (`implicit` False): the fewest with |s|·dt/m ≤ CONTACT_SUBSTEP_MODE_DT on the scene's
     fastest mode s (its contact mode, at the contact element's design force); 1 when the scene is
