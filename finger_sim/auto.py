@@ -45,7 +45,8 @@ from typing import NamedTuple
 
 from finger_sim import kinematics
 from finger_sim.dynamics import FingerSystem
-from finger_sim.effects import EFFECTS
+from finger_sim.effects import EFFECTS, build_elements
+from finger_sim.effects.base import has_kinks
 from finger_sim.integrators import METHODS
 from finger_sim.scene import AUTO, Scene
 from finger_sim.stability import SAMPLES, TOGGLE_MARGIN, fastest_mode, inside_object, mcp_range, modal_roots, stable_at
@@ -213,7 +214,7 @@ def pick(rows: Sequence[Sequence[object]], root: complex, dt: float, target: flo
 
 
 def contact_substeps(scene: Scene, implicit: bool = False) -> int:
-    """Substeps m of a step in contact under `method: auto`: 1 without objects.
+    """Substeps m of a step in contact under `method: auto`: 1 without contact (no element with kinks).
 
     Explicit (`implicit` False): the fewest with |s|·dt/m ≤ CONTACT_SUBSTEP_MODE_DT on the scene's
     fastest mode s (its contact mode, at the contact element's design force); 1 when the scene is
@@ -223,7 +224,7 @@ def contact_substeps(scene: Scene, implicit: bool = False) -> int:
     friction's damping, however fast, is left to the L-stable method."""
     system = scene.build_system()
     q0, _ = scene.initial_state()
-    smooth = [e for e in system.elements if e.smooth or all(e.impact(i) is not None for i in range(len(e.gaps(q0))))]
+    smooth = [e for e in system.elements if not has_kinks(e, q0)]
     if len(smooth) == len(system.elements):
         return 1  # no contact
     theta_range = mcp_range(scene)
@@ -256,10 +257,13 @@ def choose_method(scene: Scene) -> tuple[str, str]:
     """(method, reason) for `method: auto`: the table's cheapest fixed-step method within
     scene.tolerance / TABLE_MARGIN on a scene without events that is not stiff; else ERROR_CONTROLLED
     at the scene's tolerance (`error_control`)."""
-    root = fastest_mode(scene.build_system(), mcp_range(scene))
+    system = scene.build_system()
+    root = fastest_mode(system, mcp_range(scene))
     kind, why = scene_kind(scene, root)
     rows = RECOMMENDATION.get(kind, {})
-    label = "contact" if kind == "stops" and scene.objects else kind  # contact shares the stops row's kind
+    q0, _ = scene.initial_state()
+    # contact (an element's kinks) shares the stops row's kind
+    label = "contact" if kind == "stops" and any(has_kinks(e, q0) for e in system.elements) else kind
     if kind in ("smooth", "discontinuous") and rows:
         rate, rate_text = table_rate(list(rows), scene.dt)
         target = scene.tolerance / TABLE_MARGIN
@@ -281,7 +285,8 @@ def realtime_note(scene: Scene, root: complex) -> str:
     cannot do and what would: the internal steps per output step that its fastest mode `root` (1/s) forces
     (|s|·dt / DOP853_STABILITY, whatever the tolerance), their predicted CPU against REALTIME_SHARE of the period."""
     attempts = max(1.0, abs(root) * scene.dt / DOP853_STABILITY)
-    cost = ATTEMPT_US * attempts + (EVENT_STEP_US if scene.objects or scene.mcp_limits is not None else 0.0)
+    events = any(not e.smooth for e in build_elements(scene))  # stops, contact: the event loop's cost
+    cost = ATTEMPT_US * attempts + (EVENT_STEP_US if events else 0.0)
     budget = REALTIME_SHARE * scene.dt * 1e6
     if cost <= budget:
         return ""

@@ -36,7 +36,8 @@ import numpy as np
 
 from finger_sim.actuators import stepping as drive_stepping
 from finger_sim.actuators.drive import STUCK, DrivenSystem, holding_margin
-from finger_sim.effects.friction_modes import LOCKED, SLIDING, STICK_SLIP, StickSlipContact
+from finger_sim.effects import build_elements
+from finger_sim.effects.friction_modes import FRICTION, LOCKED, SLIDING, STICK_SLIP, StickSlipContact
 from finger_sim.errors import SimulationDiverged
 from finger_sim.integrators.base import TorqueFn
 from finger_sim.kinematics import Vec3
@@ -65,10 +66,9 @@ PROBE_TORQUE = 1.0
 
 
 def in_scene(scene: Scene) -> bool:
-    """Whether the scene's contacts use stick–slip friction (then its Simulators each build their own
-    system: the friction mode is state of the element)."""
-    law = getattr(scene, "friction_law", None)
-    return bool(scene.objects) and law is not None and law.model == STICK_SLIP
+    """Whether an element the scene builds owns the friction mode (`FRICTION`: the contacts' stick–slip
+    friction); then its Simulators each build their own system: the friction mode is state of the element."""
+    return any(FRICTION in getattr(e, "modes", ()) for e in build_elements(scene))
 
 
 def auto_method(scene: Scene) -> tuple[str, str, dict[str, float], int]:

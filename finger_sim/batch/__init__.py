@@ -36,6 +36,7 @@ from finger_sim.tip_force_profile import refuse_profile
 from finger_sim.auto import choose_method, contact_substeps
 from finger_sim.dynamics import FingerSystem
 from finger_sim.effects import contact_outputs
+from finger_sim.effects.base import has_kinks
 from finger_sim.errors import ConfigError, StabilityError
 from finger_sim.inputs import profile_array
 from finger_sim.integrators import METHODS
@@ -198,8 +199,10 @@ class _Planner:
         cls = METHODS[method]
         profile = profile_array(scene.torque)
         known, stops = _events(scene, system)
-        # auto splits a contact scene's steps near contact into substeps (Simulator._step): its Simulator runs it
-        substeps = contact_substeps(scene) if scene.method == AUTO and scene.objects and not cls.implicit else 1
+        # auto splits a contact scene's steps near contact (an element's kinks) into substeps (Simulator._step):
+        # its Simulator runs it
+        substeps = (contact_substeps(scene) if scene.method == AUTO and not cls.implicit
+                    and any(has_kinks(e, scene.initial_state()[0]) for e in system.elements) else 1)
         # a drive's mesh modes are events of its Simulator (finger_sim.actuators.stepping): its Simulator runs it
         if model is not None and (profile is None or self._twin(cls) is None or not known or substeps != 1
                                   or scene.drive is not None):

@@ -7,9 +7,9 @@ what does it report?) is a member of `ForceElement`. An element exists only when
 turns its effect on, so an absent effect costs nothing per step.
 
 Adding an effect takes its module: a class implementing `ForceElement` and a builder decorated with
-`@effect("scene_key", ..., parameters, outputs=...)`, declaring the scene keys it reads (a key that is no
-`Scene` field is read through `Scene.effect_value`) and the quantities it reports; for its compiled form,
-one `kernel_law(...)` line naming the plain function its `force` calls.
+`@effect("scene_key", ..., parameters, outputs=..., wrenches=...)`, declaring the scene keys it reads (a key that
+is no `Scene` field is read through `Scene.effect_value`), the quantities it reports and the bodies it reports a
+wrench on; for its compiled form, one `kernel_law(...)` line naming the plain function its `force` calls.
 """
 
 from __future__ import annotations
@@ -71,6 +71,11 @@ class ForceElement(Protocol):
 
     def outputs(self, t: float, q: Vec3, v: Vec3) -> Mapping[str, float]:
         """Quantities the element reports, by the names its effect declares (`Effect.outputs`); {} for none."""
+        ...
+
+    def wrenches(self, t: float, q: Vec3, v: Vec3) -> tuple[Vec3, ...]:
+        """The wrench (Fx, Fy, Mz) on each body its effect declares one on (`Effect.wrenches`), in that order:
+        N in the model plane and N·m about the frame origin A (+Z); () for none."""
         ...
 
     def impact(self, index: int) -> float | None:
@@ -160,6 +165,28 @@ class Output:
     measurable: bool = True
 
 
+@dataclass(frozen=True)
+class Wrench:
+    """A wrench an element reports on one body at each sample (`ForceElement.wrenches`), declared once: the
+    force (Fx, Fy), N in the model plane, and its moment Mz about the frame origin A, N·m (+Z of the model
+    plane). `force`: the two outputs that carry Fx and Fy in tables (an element reporting the wrench reports
+    them); their `topic` and `message` are the finger_node topic that carries the whole wrench."""
+
+    body: str
+    force: tuple[Output, Output]
+
+    def __post_init__(self) -> None:
+        x, y = self.force
+        if x.topic is None or (x.topic, x.message) != (y.topic, y.message):
+            raise ValueError(f"wrench on '{self.body}': its force outputs must name one topic, "
+                             f"got {x.topic!r}, {y.topic!r}")
+
+    @property
+    def topic(self) -> str:
+        """The finger_node topic that carries the wrench (relative name)."""
+        return self.force[0].topic  # type: ignore[return-value]  # checked in __post_init__
+
+
 #: Builds the element of one effect from a resolved scene, or None when the scene leaves it off.
 Builder = Callable[["Scene"], "ForceElement | None"]
 
@@ -175,6 +202,8 @@ class Effect:
     parameters: Mapping[str, Parameter] = field(default_factory=dict, hash=False, compare=False)
     #: every quantity its element may report (`ForceElement.outputs` returns a subset, in this order)
     outputs: tuple[Output, ...] = ()
+    #: the bodies its element reports a wrench on (`ForceElement.wrenches`, in this order)
+    wrenches: tuple[Wrench, ...] = ()
 
 
 #: scene key → effect, in registration order (the order elements are summed in).
@@ -182,14 +211,18 @@ EFFECTS: dict[str, Effect] = {}
 
 
 def effect(key: str, description: str, parameters: Mapping[str, Parameter] | None = None,
-           outputs: tuple[Output, ...] = ()) -> Callable[[Builder], Builder]:
+           outputs: tuple[Output, ...] = (), wrenches: tuple[Wrench, ...] = ()) -> Callable[[Builder], Builder]:
     """Register the builder of the effect switched on by `model.<key>` in a scene, with the scene
-    keys it reads (`parameters`: key → declaration) and the quantities its element reports (`outputs`)."""
+    keys it reads (`parameters`: key → declaration), the quantities its element reports (`outputs`) and
+    the bodies it reports a wrench on (`wrenches`, each one's force among `outputs`)."""
 
     def register(build: Builder) -> Builder:
         if key in EFFECTS:
             raise ValueError(f"effect '{key}' registered twice")
-        EFFECTS[key] = Effect(key, build, description, dict(parameters or {}), tuple(outputs))
+        missing = [o.name for w in wrenches for o in w.force if o not in outputs]
+        if missing:
+            raise ValueError(f"effect '{key}': its wrenches' force outputs {missing} are not among its outputs")
+        EFFECTS[key] = Effect(key, build, description, dict(parameters or {}), tuple(outputs), tuple(wrenches))
         return build
 
     return register
@@ -205,6 +238,24 @@ def declared_outputs() -> dict[str, Output]:
     return {o.name: o for eff in EFFECTS.values() for o in eff.outputs}
 
 
+def declared_wrenches() -> tuple[Wrench, ...]:
+    """Every registered effect's wrenches, once each, in registration order."""
+    return tuple(dict.fromkeys(w for eff in EFFECTS.values() for w in eff.wrenches))
+
+
+def reported_wrenches(element: ForceElement, q: Vec3) -> tuple[Wrench, ...]:
+    """The declared wrenches an element reports, in the order of its `wrenches`: those whose force outputs it
+    reports (asked at a pose q, as `outputs` is: an element reports the same names at every state)."""
+    names = element.outputs(0.0, q, (0.0, 0.0, 0.0))
+    return tuple(w for w in declared_wrenches() if w.force[0].name in names)
+
+
+def has_kinks(element: ForceElement, q: Vec3) -> bool:
+    """Whether the element has events where Q only kinks, without an impact (a contact's onset and release):
+    a gap at q whose `impact` is None. What makes a scene one with contact, whatever its effects are."""
+    return not element.smooth and any(element.impact(i) is None for i in range(len(element.gaps(q))))
+
+
 def build_elements(scene: "Scene") -> list[ForceElement]:
     """The elements of every effect the scene turns on, in registration order."""
     return [e for e in (eff.build(scene) for eff in EFFECTS.values()) if e is not None]
@@ -214,9 +265,9 @@ NO_OUTPUTS: Mapping[str, Any] = {}
 
 
 class Smooth:
-    """Defaults of the event members for an element with no events (`smooth = True`).
+    """Defaults of the event and report members for an element with no events (`smooth = True`).
 
-    An element class may inherit these instead of writing the three trivial methods;
+    An element class may inherit these instead of writing the five trivial methods;
     `force`, `potential`, `modal` and the class constants stay its own.
     """
 
@@ -233,3 +284,6 @@ class Smooth:
 
     def outputs(self, t: float, q: Vec3, v: Vec3) -> Mapping[str, float]:
         return NO_OUTPUTS
+
+    def wrenches(self, t: float, q: Vec3, v: Vec3) -> tuple[Vec3, ...]:
+        return ()

@@ -36,7 +36,8 @@ from finger_sim.effects.base import Vec3, effect
 from finger_sim.effects.contact_law import (contact_force, distal_circle, gap_gradient, generalized, joint_plane,
                                             point_velocity, proximal_circle, tip_plane)
 from finger_sim.effects.contact_geometry import PHALANX_RADII, Circle, ContactParams, Plane, SceneObject, Vec2
-from finger_sim.effects.contact_outputs import CONTACT_FORCES, CONTACT_OUTPUTS, GRIP_FORCE, MOTION_POWER
+from finger_sim.effects.contact_outputs import (CONTACT_FORCES, CONTACT_OUTPUTS, CONTACT_WRENCHES, GRIP_FORCE,
+                                               MOTION_POWER)
 from finger_sim.errors import ConfigError
 from finger_sim.effects.base import CONTACT
 from finger_sim.kinematics import distal_offset
@@ -325,13 +326,13 @@ class Contact:
             out[MOTION_POWER.name] = self.motion_power(t, q, v)  # W, only with moving objects
         return out
 
-    # -- reports -------------------------------------------------------------------------
     def wrenches(self, t: float, q: Vec3, v: Vec3) -> tuple[Vec3, Vec3]:
-        """(Fx, Fy, Mz) on the proximal and on the distal phalanx: the contact force (N, model
-        plane, sum over objects) and its moment about the frame origin A (N·m, about +Z of the
+        """(Fx, Fy, Mz) on the proximal and on the distal phalanx (`CONTACT_WRENCHES`): the contact force (N,
+        model plane, sum over objects) and its moment about the frame origin A (N·m, about +Z of the
         model plane), each force acting at its contact point p on the phalanx's axis."""
         return self._totals(q, v, t)[1]
 
+    # -- reports -------------------------------------------------------------------------
     def contacts(self, t: float, q: Vec3, v: Vec3) -> tuple[ContactPoint, ...]:
         """Every active contact (δ > 0) with its point, normal and force."""
         out = []
@@ -388,7 +389,7 @@ class Contact:
 
 
 @effect("contact", "Hunt–Crossley contact of the phalanx capsules with the scene's objects (spec §7)",
-        outputs=CONTACT_OUTPUTS)
+        outputs=CONTACT_OUTPUTS, wrenches=CONTACT_WRENCHES)
 def build_contact(scene: "Scene") -> Contact | None:
     """The contact element of a scene with objects; None (no element, no cost) without any."""
     objects = tuple(getattr(scene, "objects", ()) or ())

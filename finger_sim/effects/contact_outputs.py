@@ -3,7 +3,7 @@ column, log export, node topic, task and plot uses (`effects.base.Output`)."""
 
 from __future__ import annotations
 
-from finger_sim.effects.base import Output
+from finger_sim.effects.base import Output, Wrench
 
 FLOAT64 = "std_msgs/msg/Float64"
 WRENCH_STAMPED = "geometry_msgs/msg/WrenchStamped"
@@ -23,6 +23,8 @@ def _force(phalanx: str, axis: str) -> Output:
 
 #: contact force on each phalanx, (x, y) in the model plane: {phalanx: (x output, y output)}
 CONTACT_FORCES = {p: (_force(p, "x"), _force(p, "y")) for p in PHALANGES}
+#: the contact wrench on each phalanx (its force the outputs above, its moment about A), in `PHALANGES` order
+CONTACT_WRENCHES = tuple(Wrench(p, CONTACT_FORCES[p]) for p in PHALANGES)
 MOTION_POWER = Output("motion_power", "W", "power the moving objects put into the finger (moving objects only)",
                       measurable=False)
 FRICTION_MODE = Output("friction_mode", "1", "stick–slip mode: 1 locked, 0 sliding (friction_model: stick_slip)")

@@ -81,6 +81,9 @@ class JointStops:
     def outputs(self, t: float, q: Vec3, v: Vec3) -> Mapping[str, float]:
         return NO_OUTPUTS
 
+    def wrenches(self, t: float, q: Vec3, v: Vec3) -> tuple[Vec3, ...]:
+        return ()
+
     # -- the resting mode -----------------------------------------------------------------
     def rests(self, index: int, q: Vec3, v_plus: Vec3, a_free: Vec3) -> bool:
         """Whether the finger, leaving gap `index` at q with q' = v_plus (rad/s) after an impact, rests

@@ -35,6 +35,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from finger_sim import joints, kinematics
 from finger_sim.dynamics import FingerSystem
 from finger_sim.effects import ForceElement, contact_outputs
+from finger_sim.effects.base import declared_wrenches, reported_wrenches
 from finger_sim.effects.contact_geometry import Circle, SceneObject
 from finger_sim.effects.spring import spring_force
 from finger_sim.kinematics import Vec3
@@ -51,8 +52,9 @@ GRIP_FORCE = contact_outputs.GRIP_FORCE.name
 #: (N, a magnitude, not a direction of header.frame_id), every other field 0; a stamped type of
 #: common_interfaces that a controller pairs with its time (std_msgs has no stamped Float64).
 GRIP_FORCE_STAMPED = "grip_force_stamped"
-PHALANGES = contact_outputs.PHALANGES
-WRENCH_KEYS = tuple(contact_outputs.WRENCH_TOPICS[phalanx] for phalanx in PHALANGES)
+#: The declared wrenches (`effects.base.Wrench`) and their topics (keys of OUTPUTS), each one's sum over elements.
+WRENCHES = declared_wrenches()
+WRENCH_KEYS = tuple(w.topic for w in WRENCHES)
 
 #: Line width of the link markers and diameter of the fingertip sphere, m.
 LINK_WIDTH = 0.002
@@ -289,22 +291,21 @@ def contact_wrench(frames: FingerFrames, wrench: Vec3, stamp_ns: int, out: Wrenc
 class ContactReport:
     """The contact topics' messages of a state, from the elements that report a grip force.
 
-    Summed over those elements: grip_force (Σ F_n, N) from their `outputs`, and each phalanx's
-    (Fx, Fy, Mz about A) from their `wrenches(t, q, q')` (finger_sim.effects.contact). Messages
-    are refilled in place (as `out=` does above).
+    Summed over those elements: grip_force (Σ F_n, N) from their `outputs`, and each declared wrench
+    (`WRENCHES`: (Fx, Fy, Mz about A) on a phalanx) from their `wrenches(t, q, q')`. Messages are refilled
+    in place (as `out=` does above).
     """
 
     def __init__(self, frames: FingerFrames, elements: Iterable[ForceElement]) -> None:
         zero = (0.0, 0.0, 0.0)
         self.frames = frames
         self.elements = tuple(e for e in elements if GRIP_FORCE in e.outputs(0.0, frames.q_ext, zero))
-        for e in self.elements:
-            if not callable(getattr(e, "wrenches", None)):  # at start, never in the stepping loop
-                raise TypeError(f"{type(e).__name__} reports {GRIP_FORCE} but has no wrenches(t, q, v)")
+        #: per element, the index in WRENCHES of each wrench it reports, in the order of its `wrenches`
+        self._slots = tuple(tuple(WRENCHES.index(w) for w in reported_wrenches(e, frames.q_ext)) for e in self.elements)
         self._grip = Float64()
         self._grip_stamped = WrenchStamped()
         self._grip_stamped.header.frame_id = frames.base_frame
-        self._wrenches: list[WrenchStamped | None] = [None] * len(PHALANGES)
+        self._wrenches: list[WrenchStamped | None] = [None] * len(WRENCHES)
 
     @classmethod
     def of(cls, frames: FingerFrames, elements: Iterable[ForceElement]) -> ContactReport | None:
@@ -313,11 +314,13 @@ class ContactReport:
         return report if report.elements else None
 
     def messages(self, t: float, q: Vec3, v: Vec3, stamp_ns: int) -> list[tuple[str, Float64 | WrenchStamped]]:
-        """[(output key, message)]: grip_force, grip_force_stamped, then contact_wrench/proximal and /distal."""
-        grip, sums = 0.0, [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]
-        for e in self.elements:
+        """[(output key, message)]: grip_force, grip_force_stamped, then each declared wrench's topic
+        (contact_wrench/proximal and /distal)."""
+        grip, sums = 0.0, [[0.0, 0.0, 0.0] for _ in WRENCH_KEYS]
+        for e, slots in zip(self.elements, self._slots):
             grip += e.outputs(t, q, v)[GRIP_FORCE]
-            for acc, wrench in zip(sums, e.wrenches(t, q, v)):  # type: ignore[attr-defined]
+            for slot, wrench in zip(slots, e.wrenches(t, q, v)):
+                acc = sums[slot]
                 acc[0] += wrench[0]
                 acc[1] += wrench[1]
                 acc[2] += wrench[2]
@@ -325,7 +328,7 @@ class ContactReport:
         to_time(stamp_ns, self._grip_stamped.header.stamp)
         out: list[tuple[str, Float64 | WrenchStamped]] = [(GRIP_FORCE, self._grip), (GRIP_FORCE_STAMPED, self._grip_stamped)]
         for i, (key, acc) in enumerate(zip(WRENCH_KEYS, sums)):
-            self._wrenches[i] = contact_wrench(self.frames, tuple(acc), stamp_ns, out=self._wrenches[i])  # type: ignore[arg-type]
+            self._wrenches[i] = contact_wrench(self.frames, (acc[0], acc[1], acc[2]), stamp_ns, out=self._wrenches[i])
             out.append((key, self._wrenches[i]))
         return out
 

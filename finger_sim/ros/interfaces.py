@@ -31,7 +31,8 @@ from std_msgs.msg import Float64, Float64MultiArray, Int64, String
 from visualization_msgs.msg import MarkerArray
 
 from finger_sim.actuators.drive_outputs import ENCODER, MESH_MODE, MOTOR_ANGLE, MOTOR_CURRENT, MOTOR_VOLTAGE
-from finger_sim.effects.contact_outputs import GRIP_FORCE, WRENCH_TOPICS
+from finger_sim.effects.base import declared_wrenches
+from finger_sim.effects.contact_outputs import GRIP_FORCE
 
 from finger_sim.runtime.commands import joint_effort
 from finger_sim.runtime.parameters import CommandQos, HandSettings, RunSettings
@@ -123,8 +124,9 @@ OUTPUTS: dict[str, OutputSpec] = {
     # grip_force with the state's stamp (conversions.GRIP_FORCE_STAMPED: wrench.force.x = Σ F_n, N)
     "grip_force_stamped": OutputSpec("grip_force_stamped", WrenchStamped, STATE_QOS, acked=True,
                                      reported_by=GRIP_FORCE.name),
-    **{topic: OutputSpec(topic, WrenchStamped, STATE_QOS, acked=True, reported_by=GRIP_FORCE.name)
-       for topic in WRENCH_TOPICS.values()},  # contact_wrench/proximal, contact_wrench/distal
+    # every declared wrench (effects.base.Wrench): contact_wrench/proximal, contact_wrench/distal
+    **{w.topic: OutputSpec(w.topic, WrenchStamped, STATE_QOS, acked=True, reported_by=GRIP_FORCE.name)
+       for w in declared_wrenches()},
     # the drive (spec §8; finger_sim.ros.motor): what a prosthetic controller reads from the device
     **{o.topic: OutputSpec(o.topic, Float64, STATE_QOS, acked=True, reported_by=MOTOR_CURRENT.name)
        for o in (MOTOR_CURRENT, MOTOR_VOLTAGE, MOTOR_ANGLE)},  # motor/current, motor/voltage, motor/angle

@@ -202,7 +202,7 @@ def test_node_contact_topics_match_the_offline_run(launcher, ros_client, tmp_pat
     grip_log = {t: m.data for topic, t, m in logged if topic == "/grip_force"}
     assert sorted(grip_log) == [n * DT_NS for n in range(steps + 1)]
     assert [grip_log[n * DT_NS] for n in range(steps + 1)] == [g for g, _ in ref]
-    stamped_log = {t: (m.header.stamp.sec * 10**9 + m.header.stamp.nanosec, m.wrench.force.x)
+    stamped_log = {t: (stamp(m), m.wrench.force.x)
                    for topic, t, m in logged if topic == "/grip_force_stamped"}
     assert stamped_log == {t: (t, g) for t, g in grip_log.items()}  # log time = stamp (record_time sim)
     distal_log = [(t, m) for topic, t, m in logged if topic == "/contact_wrench/distal"]

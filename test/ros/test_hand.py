@@ -120,7 +120,7 @@ def test_three_fingers_one_clock_their_own_runs_one_log(launcher, ros_client, tm
         logged, logged_ticks = {}, []
         for c, _, raw in reader.messages(connections=[c for c in reader.connections if c.topic.endswith("/joint_states")]):
             m = reader.deserialize(raw, c.msgtype)
-            logged.setdefault(c.topic, {})[m.header.stamp.sec * 10**9 + m.header.stamp.nanosec] = \
+            logged.setdefault(c.topic, {})[stamp(m)] = \
                 (list(m.name), m.header.frame_id, list(m.position), list(m.velocity), list(m.effort))
         for c, _, raw in reader.messages(connections=[c for c in reader.connections if c.topic == "/clock"]):
             m = reader.deserialize(raw, c.msgtype)

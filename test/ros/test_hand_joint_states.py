@@ -94,7 +94,7 @@ def test_merged_joint_states_are_the_fingers_own_at_the_same_stamp(launcher, ros
         for c, _, raw in reader.messages(connections=[c for c in reader.connections if c.topic.endswith("joint_states")]):
             m = reader.deserialize(raw, c.msgtype)
             topic_states = logged.setdefault(c.topic, {})
-            t = m.header.stamp.sec * 10**9 + m.header.stamp.nanosec
+            t = stamp(m)
             assert t not in topic_states or c.topic != "/joint_states", f"two merged messages at {t}"
             topic_states[t] = fields(m)
     assert set(logged) == {"/joint_states", *(f"/{n}/joint_states" for n in fingers)}

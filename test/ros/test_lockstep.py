@@ -24,6 +24,7 @@ from sensor_msgs.msg import JointState  # noqa: E402
 
 from finger_sim.ros import conversions  # noqa: E402
 from finger_sim.ros.pd_controller import KD, KP, MAX_TORQUE, pd_torque  # noqa: E402
+from ros_helpers import stamp  # noqa: E402
 
 NODE = "finger_sim.ros.node"
 PD = "finger_sim.ros.pd_controller"
@@ -50,12 +51,8 @@ def read_log(folder: Path) -> list[tuple[str, object]]:
         return [(c.topic, reader.deserialize(raw, c.msgtype)) for c, _, raw in reader.messages()]
 
 
-def stamp_ns(msg) -> int:
-    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-
-
 def states_of(log: list[tuple[str, object]], ns: str) -> list[tuple[int, tuple, tuple, tuple]]:
-    return [(stamp_ns(m), tuple(m.position), tuple(m.velocity), tuple(m.effort)) for t, m in log
+    return [(stamp(m), tuple(m.position), tuple(m.velocity), tuple(m.effort)) for t, m in log
             if t == f"{ns}/joint_states"]
 
 
@@ -82,7 +79,7 @@ def start_closed_loop(launcher, ros_client, tag: str) -> tuple:
 def closed_loop_log(launcher, ros_client, tag: str, node, states: list, diagnostics: list) -> list[tuple[str, object]]:
     """Once STEPS states of the run `tag` went out and the node reported /diagnostics after them (about
     1 Hz of wall time: a run of STEPS lockstep states can take less): the node stopped, its log."""
-    ros_client.wait_for(lambda: states and stamp_ns(states[-1]) >= STEPS * DT_NS, f"{STEPS} lockstep states of {tag}", 120.0)
+    ros_client.wait_for(lambda: states and stamp(states[-1]) >= STEPS * DT_NS, f"{STEPS} lockstep states of {tag}", 120.0)
     ours = lambda: sum(any(s.name.startswith(f"{namespace(tag)}/") for s in d.status) for d in diagnostics)  # noqa: E731
     reported = ours()
     ros_client.wait_for(lambda: ours() > reported, f"/diagnostics of {tag} after its {STEPS} states", 30.0)
@@ -119,7 +116,7 @@ def test_joint_command_stamps_and_a_silent_controller(launcher, ros_client):
 
     def answer(msg: JointState) -> None:
         states.append(msg)
-        k = stamp_ns(msg) // DT_NS
+        k = stamp(msg) // DT_NS
         if k in answers:
             pub.publish(JointState(header=msg.header, name=["mcp_joint"], effort=[answers[k]]))
         if k == 3:  # an answer to state 0 arrives late: stale, refused
@@ -138,7 +135,7 @@ def test_joint_command_stamps_and_a_silent_controller(launcher, ros_client):
         return 0
 
     ros_client.wait_for(lambda: timeouts() >= 3, "lockstep timeouts in /diagnostics", 60.0)
-    by_step = {stamp_ns(m) // DT_NS: m for m in states}
+    by_step = {stamp(m) // DT_NS: m for m in states}
     assert [by_step[k].effort[0] for k in range(1, 5)] == [0.01, 0.02, 0.03, 0.03]  # state k+1 shows answer k
     assert all(by_step[k].effort[0] == 0.03 for k in by_step if k >= 4)  # held through the timeouts
     refused = [conversions.parse_values(e) for e in events if conversions.parse_values(e)["event"] == "refused"]
@@ -164,7 +161,7 @@ def test_a_lockstep_hand_waits_for_every_fingers_controller(launcher, ros_client
                                                      realtime_factor=0.0, command_qos="reliable", marker_rate_hz=0.0,
                                                      record_dir="bags_hand"))
     steps = 200
-    ros_client.wait_for(lambda: all(s and stamp_ns(s[-1]) >= steps * DT_NS for s in states.values()),
+    ros_client.wait_for(lambda: all(s and stamp(s[-1]) >= steps * DT_NS for s in states.values()),
                         f"{steps} lockstep states of every finger", 120.0)
     status = node.stop()
     assert status == 0, f"exit status {status}:\n{node.output()}"

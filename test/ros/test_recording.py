@@ -52,7 +52,7 @@ from finger_sim.run_log import FINGER_SIM_METADATA, load_run, resimulate  # noqa
 from finger_sim.scene import load_scene, scene_from_dict  # noqa: E402
 from finger_sim.simulate import Simulator  # noqa: E402
 from helpers import NODE, child_pids, run_cli, run_cli_here, wait_until_gone  # noqa: E402
-from ros_helpers import start_when_heard, values  # noqa: E402
+from ros_helpers import stamp, start_when_heard, values  # noqa: E402
 
 CONTROLLER = "finger_sim.ros.pd_controller"
 ROOT = Path(__file__).resolve().parents[2]
@@ -215,10 +215,6 @@ def where(message: str) -> tuple[int, int, int]:
     return round(float(m.group(1)) * 1e9), int(m.group(3)), int(m.group(4))
 
 
-def js_stamp(msg: JointState) -> int:
-    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-
-
 def publish_until(client, publisher, value: float, sent: list, log: list, match, what: str,
                   timeout: float = 20.0) -> dict[str, str]:
     """Publish `value` (again every REPUBLISH_S: commands are best effort) until a ~/command_log
@@ -286,7 +282,7 @@ def test_round_trip_read_by_rosbags_and_mcap(launcher, ros_client, tmp_path):
     held = publish_until(ros_client, torque_pub, 0.003, sent, events,
                          lambda v: v["event"] == "accepted" and v["torque"] == "0.003", "0.003 accepted")
     end = int(held["stamp_ns"]) + 300 * DT_NS
-    ros_client.wait_for(lambda: js_stamp(states[-1]) >= end, "300 steps after the last command")
+    ros_client.wait_for(lambda: stamp(states[-1]) >= end, "300 steps after the last command")
     ros_client.wait_for(lambda: diagnostics, "diagnostics (about 1 Hz of wall time)")
     assert node.stop() == 0, output(node)
     out = output(node)
@@ -315,8 +311,8 @@ def test_round_trip_read_by_rosbags_and_mcap(launcher, ros_client, tmp_path):
         times = [t for t, _ in by_channel[topic]]
         assert times == sorted(times), f"log time went back on {topic}"
         for log_time, fields in by_channel[topic]:
-            stamp = stamp_ns(topic, fields)
-            assert stamp is None or log_time == stamp, (topic, log_time, stamp)
+            stamped = stamp_ns(topic, fields)
+            assert stamped is None or log_time == stamped, (topic, log_time, stamped)
     assert all(m.publish_time == m.log_time for _, _, m, _ in view.messages)
     for topic in ("/joint_states", "/fingertip_pose", "/clock", "/diagnostics", "/finger_markers",
                   "/finger_node/command_log", "/motor_torque"):
@@ -490,9 +486,9 @@ def test_kill_9_leaves_a_readable_prefix(launcher, ros_client, tmp_path):
     diagnostics = ros_client.collect(DiagnosticArray, "/diagnostics")
     start_when_heard(ros_client, "/finger_node", states)
     assert ros_client.call(SetBool, "/finger_node/pause", SetBool.Request(data=False)).success
-    first = js_stamp(states[0])
+    first = stamp(states[0])
     paused_written = log_written(diagnostics)
-    ros_client.wait_for(lambda: js_stamp(states[-1]) >= first + 8 * CHUNK_S * 1e9
+    ros_client.wait_for(lambda: stamp(states[-1]) >= first + 8 * CHUNK_S * 1e9
                         and log_written(diagnostics) > paused_written, "8 chunk intervals of states, a chunk reported written")
     writers = child_pids(node.pid)
     os.killpg(node.pid, signal.SIGKILL)
@@ -587,13 +583,13 @@ def test_resim_of_a_controller_run_is_bit_for_bit(launcher, ros_client, tmp_path
     controller = launcher.node(CONTROLLER, dict(setpoint=0.8), name="pd")
     states = ros_client.collect(JointState, "/joint_states")
     ros_client.wait_for(lambda: states and states[-1].effort[0] > 0.0, "the controller's torque", timeout=30.0)
-    t_on = js_stamp(states[-1])
-    ros_client.wait_for(lambda: js_stamp(states[-1]) >= t_on + 700 * DT_NS, "0.7 s of closed loop")
+    t_on = stamp(states[-1])
+    ros_client.wait_for(lambda: stamp(states[-1]) >= t_on + 700 * DT_NS, "0.7 s of closed loop")
     reset = ros_client.call(Trigger, "/finger_node/reset")
     assert reset.success, reset.message
     clock_r, step_r, episode = where(reset.message)
     assert (step_r, episode) == (0, 1)
-    ros_client.wait_for(lambda: js_stamp(states[-1]) >= clock_r + 700 * DT_NS, "0.7 s of the second episode")
+    ros_client.wait_for(lambda: stamp(states[-1]) >= clock_r + 700 * DT_NS, "0.7 s of the second episode")
     assert node.stop() == 0, output(node)
     assert controller.stop() == 0, output(controller)
     path = the_log(bags)

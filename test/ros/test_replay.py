@@ -38,6 +38,7 @@ from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Float64  # noqa: E402
 
 from conftest import Launcher, RosProcess, wait_until  # noqa: E402
+import ros_helpers  # noqa: E402
 from finger_sim.log import (  # noqa: E402
     LogArgumentError,
     LogFileError,
@@ -134,10 +135,6 @@ def assert_joint_state(msg: JointState, k: int) -> None:
     assert list(msg.position) == position  # bit for bit: the recorded bytes are republished
     assert list(msg.velocity) == velocity
     assert list(msg.effort) == effort
-
-
-def clock_ns(msg: Clock) -> int:
-    return msg.clock.sec * 10**9 + msg.clock.nanosec
 
 
 # -- the listener and the replay process (isolation and processes: conftest.py) -----------------
@@ -382,7 +379,7 @@ def test_replays_every_message_with_recorded_values_order_and_timing(
     assert [m.data for m in listener.messages("/tip_force")] == [force_value(j) for j in range(FORCE_COUNT)]
 
     # /clock carries the log's times (best effort: allow a rare loss, never a foreign value)
-    clocks = [clock_ns(m) for m in listener.messages("/clock")]
+    clocks = [ros_helpers.stamp(m) for m in listener.messages("/clock")]
     recorded = [joint_time(k) for k in range(JOINT_COUNT)]
     arrived = set(clocks)
     assert clocks == [t for t in recorded if t in arrived]
@@ -452,7 +449,7 @@ def test_start_offset_skips_the_beginning(
     for k, msg in zip(joints, listener.messages("/joint_states"), strict=True):
         assert_joint_state(msg, k)
     assert [m.data for m in listener.messages("/tip_force")] == [force_value(j) for j in forces]
-    clocks = [clock_ns(m) for m in listener.messages("/clock")]
+    clocks = [ros_helpers.stamp(m) for m in listener.messages("/clock")]
     assert clocks and min(clocks) >= T0_NS + offset_ns
 
 
@@ -464,7 +461,7 @@ def test_generated_clock_replaces_the_recorded_one(
     wait_for(lambda: listener.count("/joint_states") == JOINT_COUNT, "every joint state")
     code, out, err = proc.finish(DEADLINE_S)
     assert code == 0, err
-    clocks = [clock_ns(m) for m in listener.messages("/clock")]
+    clocks = [ros_helpers.stamp(m) for m in listener.messages("/clock")]
     end = joint_time(JOINT_COUNT - 1)
     expected_ticks = (end - T0_NS) / 1e9 * hz + 2  # a tick at the start, one per period, one at the end
     # one source: the recorded /clock (200 messages) is not replayed besides the ticks

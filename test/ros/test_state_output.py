@@ -16,6 +16,7 @@ pytest.importorskip("rclpy")
 
 from conftest import allocate_domain_id, ros_environment  # noqa: E402
 from rosbags.highlevel import AnyReader  # noqa: E402
+from ros_helpers import stamp  # noqa: E402
 
 FINGERS = ("a", "b", "c")
 STEPS = 300  # after the first state: paper_flexion lasts 0.3 s
@@ -61,8 +62,7 @@ def test_every_message_of_every_step_is_logged_once(tmp_path: Path) -> None:
         conns = [c for c in reader.connections if c.topic in per_step]
         for c, log_time, raw in reader.messages(connections=conns):
             msg = reader.deserialize(raw, c.msgtype)
-            stamp = msg.clock if c.topic == "/clock" else msg.header.stamp
-            stamps.setdefault(c.topic, []).append(stamp.sec * 1_000_000_000 + stamp.nanosec)
+            stamps.setdefault(c.topic, []).append(stamp(msg))
             if c.msgtype == "sensor_msgs/msg/JointState":
                 values.setdefault(c.topic, []).append((list(msg.position), list(msg.velocity), list(msg.effort)))
     assert sorted(stamps) == sorted(per_step)
