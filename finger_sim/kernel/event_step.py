@@ -58,7 +58,10 @@ EVENT = 2
 T, H, T_OLD, H_OLD = I_T, I_H, I_T_OLD, I_H_OLD
 ERR, ERR_OLD, HAS_LAST, LAST_T, LAST_Q, LAST_V, LAST_EST = 4, 5, 6, 7, 8, 11, 14
 HAS_ORIGIN, ORIGIN_T, ORIGIN_Q, ORIGIN_V, KNOWN, SIDE, RTOL, ATOL, X = 15, 16, 17, 20, 23, 24, 25, 26, 27
-N_SCALARS = 33
+#: The output of a step a crossing ended (ENDED; HAS_END 1/0, its q and error estimate), which is not the last
+#: output: a restart from it at the next step reads its estimate (`DormandPrince853.error_estimate`).
+HAS_END, END_Q, END_EST = 33, 34, 37
+N_SCALARS = 38
 TAUS = N_SCALARS
 SAVED = TAUS + N_NODES
 #: The profile's slot (code and up to three parameters), then the held value's code.
@@ -177,6 +180,8 @@ def _step(m, plan, st, arr, work, t, t1, command, prof, same, locate, q, v, log)
     y, f, y_old, dense, kk, y_new, out = arr[Y], arr[F], arr[Y_OLD], arr[DENSE:KK], arr[KK:Y_NEW], arr[Y_NEW], arr[OUT]
     taus = st[TAUS:SAVED]
     log[COUNT], log[BRANCH] = 0.0, 0.0
+    ended = st[HAS_END] == 1.0 and st[END_Q] == q[0] and st[END_Q + 1] == q[1] and st[END_Q + 2] == q[2]
+    st[HAS_END] = 0.0
     if same and st[HAS_ORIGIN] == 1.0 and st[ORIGIN_T] == t and _is(st, ORIGIN_Q, q, v) and target >= t:
         pass  # a step from the solution's start: answered from it
     elif same and st[HAS_LAST] == 1.0 and _is(st, LAST_Q, q, v) and abs(st[LAST_T] - t) <= LAST_OUTPUT_SLACK * h \
@@ -185,7 +190,9 @@ def _step(m, plan, st, arr, work, t, t1, command, prof, same, locate, q, v, log)
         _put(st, ORIGIN_Q, q, v)
         log[BRANCH] = CONTINUED
     else:  # `DormandPrince853._restart`, from the last output's q (whose error estimate is kept)
-        if st[HAS_LAST] == 1.0 and st[LAST_Q] == q[0] and st[LAST_Q + 1] == q[1] and st[LAST_Q + 2] == q[2]:
+        if ended:  # the output of a step a crossing ended (its estimate the newest at q)
+            st[ERR] = st[ERR_OLD] = st[END_EST]
+        elif st[HAS_LAST] == 1.0 and st[LAST_Q] == q[0] and st[LAST_Q + 1] == q[1] and st[LAST_Q + 2] == q[2]:
             st[ERR] = st[ERR_OLD] = st[LAST_EST]
         elif st[HAS_LAST] == 0.0 and st[HAS_ORIGIN] == 0.0 and st[H] <= 0.0:
             st[ERR] = st[ERR_OLD] = 0.0  # a new solution's first step (`simulation.event_step`: no estimates yet)
@@ -275,6 +282,8 @@ def _settle(m, plan, st, arr, work, side, t, t1, command, prof, q, v, q1, v1, lo
                 st[LAST_T], st[LAST_EST] = target, est1
                 _put(st, LAST_Q, q1, v1)
             st[HAS_LAST], st[KNOWN] = 1.0, 0.0
+            st[HAS_END], st[END_EST] = 1.0, found[event_crossing.OUT_EST]
+            st[END_Q], st[END_Q + 1], st[END_Q + 2] = q[0], q[1], q[2]
             return ENDED, q, v, target, found[event_crossing.OUT_EST]
         st[HAS_ORIGIN], st[ORIGIN_T] = 1.0, s
         _put(st, ORIGIN_Q, q, v)

@@ -264,7 +264,7 @@ class EventStep:
         if origin is not None:
             st[k.ORIGIN_T] = origin[0]
             st[k.ORIGIN_Q:k.ORIGIN_Q + 3], st[k.ORIGIN_V:k.ORIGIN_V + 3] = origin[1], origin[2]
-        st[k.KNOWN] = 0.0  # the screen's kept gaps are of another step
+        st[k.KNOWN] = st[k.HAS_END] = 0.0  # the screen's kept gaps and an ended step's output are of another step
         self._holds, self._moved, self._q = True, False, None
 
     def _write_back(self, integ: DormandPrince853) -> None:

@@ -47,9 +47,10 @@ def record(sim: Simulator, command: float | None):
     return state, sim.torque, sim.error_estimate, sim.impacts
 
 
-def run_side_by_side(scene, command: Callable[[int], float | None] = lambda k: None) -> tuple[int, list, list]:
+def run_side_by_side(scene, command: Callable[[int], float | None] = lambda k: None) -> tuple[int, int, list, list]:
     """Steps the kernel's Simulator, the Python step's and the hand-over's together, comparing after every
-    step; (steps settled in the kernel, steps where it located in Python, steps where the reference did)."""
+    step; (steps settled in the kernel, steps the kernel took, steps where it located in Python, steps where
+    the reference did)."""
     kernel, python, handed = Simulator(scene), Simulator(scene), Simulator(scene)
     assert kernel._event_step is not None and kernel._event_step.locates
     python._event_step = None
@@ -61,21 +62,23 @@ def run_side_by_side(scene, command: Callable[[int], float | None] = lambda k: N
         assert a == record(handed, command(k)), k
         if isinstance(a, str):
             break
-    return kernel._event_step.settled, in_python, reference
+    return kernel._event_step.settled, kernel._event_step.taken, in_python, reference
 
 
 @pytest.mark.parametrize("name", EVENT_SCENES)
 def test_settled_steps_equal_the_python_step_bit_for_bit(name: str) -> None:
-    settled, in_python, reference = run_side_by_side(event_scene(name))
+    settled, taken, in_python, reference = run_side_by_side(event_scene(name))
     if name in CONTACT_SCENES:
         assert settled >= 1 and not in_python  # every onset and release taken whole by the kernel
         assert settled == len(set(reference))  # one settled step per step the reference located in
+        # every step in the kernel: the one after a crossing that ended its step too (it restarts from that output)
+        assert taken == event_scene(name).step_count
 
 
 @pytest.mark.parametrize("profile", ["ramp", "sine"])
 @pytest.mark.parametrize("name", ["grasp_impact", "grasp_rigid"])
 def test_settled_steps_under_smooth_inputs(name: str, profile: str) -> None:
-    settled, in_python, reference = run_side_by_side(with_profile(name, EVENT_PROFILES[profile]))
+    settled, _, in_python, reference = run_side_by_side(with_profile(name, EVENT_PROFILES[profile]))
     assert reference and settled >= 1
 
 
@@ -83,7 +86,7 @@ def test_held_commands_onto_the_cup_and_away() -> None:
     """Commands held as the node sends them: onsets and releases under held values, restarts between them."""
     scene = event_scene("grasp_impact").with_overrides(duration=0.3)
     values = np.repeat([0.0, 0.02, -0.01, 0.03], 75)
-    settled, in_python, reference = run_side_by_side(scene, lambda k: float(values[k]))
+    settled, _, in_python, reference = run_side_by_side(scene, lambda k: float(values[k]))
     assert reference and settled >= 1 and not in_python
 
 
