@@ -34,7 +34,8 @@ from finger_sim.simulation.crossings import MAX_LOCATE_ITERATIONS
 NONE, FOUND, DECLINE = 0, 1, 2
 #: out's slots: the crossing (s, q, q', the error estimate at q in rad), then the last trial (HAS_LAST 1/0,
 #: its time, q, q', its estimate).
-OUT_S, OUT_Q, OUT_V, OUT_EST, OUT_HAS_LAST, OUT_LAST_T, OUT_LAST_Q, OUT_LAST_V, OUT_LAST_EST = 0, 1, 4, 7, 8, 9, 10, 13, 16
+OUT_S, OUT_Q, OUT_V, OUT_EST = 0, 1, 4, 7
+OUT_HAS_LAST, OUT_LAST_T, OUT_LAST_Q, OUT_LAST_V, OUT_LAST_EST = 8, 9, 10, 13, 16
 OUT_SIZE = 17
 
 
@@ -83,7 +84,8 @@ def first_crossing(m, plan, work, a, t, q, v, t1, q1, v1, est1, segs, y_olds, de
         if count:
             row = trials[count - 1]
             out[OUT_HAS_LAST], out[OUT_LAST_T] = 1.0, row[0]
-            out[OUT_LAST_Q:OUT_LAST_Q + 3], out[OUT_LAST_V:OUT_LAST_V + 3], out[OUT_LAST_EST] = row[1:4], row[4:7], row[7]
+            out[OUT_LAST_Q:OUT_LAST_Q + 3], out[OUT_LAST_V:OUT_LAST_V + 3] = row[1:4], row[4:7]
+            out[OUT_LAST_EST] = row[7]
         if first >= 0 and not s < out[OUT_S]:
             continue
         # the estimate `error_estimate(q)` reads at the crossing: the newest trial at q, else the step's end

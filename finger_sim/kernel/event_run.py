@@ -17,8 +17,8 @@ from finger_sim.kernel import use_writable_cache
 use_writable_cache()  # before numba reads NUMBA_CACHE_DIR
 from numba import njit  # noqa: E402  (after the cache folder is set)
 
-from finger_sim.kernel.event_step import (AT_LAST, ENDED, EVENT, SAME, SETTLED, common_step, pushes_at, restore,  # noqa: E402
-                                          stays_at_rest)
+from finger_sim.kernel.event_step import (AT_LAST, ENDED, EVENT, SAME, SETTLED, common_step, pushes_at,  # noqa: E402
+                                          restore, stays_at_rest)
 from finger_sim.kernel.numerics import JIT, OK  # noqa: E402
 
 #: Columns of `run`'s output rows: q (3), q' (3), the θ error estimate (rad).

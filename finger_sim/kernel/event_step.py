@@ -38,9 +38,9 @@ from finger_sim.kernel.closed_loop import I_H, I_H_OLD, I_T, I_T_OLD, N_NODES, _
 from finger_sim.kernel.gap_screen import screen  # noqa: E402
 from finger_sim.kernel.integrators import _entry_point  # noqa: E402
 from finger_sim.kernel import internal_steps  # noqa: E402  (its layout, read by `simulation.event_handover`)
-from finger_sim.kernel.internal_steps import (BRANCH, CONTINUED, COUNT, HISTORY_ROWS, HISTORY_SIZE, RESTARTED,  # noqa: E402
-                                              ROW_DENSE, ROW_ERR, ROW_ERR_OLD, ROW_H, ROW_SIZE, ROW_T, ROW_Y_OLD,
-                                              ROWS_AT, record)
+from finger_sim.kernel.internal_steps import (BRANCH, CONTINUED, COUNT, HISTORY_ROWS, HISTORY_SIZE,  # noqa: E402
+                                              RESTARTED, ROW_DENSE, ROW_ERR, ROW_ERR_OLD, ROW_H, ROW_SIZE, ROW_T,
+                                              ROW_Y_OLD, ROWS_AT, record)
 from finger_sim.kernel import event_crossing  # noqa: E402
 from finger_sim.kernel.locate_event import _estimate  # noqa: E402
 from finger_sim.kernel.numerics import JIT, OK, _rhs, dop853_output, dop853_theta_error, torque_at  # noqa: E402
@@ -228,7 +228,8 @@ def _step(m, plan, st, arr, work, t, t1, command, prof, same, locate, q, v, log)
             return PYTHON, q, v, 0.0
         if not locate:
             return EVENT, q, v, 0.0
-        status, q1, v1, target, estimate = _settle(m, plan, st, arr, work, side, t, t1, command, prof, q, v, q1, v1, log)
+        status, q1, v1, target, estimate = _settle(m, plan, st, arr, work, side, t, t1, command, prof, q, v, q1, v1,
+                                                   log)
         if status == ENDED:
             return status, q1, v1, estimate
         if status != SETTLED and status != OK:
