@@ -7,9 +7,10 @@ takes):
 - *kernel*: the common step, one compiled call (`simulation.event_step`); its compiled call is timed
   on its own in every other run (the timer's Python kept out of the step times), so (a) the Python
   around it and (b) the kernel's time are apart;
-- *event*: a step Python takes (a possible crossing handed over by the kernel, or one the kernel
-  declines): the location, an impact's velocity jump and restart, the hand-over; its kernel call
-  (the attempt that found the possible crossing) timed apart;
+- *event*: a step with a located crossing: taken whole by the kernel (a contact onset or release located
+  and stepped past in the same call, `EventStep.settled`), or by Python (a possible crossing handed over
+  by the kernel, or one the kernel declines: the location, an impact's velocity jump and restart, the
+  hand-over); its kernel call timed apart;
 - *first*: the run's first step (DOP853's initial step size).
 
 (c) The method: accepted DOP853 internal steps per 1 ms output in the kernel's steps (the kernel's
@@ -72,6 +73,7 @@ def profile_scene(name: str, runs: int) -> dict[str, float]:
     call: list[list[float]] = [[] for _ in range(n)]
     kinds: list[str] = []
     internal: list[int] = []
+    in_kernel: set[int] = set()  # the event steps the kernel took whole (`EventStep.settled`)
     for run in range(2 * runs + 2):  # the first two warm up; the odd runs time the kernel's call, the even the steps
         wrapped = run % 2 == 1 and timed is not None
         if events is not None:
@@ -81,12 +83,15 @@ def profile_scene(name: str, runs: int) -> dict[str, float]:
         internal.clear()
         for k in range(n):
             taken = events.taken if events is not None else 0
+            settled = events.settled if events is not None else 0
             in_call = timed.seconds if wrapped else 0.0
             start = time.perf_counter()
             sim.step()
             seconds = time.perf_counter() - start
-            kernel = events is not None and events.taken > taken
+            kernel = events is not None and events.taken > taken and events.settled == settled
             kinds.append("first" if k == 0 else "kernel" if kernel else "event")
+            if run == 0 and k and events is not None and events.settled > settled:
+                in_kernel.add(k)
             if run < 2:
                 continue
             if wrapped:
@@ -114,7 +119,7 @@ def profile_scene(name: str, runs: int) -> dict[str, float]:
     for count in (0, 1):  # the kernel call with no internal step (the dense output, projection, screen), and one
         calls = [statistics.median(call[k]) for k, kind in enumerate(kinds) if kind == "kernel" and internal[k] == count]
         sums[f"call {count}"] = statistics.median(calls) if calls else float("nan")
-    sums["impacts"], sums["steps"] = sim.impacts, n
+    sums["impacts"], sums["steps"], sums["n event in kernel"] = sim.impacts, n, len(in_kernel)
     return sums
 
 
@@ -144,7 +149,7 @@ def main(argv: Sequence[str] | None = None) -> int:
           f"DOP853 {DOP853_RHS} per accepted internal step (median of {args.runs} runs)")
     print("| scene | steps | µs/step (× free) | first step µs | kernel steps: n, µs/step, of it in the kernel "
           "| internal steps / output (rhs / rk6's) | kernel call with 0 / 1 internal steps µs | before contact µs/step (× free) | event steps: n, µs in all, "
-          "of it in the kernel | impacts | share of the run: kernel steps / their Python / events / first |")
+          "of it in the kernel, taken whole by the kernel | impacts | share of the run: kernel steps / their Python / events / first |")
     print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for name in args.scenes:
         p = profile_scene(name, args.runs)
@@ -157,7 +162,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"| {name} | {n:.0f} | {per:.2f} ({per / free:.2f}×) | {p['first']:.0f} "
               f"| {p['n kernel']:.0f}, {p['kernel'] / nk:.2f}, {p['kernel call'] / nk:.2f} "
               f"| {internal:.2f} ({internal * DOP853_RHS / RK6_RHS:.1f}×) | {p['call 0']:.2f} / {p['call 1']:.2f} | {before:.2f} ({before / free:.2f}×) "
-              f"| {p['n event']:.0f}, {p['event']:.0f}, {p['event call']:.0f} | {p['impacts']:.0f} "
+              f"| {p['n event']:.0f}, {p['event']:.0f}, {p['event call']:.0f}, {p['n event in kernel']:.0f} | {p['impacts']:.0f} "
               f"| {p['kernel call'] / whole:.0%} / {(p['kernel'] - p['kernel call']) / whole:.0%} "
               f"/ {p['event'] / whole:.0%} / {p['first'] / whole:.0%} |")
     return 0

@@ -2,7 +2,8 @@
 
 `run` loops the one compiled common step (`event_step.common_step`) over consecutive output steps
 k0, k0 + 1, … on the time grid t = k·dt, writing each step's (q, q', error estimate) into a
-preallocated array, and stops at the first step that answers PYTHON (a possible crossing, an
+preallocated array (a step whose contact onsets or releases it located itself, SETTLED, included),
+and stops at the first step that answers PYTHON or EVENT (a crossing the kernel does not locate, an
 impact, an error-control case the kernel does not take): that step is left to Python, with the
 workspace as it was before it. `rest_run` does the same with `event_step.stays_at_rest` for a
 finger resting on a stop. No second stepping implementation: the same calls, the same numbers
@@ -16,7 +17,8 @@ from finger_sim.kernel import use_writable_cache
 use_writable_cache()  # before numba reads NUMBA_CACHE_DIR
 from numba import njit  # noqa: E402  (after the cache folder is set)
 
-from finger_sim.kernel.event_step import AT_LAST, EVENT, SAME, common_step, pushes_at, restore, stays_at_rest  # noqa: E402
+from finger_sim.kernel.event_step import (AT_LAST, ENDED, EVENT, SAME, SETTLED, common_step, pushes_at,  # noqa: E402
+                                          restore, stays_at_rest)
 from finger_sim.kernel.numerics import JIT, OK  # noqa: E402
 
 #: Columns of `run`'s output rows: q (3), q' (3), the θ error estimate (rad).
@@ -33,9 +35,9 @@ def run(ws, k0, n, dt, command, flags, out):
     for i in range(n):
         k = k0 + i
         status, q, v, estimate, tau = common_step(ws, k * dt, (k + 1) * dt, command, flags)
-        if status != OK:
-            if status == EVENT:  # a stretch hands Python the step as it was (its `sim.step()` takes it again)
-                restore(ws)
+        if status != OK and status != SETTLED:  # (SETTLED: crossings located and stepped past, as OK)
+            if status == EVENT or status == ENDED:  # a stretch hands Python the step as it was (`sim.step()`
+                restore(ws)  # takes it again; after ENDED the next step does not start at the last output)
             return i, end
         out[i, 0], out[i, 1], out[i, 2], out[i, 3], out[i, 4], out[i, 5] = q[0], q[1], q[2], v[0], v[1], v[2]
         out[i, 6] = estimate

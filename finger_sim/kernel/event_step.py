@@ -5,10 +5,12 @@ checks every step's end for a gap crossing (`simulation.crossings`); nearly ever
 `common_step` takes that step whole, on the same numbers: `DormandPrince853.step` under a torque
 held over the step (its continuation and restart rules; `closed_loop._advance`'s internal steps,
 i.e. the attempt, error control and step-size update; the θ error estimate; the projected dense
-output) and the step-end gap check (`gap_screen.screen`). Where the step may hold a crossing, or
-needs what only Python does (an earlier internal step's output, a failure, an error estimate it
-does not hold), it puts the solution back as it was and answers
-PYTHON: the Simulator takes that step in Python, as always (`simulation.event_step`).
+output) and the step-end gap check (`gap_screen.screen`). Where the step may hold a crossing, it
+locates the contact onsets and releases in it and steps past them as `Simulator._advance` does
+(`_settle`, `event_crossing.first_crossing`: SETTLED), or keeps the step for Python to locate (EVENT).
+Where it needs what only Python does (an earlier internal step's output, a failure, an error estimate
+it does not hold), it puts the solution back as it was and answers PYTHON: the Simulator takes that
+step in Python, as always (`simulation.event_step`).
 
 Everything the call reads and keeps is one float64 array (one argument: numba's dispatch costs
 about 0.1 µs per argument), which `simulation.event_step` moves to and from the integrator's
@@ -28,6 +30,7 @@ from __future__ import annotations
 from finger_sim.kernel import use_writable_cache
 
 use_writable_cache()  # before numba reads NUMBA_CACHE_DIR
+import numpy as np  # noqa: E402
 from numba import njit  # noqa: E402  (after the cache folder is set)
 
 from finger_sim.integrators import dop853  # noqa: E402
@@ -35,7 +38,11 @@ from finger_sim.kernel.closed_loop import I_H, I_H_OLD, I_T, I_T_OLD, N_NODES, _
 from finger_sim.kernel.gap_screen import screen  # noqa: E402
 from finger_sim.kernel.integrators import _entry_point  # noqa: E402
 from finger_sim.kernel import internal_steps  # noqa: E402  (its layout, read by `simulation.event_handover`)
-from finger_sim.kernel.internal_steps import BRANCH, CONTINUED, COUNT, HISTORY_ROWS, HISTORY_SIZE, RESTARTED, record  # noqa: E402
+from finger_sim.kernel.internal_steps import (BRANCH, CONTINUED, COUNT, HISTORY_ROWS, HISTORY_SIZE,  # noqa: E402
+                                              RESTARTED, ROW_DENSE, ROW_ERR, ROW_ERR_OLD, ROW_H, ROW_SIZE, ROW_T,
+                                              ROW_Y_OLD, ROWS_AT, record)
+from finger_sim.kernel import event_crossing  # noqa: E402
+from finger_sim.kernel.locate_event import _estimate  # noqa: E402
 from finger_sim.kernel.numerics import JIT, OK, _rhs, dop853_output, dop853_theta_error, torque_at  # noqa: E402
 
 #: `common_step`'s answer when Python must take the step.
@@ -51,7 +58,10 @@ EVENT = 2
 T, H, T_OLD, H_OLD = I_T, I_H, I_T_OLD, I_H_OLD
 ERR, ERR_OLD, HAS_LAST, LAST_T, LAST_Q, LAST_V, LAST_EST = 4, 5, 6, 7, 8, 11, 14
 HAS_ORIGIN, ORIGIN_T, ORIGIN_Q, ORIGIN_V, KNOWN, SIDE, RTOL, ATOL, X = 15, 16, 17, 20, 23, 24, 25, 26, 27
-N_SCALARS = 33
+#: The output of a step a crossing ended (ENDED; HAS_END 1/0, its q and error estimate), which is not the last
+#: output: a restart from it at the next step reads its estimate (`DormandPrince853.error_estimate`).
+HAS_END, END_Q, END_EST = 33, 34, 37
+N_SCALARS = 38
 TAUS = N_SCALARS
 SAVED = TAUS + N_NODES
 #: The profile's slot (code and up to three parameters), then the held value's code.
@@ -64,9 +74,18 @@ KEPT = KK  # y, f, y_old and dense: what a step changes of the solution
 ROWS = OUT + 1 + KEPT
 #: The workspace's header: the lengths of the model, the gap plan and the number of gaps.
 HEADER = 3
+#: Its answer when the step held gap crossings (contact onsets, releases) that it located and stepped past
+#: itself (`_settle`): the state at t1, as OK.
+SETTLED = 3
+#: Its answer when a located crossing ends the step (`Simulator._advance`): its state is the output, and the
+#: solution's last output is the location's last trial (the next step starts off it: not AT_LAST).
+ENDED = 4
 #: `common_step`'s flags: the solution is under this command's torque function; the step starts at
-#: the last output (else at st[X:X + 6]); the torque is the profile in st (else the held command).
-SAME, AT_LAST, PROFILE = 1, 2, 4
+#: the last output (else at st[X:X + 6]); the torque is the profile in st (else the held command); a
+#: crossing may be located here (Python's step would integrate under the same function: `_settle`).
+SAME, AT_LAST, PROFILE, LOCATE = 1, 2, 4, 8
+#: Events allowed in one step (`driver.MAX_EVENTS_PER_STEP`): more, and Python takes the step (and raises).
+MAX_EVENTS_PER_STEP = 64
 #: A rest on a stop is kept here only when the push into it (rad/s²) exceeds this share of the free
 #: acceleration (at least 1 rad/s²) at both ends of the step: the compiled acceleration agrees with the
 #: Python one the Simulator decides on (`JointStops.release_time`) to round-off, far inside this margin.
@@ -125,7 +144,8 @@ def common_step(ws, t, t1, command, flags):
     o = LAST_Q if flags & AT_LAST else X
     q, v = (st[o], st[o + 1], st[o + 2]), (st[o + 3], st[o + 4], st[o + 5])
     prof = st[PROFILE_AT:PROFILE_AT + PROFILE_SIZE] if flags & PROFILE else st[HELD_AT:HELD_AT + 1]
-    status, q1, v1, estimate = _step(m, plan, st, arr, work, t, t1, command, prof, (flags & SAME) != 0, q, v, log_of(ws))
+    status, q1, v1, estimate = _step(m, plan, st, arr, work, t, t1, command, prof, (flags & SAME) != 0,
+                                     (flags & LOCATE) != 0, q, v, log_of(ws))
     if status == PYTHON:
         restore(ws)
     return status, q1, v1, estimate, torque_at(prof, command, t1)
@@ -152,13 +172,16 @@ def _put(st, o, q, v):
 
 
 @njit(**JIT)
-def _step(m, plan, st, arr, work, t, t1, command, prof, same, q, v, log):
-    """`common_step` without the restore; its internal steps recorded in log."""
+def _step(m, plan, st, arr, work, t, t1, command, prof, same, locate, q, v, log):
+    """`common_step` without the restore; its internal steps recorded in log; with `locate`, the crossings
+    the step may hold are located here (`_settle`)."""
     h = t1 - t
     target = t + h
     y, f, y_old, dense, kk, y_new, out = arr[Y], arr[F], arr[Y_OLD], arr[DENSE:KK], arr[KK:Y_NEW], arr[Y_NEW], arr[OUT]
     taus = st[TAUS:SAVED]
     log[COUNT], log[BRANCH] = 0.0, 0.0
+    ended = st[HAS_END] == 1.0 and st[END_Q] == q[0] and st[END_Q + 1] == q[1] and st[END_Q + 2] == q[2]
+    st[HAS_END] = 0.0
     if same and st[HAS_ORIGIN] == 1.0 and st[ORIGIN_T] == t and _is(st, ORIGIN_Q, q, v) and target >= t:
         pass  # a step from the solution's start: answered from it
     elif same and st[HAS_LAST] == 1.0 and _is(st, LAST_Q, q, v) and abs(st[LAST_T] - t) <= LAST_OUTPUT_SLACK * h \
@@ -167,7 +190,9 @@ def _step(m, plan, st, arr, work, t, t1, command, prof, same, q, v, log):
         _put(st, ORIGIN_Q, q, v)
         log[BRANCH] = CONTINUED
     else:  # `DormandPrince853._restart`, from the last output's q (whose error estimate is kept)
-        if st[HAS_LAST] == 1.0 and st[LAST_Q] == q[0] and st[LAST_Q + 1] == q[1] and st[LAST_Q + 2] == q[2]:
+        if ended:  # the output of a step a crossing ended (its estimate the newest at q)
+            st[ERR] = st[ERR_OLD] = st[END_EST]
+        elif st[HAS_LAST] == 1.0 and st[LAST_Q] == q[0] and st[LAST_Q + 1] == q[1] and st[LAST_Q + 2] == q[2]:
             st[ERR] = st[ERR_OLD] = st[LAST_EST]
         elif st[HAS_LAST] == 0.0 and st[HAS_ORIGIN] == 0.0 and st[H] <= 0.0:
             st[ERR] = st[ERR_OLD] = 0.0  # a new solution's first step (`simulation.event_step`: no estimates yet)
@@ -196,16 +221,131 @@ def _step(m, plan, st, arr, work, t, t1, command, prof, same, q, v, log):
     if status != OK:
         return PYTHON, q, v, 0.0
     side = int(st[SIDE])
+    status = OK
     if screen(plan, work, side, st[KNOWN] == 1.0, h, q, v, q1, v1):
         # a crossing may lie inside: kept for Python when the log holds the step's whole history
-        return (EVENT if log[BRANCH] != 0.0 and log[COUNT] <= HISTORY_ROWS else PYTHON), q, v, 0.0
-    st[KNOWN], st[SIDE] = 1.0, 2 - side
+        if log[BRANCH] == 0.0 or log[COUNT] > HISTORY_ROWS:
+            return PYTHON, q, v, 0.0
+        if not locate:
+            return EVENT, q, v, 0.0
+        status, q1, v1, target, estimate = _settle(m, plan, st, arr, work, side, t, t1, command, prof, q, v, q1, v1,
+                                                   log)
+        if status == ENDED:
+            return status, q1, v1, estimate
+        if status != SETTLED and status != OK:
+            return status, q, v, 0.0
+    else:
+        st[KNOWN], st[SIDE] = 1.0, 2 - side
     # `DormandPrince853._remember`: the estimate interpolated over the internal step that covers the output
-    x = (target - t_old) / h_old if h_old > 0.0 else 1.0
-    estimate = st[ERR_OLD] + min(1.0, max(0.0, x)) * (st[ERR] - st[ERR_OLD])
+    estimate = _estimate(target, st[T_OLD], st[H_OLD], st[ERR_OLD], st[ERR])
     st[HAS_LAST], st[LAST_T], st[LAST_EST] = 1.0, target, estimate
     _put(st, LAST_Q, q1, v1)
-    return OK, q1, v1, estimate
+    return status, q1, v1, estimate
+
+
+@njit(**JIT)
+def _settle(m, plan, st, arr, work, side, t, t1, command, prof, q, v, q1, v1, log):
+    """`Simulator._advance`'s event loop for a step whose screen (start rows `side`) shows a possible
+    crossing, the solution advanced to t1 with its internal steps in log: each crossing located
+    (`event_crossing.first_crossing`), the internal solution continued or restarted from it as
+    `DormandPrince853.step` does (its internal steps logged for the next location), the rest of the step
+    checked again. Returns (SETTLED, q1, q1', …) with the solution and its last output's origin set (OK: no
+    crossing found; ENDED: the crossing ends the step, its state and estimate returned, the last output set);
+    EVENT (nothing changed: Python locates from the log) or PYTHON (the solution
+    moved: Python takes the step again) where Python must act (`first_crossing`'s DECLINE, a step that fails).
+    The last two: the output's time (`DormandPrince853.step`'s target s + (t1 − s) from the last crossing s),
+    and with ENDED the error estimate at the output (rad)."""
+    y, f, y_old, dense, kk, y_new, out = arr[Y], arr[F], arr[Y_OLD], arr[DENSE:KK], arr[KK:Y_NEW], arr[Y_NEW], arr[OUT]
+    taus = st[TAUS:SAVED]
+    found = np.empty(event_crossing.OUT_SIZE)
+    st[SAVED + KNOWN] = 0.0  # the screen's rows change here: a restored step computes its start's gaps again
+    s, target = t, t + (t1 - t)
+    for event in range(MAX_EVENTS_PER_STEP + 1):
+        est1 = _estimate(target, st[T_OLD], st[H_OLD], st[ERR_OLD], st[ERR])
+        segs, y_olds, denses = _history(st, arr, log)
+        code, _ = event_crossing.first_crossing(m, plan, work, side, s, q, v, t1, q1, v1, est1, segs, y_olds,
+                                                denses, st[T], found)
+        if code == event_crossing.NONE:
+            st[KNOWN] = 0.0
+            return (OK if event == 0 else SETTLED), q1, v1, target, 0.0
+        if code == event_crossing.DECLINE or event == MAX_EVENTS_PER_STEP:  # Python acts
+            return (EVENT if event == 0 else PYTHON), q1, v1, target, 0.0
+        s = found[event_crossing.OUT_S]
+        q = (found[event_crossing.OUT_Q], found[event_crossing.OUT_Q + 1], found[event_crossing.OUT_Q + 2])
+        v = (found[event_crossing.OUT_V], found[event_crossing.OUT_V + 1], found[event_crossing.OUT_V + 2])
+        lq = found[event_crossing.OUT_LAST_Q:event_crossing.OUT_LAST_V]
+        lv = found[event_crossing.OUT_LAST_V:event_crossing.OUT_LAST_V + 3]
+        if s >= t1:  # the crossing ends the step: its state the output, the last trial (else the end) the last output
+            if found[event_crossing.OUT_HAS_LAST] == 1.0:
+                st[LAST_T], st[LAST_EST] = found[event_crossing.OUT_LAST_T], found[event_crossing.OUT_LAST_EST]
+                _put(st, LAST_Q, (lq[0], lq[1], lq[2]), (lv[0], lv[1], lv[2]))
+            else:
+                st[LAST_T], st[LAST_EST] = target, est1
+                _put(st, LAST_Q, q1, v1)
+            st[HAS_LAST], st[KNOWN] = 1.0, 0.0
+            st[HAS_END], st[END_EST] = 1.0, found[event_crossing.OUT_EST]
+            st[END_Q], st[END_Q + 1], st[END_Q + 2] = q[0], q[1], q[2]
+            return ENDED, q, v, target, found[event_crossing.OUT_EST]
+        st[HAS_ORIGIN], st[ORIGIN_T] = 1.0, s
+        _put(st, ORIGIN_Q, q, v)
+        target = s + (t1 - s)  # `DormandPrince853.step`'s from the crossing
+        if not (found[event_crossing.OUT_HAS_LAST] == 1.0 and lq[0] == q[0] and lq[1] == q[1] and lq[2] == q[2]
+                and lv[0] == v[0] and lv[1] == v[1] and lv[2] == v[2]
+                and abs(found[event_crossing.OUT_LAST_T] - s) <= LAST_OUTPUT_SLACK * (t1 - s) and target >= st[T_OLD]):
+            # `DormandPrince853._restart` from the crossing (the next step size kept), its steps logged anew
+            st[ERR] = st[ERR_OLD] = found[event_crossing.OUT_EST]
+            st[T] = st[T_OLD] = s
+            y[0], y[1], y[2], y[3], y[4], y[5] = q[0], q[1], q[2], v[0], v[1], v[2]
+            _rhs(m, s, y, torque_at(prof, command, s), f)
+            if st[H] <= 0.0:
+                st[H] = initial_step(y, f, st[RTOL], st[ATOL], t1 - s)
+            log[COUNT], log[BRANCH] = 0.0, RESTARTED
+            while st[T] < target:
+                if not _advance(m, st[RTOL], st[ATOL], st, y, f, y_old, dense, kk, y_new, taus, prof):
+                    return PYTHON, q1, v1, target, 0.0
+                st[ERR_OLD] = st[ERR]
+                st[ERR] += dop853_theta_error(E53, kk, st[H_OLD], E3_WEIGHT)
+                record(log, st, y_old, dense)
+            if log[COUNT] > HISTORY_ROWS:
+                return PYTHON, q1, v1, target, 0.0
+        if target < st[T_OLD]:  # an earlier internal step's output: the history is Python's
+            return PYTHON, q1, v1, target, 0.0
+        status, q1, v1 = dop853_output(m, st[T_OLD], st[H_OLD], y_old, dense, target, out)
+        if status != OK:
+            return PYTHON, q1, v1, target, 0.0
+        if not screen(plan, work, side, False, t1 - s, q, v, q1, v1):
+            st[KNOWN], st[SIDE] = 1.0, 2 - side
+            return SETTLED, q1, v1, target, 0.0
+    return PYTHON, q1, v1, target, 0.0  # (not reached: the last round returns)
+
+
+@njit(**JIT)
+def _history(st, arr, log):
+    """The internal steps a trial from the solution's origin is answered from, in `locate_event`'s layout
+    (segs, y_olds, denses): the one that covered the start of a continued step (its copy from before the
+    step), the logged ones, then the current one (`event_handover.hand_over`'s history, and the integrator's
+    current step)."""
+    n = int(log[COUNT])
+    pre = 1 if log[BRANCH] == CONTINUED else 0
+    rows = pre + n + 1
+    segs, y_olds, denses = np.empty((rows, 4)), np.empty((rows, 6)), np.empty((rows, 7, 6))
+    if pre:
+        o = SAVED
+        segs[0, 0], segs[0, 1], segs[0, 2], segs[0, 3] = st[o + T_OLD], st[o + H_OLD], st[o + ERR_OLD], st[o + ERR]
+        y_olds[0] = arr[ROWS - KEPT + Y_OLD]
+        denses[0] = arr[ROWS - KEPT + DENSE:ROWS - KEPT + KK]
+    for i in range(n):
+        row = log[ROWS_AT + i * ROW_SIZE:ROWS_AT + (i + 1) * ROW_SIZE]
+        j = pre + i
+        segs[j, 0], segs[j, 1], segs[j, 2], segs[j, 3] = row[ROW_T], row[ROW_H], row[ROW_ERR_OLD], row[ROW_ERR]
+        y_olds[j] = row[ROW_Y_OLD:ROW_DENSE]
+        for k in range(7):
+            denses[j, k] = row[ROW_DENSE + 6 * k:ROW_DENSE + 6 * k + 6]
+    c = rows - 1
+    segs[c, 0], segs[c, 1], segs[c, 2], segs[c, 3] = st[T_OLD], st[H_OLD], st[ERR_OLD], st[ERR]
+    y_olds[c] = arr[Y_OLD]
+    denses[c] = arr[DENSE:KK]
+    return segs, y_olds, denses
 
 
 @njit(**JIT)

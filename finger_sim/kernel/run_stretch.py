@@ -64,6 +64,8 @@ def _stretch(sim: Simulator, events: EventStep, compiled: Any, rows: np.ndarray,
         fn, value, flags = events._profile_step(profile, k * dt, (k + 1) * dt)  # noqa: SLF001
     if fn is None:
         return 0
+    if events.locates and (fn is events._constant or flags != 0):  # noqa: SLF001  (as `EventStep.step`)
+        flags |= events._locate  # noqa: SLF001
     if sim._resting is not None:  # noqa: SLF001  (the stop's rest mode: `EventStep._rest`, looped)
         events.release()
         gap, q = sim._resting, sim.q  # noqa: SLF001

@@ -9,6 +9,13 @@ stop, a switch of a piecewise-constant profile inside the step, a profile withou
 so that Python's step, its event location included, runs exactly as it always
 did. The estimates of `error_estimate` are written at every step.
 
+A step whose end gaps show a possible contact onset or release is taken whole in the same call where
+Python's step would integrate it under the same function (a held command, a constant or smooth profile):
+the kernel locates each crossing on its internal steps' dense output and continues or restarts the
+solution from it (`kernel.event_step._settle`, `kernel.event_crossing`), on Python's numbers. Where
+Python must act (an impact on a stop, a crossing predicted between two ends on the same side, a phalanx
+axis in the object), the kernel hands the advanced step over (`hand_over`) and Python locates it.
+
 A smooth profile (ramp, sine) is evaluated in the kernel (its compiled form, `inputs.profile_array`);
 a piecewise-constant one (step, square) is held at its segment's value (`Profile.on_segment`). A step
 resting on a stop (the rest mode, `simulation.impact`) is checked in the kernel as
@@ -98,6 +105,12 @@ class EventStep:
         self._v: tuple | None = None
         #: steps taken here (the rest went to Python), for tests and benchmarks
         self.taken = 0
+        #: whether the kernel locates a step's contact onsets and releases itself (`kernel.event_step._settle`);
+        #: False: it hands every possible crossing to Python (`hand_over`), as the tests of that path set
+        self.locates = True
+        #: the steps of `taken` whose crossings the kernel located, for tests and benchmarks
+        self.settled = 0
+        self._locate, self._settled, self._ended = compiled.LOCATE, compiled.SETTLED, compiled.ENDED
         #: the compiled location of a crossing (`simulation.event_locate`), or None: Python's
         self.locate: CompiledLocate | None = None
 
@@ -125,7 +138,8 @@ class EventStep:
         if fn is None:  # a profile's step that Python takes
             self.release()
             return None
-        if sim._resting is not None:  # noqa: SLF001  (the stop's rest mode)
+        at = sim._rest_at  # noqa: SLF001  (the stop's rest mode: `Simulator._resting`, read inline)
+        if at is not None and sim._mode_list[at]:  # noqa: SLF001
             return self._rest(sim, value, flags, k)
         if not self._holds:
             self._take_over(integ)
@@ -136,26 +150,38 @@ class EventStep:
             flags |= self._at_last
         else:  # a state the kernel did not produce
             self._st[self._x] = (*q, *v)
+        if continues and self.locates:
+            flags |= self._locate
         status, q, v, estimate, end = self._call(self._ws, k * dt, (k + 1) * dt, value, flags)  # (floats, an int)
         if status != self._ok:
-            if status == self._event and continues:  # a crossing may lie inside: Python locates it, not integrating again
-                hand_over(self, integ, fn)
-                self._holds = self._moved = False
-                return None
-            if status == self._event:  # Python integrates under a new function: the solution as before the step
-                self._k.restore(self._ws)
-            self.release()
-            return None
+            if status != self._settled and status != self._ended:  # (else: crossings located and stepped past here)
+                return self._decline(integ, fn, status == self._event, continues)
+            self.settled += 1
         self._moved = True
         integ._torque = fn  # noqa: SLF001
-        estimates = integ._estimates  # noqa: SLF001  (`DormandPrince853._remember`)
+        # `DormandPrince853._remember` (its `_estimates` property read only when estimates are deferred)
+        estimates = integ._estimates if integ._deferred else integ._settled  # noqa: SLF001
         if len(estimates) >= MAX_OUTPUTS:
             estimates = integ._estimates = dict(list(estimates.items())[-KEEP_OUTPUTS:])  # noqa: SLF001
         estimates[q] = estimate
         sim.q, sim.v, sim.torque, sim.step_index = q, v, end, k + 1
         self._q, self._v = q, v
+        if status == self._ended:  # a crossing ended the step: its state is not the solution's last output
+            self._q = None
         self.taken += 1
         return _new_state(self._state, ((k + 1) * dt, q, v))
+
+    def _decline(self, integ: DormandPrince853, fn: Any, event: bool, continues: bool) -> None:
+        """After `common_step` left the step to Python: the integrator made ready for Python's step. On
+        EVENT (a possible crossing) under the function Python integrates under, the advanced step is handed
+        over (Python locates from it, not integrating again); else the solution as before the step."""
+        if event and continues:
+            hand_over(self, integ, fn)
+            self._holds = self._moved = False
+            return
+        if event:  # Python integrates under a new function: the solution as before the step
+            self._k.restore(self._ws)
+        self.release()
 
     def claim(self, integ: DormandPrince853) -> bool:
         """Whether the kernel may take `integ`'s next step: it `follows` the solution, or the solution is
@@ -238,7 +264,7 @@ class EventStep:
         if origin is not None:
             st[k.ORIGIN_T] = origin[0]
             st[k.ORIGIN_Q:k.ORIGIN_Q + 3], st[k.ORIGIN_V:k.ORIGIN_V + 3] = origin[1], origin[2]
-        st[k.KNOWN] = 0.0  # the screen's kept gaps are of another step
+        st[k.KNOWN] = st[k.HAS_END] = 0.0  # the screen's kept gaps and an ended step's output are of another step
         self._holds, self._moved, self._q = True, False, None
 
     def _write_back(self, integ: DormandPrince853) -> None:

@@ -50,6 +50,7 @@ def run_side_by_side(scene, command=lambda k: None, monkeypatch=None) -> int:
     original = event_step.hand_over
     monkeypatch.setattr(event_step, "hand_over", lambda *args: (handed.append(1), original(*args)))
     kernel, python = Simulator(scene), Simulator(scene)
+    kernel._event_step.locates = False  # every possible crossing handed over (not located by the kernel itself)
     python._event_step = None
     for k in range(scene.step_count):
         before = len(handed)
