@@ -13,10 +13,9 @@ event's trial step, a held command) restarts it from the given state. The step-s
 control, error norm and dense output are scipy's DOP853 (scipy/integrate/_ivp/rk.py,
 after Hairer, Nørsett & Wanner, *Solving ODEs I*, §II.10), with scipy's coefficients.
 
-A system with a force element that has no compiled form (objects with different contact laws, a
-moving object) is stepped the same way with its stages evaluated in Python (`_python_attempt`, the
-same arithmetic as `numerics.dop853_attempt` on `FingerSystem.accelerations`): slower, just as
-error-controlled.
+An attempt is `steps.dop853_attempt`, which the kernel compiles. A system with a force element that
+has no compiled form (objects with different contact laws, a moving object) runs that same function in
+Python on lists, its stages `FingerSystem.accelerations` (`_python_attempt`): slower, the same numbers.
 """
 
 from __future__ import annotations
@@ -37,6 +36,7 @@ from finger_sim.dynamics import FingerSystem
 from finger_sim.errors import SimulationDiverged
 from finger_sim.inputs import HELD_ARRAY
 from finger_sim.integrators.base import Integrator, TorqueFn
+from finger_sim.integrators.steps import E3_WEIGHT, StageModel, dop853_attempt, rhs
 from finger_sim.kinematics import Vec3
 
 #: scipy's DOP853 tableau module, which imports numpy only.
@@ -66,8 +66,6 @@ DEFAULT_ATOL = 1e-12
 MAX_ATTEMPTS = 60
 #: The longest internal step, s: a state exactly at rest (zero error) would otherwise grow it without bound.
 MAX_STEP = 0.1
-#: Weight of the 3rd-order estimate in DOP853's error combination |e5|²/√(|e5|² + w|e3|²) (scipy's).
-E3_WEIGHT = 0.01
 #: `initial_step`: the first internal step is this share of ‖y‖/‖y'‖ (both scaled), or TINY_FIRST_STEP (s)
 #: where either scaled norm is below TINY_NORM (a state at rest, or at zero): Hairer's and scipy's constants.
 FIRST_STEP_SHARE, TINY_FIRST_STEP, TINY_NORM = 0.01, 1e-6, 1e-5
@@ -89,6 +87,8 @@ _E3 = np.ascontiguousarray(coefficients.E3, dtype=np.float64)
 _E5 = np.ascontiguousarray(coefficients.E5, dtype=np.float64)
 _D = np.ascontiguousarray(coefficients.D, dtype=np.float64)
 _E53 = np.vstack([_E5, _E3])  # both error estimates in one product
+#: The coefficients as nested lists, for the attempt in Python (`_python_attempt`)
+_LISTS = tuple(x.tolist() for x in (_A, _B, _C, _E3, _E5, _D))
 
 
 class DormandPrince853(Integrator):
@@ -113,6 +113,7 @@ class DormandPrince853(Integrator):
             model = compiled.model_array(FingerSystem(system.params))
         numerics = compiled.compiled_numerics()
         self._numerics, self._model = numerics, model
+        self._stages = StageModel(system)  # the model of an attempt in Python
         #: the right-hand side and the attempt: with a drive (spec §8) the ones applying its mesh mode,
         #: and the internal solution restarts whenever the mode changes (`Drive.changes`)
         self._rhs, self._attempt = numerics._rhs, numerics.dop853_attempt
@@ -314,7 +315,9 @@ class DormandPrince853(Integrator):
         if self.compiled:
             self._rhs(self._model, t, self._y, torque(t), self._f)
         else:
-            self._f[:] = _python_rhs(self.system, t, self._y, torque(t))
+            f = [0.0] * 6
+            rhs(self._stages, t, self._y.tolist(), torque(t), f)
+            self._f[:] = f
         if self._h <= 0.0:
             self._h = initial_step(self._y, self._f, self.rtol, self.atol, dt)
 
@@ -365,8 +368,7 @@ class DormandPrince853(Integrator):
                 norm = self._attempt(self._model, _A, _B, _C, _E3, _E5, _D, t, self._y, self._f, h, taus,
                                      self.rtol, self.atol, self._kk, y_new, self._dense)
             else:
-                norm = _python_attempt(self.system, t, self._y, self._f, h, taus, self.rtol, self.atol, self._kk,
-                                       y_new, self._dense)
+                norm = self._python_attempt(t, h, taus, y_new)
             if norm < 1.0:
                 self._err_old = self._err
                 self._err += num.dop853_theta_error(_E53, self._kk, h, E3_WEIGHT)
@@ -390,6 +392,16 @@ class DormandPrince853(Integrator):
             self.rejected += 1
         raise SimulationDiverged(f"internal step fell to {h:.3g} s (rtol {self.rtol:g})", method=self.name, t=t)
 
+    def _python_attempt(self, t: float, h: float, taus: np.ndarray, y_new: np.ndarray) -> float:
+        """`steps.dop853_attempt` from (t, y) with step h (s) in Python, on lists, its stages the system's
+        own (`steps.rhs`); the stages, y_new and the dense coefficients then into the arrays the
+        compiled dense output and error estimate read. The error norm (accepted when < 1)."""
+        kk, new, dense = [[0.0] * 6 for _ in range(16)], [0.0] * 6, self._dense.tolist()
+        norm = dop853_attempt(self._stages, *_LISTS, t, self._y.tolist(), self._f.tolist(), h, taus.tolist(),
+                              self.rtol, self.atol, kk, new, dense)
+        self._kk[:], y_new[:], self._dense[:] = kk, new, dense
+        return norm
+
     @classmethod
     def is_stable(cls, z: complex) -> bool:
         return True  # error control shrinks the internal step as needed
@@ -400,37 +412,6 @@ def interpolated_estimate(target: float, t_old: float, h_old: float, err_old: fl
     internal step (t_old, h_old) that covers it, whose estimates at its ends are err_old and err."""
     x = (target - t_old) / h_old if h_old > 0.0 else 1.0
     return err_old + min(1.0, max(0.0, x)) * (err - err_old)
-
-
-def _python_rhs(system: FingerSystem, t: float, y: np.ndarray, tau: float) -> list[float]:
-    """y' = (q', q'') at (t, y) under torque tau (N·m), by `FingerSystem.accelerations`."""
-    q0, q1, q2, v0, v1, v2 = y.tolist()
-    a, _ = system.accelerations(t, (q0, q1, q2), (v0, v1, v2), tau)
-    return [v0, v1, v2, *a]
-
-
-def _python_attempt(system: FingerSystem, t: float, y: np.ndarray, f: np.ndarray, h: float, taus: np.ndarray,
-                    rtol: float, atol: float, kk: np.ndarray, y_new: np.ndarray, dense: np.ndarray) -> float:
-    """`numerics.dop853_attempt` with the stages evaluated in Python (same arguments but the model:
-    the system itself, whatever its elements). Returns the error norm (accepted when < 1)."""
-    kk[0] = f
-    for s in range(1, _N_STAGES):
-        kk[s] = _python_rhs(system, t + _C[s] * h, y + h * (_A[s, :s] @ kk[:s]), taus[s])
-    y_new[:] = y + h * (_B @ kk[:_N_STAGES])
-    kk[_N_STAGES] = _python_rhs(system, t + h, y_new, taus[_N_STAGES])
-    scale = atol + np.maximum(np.abs(y), np.abs(y_new)) * rtol
-    e5, e3 = (_E53 @ kk[: _N_STAGES + 1]) / scale
-    err5, err3 = float(e5 @ e5), float(e3 @ e3)
-    norm = 0.0 if err5 == 0.0 and err3 == 0.0 else abs(h) * err5 / math.sqrt((err5 + E3_WEIGHT * err3) * 6)
-    if norm < 1.0:
-        for s in range(_N_STAGES + 1, 16):
-            kk[s] = _python_rhs(system, t + _C[s] * h, y + h * (_A[s, :s] @ kk[:s]), taus[s])
-        dy = y_new - y
-        dense[0] = dy
-        dense[1] = h * kk[0] - dy
-        dense[2] = 2.0 * dy - h * (kk[_N_STAGES] + kk[0])
-        dense[3:] = h * (_D @ kk)
-    return norm
 
 
 def initial_step(y: np.ndarray, f: np.ndarray, rtol: float, atol: float, dt: float) -> float:

@@ -29,12 +29,13 @@ JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
 LAW = {**JIT, "inline": "always"}
 
 
-def compiled(law: Callable, **callees: Callable) -> Callable:
-    """`law` (a plain function) compiled, with the plain functions it calls by name (`callees`) bound
-    to their compiled forms: the same code object under other globals, so nothing is copied."""
+def compiled(law: Callable, *, options: dict = LAW, **callees: Callable) -> Callable:
+    """`law` (a plain function) compiled with numba's `options` (inlined by default), with the plain
+    functions it calls by name (`callees`) bound to their compiled forms: the same code object under
+    other globals, so nothing is copied."""
     function = types.FunctionType(law.__code__, {**law.__globals__, **callees}, law.__name__, law.__defaults__)
     function.__qualname__, function.__doc__, function.__module__ = law.__qualname__, law.__doc__, law.__module__
-    return njit(**LAW)(function)
+    return njit(**options)(function)
 
 
 def compiled_law(law: KernelLaw) -> Callable:

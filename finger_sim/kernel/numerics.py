@@ -5,10 +5,11 @@ The laws are not written here: the acceleration solve (`dynamics.schur_solve`), 
 by `element_force`, generated from the registry: `kernel.force_laws`) and the torque profiles
 (`inputs.torque_at`, `inputs.switches_inside`) are the plain functions the Python path calls, compiled
 here as they are, and so is the contact law (`effects.contact_law`: the candidates' geometry and the force).
-What remains is the flat model's force sum, the contact's candidate loop over its flat parameters
-(`Contact.kernel_params`, the order of `Contact._hits`), and the steppers: the same
-arithmetic, in the same order, as their Python references (`ExplicitRungeKutta.step`, scipy's
-DOP853), so both paths agree to round-off (the tests ask 1e-13 rad).
+So is a DOP853 attempt (`integrators.steps.dop853_attempt`, compiled with this module's `_rhs`). What
+remains is the flat model's force sum, the contact's candidate loop over its flat parameters
+(`Contact.kernel_params`, the order of `Contact._hits`), and the fixed-step steppers: the same
+arithmetic, in the same order, as their Python references (`ExplicitRungeKutta.step`), so both paths
+agree to round-off (the tests ask 1e-13 rad).
 Compiled by numba on first use and cached on disk (`cache=True`; see `finger_sim.kernel`).
 Errors are status codes, raised as exceptions by the Python callers.
 """
@@ -25,6 +26,7 @@ from finger_sim import dynamics, inputs, projection
 from finger_sim.effects import contact_law, friction_modes
 from finger_sim.effects.friction_modes import KERNEL_BLOCK as SLIP_BLOCK
 from finger_sim.effects.friction_modes import SLIDING
+from finger_sim.integrators import steps
 from finger_sim.inputs import BREAK_EPS, SQUARE, STEP
 from finger_sim.kernel.force_laws import element_forces
 from finger_sim.kernel.layout import (BREAKPOINT, CONTACT, HEADER, NON_FINITE, NOT_CONVERGED, OK, STATE_NON_FINITE,
@@ -247,67 +249,12 @@ def _rhs(m, t, y, tau, out):
     out[3], out[4], out[5] = accelerations(m, t, y[0], y[1], y[2], y[3], y[4], y[5], tau)
 
 
-@njit(**JIT)
-def dop853_attempt(m, a, b, c, e3, e5, d, t, y, f, h, taus, rtol, atol, kk, y_new, dense):
-    """One DOP853 step attempt from (t, y) with y' = f at t, step h; scipy's `rk_step` and
-    `_estimate_error_norm`, then on acceptance the three extra stages and the dense
-    coefficients (`_dense_output_impl`).
-
-    a (16 × 16), b (12), c (16), e3, e5 (13), d (4 × 16): scipy's dop853_coefficients.
-    taus: τ at t + c_i h for the 12 stages, then at t + h, then at the 3 extra stages.
-    kk: 16 × 6 work array (kk[0] = f on entry); y_new: 6, the result; dense: 7 × 6.
-    Returns the error norm (accepted when < 1).
-    """
-    n_stages = 12
-    kk[0] = f
-    ys = np.empty(6)
-    for s in range(1, n_stages):
-        for i in range(6):
-            acc = 0.0
-            for j in range(s):
-                acc += kk[j, i] * a[s, j]
-            ys[i] = y[i] + acc * h
-        _rhs(m, t + c[s] * h, ys, taus[s], kk[s])
-    for i in range(6):
-        acc = 0.0
-        for j in range(n_stages):
-            acc += kk[j, i] * b[j]
-        y_new[i] = y[i] + h * acc
-    _rhs(m, t + h, y_new, taus[n_stages], kk[n_stages])
-    err5 = 0.0
-    err3 = 0.0
-    for i in range(6):
-        scale = atol + max(abs(y[i]), abs(y_new[i])) * rtol
-        s5 = 0.0
-        s3 = 0.0
-        for j in range(n_stages + 1):
-            s5 += kk[j, i] * e5[j]
-            s3 += kk[j, i] * e3[j]
-        err5 += (s5 / scale) ** 2
-        err3 += (s3 / scale) ** 2
-    if err5 == 0.0 and err3 == 0.0:
-        norm = 0.0
-    else:
-        norm = abs(h) * err5 / math.sqrt((err5 + 0.01 * err3) * 6)
-    if norm < 1.0:
-        for s in range(n_stages + 1, 16):
-            for i in range(6):
-                acc = 0.0
-                for j in range(s):
-                    acc += kk[j, i] * a[s, j]
-                ys[i] = y[i] + acc * h
-            _rhs(m, t + c[s] * h, ys, taus[s], kk[s])
-        for i in range(6):
-            dy = y_new[i] - y[i]
-            dense[0, i] = dy
-            dense[1, i] = h * kk[0, i] - dy
-            dense[2, i] = 2.0 * dy - h * (kk[n_stages, i] + kk[0, i])
-            for r in range(4):
-                acc = 0.0
-                for j in range(16):
-                    acc += d[r, j] * kk[j, i]
-                dense[3 + r, i] = h * acc
-    return norm
+#: One DOP853 attempt compiled from its one definition (`integrators.steps.dop853_attempt`, the function
+#: the Python path calls) with this module's `_rhs`; not inlined: a call, as it was when written here.
+#: (`kernel.drive` compiles it again with the drive's `_rhs`: every global it reads is a name here.)
+_stage_state = njit(**LAW)(steps._stage_state)
+DOP853_STAGES, E3_WEIGHT = steps.DOP853_STAGES, steps.E3_WEIGHT
+dop853_attempt = compiled(steps.dop853_attempt, options=JIT, _rhs=_rhs, _stage_state=_stage_state)
 
 
 @njit(**JIT)
