@@ -123,8 +123,9 @@ def test_every_run_is_in_its_scene_table_once_and_rendered_as_one_row(bench):
 @pytest.mark.slow
 def test_every_project_method_has_rows_with_finite_numbers(bench, scene):
     every = [r for r in bench[2].scenes[scene] if r.family == FAMILY_PROJECT]
-    assert {r.method for r in every} == set(project_methods()) | {AUTO}  # auto itself runs on every scene
-    rows = [r for r in every if r.method != AUTO]
+    whole = {AUTO_WHOLE_RUN} if scene in SHIPPED_SCENES else set()  # a shipped scene's auto is timed whole too
+    assert {r.method for r in every} == set(project_methods()) | {AUTO} | whole  # auto itself runs on every scene
+    rows = [r for r in every if r.method not in {AUTO} | whole]
     assert {r.method for r in rows} == set(project_methods()) == set(METHODS)
     for r in rows:
         assert r.status in ("ok", "refused", "diverged"), r
@@ -182,7 +183,8 @@ MUJOCO_GRIP_RTOL = 3e-3
 @pytest.mark.slow
 def test_contact_scenes_have_every_method_and_auto_itself(bench, scene):
     rows = [r for r in bench[2].scenes[scene] if r.family == FAMILY_PROJECT]
-    assert {r.method for r in rows} == set(project_methods()) | {AUTO}
+    whole = {AUTO_WHOLE_RUN} if scene in SHIPPED_SCENES else set()  # a shipped scene's auto is timed whole too
+    assert {r.method for r in rows} == set(project_methods()) | {AUTO} | whole
     for r in rows:
         assert r.status in ("ok", "refused", "diverged"), r
         assert r.ok or r.note, r  # a refusal or divergence says why
@@ -216,7 +218,7 @@ def test_drive_scenes_have_every_method_auto_itself_and_a_reference_through_the_
     saying why), auto within its promise against a reference solved through the mesh's modes and checked by Radau."""
     ref = bench[1].refs[scene]
     assert (ref.solution.method, ref.check.method) == ("DOP853", "Radau")
-    assert ref.check_difference < 1e-9  # measured 4.0e-14 (drive_grasp) and 1.2e-12 (back-drivable) at rtol 1e-12
+    assert ref.check_difference < 1e-10  # quick (Radau at rtol 1e-10): measured 1.4e-12 and 2.1e-12 rad
     if scene == "drive_grasp":  # the self-locking hold: q held exactly from the turning point on the cup
         held = [p for p in ref.solution.pieces if p.sol is None]
         assert held and held[-1].t1 == pytest.approx(bench[1].scenes[scene].duration) and held[0].held[3:] == (0.0,) * 3
@@ -226,7 +228,7 @@ def test_drive_scenes_have_every_method_auto_itself_and_a_reference_through_the_
         if r.method == "rattle":
             assert r.status == "refused" and "drive" in r.note, r
             continue
-        assert r.status in ("ok", "diverged"), r
+        assert r.status in ("ok", "refused", "diverged") and (r.ok or r.note), r  # a refusal says why
         if r.ok:
             assert finite(r), r
     whole = next(r for r in rows if r.method == AUTO_WHOLE_RUN)
