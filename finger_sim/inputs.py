@@ -292,3 +292,22 @@ def profile_from_dict(data: Any, key: str = "input.torque") -> Profile:
     if "frequency" in values and not values["frequency"] > 0:
         raise ConfigError(f"{key}.frequency", "a number > 0 (Hz)", data["frequency"])
     return cls(**values)
+
+
+def steps_on_segment(profile: Any, k: int, dt: float, n: int) -> int:
+    """How many of the n steps from index k lie on the profile's current segment with room to spare:
+    every step ends before the next switch (less `BREAK_EPS`·dt), so each is held at the first one's
+    value, as `Simulator.step` holds it (`on_segment`). n for a profile without switches."""
+    if not isinstance(profile, Profile) or profile.kernel_code not in PIECEWISE_CONSTANT:
+        return n
+    t0 = k * dt
+    switches = [b for b in profile.breakpoints(t0, (k + n) * dt) if b > t0]
+    if not switches:
+        return n
+    limit = min(switches) - BREAK_EPS * dt  # the steps k … k + count − 1 end before it: (k + count)·dt < limit
+    count = max(0, min(n, int((limit - t0) / dt)))  # a first guess, made exact on the grid's own times
+    while count > 0 and (k + count) * dt >= limit:
+        count -= 1
+    while count < n and (k + count + 1) * dt < limit:
+        count += 1
+    return count

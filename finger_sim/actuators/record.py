@@ -11,8 +11,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from finger_sim.actuators.drive import DrivenSystem
+from finger_sim.actuators.drive import STUCK, ZERO, DrivenSystem
 from finger_sim.actuators.stepping import EnergyLedger
+from finger_sim.inputs import PIECEWISE_CONSTANT, Constant, steps_on_segment
 
 if TYPE_CHECKING:
     from finger_sim.simulation.driver import Simulator
@@ -30,16 +31,61 @@ def steps(sim: Simulator, n: int, ledger: EnergyLedger | None = None) -> tuple[n
     with `ledger`, the steps' energy integrals are added to it."""
     system: DrivenSystem = sim.system  # type: ignore[assignment]
     system.drive.ledger = ledger
-    xs = np.empty((n, 6))
     rows = np.empty((n, len(system.output_names())))
     try:
-        for k in range(n):
-            state = sim.step()
-            xs[k] = (*state.q, *state.v)
-            rows[k] = outputs_now(sim)
+        xs = states(sim, n, rows)
     finally:
         system.drive.ledger = None
     return xs, rows
+
+
+def states(sim: Simulator, n: int, rows: np.ndarray | None = None) -> np.ndarray:
+    """Step `sim` n times under its scene's input, as n calls of `sim.step()`: the (n, 6) states after each step
+    (and, into `rows`, the drive's outputs after each); a stretch of steps that hold a stuck mesh where it is
+    (`held_steps`) is taken at once."""
+    xs = np.empty((n, 6))
+    k = 0
+    while k < n:
+        held = held_steps(sim, n - k)
+        if held:
+            xs[k:k + held] = (*sim.q, *sim.v)
+            if rows is not None:
+                rows[k:k + held] = outputs_now(sim)
+            k += held
+            continue
+        state = sim.step()
+        xs[k] = (*state.q, *state.v)
+        if rows is not None:
+            rows[k] = outputs_now(sim)
+        k += 1
+    return xs
+
+
+def held_steps(sim: Simulator, n: int) -> int:
+    """Take up to n next steps of `sim` that hold its stuck mesh where it is, at once, as `sim.step()` would take
+    them one by one; the number taken (0: the next step is `sim.step()`'s).
+
+    A stuck step holds throughout while the holding margin is ≥ 0 at its end (`stepping._release_time`). At a
+    fixed q that margin is the same at every t where no element depends on time (`holding_torque_is_steady`) and
+    the input is the same: so after a step that held at this q (its end margin, kept in `Drive.margin_cache`,
+    ≥ 0), every later step on the same level of a held input holds too (`inputs.steps_on_segment`: none has a
+    switch inside), and leaves q, q' = ZERO and the input as they were. Not with the energy ledger (it integrates
+    each step), stick–slip friction, an actuator in the slot, a stop's rest mode or L > 0."""
+    system: DrivenSystem = sim.system  # type: ignore[assignment]
+    drive = system.drive
+    profile = sim.scene.torque
+    kept = drive.margin_cache
+    if (drive.mode != STUCK or kept is None or kept[0] is not sim.q or not kept[2] >= 0.0 or sim.v is not ZERO
+            or drive.ledger is not None or drive.inductive or not system.holding_torque_is_steady
+            or not system.keeps_holding_torque or sim._resting is not None  # noqa: SLF001
+            or not (isinstance(profile, Constant) or profile.kernel_code in PIECEWISE_CONSTANT)):
+        return 0
+    k, dt = sim.step_index, sim.dt
+    count = steps_on_segment(profile, k, dt, n)
+    if count == 0 or profile.on_segment(k * dt, (k + 1) * dt)((k + 1) * dt) != kept[1][1]:  # another level
+        return 0
+    sim.step_index = k + count
+    return count
 
 
 class EnergyReport(Mapping[str, float]):

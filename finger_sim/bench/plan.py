@@ -4,7 +4,7 @@ The project's integrators over a grid of dt, scipy's solve_ivp over rtol on the 
 equations (and the same scalar right-hand side), MuJoCo's integrators over timestep on the
 MJCF peer; the scene kinds and step rates of the recommendation table; the hard cases; the
 contact scenes (spec §7), where `method: auto` itself is run too (its choice and its substeps
-in contact are not one of the fixed methods). `tasks` turns this into the list of
+in contact are not one of the fixed methods); the drive scenes (spec §8). `tasks` turns this into the list of
 measurements, in the order they run.
 """
 
@@ -30,13 +30,16 @@ WP_SCENES = ("paper_flexion", "toggle_passage", "free_swing", "bang_bang", "stif
 CONTACT_WP_SCENES = ("grasp_cylinder", "press_table")
 CONTACT_HARD_SCENES = ("grasp_impact", "grasp_rigid")
 CONTACT_SCENES = CONTACT_WP_SCENES + CONTACT_HARD_SCENES
+#: The shipped drive scenes (spec §8: the motor, the gear train and its mesh modes, closing on the cup). Their
+#: reference and scipy rows are solved piece by piece through the mesh's modes (`reference.solve_drive`).
+DRIVE_SCENES = ("drive_grasp", "drive_grasp_backdrivable")
 #: The hard contact scenes (config/hard/, not shipped scenes): the elastic fast impact, the chatter on a tilted
 #: wall, grasp and release, the table with friction, the near-rigid fast impact, the elastic stops. `auto`
 #: itself is run on them too (its error control is what they test).
 ISSUE_HARD_FOLDER = "hard"
 ISSUE_HARD_SCENES = ("elastic_impact", "chatter_wall", "grasp_release", "friction_table", "rigid_fast", "stops_elastic")
 #: The shipped bench scenes (config/): each has scipy rows and `auto` itself run, for the goal table at auto's error.
-SHIPPED_SCENES = WP_SCENES + ("paper_to_stop",) + CONTACT_SCENES
+SHIPPED_SCENES = WP_SCENES + ("paper_to_stop",) + CONTACT_SCENES + DRIVE_SCENES
 ALL_SCENES = SHIPPED_SCENES + ISSUE_HARD_SCENES
 #: Scene kinds of the recommendation table and the scenes measured for each (the same
 #: kinds `finger_sim.auto.scene_kind` recognizes in a scene).

@@ -22,6 +22,10 @@ release as a solve_ivp event on the contact element's gaps and restarts there, a
 stop (test/hybrid_reference.py's scheme): a second method that shares nothing with the first
 but the right-hand side and the gap functions. The same `solve` is the bench's scipy row on a
 scene with events (`runners.run_scipy`): what a solve_ivp script that handles the events costs.
+A drive scene (spec §8) is solved the same way through the mesh's modes (`solve_drive`): one piece per mode,
+ended by a terminal event on the turn, the flank, the current limit and every contact onset and release, the
+stuck hold by the holding margin's root. Its reference is that solve by DOP853 at REFERENCE_RTOL, its check the
+same by Radau.
 Where the check still cannot follow the scene (a check difference above MAX_CHECK_DIFFERENCE) it
 is reported as such and no reference floor is claimed (`Reference.floor` is NaN); that scene's
 reference is then checked only by the tests' independent one (test/hybrid_reference.py,
@@ -35,11 +39,14 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
+from finger_sim.actuators import stepping
+from finger_sim.actuators.drive import BACK, DRIVE, STUCK, DrivenSystem
 from finger_sim.errors import SimulationDiverged
 from finger_sim.integrators.adaptive import REFERENCE_RTOL as ADAPTIVE_RTOL
 from finger_sim.scene import Scene
@@ -75,6 +82,9 @@ TIME_EPS = 1e-12
 ON_GAP = 1e-13
 #: Most restarts at contact onsets and releases before the solve gives up (a chattering contact).
 MAX_RESTARTS = 100_000
+#: On a drive scene, after a located event the solve steps this far (s) without events, so that the guard just
+#: crossed is not found again at once at the restart (test/effects/test_drive.py's reference does the same).
+NUDGE = 1e-9
 
 ZERO = (0.0, 0.0, 0.0)
 
@@ -192,11 +202,25 @@ def _kink_events(system, t: float, y: Sequence[float]) -> list[Callable[[float, 
     return events
 
 
+def _smooth_piece(scene: Scene, rhs: Callable[..., list[float]], t: float, end: float, y: Sequence[float], method: str,
+                  rtol: float, events: list[Callable[[float, np.ndarray], float]], pieces: list[_Piece]) -> Any:
+    """solve_ivp's result on one smooth piece [t, end] from y (dense output, stopped by a terminal one of `events`),
+    its `_Piece` appended to `pieces`; SimulationDiverged where scipy fails."""
+    sol = solve_ivp(rhs, (t, end), y, method=method, rtol=rtol, atol=ATOL_PER_RTOL * rtol, dense_output=True,
+                    events=events or None)
+    if not sol.success:
+        raise SimulationDiverged(f"reference {method} on {scene.name}: {sol.message} at t = {sol.t[-1]:.6f} s")
+    pieces.append(_Piece(t, float(sol.t[-1]), sol.sol, ()))
+    return sol
+
+
 def solve(scene: Scene, *, method: str, rtol: float,
           wrap: Callable[[Callable[..., list[float]]], Callable[..., list[float]]] = lambda f: f) -> Solution:
     """`scene` by scipy `method` at `rtol` (atol = ATOL_PER_RTOL·rtol), piece by piece: restarted at every
-    torque switch, stop impact, contact onset and release. `wrap` wraps each piece's right-hand side (the
-    bench's evaluation counter)."""
+    torque switch, stop impact, contact onset and release, and on a drive scene at every mesh mode change
+    (`solve_drive`). `wrap` wraps each piece's right-hand side (the bench's evaluation counter)."""
+    if scene.drive is not None:
+        return solve_drive(scene, method=method, rtol=rtol, wrap=wrap)
     system = scene.build_system()
     acc = system.accelerations
     profile = scene.torque
@@ -241,16 +265,10 @@ def solve(scene: Scene, *, method: str, rtol: float,
             events = [upper, lower]
         stops = len(events)
         events += _kink_events(system, t, y)
-        sol = solve_ivp(
-            rhs, (t, end), y, method=method, rtol=rtol, atol=ATOL_PER_RTOL * rtol, dense_output=True,
-            events=events or None,
-        )
-        if not sol.success:
-            raise SimulationDiverged(f"reference {method} on {scene.name}: {sol.message} at t = {sol.t[-1]:.6f} s")
+        sol = _smooth_piece(scene, rhs, t, end, y, method, rtol, events, pieces)
         nfev += sol.nfev
         steps += sol.t.size - 1
         t_hit = float(sol.t[-1])
-        pieces.append(_Piece(t, t_hit, sol.sol, ()))
         y = sol.y[:, -1].tolist()
         t = t_hit
         restarts += sol.status == 1
@@ -266,6 +284,94 @@ def solve(scene: Scene, *, method: str, rtol: float,
             if a_free * side > 0.0 and v_plus[0] == 0.0:
                 contact = side
             y = [*qs, *v_plus]
+    return Solution(method, rtol, tuple(pieces), time.process_time() - start, nfev, steps)
+
+
+def _drive_guard_events(system: DrivenSystem, torque: Callable[[float], float]) -> list[Callable[[float, np.ndarray], float]]:
+    """Terminal events of the rolling mesh's guards under the mode set now (`actuators.stepping._guards`): turn
+    and flank (one-sided, crossing downwards) and the current limit (both ways); an ideal gear has the limit only."""
+    drive = system.drive
+    s, mode = drive.direction, drive.mode
+
+    def turn(t: float, y: np.ndarray) -> float:
+        return s * y[3]
+
+    def flank(t: float, y: np.ndarray) -> float:
+        tau_g = system.mesh(t, (y[0], y[1], y[2]), (y[3], y[4], y[5]), torque(t), mode)[0]
+        return (s if mode == DRIVE else -s) * tau_g
+
+    def limit(t: float, y: np.ndarray) -> float:
+        return drive.params.current_limit - abs(drive.unclamped_current(torque(t), y[3]))
+
+    turn.terminal, turn.direction = True, -1.0  # type: ignore[attr-defined]
+    flank.terminal, flank.direction = True, -1.0  # type: ignore[attr-defined]
+    limit.terminal = True  # type: ignore[attr-defined]
+    return [limit] if drive.params.ideal else [turn, flank, limit]
+
+
+def solve_drive(scene: Scene, *, method: str, rtol: float,
+                wrap: Callable[[Callable[..., list[float]]], Callable[..., list[float]]] = lambda f: f) -> Solution:
+    """A drive scene (spec §8, L = 0, no joint stops) by scipy `method` at `rtol`, one smooth piece per mesh mode
+    (test/hybrid_reference.py's scheme), each ended by a terminal event and restarted under the new mode:
+    - turn (direction·θ1' < 0): the holding test decides, stuck or rolling on (`stepping._turn`);
+    - flank (τ_g against the flank): drive ↔ back;
+    - the current limit's kink and every contact onset and release (`_kink_events`): restart only;
+    - stuck: q held, q' = 0, until the holding margin's root (`stepping._release_time`).
+    The same equations as every method under test (`DrivenSystem.rhs` in the mode). ValueError for a scene this
+    does not cover (joint stops, L > 0)."""
+    if scene.mcp_limits is not None or scene.drive is None or scene.drive.inductance > 0.0:
+        raise ValueError(f"{scene.name}: the reference covers drive scenes with L = 0 and without joint stops")
+    system: DrivenSystem = scene.build_system()  # type: ignore[assignment]
+    drive = system.drive
+    profile = scene.torque
+    duration = scene.duration
+    q, v = scene.initial_state()
+    cuts = sorted(profile.breakpoints(0.0, duration)) + [duration]
+    if v[0] == 0.0:
+        v = stepping._turn(system, 0.0, q, profile(0.0))
+    else:
+        stepping._roll(system, 0.0, q, v, profile(0.0), math.copysign(1.0, v[0]))
+    pieces: list[_Piece] = []
+    nfev = steps = 0
+    start = time.process_time()
+    t, y = 0.0, np.array([*q, *v])
+    for _ in range(MAX_RESTARTS):
+        if t >= duration - TIME_EPS:
+            break
+        end = next(b for b in cuts if b > t + TIME_EPS)
+        u = profile.on_segment(t, end)
+        if drive.mode == STUCK:
+            qs = (y[0], y[1], y[2])
+            release = stepping._release_time(system, t, end, qs, u)
+            held_to = end if release is None else release
+            if held_to > t:
+                pieces.append(_Piece(t, held_to, None, (*qs, *ZERO)))
+            t, y = held_to, np.array([*qs, *ZERO])
+            if release is not None:
+                stepping._roll(system, t, qs, ZERO, u(t), stepping._break_direction(system, t, qs, u(t)))
+            continue
+        rhs = wrap(lambda s, z, u=u: system.rhs(s, z, u))  # the mode is read at each call
+        guards = _drive_guard_events(system, u)
+        sol = _smooth_piece(scene, rhs, t, end, y, method, rtol, guards + _kink_events(system, t, y), pieces)
+        nfev += sol.nfev
+        steps += sol.t.size - 1
+        t, y = float(sol.t[-1]), sol.y[:, -1].copy()
+        if sol.status != 1:
+            continue
+        qs, us = (y[0], y[1], y[2]), u(t)
+        if len(guards) == 3 and sol.t_events[0].size:  # the turn: stick, or roll on
+            y[3:] = stepping._turn(system, t, qs, us)
+            continue
+        if len(guards) == 3 and sol.t_events[1].size:
+            drive.mode = BACK if drive.mode == DRIVE else DRIVE
+        # a kink (limit, contact) or a flank change: step just past it without events, then restart
+        nxt = min(end, t + NUDGE)
+        sol = _smooth_piece(scene, rhs, t, nxt, y, method, rtol, [], pieces)
+        nfev += sol.nfev
+        steps += sol.t.size - 1
+        t, y = nxt, sol.y[:, -1].copy()
+    else:
+        raise SimulationDiverged(f"reference {method} on {scene.name}: more than {MAX_RESTARTS} pieces")
     return Solution(method, rtol, tuple(pieces), time.process_time() - start, nfev, steps)
 
 
@@ -293,10 +399,11 @@ def solve_with_events(scene: Scene, *, spacing: float) -> GridSolution:
 def build_reference(scene: Scene, *, quick: bool, spacing: float) -> Reference:
     """DOP853 at its tightest practical tolerance, checked by Radau (LSODA on a stiff scene).
 
-    A contact scene (objects): `solve_with_events` on the sample grid, checked the same way.
+    A contact scene (objects): `solve_with_events` on the sample grid, checked the same way; a drive scene, with
+    or without objects, is solved piece by piece through the mesh's modes (`solve_drive`) both times.
     """
     stiff = is_stiff(scene)
-    if scene.objects:
+    if scene.objects and scene.drive is None:
         solution: Solution | GridSolution = solve_with_events(scene, spacing=spacing)
     else:
         solution = solve(scene, method="DOP853", rtol=STIFF_REFERENCE_RTOL if stiff else REFERENCE_RTOL)

@@ -29,7 +29,7 @@ from finger_sim.effects.contact_outputs import GRIP_FORCE
 from finger_sim import kinematics
 from finger_sim.bench.reference import Reference, sample_times, solve
 from finger_sim.effects.contact import build_contact
-from finger_sim.errors import FingerSimError, SimulationDiverged, StabilityError
+from finger_sim.errors import ConfigError, FingerSimError, SimulationDiverged, StabilityError
 from finger_sim.inputs import Constant
 from finger_sim.scene import Scene
 from finger_sim.simulate import Simulator, State
@@ -98,8 +98,8 @@ class Run:
 
 
 def conserves_energy(scene: Scene) -> bool:
-    """τ ≡ 0, no damping, and no stops or contacts that could absorb energy: T + V (+ V_c) is a constant of motion."""
-    no_torque = isinstance(scene.torque, Constant) and scene.torque.value == 0.0
+    """τ ≡ 0 (no drive), no damping, and no stops or contacts that could absorb energy: T + V (+ V_c) is a constant of motion."""
+    no_torque = scene.drive is None and isinstance(scene.torque, Constant) and scene.torque.value == 0.0
     elastic = scene.mcp_limits is None or scene.restitution == 1.0
     lossless_contact = not scene.objects or (scene.contact.damping == 0.0 and scene.contact.friction == 0.0)
     return no_torque and scene.damping == 0.0 and elastic and lossless_contact
@@ -177,6 +177,9 @@ def run_method(
             run.note = f"{probe.method}" + (f", {probe.substeps} substeps in contact" if probe.substeps > 1 else "")
     except StabilityError as exc:
         run.status, run.note = REFUSED, str(exc).split(";")[0].split(": ", 1)[-1]
+        return run
+    except ConfigError as exc:  # a method that cannot step the scene (rattle on a drive scene)
+        run.status, run.note = REFUSED, str(exc)
         return run
 
     def timed_once() -> tuple[list, float]:
@@ -282,7 +285,7 @@ def run_scipy(
     """
     label = f"scipy {method}" + (" (numpy RHS)" if rhs == "numpy" else "")
     run = Run(scene.name, FAMILY_SCIPY, label, "rtol", rtol, scene.duration)
-    if scene.mcp_limits is not None or scene.objects:
+    if scene.mcp_limits is not None or scene.objects or scene.drive is not None:
         return _run_scipy_events(run, scene, method, rtol, reference, spacing=spacing, repeats=repeats)
     make = (scalar_rhs if rhs == "scalar" else numpy_rhs)(scene)
     profile = scene.torque
@@ -352,8 +355,9 @@ def _counted() -> tuple[list[int], Callable]:  # type: ignore[type-arg]
 
 def _run_scipy_events(run: Run, scene: Scene, method: str, rtol: float, reference: Reference, *, spacing: float,
                       repeats: int) -> Run:
-    """A scene with events (stops, contact): solve_ivp restarted at every located stop impact, contact onset and
-    release (`reference.solve`, the bench's own piecewise solver), its dense output sampled on the grid."""
+    """A scene with events (stops, contact, a drive's mesh modes): solve_ivp restarted at every located stop impact,
+    contact onset and release and mode change (`reference.solve`, the bench's own piecewise solver), its dense
+    output sampled on the grid."""
     if stick_slip.in_scene(scene):
         run.status, run.note = SKIPPED, "stick–slip friction's locked mode is not in the piecewise solve"
         return run

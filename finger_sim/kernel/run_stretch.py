@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from finger_sim.inputs import BREAK_EPS, PIECEWISE_CONSTANT, Profile
+from finger_sim.inputs import steps_on_segment
 from finger_sim.integrators.dop853 import KEEP_OUTPUTS, MAX_OUTPUTS
 from finger_sim.kernel import event_run
 from finger_sim.simulation.event_step import ZERO, EventStep
@@ -55,7 +55,7 @@ def _stretch(sim: Simulator, events: EventStep, compiled: Any, rows: np.ndarray,
     if not events.claim(integ):  # as `EventStep.step`: another hand stepped the solution (Python takes the step)
         return 0
     k, dt, profile = sim.step_index, sim.dt, sim.scene.torque
-    n = min(n, _steps_on_segment(profile, k, dt, n))
+    n = min(n, steps_on_segment(profile, k, dt, n))
     if n <= 0:
         return 0
     if events._constant is not None:  # noqa: SLF001  (the scene's constant torque)
@@ -97,25 +97,6 @@ def _stretch(sim: Simulator, events: EventStep, compiled: Any, rows: np.ndarray,
         sim.q, sim.v, sim.torque, sim.step_index = q, v, end, k + count
         events._q, events._v = q, v  # noqa: SLF001
         events.taken += count
-    return count
-
-
-def _steps_on_segment(profile: Any, k: int, dt: float, n: int) -> int:
-    """How many of the n steps from index k lie on the profile's current segment with room to spare:
-    every step ends before the next switch (less `BREAK_EPS`·dt), so each is held at the first one's
-    value, as `EventStep._profile_step` holds it. n for a profile without switches."""
-    if not isinstance(profile, Profile) or profile.kernel_code not in PIECEWISE_CONSTANT:
-        return n
-    t0 = k * dt
-    switches = [b for b in profile.breakpoints(t0, (k + n) * dt) if b > t0]
-    if not switches:
-        return n
-    limit = min(switches) - BREAK_EPS * dt  # the steps k … k + count − 1 end before it: (k + count)·dt < limit
-    count = max(0, min(n, int((limit - t0) / dt)))  # a first guess, made exact on the grid's own times
-    while count > 0 and (k + count) * dt >= limit:
-        count -= 1
-    while count < n and (k + count + 1) * dt < limit:
-        count += 1
     return count
 
 

@@ -28,6 +28,7 @@ from finger_sim.bench.plan import (
     CONTACT_HARD_SCENES,
     CONTACT_SCENES,
     CONTACT_WP_SCENES,
+    DRIVE_SCENES,
     HARD_SCENES,
     ISSUE_HARD_SCENES,
     KINDS,
@@ -118,12 +119,13 @@ def test_every_run_is_in_its_scene_table_once_and_rendered_as_one_row(bench):
         assert [line.split(" | ")[:2] for line in body] == [[f"| {r.family}", r.method] for r in rows]
 
 
-@pytest.mark.parametrize("scene", [s for s in ALL_SCENES if s not in CONTACT_SCENES + ISSUE_HARD_SCENES])
+@pytest.mark.parametrize("scene", [s for s in ALL_SCENES if s not in CONTACT_SCENES + ISSUE_HARD_SCENES + DRIVE_SCENES])
 @pytest.mark.slow
 def test_every_project_method_has_rows_with_finite_numbers(bench, scene):
     every = [r for r in bench[2].scenes[scene] if r.family == FAMILY_PROJECT]
-    assert {r.method for r in every} == set(project_methods()) | {AUTO}  # auto itself runs on every scene
-    rows = [r for r in every if r.method != AUTO]
+    whole = {AUTO_WHOLE_RUN} if scene in SHIPPED_SCENES else set()  # a shipped scene's auto is timed whole too
+    assert {r.method for r in every} == set(project_methods()) | {AUTO} | whole  # auto itself runs on every scene
+    rows = [r for r in every if r.method not in {AUTO} | whole]
     assert {r.method for r in rows} == set(project_methods()) == set(METHODS)
     for r in rows:
         assert r.status in ("ok", "refused", "diverged"), r
@@ -181,7 +183,8 @@ MUJOCO_GRIP_RTOL = 3e-3
 @pytest.mark.slow
 def test_contact_scenes_have_every_method_and_auto_itself(bench, scene):
     rows = [r for r in bench[2].scenes[scene] if r.family == FAMILY_PROJECT]
-    assert {r.method for r in rows} == set(project_methods()) | {AUTO}
+    whole = {AUTO_WHOLE_RUN} if scene in SHIPPED_SCENES else set()  # a shipped scene's auto is timed whole too
+    assert {r.method for r in rows} == set(project_methods()) | {AUTO} | whole
     for r in rows:
         assert r.status in ("ok", "refused", "diverged"), r
         assert r.ok or r.note, r  # a refusal or divergence says why
@@ -206,6 +209,31 @@ def test_contact_reference_locates_events_and_agrees_with_its_check(bench, scene
     # the adaptive run at 1 ms in the table is the reference itself: error 0
     own = next(r for r in bench[2].scenes[scene] if r.method == "adaptive" and r.value == 1e-3)
     assert own.error == 0.0
+
+
+@pytest.mark.parametrize("scene", DRIVE_SCENES)
+@pytest.mark.slow
+def test_drive_scenes_have_every_method_auto_itself_and_a_reference_through_the_mesh_modes(bench, scene):
+    """The shipped drive scenes (spec §8) in the report: every project method that steps the drive (rattle refused,
+    saying why), auto within its promise against a reference solved through the mesh's modes and checked by Radau."""
+    ref = bench[1].refs[scene]
+    assert (ref.solution.method, ref.check.method) == ("DOP853", "Radau")
+    assert ref.check_difference < 1e-10  # quick (Radau at rtol 1e-10): measured 1.4e-12 and 2.1e-12 rad
+    if scene == "drive_grasp":  # the self-locking hold: q held exactly from the turning point on the cup
+        held = [p for p in ref.solution.pieces if p.sol is None]
+        assert held and held[-1].t1 == pytest.approx(bench[1].scenes[scene].duration) and held[0].held[3:] == (0.0,) * 3
+    rows = [r for r in bench[2].scenes[scene] if r.family == FAMILY_PROJECT]
+    assert {r.method for r in rows} == set(project_methods()) | {AUTO, AUTO_WHOLE_RUN}
+    for r in rows:
+        if r.method == "rattle":
+            assert r.status == "refused" and "drive" in r.note, r
+            continue
+        assert r.status in ("ok", "refused", "diverged") and (r.ok or r.note), r  # a refusal says why
+        if r.ok:
+            assert finite(r), r
+    whole = next(r for r in rows if r.method == AUTO_WHOLE_RUN)
+    stepped = next(r for r in rows if r.method == AUTO and r.value == 1e-3)
+    assert whole.ok and whole.error == stepped.error < 1e-6, (whole, stepped)  # the same states, either way
 
 
 @pytest.mark.parametrize("scene", CONTACT_WP_SCENES)
