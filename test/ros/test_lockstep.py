@@ -23,6 +23,7 @@ from rclpy.qos import QoSProfile  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 
 from finger_sim.ros import conversions  # noqa: E402
+from finger_sim.ros.controller_main import AnswerPublisher  # noqa: E402
 from finger_sim.ros.pd_controller import KD, KP, MAX_TORQUE, pd_torque  # noqa: E402
 
 NODE = "finger_sim.ros.node"
@@ -35,6 +36,9 @@ LOCKSTEP_TIMEOUT_S = 30.0
 #: A busy process that competes for the cores during the runs.
 BURN = "import time\nend = time.monotonic() + 300\nwhile time.monotonic() < end: pass\n"
 RELIABLE = QoSProfile(depth=1000)
+#: lockstep_timeout of the silent-controller test, wall s: this test's own answers (a Python callback in a
+#: process spun only while it waits) must come within it, also on a loaded machine (0.1 s did not, always)
+SILENCE_TIMEOUT_S = 2.0
 
 
 def namespace(tag: str) -> str:
@@ -114,7 +118,9 @@ def test_joint_command_stamps_and_a_silent_controller(launcher, ros_client):
     controller stops answering, each state waits lockstep_timeout, then the held command goes on,
     /diagnostics counts it and turns WARN, and ~/command_log records each held step."""
     answers = {0: 0.01, 1: 0.02, 2: 0.03}  # state index → the effort answered
-    pub = ros_client.publisher(JointState, "/joint_command", RELIABLE)
+    # the first answer waits for its publisher to match the node's subscription, as a controller's does:
+    # the node can see this publisher (and send state 0) before the publisher knows the node's subscription
+    pub = AnswerPublisher(ros_client.publisher(JointState, "/joint_command", RELIABLE))
     states: list[JointState] = []
 
     def answer(msg: JointState) -> None:
@@ -128,7 +134,7 @@ def test_joint_command_stamps_and_a_silent_controller(launcher, ros_client):
     ros_client.node.create_subscription(JointState, "/joint_states", answer, RELIABLE)
     events = ros_client.collect(DiagnosticStatus, "/finger_node/command_log", RELIABLE)
     diagnostics = ros_client.collect(DiagnosticArray, "/diagnostics", RELIABLE)
-    launcher.node(NODE, dict(lockstep=True, lockstep_timeout=0.1, realtime_factor=0.0, command_qos="reliable",
+    launcher.node(NODE, dict(lockstep=True, lockstep_timeout=SILENCE_TIMEOUT_S, realtime_factor=0.0, command_qos="reliable",
                              command_timeout=0.0))
 
     def timeouts() -> int:
