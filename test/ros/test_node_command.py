@@ -80,7 +80,8 @@ def test_the_node_command_drives_a_running_node(launcher, ros_client):
         return False
 
     try:
-        ros_client.wait_for(lambda: ros_client.node.count_subscribers("/joint_states") >= 1, "echo's subscription")
+        ros_client.wait_for(lambda: ros_client.node.count_subscribers("/joint_states") >= 1, "echo's subscription",
+                            TIMEOUT_S)  # a process start: 20 s was not enough at load ~21
         ros_client.wait_for(echoed, "echo's three states", TIMEOUT_S)
         out, err = echo.communicate(timeout=TIMEOUT_S)
     finally:
