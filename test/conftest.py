@@ -11,6 +11,7 @@ rarely share one, and never with the ids used by hand (20-49). Discovery stays o
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import os
 import signal
@@ -268,15 +269,33 @@ class RosClient:
         rclpy.try_shutdown(context=self.context)
 
 
-@pytest.fixture
-def ros_domain(monkeypatch: pytest.MonkeyPatch) -> int:
-    """A DDS domain for this test alone; this process's environment is set for it too."""
-    domain = allocate_domain_id()
-    for key, value in ros_environment(domain).items():
+def join_domain(monkeypatch: pytest.MonkeyPatch, domain_id: int) -> None:
+    """This process's environment set for `domain_id` (loopback discovery), undone by `monkeypatch`."""
+    for key, value in ros_environment(domain_id).items():
         if os.environ.get(key) != value:
             monkeypatch.setenv(key, value)
     for key in ("ROS_LOCALHOST_ONLY", "ROS_STATIC_PEERS", "ROS_DISCOVERY_SERVER", "FASTRTPS_DEFAULT_PROFILES_FILE"):
         monkeypatch.delenv(key, raising=False)
+
+
+@contextlib.contextmanager
+def ros_client_on(domain_id: int) -> Iterator[RosClient]:
+    """A RosClient on `domain_id` where the function fixtures do not reach (a module fixture), with
+    this process's environment set for that domain while it lives."""
+    with pytest.MonkeyPatch.context() as monkeypatch:
+        join_domain(monkeypatch, domain_id)
+        client = RosClient(domain_id)
+        try:
+            yield client
+        finally:
+            client.close()
+
+
+@pytest.fixture
+def ros_domain(monkeypatch: pytest.MonkeyPatch) -> int:
+    """A DDS domain for this test alone; this process's environment is set for it too."""
+    domain = allocate_domain_id()
+    join_domain(monkeypatch, domain)
     return domain
 
 

@@ -101,6 +101,13 @@ class Finger:
         """Lockstep: some node publishes on one of this finger's command topics."""
         return any(e.handle.get_publisher_count() > 0 for e in self.inputs)
 
+    def outputs_matched(self, count_subscribers: Callable[[str], int]) -> bool:
+        """Lockstep: each of this finger's publishers has matched every subscription the ROS graph
+        (`count_subscribers(topic)`) knows on its topic. Discovery completes on each side apart: the
+        node can see a controller's command publisher before its own publishers know the controller's
+        subscriptions, and a volatile first state sent then is lost (the controller never answers it)."""
+        return all(e.handle.get_subscription_count() >= count_subscribers(e.topic) for e in self.outputs.values())
+
     def initial_torque(self) -> float:
         """The torque shown at step 0 of an episode: the script's at t = 0, or none."""
         return self.scene.torque(0.0) if self.scene_steps is not None else 0.0

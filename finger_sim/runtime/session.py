@@ -19,10 +19,11 @@ command publisher on every finger. realtime_factor is not used.
 What the adapter provides (the hooks below raise NotImplementedError here): `_publish(out, msg)`
 for every outgoing message, `_publish_clock(stamp)`, `_publish_diagnostics()`, `_event(finger,
 event, level)` for ~/command_log, `_log_parameter_change(params)`, `get_logger()` (info, warning
-with throttle_duration_sec, error, fatal), `_shutting_down()` and `_shutdown_errors` (the
+with throttle_duration_sec, error, fatal), `count_subscribers(topic)` (the ROS graph's count, for
+lockstep's first state), `_shutting_down()` and `_shutdown_errors` (the
 middleware's errors that mean a clean stop while shutting down). A finger is
 finger_sim.ros.finger.Finger, or anything with its attributes (sim, scene, spec, commands,
-inbox, step, reset, publish_state, has_controller, lockstep_timeouts).
+inbox, step, reset, publish_state, has_controller, outputs_matched, lockstep_timeouts).
 """
 
 from __future__ import annotations
@@ -64,6 +65,10 @@ JOIN_TIMEOUT_S = 5.0
 #: Lockstep: wall time between a controller's first command publisher showing up and the first
 #: state, so that discovery completes both ways and neither the state nor its answer is lost.
 LOCKSTEP_SETTLE_S = 0.5
+#: Lockstep: wall time after a controller showed up that the first state waits at most for the
+#: node's publishers to match every subscription the graph knows (one that never matches, e.g. of
+#: an incompatible QoS, then delays the start by this much, not for ever).
+LOCKSTEP_MATCH_TIMEOUT_S = 10.0
 #: Lockstep: how often the loop looks for a controller before the first state, wall s.
 LOCKSTEP_POLL_S = 0.01
 #: Slack of the float comparisons on the time grid (publish instants), in steps.
@@ -396,12 +401,16 @@ class SteppingSession:
     def _lockstep_turn(self) -> None:
         """Lockstep: step once every finger's command answering the published state has arrived,
         or lockstep_timeout wall s after it went out (then count it and hold the last command).
-        The first state goes out once a controller publishes on a command topic of every finger."""
+        The first state goes out once a controller publishes on a command topic of every finger, and
+        the fingers' publishers have matched the subscriptions the graph knows (LOCKSTEP_MATCH_TIMEOUT_S)."""
         if not self._lockstep_started:
             now = time.perf_counter()
             if self._controller_seen is None and all(f.has_controller() for f in self.fingers):
                 self._controller_seen = now
-            if self._controller_seen is None or now - self._controller_seen < LOCKSTEP_SETTLE_S:
+            waited = now - self._controller_seen if self._controller_seen is not None else None
+            if waited is None or waited < LOCKSTEP_SETTLE_S or (
+                    waited < LOCKSTEP_MATCH_TIMEOUT_S
+                    and not all(f.outputs_matched(self.count_subscribers) for f in self.fingers)):
                 self._sleep(LOCKSTEP_POLL_S)
                 return
             self._lockstep_started = True

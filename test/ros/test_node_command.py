@@ -68,30 +68,44 @@ def test_the_node_command_drives_a_running_node(launcher, ros_client):
 
     echo = subprocess.Popen([str(FINGER_SIM), "node", "echo", "/joint_states", "-n", "3"], env=launcher.env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    answers: list[str] = []
+
+    def echoed() -> bool:
+        """One more ~/step call (10 steps of 2 ms, one state) until echo has its three states and exits:
+        the node's publisher may match echo's subscription after the graph shows it (discovery
+        completes on each side apart), and a state sent before that does not reach echo."""
+        if echo.poll() is not None:
+            return True
+        answers.append(ok(node_here("step")).strip())
+        return False
+
     try:
-        ros_client.wait_for(lambda: ros_client.node.count_subscribers("/joint_states") >= 1, "echo's subscription")
-        answer = ok(node_here("step", 3))  # three ~/step calls: 30 steps of 2 ms
-        assert answer.strip() == "clock=0.06 time=0.06 step=30 episode=0", answer
+        ros_client.wait_for(lambda: ros_client.node.count_subscribers("/joint_states") >= 1, "echo's subscription",
+                            TIMEOUT_S)  # a process start: 20 s was not enough at load ~21
+        ros_client.wait_for(echoed, "echo's three states", TIMEOUT_S)
         out, err = echo.communicate(timeout=TIMEOUT_S)
     finally:
         echo.kill()
     assert echo.returncode == 0, err
+    assert answers[0] == "clock=0.02 time=0.02 step=10 episode=0", answers
+    assert [a.split()[2] for a in answers] == [f"step={10 * (k + 1)}" for k in range(len(answers))]
     documents = [yaml.safe_load(d) for d in out.split("---\n") if d.strip()]
-    assert [d["header"]["stamp"]["nanosec"] for d in documents] == [20_000_000, 40_000_000, 60_000_000]
+    stamps = [d["header"]["stamp"]["sec"] * 10**9 + d["header"]["stamp"]["nanosec"] for d in documents]
+    assert len(stamps) == 3 and stamps[0] % 20_000_000 == 0 and 0 < stamps[0] <= len(answers) * 20_000_000
+    assert stamps == [stamps[0], stamps[0] + 20_000_000, stamps[0] + 40_000_000]  # consecutive states, one per call
     state = documents[-1]
 
     sim = Simulator(load_scene(resolve_scene("finger_default")).with_overrides(dt=1.0 / RATE))
-    for _ in range(3 * STEPS_PER_TRIGGER):
+    for _ in range(stamps[-1] // 2_000_000):
         sim.step(TORQUE)
     p = sim.scene.params
-    assert state["header"]["stamp"] == {"sec": 0, "nanosec": 60_000_000}
     assert state["name"] == list(joints.JOINT_NAMES)
     assert state["position"] == list(joints.joint_positions(sim.q, kinematics.extended_pose(p), kinematics.distal_offset(p)))
     assert state["velocity"] == list(joints.joint_velocities(sim.v))
     assert state["effort"][0] == TORQUE
 
     clock = yaml.safe_load(ok(node_here("echo", "/clock", "-n", "1")).split("---")[0])
-    assert clock == {"clock": {"sec": 0, "nanosec": 60_000_000}}  # republished while paused
+    assert clock == {"clock": dict(zip(("sec", "nanosec"), divmod(len(answers) * 20_000_000, 10**9)))}  # republished while paused
 
     assert ok(node_here("set", "realtime_factor", "2")) == "realtime_factor = 2.0\n"
     refused = one_line_error(node_here("set", "physics_rate_hz", "100.0"))

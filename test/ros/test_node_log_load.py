@@ -10,7 +10,6 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
-import time
 from pathlib import Path
 
 import pytest
@@ -24,17 +23,15 @@ from std_srvs.srv import SetBool  # noqa: E402
 from finger_sim.cli import EXIT_INCOMPLETE  # noqa: E402
 from finger_sim.log import RECORDING_STATUS  # noqa: E402
 from finger_sim.log import writer_process  # noqa: E402
+from finger_sim.log.errors import LogFileError  # noqa: E402
 from finger_sim.log.reader import LogReader  # noqa: E402
 from finger_sim.ros import conversions  # noqa: E402
-from conftest import Launcher, allocate_domain_id, ros_environment, wait_until  # noqa: E402
+from conftest import WAIT_TIMEOUT, Launcher, allocate_domain_id, ros_client_on, ros_environment, wait_until  # noqa: E402
 from helpers import NODE, child_pids, run_cli, run_cli_here, wait_until_gone  # noqa: E402
 
 CONFIG = Path(__file__).resolve().parents[2] / "config"
 PAPER = CONFIG / "paper_flexion.yaml"
 DT_NS = 1_000_000
-#: Wall time the test waits while paused before the kill: longer than the recorder's 1 s
-#: wall-time bound on an open chunk.
-PAUSED_WAIT_S = 2.5
 #: Period of the commands sent while paused: they are logged on arrival, so the recorder never
 #: sits idle long enough for its idle flush.
 COMMAND_PERIOD_S = 0.1
@@ -61,10 +58,21 @@ def test_a_kill_after_a_pause_keeps_the_paused_second(launcher, ros_client, tmp_
     paused = ros_client.call(SetBool, "/finger_node/pause", SetBool.Request(data=True))
     assert paused.success, paused.message
     step = int(paused.message.split("step=")[1].split()[0])
-    end = time.monotonic() + PAUSED_WAIT_S
-    while time.monotonic() < end:  # a controller that goes on sending while the sim is paused
-        torque.publish(Float64(data=0.001))
-        ros_client.spin(COMMAND_PERIOD_S)
+    expected = [n * DT_NS for n in range(step + 1)]
+
+    def paused_second_on_disk() -> bool:
+        """Whether the file holds every state up to the pause: only the 1 s wall-time bound closes that
+        chunk (its sim-time interval is 60 s, and the commands keep the recorder from idling)."""
+        torque.publish(Float64(data=0.001))  # a controller that goes on sending while the sim is paused
+        try:
+            log = LogReader(the_log(tmp_path / "bags"))
+            return [conversions.from_time(m.msg.header.stamp) for m in log.messages("/joint_states")] == expected
+        except (ValueError, LogFileError):  # no file yet, or a record still being written
+            return False
+
+    # the event, not a wall time (a fixed 2.5 s wait here failed under load: the chunk closed later)
+    wait_until(paused_second_on_disk, WAIT_TIMEOUT, "the paused second on disk",
+               spin=lambda _: ros_client.spin(COMMAND_PERIOD_S))
     writers = child_pids(node.pid)
     node.send_signal(signal.SIGKILL)
     node.wait(10.0)
@@ -73,7 +81,7 @@ def test_a_kill_after_a_pause_keeps_the_paused_second(launcher, ros_client, tmp_
     log = LogReader(the_log(tmp_path / "bags"))
     assert log.truncated  # no summary: killed
     logged = [conversions.from_time(m.msg.header.stamp) for m in log.messages("/joint_states")]
-    assert logged == [n * DT_NS for n in range(step + 1)]
+    assert logged == expected
 
 
 def writer_pid(node_pid: int) -> int | None:
@@ -118,19 +126,24 @@ DROP_STEPS = 8000
 @pytest.fixture(scope="module")
 def loaded_runs(tmp_path_factory) -> dict[str, tuple[int, str, Path]]:
     """The two runs of a small queue, started at once (each only runs its scene to the end):
-    "fast" at realtime_factor 0, "drops" at 1 with its writer process stopped until the node
-    reports dropping. Kind → (exit status, output, log path)."""
+    "fast" at realtime_factor 0, "drops" at 1, started paused and resumed once its writer process is
+    stopped (until the node reports dropping). Kind → (exit status, output, log path)."""
     runs, launchers = {}, []
     try:
         for kind, steps, factor in (("fast", FAST_STEPS, 0.0), ("drops", DROP_STEPS, 1.0)):
             folder = tmp_path_factory.mktemp(kind)
             launchers.append(Launcher(ros_environment(allocate_domain_id()), folder))
             runs[kind] = (launchers[-1].node(NODE, dict(scene=str(scene_file(folder, steps / 1000)), torque_source="scene",
-                                                        realtime_factor=factor, record_queue_size=SMALL_QUEUE)), folder)
+                                                        realtime_factor=factor, record_queue_size=SMALL_QUEUE,
+                                                        start_paused=kind == "drops")), folder)
         node = runs["drops"][0]
         writer = wait_until(lambda: writer_pid(node.pid), 60.0, "the log's writer process")
         os.kill(writer, signal.SIGSTOP)  # a writer that cannot keep up: the pipe fills, then the queue
         try:
+            # resumed only now: started running, a loaded machine could run the whole scene while the
+            # writer started, leaving too few steps after the stop to fill the pipe (no drop in 60 s)
+            with ros_client_on(int(launchers[-1].env["ROS_DOMAIN_ID"])) as client:
+                assert client.call(SetBool, "/finger_node/pause", SetBool.Request(data=False), timeout=60.0).success
             wait_until(lambda: "dropping messages" in node.output(), 60.0, "the node's report of dropped messages")
         finally:
             os.kill(writer, signal.SIGCONT)
