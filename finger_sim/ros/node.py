@@ -92,8 +92,10 @@ PARAMETER_EVENTS = "/parameter_events"
 
 #: Characters of an rmw/rclpy error shown when the node cannot be created (it may echo the name).
 MAX_START_ERROR = 400
-#: At a clean exit, wall time granted to reliable subscribers to acknowledge the last messages.
-ACK_TIMEOUT_S = 1.0
+#: At a clean exit, wall time granted to reliable subscribers to acknowledge the last messages, in all:
+#: more than Fast DDS's heartbeat period (3 s by default), after which a writer sends again what a
+#: subscriber missed (a burst of states at realtime_factor 0 can overrun its socket).
+ACK_TIMEOUT_S = 4.0
 #: Exit status for a configuration that cannot start (a bad parameter, scene or method).
 EXIT_CONFIG = 2
 __all__ = ["EXIT_CONFIG", "EXIT_FAILED", "NODE_NAME", "FingerNode", "RunState", "SteppingNode", "main", "run", "spin_until_done"]
@@ -221,13 +223,16 @@ class SteppingNode(Node, BatchedStateOutput, SteppingSession):
         self._thread.start()
 
     def close(self) -> None:
-        """After stop(), at a clean exit: let reliable subscribers acknowledge the last messages."""
+        """After stop(), at a clean exit: let reliable subscribers acknowledge the last messages
+        (ACK_TIMEOUT_S in all); the topics some subscriber had not acknowledged are named in the log."""
         if not self.context.ok():
             return
-        timeout = Duration(seconds=ACK_TIMEOUT_S)
-        for out in self._endpoints():
-            if out.acked:
-                out.handle.wait_for_all_acked(timeout)
+        deadline = time.monotonic() + ACK_TIMEOUT_S
+        unacked = [out.topic for out in self._endpoints() if out.acked and not out.handle.wait_for_all_acked(
+            Duration(seconds=max(deadline - time.monotonic(), 0.0)))]
+        if unacked:
+            self.get_logger().warning(f"exit: not every reliable subscriber acknowledged the last messages of "
+                                      f"{', '.join(unacked)} within {ACK_TIMEOUT_S:g} s")
 
     def _loop(self) -> None:
         """The session's stepping loop, holding every publisher's use guard for its run: the
