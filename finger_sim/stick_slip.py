@@ -173,7 +173,7 @@ def advance(sim: Simulator, t0: float, t1: float, torque: TorqueFn) -> None:
             turn = _turn_event(sim, friction, t, q, v, t1, q1, v1, torque)
         else:  # the mesh's guards: turn (the friction's too), flank and current limit
             event = drive_stepping._first_event(sim, sim.system, t, q, v, t1, q1, v1, torque)
-            turn = None if event is None else (event.t, event.q, event.v)
+            turn = None if event is None else (event.t, *event.state)
             guard = drive_stepping.TURN if event is None else event.guard
         end, qe, ve = (t1, q1, v1) if turn is None else turn
         crossing = sim._first_crossing(t, q, v, end, qe, ve, torque) if sim._gaps else None
