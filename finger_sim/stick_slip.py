@@ -1,8 +1,8 @@
 """The stick–slip friction modes stepped inside the Simulator's fixed step (spec §7), beside its gap events.
 
 The pattern of the drive's stuck mesh (`finger_sim.actuators.stepping`) and of the rest on a stop:
-- sliding, the guard is direction·θ1' ≥ 0; where a step ends below −GUARD_TOLERANCE the turn is
-  located by Illinois regula falsi on the step's length. There θ1' = 0 and the holding test decides:
+- sliding, the guard is direction·θ1' ≥ 0; where a step ends below −`locate.GUARD_TOLERANCE` the turn
+  is located by Illinois regula falsi on the step's length (`locate.first_guard_crossing`). There θ1' = 0 and the holding test decides:
   `locked` (q fixed, q' = 0 exactly from then on) or sliding on towards the excess;
 - locked, q is fixed and q' = 0, so the holding margin Σ μ_s F_n,k |j_k| − |τ_h| is a function of
   time alone (the input): its root (brentq) is the breakaway, and the finger slides towards
@@ -41,7 +41,7 @@ from finger_sim.effects.friction_modes import FRICTION, LOCKED, SLIDING, STICK_S
 from finger_sim.errors import SimulationDiverged
 from finger_sim.integrators.base import TorqueFn
 from finger_sim.kinematics import Vec3
-from finger_sim.simulation.locate import illinois
+from finger_sim.simulation.locate import LOCATE_TOLERANCE, first_guard_crossing
 
 if TYPE_CHECKING:
     from finger_sim.dynamics import FingerSystem
@@ -50,11 +50,8 @@ if TYPE_CHECKING:
 
 LOG = logging.getLogger(__name__)
 ZERO: Vec3 = (0.0, 0.0, 0.0)
-#: The turn guard direction·θ1' counts as crossed below −GUARD_TOLERANCE, rad/s.
-GUARD_TOLERANCE = 1e-12
-#: A located turn (and a breakaway) is bracketed to this fraction of the step.
-LOCATE_TOLERANCE = 1e-13
-MAX_LOCATE_ITERATIONS = 100
+#: The sliding linkage's one guard, direction·θ1' (rad/s), one-sided: `locate.first_guard_crossing`.
+TURN_GUARD = (False,)
 #: Events (turns, breakaways, impacts, contact changes) allowed within one step before it is
 #: declared chattering.
 MAX_EVENTS_PER_STEP = 64  # room for a stop's Zeno series down to its rest (effects.stops.REST_HEIGHT)
@@ -173,7 +170,7 @@ def advance(sim: Simulator, t0: float, t1: float, torque: TorqueFn) -> None:
             turn = _turn_event(sim, friction, t, q, v, t1, q1, v1, torque)
         else:  # the mesh's guards: turn (the friction's too), flank and current limit
             event = drive_stepping._first_event(sim, sim.system, t, q, v, t1, q1, v1, torque)
-            turn = None if event is None else (event.t, event.q, event.v)
+            turn = None if event is None else (event.t, *event.state)
             guard = drive_stepping.TURN if event is None else event.guard
         end, qe, ve = (t1, q1, v1) if turn is None else turn
         crossing = sim._first_crossing(t, q, v, end, qe, ve, torque) if sim._gaps else None
@@ -312,16 +309,12 @@ def _release_time(sim: Simulator, friction: StickSlipContact, t: float, t1: floa
 def _turn_event(sim: Simulator, friction: StickSlipContact, t: float, q: Vec3, v: Vec3, t1: float, q1: Vec3,
                 v1: Vec3, torque: TorqueFn) -> tuple[float, Vec3, Vec3] | None:
     """(s, q, q') where the sliding linkage turns (direction·θ1' crosses 0) in (t, t1], the bracket's far
-    side (the guard crossed); None if the step ends on the near side. Illinois regula falsi."""
+    side (the guard crossed); None if the step ends on the near side (`locate.first_guard_crossing`)."""
     s_dir = friction.direction
-    gb = s_dir * v1[0]
-    if gb >= -GUARD_TOLERANCE:
-        return None
 
-    def at(s: float) -> tuple[float, tuple[Vec3, Vec3]]:
+    def at(_: int, s: float) -> tuple[float, tuple[Vec3, Vec3]]:
         qs, vs = sim._step(t, q, v, s - t, torque)
         return s_dir * vs[0], (qs, vs)
 
-    b, (qb, vb) = illinois(at, lambda g: g < 0.0, t, max(s_dir * v[0], 0.0), t1, gb, (q1, v1),
-                           width=LOCATE_TOLERANCE * (t1 - t), iterations=MAX_LOCATE_ITERATIONS)
-    return b, qb, vb
+    event = first_guard_crossing(TURN_GUARD, (s_dir * v[0],), (s_dir * v1[0],), at, t, t1, (q1, v1))
+    return None if event is None else (event.t, *event.state)

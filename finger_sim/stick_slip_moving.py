@@ -29,7 +29,7 @@ from finger_sim.effects.friction_modes import LOCKED, SLIDING, StickSlipContact
 from finger_sim.errors import SimulationDiverged
 from finger_sim.integrators.base import TorqueFn
 from finger_sim.kinematics import Vec3, assemble, dependent_rates
-from finger_sim.simulation.locate import illinois
+from finger_sim.simulation.locate import GUARD_TOLERANCE, LOCATE_TOLERANCE, MAX_LOCATE_ITERATIONS, illinois
 
 if TYPE_CHECKING:
     from finger_sim.simulate import Simulator
@@ -181,8 +181,6 @@ def _turn_event(sim: Simulator, friction: StickSlipContact, t: float, q: Vec3, v
                 v1: Vec3, torque: TorqueFn) -> tuple[float, Vec3, Vec3] | None:
     """(s, q, q') where the slip direction·(θ1' − ω) crosses 0 in (t, t1], the far side; None if the step
     ends on the near side. Illinois regula falsi, as `stick_slip._turn_event`."""
-    from finger_sim.stick_slip import GUARD_TOLERANCE, LOCATE_TOLERANCE, MAX_LOCATE_ITERATIONS
-
     s_dir = friction.direction
     gb = s_dir * (v1[0] - friction.stick_speed(t1, q1))
     if gb >= -GUARD_TOLERANCE:

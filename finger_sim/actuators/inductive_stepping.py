@@ -21,35 +21,26 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import TYPE_CHECKING, NamedTuple
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.optimize import brentq
 
 from finger_sim.actuators.drive import BACK, DRIVE, STUCK, ZERO, DrivenSystem, holding_margin
-from finger_sim.actuators.stepping import (FLANK, GAUSS_NODES, GAUSS_WEIGHTS, GUARD_TOLERANCE, LIMIT, LOCATE_TOLERANCE,
-                                           MAX_EVENTS_PER_STEP, MAX_LOCATE_ITERATIONS, TURN, EnergyLedger,
-                                           crossing_test)
+from finger_sim.actuators.stepping import (FLANK, GAUSS_NODES, GAUSS_WEIGHTS, GUARDS_TWO_SIDED, MAX_EVENTS_PER_STEP,
+                                           TURN, EnergyLedger)
 from finger_sim.effects.friction_modes import LOCKED, SLIDING, StickSlipContact
 from finger_sim.errors import SimulationDiverged
 from finger_sim.integrators.base import TorqueFn
 from finger_sim.integrators.stateful import StatefulRungeKutta
 from finger_sim.kinematics import Vec3
-from finger_sim.simulation.locate import illinois
+from finger_sim.simulation.locate import LOCATE_TOLERANCE, GuardCrossing, first_guard_crossing
 
 if TYPE_CHECKING:
     from finger_sim.simulation.driver import Simulator
 
 #: (q, q', i) at a time: rad, rad/s, A.
 Trial = Callable[[float, Vec3, Vec3, float, float], tuple[Vec3, Vec3, float]]
-
-
-class _Event(NamedTuple):
-    t: float
-    q: Vec3
-    v: Vec3
-    i: float
-    guard: int
 
 
 def start(sim: Simulator) -> None:
@@ -97,7 +88,7 @@ def advance(sim: Simulator, t0: float, t1: float, u_fn: TorqueFn) -> None:
                 continue
         q1, v1, i1 = trial(t, q, v, i, t1)
         event = _first_event(system, t, (q, v, i), t1, (q1, v1, i1), u_fn, trial)
-        end, qe, ve, ie = (t1, q1, v1, i1) if event is None else (event.t, event.q, event.v, event.i)
+        end, qe, ve, ie = (t1, q1, v1, i1) if event is None else (event.t, *event.state)
         crossing = None
         if sim._gaps and drive.mode != STUCK:
             integ.begin(q, v, (i,))  # type: ignore[attr-defined]
@@ -244,34 +235,16 @@ def _guards(system: DrivenSystem, t: float, q: Vec3, v: Vec3, i: float, u: float
 
 
 def _first_event(system: DrivenSystem, t: float, x0: tuple[Vec3, Vec3, float], t1: float,
-                 x1: tuple[Vec3, Vec3, float], u_fn: TorqueFn, trial: Trial) -> _Event | None:
-    """The earliest guard crossing of the step (t, x0) → (t1, x1), located; None if none."""
-    g0 = _guards(system, t, *x0, u_fn(t))
-    g1 = _guards(system, t1, *x1, u_fn(t1))
-    first: _Event | None = None
-    for k in (TURN, FLANK, LIMIT):
-        crossed = (g0[k] < 0.0) != (g1[k] < 0.0) if k == LIMIT else g1[k] < -GUARD_TOLERANCE
-        if not crossed:
-            continue
-        event = _locate(system, k, t, x0, t1, g0[k] if k == LIMIT else max(g0[k], 0.0), (g1[k], *x1), u_fn, trial)
-        if first is None or event.t < first.t:
-            first = event
-    return first
-
-
-def _locate(system: DrivenSystem, k: int, t: float, x0: tuple[Vec3, Vec3, float], t1: float, ga: float,
-            hi: tuple[float, Vec3, Vec3, float], u_fn: TorqueFn, trial: Trial) -> _Event:
-    """Where guard k crosses in (t, t1]: Illinois regula falsi on the step's length (`locate.illinois`).
-    Returns the bracket's far side (the guard crossed)."""
-    gb, *far = hi
-
-    def at(s: float) -> tuple[float, tuple[Vec3, Vec3, float]]:
+                 x1: tuple[Vec3, Vec3, float], u_fn: TorqueFn, trial: Trial) -> GuardCrossing | None:
+    """The earliest guard crossing of the step (t, x0) → (t1, x1), located (state (q, q', i) there);
+    None if none."""
+    def at(k: int, s: float) -> tuple[float, tuple[Vec3, Vec3, float]]:
         x = trial(t, *x0, s)
         return _guards(system, s, *x, u_fn(s))[k], x
 
-    s, (qs, vs, i_s) = illinois(at, crossing_test(k, ga), t, ga, t1, gb, tuple(far),
-                                width=LOCATE_TOLERANCE * (t1 - t), iterations=MAX_LOCATE_ITERATIONS)
-    return _Event(s, qs, vs, i_s, k)
+    g0 = _guards(system, t, *x0, u_fn(t))
+    g1 = _guards(system, t1, *x1, u_fn(t1))
+    return first_guard_crossing(GUARDS_TWO_SIDED, g0, g1, at, t, t1, x1)
 
 
 def _rest(sim: Simulator, t: float, t1: float, q: Vec3, i: float, u_fn: TorqueFn) -> tuple[float, float, bool]:

@@ -21,7 +21,7 @@ from collections.abc import Callable
 import math
 from contextlib import nullcontext
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, NamedTuple
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.optimize import brentq
@@ -31,22 +31,21 @@ from finger_sim.actuators.drive import BACK, DRIVE, STUCK, ZERO, DrivenSystem, h
 from finger_sim.errors import ConfigError, SimulationDiverged
 from finger_sim.integrators.base import TorqueFn
 from finger_sim.kinematics import Vec3
-from finger_sim.simulation.locate import illinois
+from finger_sim.simulation.locate import GUARD_TOLERANCE  # noqa: F401  (read here by the compiled guards' tests)
+from finger_sim.simulation.locate import LOCATE_TOLERANCE, GuardCrossing, first_guard_crossing
 
 if TYPE_CHECKING:
     from finger_sim.simulation.driver import Simulator
 
-#: A one-sided guard (turn, flank) counts as crossed below −GUARD_TOLERANCE (rad/s, N·m).
-GUARD_TOLERANCE = 1e-12
-#: A located guard crossing is bracketed to this fraction of the step.
-LOCATE_TOLERANCE = 1e-13
-MAX_LOCATE_ITERATIONS = 100
 #: Events (mode changes, kinks, impacts) allowed within one step before it is declared chattering.
 MAX_EVENTS_PER_STEP = 64  # room for a stop's Zeno series down to its rest (effects.stops.REST_HEIGHT)
 #: 3-point Gauss–Legendre nodes and weights on [0, 1] (exact for polynomials of degree 5).
 GAUSS_NODES = (0.5 - math.sqrt(15.0) / 10.0, 0.5, 0.5 + math.sqrt(15.0) / 10.0)
 GAUSS_WEIGHTS = (5.0 / 18.0, 8.0 / 18.0, 5.0 / 18.0)
 TURN, FLANK, LIMIT = 0, 1, 2
+#: The rolling mesh's guards by index, declared for `locate.first_guard_crossing`: turn and flank are
+#: one-sided (the mode's conditions), the current limit two-sided (a kink, no mode change).
+GUARDS_TWO_SIDED = tuple(k == LIMIT for k in (TURN, FLANK, LIMIT))
 #: Methods that cannot step a drive scene: rattle takes Q and M apart (not the mesh's accelerations).
 UNSUPPORTED_METHODS = ("rattle",)
 #: auto's choices on a drive scene when its own is unsupported, in order: explicit (the table's usual
@@ -82,13 +81,6 @@ class EnergyLedger:
             magnetic = system.magnetic_energy(currents[1]) - system.magnetic_energy(currents[0])
             out["magnetic_energy_change"], out["residual"] = magnetic, residual - magnetic
         return out
-
-
-class _Event(NamedTuple):
-    t: float
-    q: Vec3
-    v: Vec3
-    guard: int
 
 
 _compiled_guards = None  # finger_sim.kernel.drive.drive_guards, once a compiled Simulator starts
@@ -193,7 +185,7 @@ def advance(sim: Simulator, t0: float, t1: float, u_fn: TorqueFn) -> None:
                 return
         q1, v1 = sim._step(t, q, v, t1 - t, u_fn)
         event = _first_event(sim, system, t, q, v, t1, q1, v1, u_fn)
-        end, qe, ve = (t1, q1, v1) if event is None else (event.t, event.q, event.v)
+        end, qe, ve = (t1, q1, v1) if event is None else (event.t, *event.state)
         crossing = sim._first_crossing(t, q, v, end, qe, ve, u_fn) if sim._gaps else None
         if crossing is not None:  # a stop or a contact change first: the mode guards are checked again after it
             end, qe, ve = crossing.t, crossing.q, crossing.v
@@ -298,46 +290,16 @@ def _guards(system: DrivenSystem, t: float, q: Vec3, v: Vec3, u: float) -> tuple
 
 
 def _first_event(sim: Simulator, system: DrivenSystem, t: float, q: Vec3, v: Vec3, t1: float, q1: Vec3, v1: Vec3,
-                 u_fn: TorqueFn) -> _Event | None:
-    """The earliest guard crossing of the step (t, q, q') → (t1, q1, q1'), located; None if none."""
-    g0 = _guards(system, t, q, v, u_fn(t))
-    g1 = _guards(system, t1, q1, v1, u_fn(t1))
-    first: _Event | None = None
-    for k in (TURN, FLANK, LIMIT):
-        if k == LIMIT:
-            crossed = (g0[k] < 0.0) != (g1[k] < 0.0)
-        else:
-            crossed = g1[k] < -GUARD_TOLERANCE
-        if not crossed:
-            continue
-        event = _locate(sim, system, k, t, q, v, t1, max(g0[k], 0.0) if k != LIMIT else g0[k], (g1[k], q1, v1), u_fn)
-        if first is None or event.t < first.t:
-            first = event
-    return first
-
-
-def _locate(sim: Simulator, system: DrivenSystem, k: int, t: float, q: Vec3, v: Vec3, t1: float, ga: float,
-            hi: tuple[float, Vec3, Vec3], u_fn: TorqueFn) -> _Event:
-    """Where guard k crosses in (t, t1]: Illinois regula falsi on the step's length (`locate.illinois`).
-    Returns the bracket's far side (the guard crossed), so that the rest of the step does not see it again."""
-    gb, qb, vb = hi
-
-    def at(s: float) -> tuple[float, tuple[Vec3, Vec3]]:
+                u_fn: TorqueFn) -> GuardCrossing | None:
+    """The earliest mesh guard crossing of the step (t, q, q') → (t1, q1, q1'), located (state (q, q')
+    there); None if none."""
+    def at(k: int, s: float) -> tuple[float, tuple[Vec3, Vec3]]:
         qs, vs = sim._step(t, q, v, s - t, u_fn)
         return _guards(system, s, qs, vs, u_fn(s))[k], (qs, vs)
 
-    s, (qs, vs) = illinois(at, crossing_test(k, ga), t, ga, t1, gb, (qb, vb),
-                           width=LOCATE_TOLERANCE * (t1 - t), iterations=MAX_LOCATE_ITERATIONS)
-    return _Event(s, qs, vs, k)
-
-
-def crossing_test(k: int, ga: float) -> Callable[[float], bool]:
-    """Whether guard k's value has crossed: a one-sided guard (turn, flank) below 0, the limit to the
-    other side than its start value ga."""
-    if k != LIMIT:
-        return lambda g: g < 0.0
-    side = ga < 0.0
-    return lambda g: (g < 0.0) != side
+    g0 = _guards(system, t, q, v, u_fn(t))
+    g1 = _guards(system, t1, q1, v1, u_fn(t1))
+    return first_guard_crossing(GUARDS_TWO_SIDED, g0, g1, at, t, t1, (q1, v1))
 
 
 def _release_time(system: DrivenSystem, t: float, t1: float, q: Vec3, u_fn: TorqueFn) -> float | None:

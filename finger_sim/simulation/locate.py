@@ -3,21 +3,71 @@
 Both are plain functions of floats and callables: the Simulator's gap events, the drive's mesh
 guards (`actuators.stepping`, `actuators.inductive_stepping`) and the stick–slip turn all locate
 their crossings with them; the compiled event checks compile `predicted_crossing` itself
-(`kernel.event_checks`).
+(`kernel.event_checks`). `first_guard_crossing` is the one loop over an element's declared mode
+guards that finds the earliest one a step crosses.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import TypeVar
+from typing import NamedTuple, TypeVar
 
 #: A gap crossing (a stop) is located to this tolerance on the gap (rad for the MCP stops);
 #: a gap counts as closed below −EVENT_TOLERANCE.
 EVENT_TOLERANCE = 1e-12
 
+#: A one-sided mode guard counts as crossed below −GUARD_TOLERANCE (its units: rad/s, N·m, ...).
+GUARD_TOLERANCE = 1e-12
+#: A located mode guard crossing is bracketed to this fraction of the step.
+LOCATE_TOLERANCE = 1e-13
+MAX_LOCATE_ITERATIONS = 100
+
 #: What a trial step returns besides the guard's value: the state at the trial time (opaque here).
 Payload = TypeVar("Payload")
+
+
+class GuardCrossing(NamedTuple):
+    """A located mode guard crossing: its time (s), the state there (the trial step's payload) and
+    the guard's index in its owner's declaration."""
+
+    t: float
+    state: tuple
+    guard: int
+
+
+def first_guard_crossing(two_sided: tuple[bool, ...], g0: tuple[float, ...], g1: tuple[float, ...],
+                         at: Callable[[int, float], tuple[float, tuple]], a: float, b: float,
+                         far: tuple) -> GuardCrossing | None:
+    """The earliest crossing of a step's mode guards in (a, b], located; None if the step crosses none.
+
+    The guards are declared by `two_sided` (one entry per guard, ≥ 0 while its mode holds): a
+    one-sided guard (a mode's condition) crosses where its end value g1 is below −GUARD_TOLERANCE,
+    located from max(g0, 0); a two-sided one (a kink, no mode change) where g0 and g1 lie on
+    opposite sides of 0. g0, g1: the guards at a and b (s); `far` the state at b; at(k, s) →
+    (guard k at s, state at s) takes a trial step. Each crossing is located by `illinois` to
+    LOCATE_TOLERANCE of the step, on the bracket's far side (the guard crossed).
+    """
+    first: GuardCrossing | None = None
+    for k, both in enumerate(two_sided):
+        crossed = (g0[k] < 0.0) != (g1[k] < 0.0) if both else g1[k] < -GUARD_TOLERANCE
+        if not crossed:
+            continue
+        ga = g0[k] if both else max(g0[k], 0.0)
+        s, state = illinois(lambda s, k=k: at(k, s), crossing_test(both, ga), a, ga, b, g1[k], far,
+                            width=LOCATE_TOLERANCE * (b - a), iterations=MAX_LOCATE_ITERATIONS)
+        if first is None or s < first.t:
+            first = GuardCrossing(s, state, k)
+    return first
+
+
+def crossing_test(two_sided: bool, ga: float) -> Callable[[float], bool]:
+    """Whether a guard's value has crossed: a one-sided guard below 0, a two-sided one to the other
+    side than its start value ga."""
+    if not two_sided:
+        return lambda g: g < 0.0
+    side = ga < 0.0
+    return lambda g: (g < 0.0) != side
 
 
 def illinois(at: Callable[[float], tuple[float, Payload]], crossed: Callable[[float], bool], a: float, ga: float,
