@@ -1,10 +1,11 @@
 """The slow corners' costs, side by side in one run: building a Simulator, importing the simulator.
 
-    python -m finger_sim.bench.setup_bench [--repeats 200]
+    python -m finger_sim.bench.setup_bench [--repeats 200] [--scenes all | NAME ...] [--no-import]
 
 - `Simulator(scene)` of a scene seen before (its set-up kept: `simulation.setup.setup_for`) against one
   never seen (a new spring stiffness each time: method choice, fastest mode, stability check,
-  compiled plan), per shipped scene; medians, µs of CPU.
+  compiled plan), per scene (names under config/ without .yaml, e.g. `friction/hold_table`; `all`:
+  every shipped scene); medians, µs of CPU.
 - `import finger_sim.simulate` in a fresh interpreter, and the same followed by
   `import scipy.integrate` (what it imported before), medians of 5, ms of wall time.
 """
@@ -24,6 +25,9 @@ from finger_sim.sweep import set_key
 
 CONFIG = Path(__file__).resolve().parents[2] / "config"
 SCENES = ("paper_flexion", "paper_to_stop", "grasp_cylinder", "stiff_spring")
+#: The folders of shipped scenes (config/finger_node.yaml holds the node's parameters, not a scene).
+SCENE_DIRS = (".", "hard", "friction")
+NOT_SCENES = frozenset({"finger_node"})
 IMPORT_REPEATS = 5
 #: Relative change of the spring that makes each "never seen" scene new.
 SPRING_STEP = 1e-9
@@ -47,14 +51,23 @@ def _import_ms(code: str) -> float:
     return 1e3 * statistics.median(samples)
 
 
+def shipped_scenes() -> tuple[str, ...]:
+    """Every shipped scene's name, relative to config/ without .yaml (`hard/chatter_wall`)."""
+    return tuple(str((CONFIG / d / path.name).relative_to(CONFIG).with_suffix(""))
+                 for d in SCENE_DIRS for path in sorted((CONFIG / d).glob("*.yaml")) if path.stem not in NOT_SCENES)
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=200)
+    ap.add_argument("--scenes", nargs="+", default=list(SCENES), help="names under config/, or all")
+    ap.add_argument("--no-import", action="store_true", help="leave out the import timings")
     args = ap.parse_args(argv)
+    names = shipped_scenes() if args.scenes == ["all"] else args.scenes
     print(f"# {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; medians of {args.repeats}")
     print("| scene | `Simulator(scene)` never seen, µs CPU | seen before, µs CPU | ratio |")
     print("|---|---:|---:|---:|")
-    for name in SCENES:
+    for name in names:
         scene = load_scene(CONFIG / f"{name}.yaml")
         Simulator(scene)
         data = scene.to_dict()
@@ -65,6 +78,8 @@ def main(argv: list[str] | None = None) -> None:
         new = _cpu_us(lambda i: Simulator(fresh[i]), len(fresh))
         seen = _cpu_us(lambda i: Simulator(scene), args.repeats)
         print(f"| {name} | {new:.0f} | {seen:.1f} | {new / seen:.0f}× |")
+    if args.no_import:
+        return
     lean = _import_ms("import finger_sim.simulate")
     full = _import_ms("import finger_sim.simulate; import scipy.integrate")
     print(f"\n`import finger_sim.simulate`: {lean:.0f} ms; with `import scipy.integrate` after it: {full:.0f} ms "

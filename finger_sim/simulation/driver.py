@@ -28,8 +28,8 @@ from finger_sim.scene import Scene
 from finger_sim.simulation import actuated, actuated_events, crossings, event_step, gap_screen, impact
 from finger_sim.simulation.crossings import Crossing, Gap
 from finger_sim.simulation.impact import FREE, REST_MODE, RESTING
-from finger_sim.simulation.setup import hashable, setup_for
-from finger_sim.state_layout import ModeValues, OwnModes, StateLayout, layout_of
+from finger_sim.simulation.setup import for_simulator
+from finger_sim.state_layout import ModeValues, StateLayout, layout_of
 from finger_sim.stepper_slot import BREAKPOINT
 from finger_sim.tip_force_profile import refuse_profile
 
@@ -69,11 +69,8 @@ class Simulator:
         effects = tuple(EFFECTS.values())
         if actuator is not None:  # its integrator and kernel are chosen below (`simulation.actuated`)
             requested, kernel = kernel, "python"
-        # a drive holds its mesh mode: each Simulator of a drive scene builds its own system
-        cached = hashable(scene) and scene.drive is None and not stick_slip.in_scene(scene)  # nor a friction mode
-        setup = setup_for(scene, kernel, effects) if cached else setup_for.__wrapped__(scene, kernel, effects)
-        if cached and any(isinstance(e, OwnModes) for e in setup.system.elements):  # bound to this run's modes
-            setup = setup_for.__wrapped__(scene, kernel, effects)
+        # a drive's mesh mode, a friction mode: a system holding run state is this Simulator's own
+        setup = for_simulator(scene, kernel, effects)
         self.system, self.dt, self.method, self.method_reason = setup.system, scene.dt, setup.method, setup.reason
         #: steps in contact (or closing a contact within the step) are split in this many (auto only)
         self.substeps = setup.substeps

@@ -3,6 +3,8 @@
 The method (auto resolved), the stability check, the integrator class on the chosen kernel, the
 non-smooth elements' gaps (`simulation.crossings.Gap`) and the compiled fast path; a frozen value,
 so one scene's Simulators share it (`setup_for`, an LRU cache: a node's resets, a rollout's rows).
+A system that holds run state (a drive's mesh mode, a stick–slip contact's friction mode) is built
+anew for each Simulator (`for_simulator`), the rest of the set-up kept.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from finger_sim.errors import StabilityError
 from finger_sim.integrators import METHODS, Integrator
 from finger_sim.scene import AUTO, Scene
 from finger_sim.simulation.crossings import Gap
+from finger_sim.state_layout import OwnModes
 from finger_sim.stability import CONTACT_RESOLUTION, fastest_mode, has_contact, largest_stable_dt, mcp_range, stable_at
 
 #: Scenes whose Simulator set-up is kept (`setup_for`): a node's resets, a rollout's rows, a test's reruns.
@@ -43,6 +46,8 @@ class Setup(NamedTuple):
     gap_elements: tuple[tuple[ForceElement, tuple[int, ...]], ...]
     depth_sources: tuple[tuple[int, float], ...]
     fast_stepper: object  # kernel.integrators.FastStepper | None
+    #: the system holds run state (a drive, an element with its own modes): each Simulator builds its own
+    own_system: bool
 
 
 def hashable(scene: Scene) -> bool:
@@ -52,6 +57,35 @@ def hashable(scene: Scene) -> bool:
     except TypeError:
         return False
     return True
+
+
+def for_simulator(scene: Scene, kernel: str, effects: tuple[Effect, ...]) -> Setup:
+    """The set-up of one Simulator of `scene`: the kept one (`setup_for`), with a system of its own
+    where the system holds run state (`rebound`); built whole for a scene that cannot key the cache."""
+    if not hashable(scene):
+        return setup_for.__wrapped__(scene, kernel, effects)
+    setup = setup_for(scene, kernel, effects)
+    return rebound(setup, scene) if setup.own_system else setup
+
+
+def rebound(setup: Setup, scene: Scene) -> Setup:
+    """`setup` on a fresh system of `scene`: its gaps, gap groups and depth gaps on the new elements
+    (each at its position in `system.elements`), the method, checks and classes kept."""
+    system = scene.build_system()
+    old = {id(e): k for k, e in enumerate(setup.system.elements)}
+    depth = depth_limit(system.elements, scene.phalanx_radius) if setup.depth_sources else None
+
+    def moved(gap: Gap) -> Gap:
+        k = old.get(id(gap.element))
+        return Gap(depth if k is None else system.elements[k], gap.index, gap.restitution)  # type: ignore[arg-type]
+
+    gaps = tuple(map(moved, setup.gaps))
+    kinks = tuple(gap for gap in gaps if gap.restitution is None) if setup.kinks else ()
+    gap_elements = tuple((system.elements[old[id(e)]], indices) for e, indices in setup.gap_elements)
+    fast_stepper = setup.fast_stepper
+    if fast_stepper is not None:  # bound to the system it was planned on
+        fast_stepper = stepper_slot.kernel().fast_stepper(setup.integrator_cls(system), scene.dt, scene.torque)
+    return setup._replace(system=system, gaps=gaps, kinks=kinks, gap_elements=gap_elements, fast_stepper=fast_stepper)
 
 
 @functools.lru_cache(maxsize=SETUP_CACHE_SIZE)
@@ -66,7 +100,8 @@ def setup_for(scene: Scene, kernel: str, effects: tuple[Effect, ...]) -> Setup:
     substeps = 1
     options: dict[str, float] = {}
     inductive = getattr(system, "drive", None) is not None and system.drive.inductive
-    if method == AUTO and (inductive or not stick_slip.in_scene(scene)):  # stick–slip: see below
+    friction = stick_slip.in_scene(scene)
+    if method == AUTO and (inductive or not friction):  # stick–slip: see below
         method, reason = choose_method(scene)
         if (method == ERROR_CONTROLLED and getattr(system, "drive", None) is None
                 and stepper_slot.kernel().model_array(system) is None):
@@ -75,7 +110,7 @@ def setup_for(scene: Scene, kernel: str, effects: tuple[Effect, ...]) -> Setup:
         method, reason = drive_stepping.drive_method(method, reason, scene.method == AUTO,
                                                      lambda name: stable_under_auto(scene, system, name),
                                                      system.drive.inductive)
-    if scene.method == AUTO and stick_slip.in_scene(scene) and not inductive:  # dop853, restarted at every mode change
+    if scene.method == AUTO and friction and not inductive:  # dop853, restarted at every mode change
         method, reason, options, substeps = stick_slip.auto_method(scene)
     elif scene.method == AUTO:
         options = integrator_options(scene, method)
@@ -111,8 +146,9 @@ def setup_for(scene: Scene, kernel: str, effects: tuple[Effect, ...]) -> Setup:
     fast_stepper = None
     if hasattr(integrator_cls, "step_plan") and not gaps and getattr(system, "drive", None) is None:
         fast_stepper = stepper_slot.kernel().fast_stepper(integrator_cls(system), scene.dt, scene.torque)
+    own_system = getattr(system, "drive", None) is not None or any(isinstance(e, OwnModes) for e in system.elements)
     return Setup(system, method, reason, substeps, options, method_cls, integrator_cls, kernel_name, gaps, kinks,
-                  gap_elements, depth_sources, fast_stepper)
+                 gap_elements, depth_sources, fast_stepper, own_system)
 
 
 def stable_under_auto(scene: Scene, system: FingerSystem, name: str) -> bool:

@@ -13,8 +13,12 @@ from pathlib import Path
 
 import numpy as np
 
+import pytest
+
+from finger_sim.depth_guard import DepthLimit
 from finger_sim.scene import load_scene
 from finger_sim.simulate import Simulator, simulate
+from finger_sim.simulation.setup import setup_for
 
 CONFIG = Path(__file__).resolve().parents[2] / "config"
 TOLERANCE = 1e-12  # rad
@@ -38,6 +42,36 @@ def test_a_scene_seen_before_shares_its_set_up_but_not_its_state():
     assert second.q == first.q and second.v == first.v
     reference = simulate(scene, kernel="python")  # the readable path, no compiled set-up shared
     np.testing.assert_allclose(first.q, reference.q[150], rtol=0, atol=TOLERANCE)
+
+
+def _own_elements(sim: Simulator) -> bool:
+    """Whether every gap of `sim` is on its own system's elements (a depth gap: on its contact)."""
+    return all(any((g.element.contact if isinstance(g.element, DepthLimit) else g.element) is e
+                   for e in sim.system.elements) for g in sim._gaps)
+
+
+@pytest.mark.parametrize("name", ["friction/hold_table", "drive_grasp"])
+def test_a_scene_whose_system_holds_run_state_shares_the_set_up_but_builds_its_own_system(name):
+    # a friction mode, a drive's mesh mode: state of the system, so each Simulator needs its own
+    scene = load_scene(CONFIG / f"{name}.yaml")
+    steps = 300
+    setup_for.cache_clear()
+    uncached = Simulator(scene)  # its set-up computed for it
+    start_modes = uncached.modes
+    for _ in range(steps):
+        uncached.step()
+    assert uncached.modes != start_modes  # the run changes a mode: the state that must not be shared
+    first, second = Simulator(scene), Simulator(scene)  # both from the kept set-up
+    assert setup_for.cache_info().hits >= 2
+    assert first.system is not second.system and first.system is not uncached.system
+    assert _own_elements(first) and _own_elements(second) and len(first._gaps) == len(uncached._gaps) > 0
+    assert first._integrator_cls is second._integrator_cls and first.method == uncached.method
+    for _ in range(steps):
+        first.step()
+    assert second.step_index == 0 and second.q == scene.initial_state()[0] and second.modes == start_modes
+    for _ in range(steps):
+        second.step()
+    assert (first.q, first.v, first.modes) == (second.q, second.v, second.modes) == (uncached.q, uncached.v, uncached.modes)
 
 
 def test_importing_the_simulator_leaves_scipy_integrate_until_a_method_needs_it():
