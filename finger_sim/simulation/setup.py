@@ -50,21 +50,13 @@ class Setup(NamedTuple):
     own_system: bool
 
 
-def hashable(scene: Scene) -> bool:
-    """Whether the scene can key the set-up cache (a scene holding a mutable value cannot)."""
-    try:
-        hash(scene)
-    except TypeError:
-        return False
-    return True
-
-
 def for_simulator(scene: Scene, kernel: str, effects: tuple[Effect, ...]) -> Setup:
     """The set-up of one Simulator of `scene`: the kept one (`setup_for`), with a system of its own
     where the system holds run state (`rebound`); built whole for a scene that cannot key the cache."""
-    if not hashable(scene):
+    try:
+        setup = setup_for(scene, kernel, effects)
+    except TypeError:  # a scene holding a mutable value cannot key the cache (hashing it once: ~2 µs)
         return setup_for.__wrapped__(scene, kernel, effects)
-    setup = setup_for(scene, kernel, effects)
     return rebound(setup, scene) if setup.own_system else setup
 
 
