@@ -172,16 +172,17 @@ class Contact:
 
         J_p has two non-zero columns, returned as vectors j1 = ∂p/∂θ1 and j3 = ∂p/∂θ3 (m/rad).
         """
-        block = self._block
-        if self._moving_slots:
-            shift = {i: m.offset(t) for i, m in enumerate(self._motions) if m is not None}
-            moved = list(block)
-            for j, i in self._moving_slots:
-                moved[j] += shift[i][0]
-                moved[j + 1] += shift[i][1]
-            block = tuple(moved)
-        found = walk_candidates(block, 0, q[0], q[2], all_candidates, [], all_candidates)
-        return [(*self._owners[i], *geometry) for i, geometry in found]
+        return walk_candidates(self._block_at(t) if self._moving_slots else self._block, 0, q[0], q[2],
+                               all_candidates, [], (all_candidates, self._owners))
+
+    def _block_at(self, t: float) -> list[float]:
+        """The block with the moving objects where they are at t (s)."""
+        shift = [m.offset(t) if m is not None else None for m in self._motions]
+        block = list(self._block)
+        for j, i in self._moving_slots:
+            block[j] += shift[i][0]
+            block[j + 1] += shift[i][1]
+        return block
 
     def _forces(self, hit: _Hit, v: Vec3, t: float = 0.0) -> tuple[float, float, float]:
         """(F_n, Fx, Fy), N, of one candidate in contact: Hunt–Crossley normal force plus friction.

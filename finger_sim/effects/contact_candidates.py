@@ -31,10 +31,12 @@ COUNTS = 8
 HEADER = COUNTS + 4
 
 
-def collect_hit(acc: list, every: bool, i: int, geometry: Geometry) -> list:  # type: ignore[type-arg]
-    """Appends (i, geometry) of candidate number i to acc where δ > 0, or always when `every`."""
+def collect_hit(acc: list, ctx: tuple, i: int, geometry: Geometry) -> list:  # type: ignore[type-arg]
+    """Appends (*owners[i], *geometry) of candidate number i to acc where δ > 0, or always when `every`;
+    ctx = (every, owners), owners[i] what names candidate i (`Contact`: its phalanx and object index)."""
+    every, owners = ctx
     if geometry[0] > 0.0 or every:
-        acc.append((i, geometry))
+        acc.append((*owners[i], *geometry))
     return acc
 
 
@@ -53,32 +55,32 @@ def walk_candidates(p: Sequence[float], o: int, q0: float, q2: float, every: boo
     bx, by = r1 * c1, r1 * s1
     ux = uy = 0.0
     have_u = False
+    size_p, size_d, size_j, size_t = RECORD_SIZE
     j = o + HEADER
     i = 0
-    for kind in range(4):
-        for _ in range(int(p[o + COUNTS + kind])):
-            if kind == PROXIMAL_CIRCLE:
-                geometry = proximal_circle(p[j], p[j + 1], p[j + 2], r1, bx, by, s1, c1)
-            elif kind == JOINT_PLANE:
-                geometry = joint_plane(p[j], p[j + 1], p[j + 2], p[j + 3], p[j + 4], bx, by)
-            else:
-                if kind == DISTAL_CIRCLE:
-                    dx, dy = p[j] - bx, p[j + 1] - by
-                    reached = every or not dx * dx + dy * dy > p[j + 3]
-                else:
-                    reached = every or not p[j + 2] * (bx - p[j]) + p[j + 3] * (by - p[j + 1]) - p[j + 5] >= 0.0
-                if not reached:
-                    j += RECORD_SIZE[kind]
-                    i += 1
-                    continue
-                if not have_u:
-                    psi = q2 + alpha
-                    ux, uy, have_u = math.cos(psi), math.sin(psi), True
-                if kind == DISTAL_CIRCLE:
-                    geometry = distal_circle(p[j], p[j + 1], p[j + 2], l3, bx, by, ux, uy)
-                else:
-                    geometry = tip_plane(p[j], p[j + 1], p[j + 2], p[j + 3], p[j + 4], l3, bx, by, ux, uy)
-            acc = _visit(acc, ctx, i, geometry)
-            j += RECORD_SIZE[kind]
-            i += 1
+    for _ in range(int(p[o + COUNTS + PROXIMAL_CIRCLE])):  # (cx, cy, ρ1 + R)
+        acc = _visit(acc, ctx, i, proximal_circle(p[j], p[j + 1], p[j + 2], r1, bx, by, s1, c1))
+        j += size_p
+        i += 1
+    for _ in range(int(p[o + COUNTS + DISTAL_CIRCLE])):  # (cx, cy, ρ3 + R, reach²)
+        dx, dy = p[j] - bx, p[j + 1] - by
+        if every or not dx * dx + dy * dy > p[j + 3]:
+            if not have_u:
+                psi = q2 + alpha
+                ux, uy, have_u = math.cos(psi), math.sin(psi), True
+            acc = _visit(acc, ctx, i, distal_circle(p[j], p[j + 1], p[j + 2], l3, bx, by, ux, uy))
+        j += size_d
+        i += 1
+    for _ in range(int(p[o + COUNTS + JOINT_PLANE])):  # (ox, oy, nx, ny, ρ)
+        acc = _visit(acc, ctx, i, joint_plane(p[j], p[j + 1], p[j + 2], p[j + 3], p[j + 4], bx, by))
+        j += size_j
+        i += 1
+    for _ in range(int(p[o + COUNTS + TIP_PLANE])):  # (ox, oy, nx, ny, ρ3, reach)
+        if every or not p[j + 2] * (bx - p[j]) + p[j + 3] * (by - p[j + 1]) - p[j + 5] >= 0.0:
+            if not have_u:
+                psi = q2 + alpha
+                ux, uy, have_u = math.cos(psi), math.sin(psi), True
+            acc = _visit(acc, ctx, i, tip_plane(p[j], p[j + 1], p[j + 2], p[j + 3], p[j + 4], l3, bx, by, ux, uy))
+        j += size_t
+        i += 1
     return acc
