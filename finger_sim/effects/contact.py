@@ -18,11 +18,12 @@ that material point (virtual work). For a circle, p slides along the segment, bu
 is normal to n_c (or p is clamped at an end), so J_pᵀ n_c F_n = −∂V_c/∂q exactly with
 V_c = k δ^(e+1)/(e+1). J_p has no θ2 column: the coupler touches nothing.
 
-The arithmetic (each candidate's geometry, the force) is `effects.contact_law`'s plain functions,
-which the compiled kernel compiles as they are; this element picks the candidates and sums.
-Scalar `math` throughout: `force` runs in every stage of every step. Candidates that cannot
-touch anywhere are dropped when the element is built; the rest are skipped by a cheap bound
-(the distal segment lies within L3 of B) before the distal direction e(ψ) is evaluated.
+The arithmetic (each candidate's geometry, the force) is `effects.contact_law`'s plain functions and
+the walk over the candidates is `effects.contact_candidates.walk_candidates`, both of which the compiled
+kernel compiles as they are; this element keeps the candidates and sums. Scalar `math` throughout:
+`force` runs in every stage of every step. Candidates that cannot touch anywhere are dropped when the
+element is built; the rest are skipped by a cheap bound (the distal segment lies within L3 of B) before
+the distal direction e(ψ) is evaluated.
 """
 
 from __future__ import annotations
@@ -33,8 +34,8 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
 from finger_sim.effects.base import Vec3, effect
-from finger_sim.effects.contact_law import (contact_force, distal_circle, gap_gradient, generalized, joint_plane,
-                                            point_velocity, proximal_circle, tip_plane)
+from finger_sim.effects.contact_law import contact_force, gap_gradient, generalized, point_velocity
+from finger_sim.effects.contact_candidates import COUNTS, HEADER, RECORD_SIZE, walk_candidates
 from finger_sim.effects.contact_geometry import PHALANX_RADII, Circle, ContactParams, Plane, SceneObject, Vec2
 from finger_sim.effects.contact_outputs import (CONTACT_FORCES, CONTACT_OUTPUTS, CONTACT_WRENCHES, GRIP_FORCE,
                                                MOTION_POWER)
@@ -121,8 +122,8 @@ class Contact:
         self._k_design = k_max * self._e * delta_d ** (self._e - 1.0)
         self._c_design = d_max * DESIGN_FORCE
         self._friction_design = self._mu * DESIGN_FORCE / self._vs
-        # Candidates, kept only where some pose can reach them (|p − A| ≤ r1 on the proximal
-        # phalanx, ≤ r1 + L3 on the distal one).
+        # Candidates, (phalanx, object index, their floats in the block), kept only where some pose
+        # can reach them (|p − A| ≤ r1 on the proximal phalanx, ≤ r1 + L3 on the distal one).
         prox_circles, dist_circles, ends, tips = [], [], [], []
         # (A moving object is a candidate wherever it is: it is never dropped nor bounded.)
         for i, obj in enumerate(self.objects):
@@ -130,10 +131,10 @@ class Contact:
             if isinstance(obj, Circle):
                 cx, cy = obj.center
                 if moving or math.hypot(cx, cy) <= r1 + rho1 + obj.radius:
-                    prox_circles.append((i, cx, cy, rho1 + obj.radius))
+                    prox_circles.append((PROXIMAL, i, cx, cy, rho1 + obj.radius))
                 if moving or math.hypot(cx, cy) <= r1 + l3 + rho3 + obj.radius:
                     reach = math.inf if moving else l3 + rho3 + obj.radius
-                    dist_circles.append((i, cx, cy, rho3 + obj.radius, reach * reach))
+                    dist_circles.append((DISTAL, i, cx, cy, rho3 + obj.radius, reach * reach))
             else:
                 (ox, oy), (nx, ny) = obj.point, obj.normal
                 height_a = -(nx * ox + ny * oy)  # n·(A − o)
@@ -141,78 +142,47 @@ class Contact:
                     if moving or height_a - r1 < rho:
                         ends.append((phalanx, i, ox, oy, nx, ny, rho))
                 if moving or height_a - r1 - l3 < rho3:
-                    tips.append((i, ox, oy, nx, ny, rho3, math.inf if moving else l3 + rho3))
-        self._prox_circles = tuple(prox_circles)
-        self._dist_circles = tuple(dist_circles)
-        self._ends = tuple(ends)
-        self._tips = tuple(tips)
+                    tips.append((DISTAL, i, ox, oy, nx, ny, rho3, math.inf if moving else l3 + rho3))
+        # The flat block `contact_candidates.walk_candidates` reads (its law header as built: `kernel_params`
+        # reads the law's current one), each candidate's (phalanx, object index) in its order, and where a
+        # moving object's position sits in it (its offset is added there).
+        kinds = (prox_circles, dist_circles, ends, tips)
+        self._block = tuple(float(x) for x in (self._r1, self._l3, self.alpha, self._kernel_k, self._e, self._kernel_d,
+                                               self._mu, self._vs, *map(len, kinds), *(x for kind in kinds
+                                                                                       for c in kind for x in c[2:])))
+        self._owners = tuple(c[:2] for kind in kinds for c in kind)
+        slots, j = [], HEADER
+        for size, kind in zip(RECORD_SIZE, kinds):
+            for c in kind:
+                if self._motions[c[1]] is not None:
+                    slots.append((j, c[1]))
+                j += size
+        self._moving_slots = tuple(slots)
 
     def kernel_params(self) -> tuple[float, ...]:
-        """(r1, L3, α, k, e, d (the objects' one law), μ, v_s, counts of the four candidate kinds, then
-        the candidates): what `finger_sim.kernel.numerics` reads to compute `force`."""
-        out = [self._r1, self._l3, self.alpha, self._kernel_k, self._e, self._kernel_d, self._mu, self._vs,
-               len(self._prox_circles), len(self._dist_circles), len(self._ends), len(self._tips)]
-        for _, cx, cy, rad in self._prox_circles:
-            out += [cx, cy, rad]
-        for _, cx, cy, rad, reach2 in self._dist_circles:
-            out += [cx, cy, rad, reach2]
-        for _, _, ox, oy, nx, ny, rho in self._ends:
-            out += [ox, oy, nx, ny, rho]
-        for _, ox, oy, nx, ny, rho, reach in self._tips:
-            out += [ox, oy, nx, ny, rho, reach]
-        return tuple(float(x) for x in out)
+        """The candidates' flat block (`effects.contact_candidates`) with the law's current header (k, d: the
+        objects' one law; μ as the element holds it now): what `finger_sim.kernel.numerics` reads."""
+        law = (self._r1, self._l3, self.alpha, self._kernel_k, self._e, self._kernel_d, self._mu, self._vs)
+        return tuple(float(x) for x in law) + self._block[COUNTS:]
 
     # -- geometry ------------------------------------------------------------------------
     def _hits(self, q: Vec3, all_candidates: bool, t: float = 0.0) -> list[_Hit]:
         """The evaluated candidates at q (and t, for moving objects): those with δ > 0, or every
-        one (for gaps and modal).
+        one (for gaps and modal); `contact_candidates.walk_candidates` picks and orders them.
 
         J_p has two non-zero columns, returned as vectors j1 = ∂p/∂θ1 and j3 = ∂p/∂θ3 (m/rad).
         """
-        r1, l3 = self._r1, self._l3
-        c1, s1 = math.cos(q[0]), math.sin(q[0])
-        bx, by = r1 * c1, r1 * s1
-        out: list[_Hit] = []
-        shift = [m.offset(t) if m is not None else None for m in self._motions] if self.time_varying else None
-        for i, cx, cy, rad in self._prox_circles:
-            if shift is not None and shift[i] is not None:
-                cx, cy = cx + shift[i][0], cy + shift[i][1]
-            hit = proximal_circle(cx, cy, rad, r1, bx, by, s1, c1)
-            if hit[0] > 0.0 or all_candidates:
-                out.append((PROXIMAL, i, *hit))
-        ux = uy = 0.0
-        have_u = False
-        for i, cx, cy, rad, reach2 in self._dist_circles:
-            if shift is not None and shift[i] is not None:
-                cx, cy = cx + shift[i][0], cy + shift[i][1]
-            dx, dy = cx - bx, cy - by
-            if dx * dx + dy * dy > reach2 and not all_candidates:
-                continue  # the distal segment lies within L3 of B
-            if not have_u:
-                psi = q[2] + self.alpha
-                ux, uy, have_u = math.cos(psi), math.sin(psi), True
-            hit = distal_circle(cx, cy, rad, l3, bx, by, ux, uy)
-            if hit[0] > 0.0 or all_candidates:
-                out.append((DISTAL, i, *hit))
-        for phalanx, i, ox, oy, nx, ny, rho in self._ends:
-            if shift is not None and shift[i] is not None:
-                ox, oy = ox + shift[i][0], oy + shift[i][1]
-            hit = joint_plane(ox, oy, nx, ny, rho, bx, by)
-            if hit[0] > 0.0 or all_candidates:
-                out.append((phalanx, i, *hit))
-        for i, ox, oy, nx, ny, rho, reach in self._tips:
-            if shift is not None and shift[i] is not None:
-                ox, oy = ox + shift[i][0], oy + shift[i][1]
-            height_b = nx * (bx - ox) + ny * (by - oy)
-            if height_b - reach >= 0.0 and not all_candidates:
-                continue  # the tip is within L3 of B
-            if not have_u:
-                psi = q[2] + self.alpha
-                ux, uy, have_u = math.cos(psi), math.sin(psi), True
-            hit = tip_plane(ox, oy, nx, ny, rho, l3, bx, by, ux, uy)
-            if hit[0] > 0.0 or all_candidates:
-                out.append((DISTAL, i, *hit))
-        return out
+        return walk_candidates(self._block_at(t) if self._moving_slots else self._block, 0, q[0], q[2],
+                               all_candidates, [], (all_candidates, self._owners))
+
+    def _block_at(self, t: float) -> list[float]:
+        """The block with the moving objects where they are at t (s)."""
+        shift = [m.offset(t) if m is not None else None for m in self._motions]
+        block = list(self._block)
+        for j, i in self._moving_slots:
+            block[j] += shift[i][0]
+            block[j + 1] += shift[i][1]
+        return block
 
     def _forces(self, hit: _Hit, v: Vec3, t: float = 0.0) -> tuple[float, float, float]:
         """(F_n, Fx, Fy), N, of one candidate in contact: Hunt–Crossley normal force plus friction.

@@ -17,9 +17,9 @@ it with the shipped grip PI (`grip_pi`), nothing per step in Python:
   (`numerics._profile_step` under the held command, tableau `tab`);
 - the grip force after the step (`Contact.outputs`' Σ F_n), measured at the next sample.
 
-The contact law here (`contact_states`) is the force's own (`effects.contact_law`, compiled in `numerics`):
-`Contact._hits` with `gaps`, `gap_gradient` and `_forces` in their order and arithmetic (sqrt, not
-hypot), so every decision the Simulator takes on the gaps (whether a step may hold a crossing) is
+The contact law here (`contact_states`) is the force's own (`effects.contact_law` and the candidate loop
+`effects.contact_candidates`, compiled in `numerics`): `Contact.gaps`, `gap_gradient` and `_forces` in their
+order and arithmetic (sqrt, not hypot), so every decision the Simulator takes on the gaps (whether a step may hold a crossing) is
 taken here on the same numbers. The internal
 solution's state is kept per row (`INTEGRATOR`, and y, f, y_old, dense), handed to the row's
 Simulator and read back from it around every step that Python takes (`finger_sim.tasks.batch_rows`).
@@ -47,9 +47,8 @@ from finger_sim.kernel.event_checks import EVENT_TOLERANCE, predicted_crossing  
 from finger_sim.integrators import dop853  # noqa: E402
 from finger_sim.inputs import HELD, HELD_ARRAY  # noqa: E402
 from finger_sim.kernel.numerics import (ERROR_EXPONENT, JIT, LAW, MAX_FACTOR, MIN_FACTOR, OK, SAFETY,  # noqa: E402
-                                        _profile_step, _rhs, compiled, distal_circle, dop853_attempt, dop853_output,
-                                        gap_gradient, joint_plane, normal_force, point_velocity, proximal_circle,
-                                        tip_plane, torque_at)
+                                        _profile_step, _rhs, candidate_walk, compiled, dop853_attempt, dop853_output,
+                                        gap_gradient, normal_force, point_velocity, torque_at)
 from finger_sim import grip_law as grip  # noqa: E402
 
 #: A row's status after `run` (module docstring).
@@ -88,48 +87,34 @@ grip_setpoint = njit(**LAW)(grip.grip_setpoint)
 grip_update = compiled(grip.grip_update, pi_update=pi_update)
 
 
+@njit(**LAW)
+def _store_state(acc, ctx, i, geometry):
+    """gaps[i] = −δ (m) and rates[i] = ∂gap/∂q · q' (m/s) of candidate i; acc = (count, Σ F_n N) plus it."""
+    gaps, rates, v0, v1, v2, k, e, dd = ctx
+    d, _, _, nx, ny, j1x, j1y, j3x, j3y = geometry
+    gaps[i] = -d
+    (g0, g2), g1 = gap_gradient(nx, ny, j1x, j1y, j3x, j3y), 0.0
+    rates[i] = g0 * v0 + g1 * v1 + g2 * v2
+    grip_force = acc[1]
+    if d > 0.0:
+        vx, vy = point_velocity(j1x, j1y, j3x, j3y, v0, v2)
+        fn = normal_force(d, nx, ny, vx, vy, k, e, dd)
+        grip_force += fn if fn > 0.0 else 0.0
+    return acc[0] + 1, grip_force
+
+
+#: The candidate loop (`effects.contact_candidates`) storing every candidate's gap and rate.
+_walk_states = candidate_walk(_store_state)
+
+
 @njit(**JIT)
 def contact_states(m, o, x, gaps, rates):
     """Every contact candidate's gap −δ (m) and rate (m/s) at the state x (q, q') into gaps and
     rates, as the Simulator reads them (`Contact.gaps`; ∂gap/∂q · q' from `Contact.gap_gradient`);
     returns (count, grip force Σ F_n over the candidates in contact, N: `Contact.outputs`).
     o: where the contact element's parameters start in the model m (`Contact.kernel_params`)."""
-    r1, l3, alpha = m[o], m[o + 1], m[o + 2]
-    k, e, dd = m[o + 3], m[o + 4], m[o + 5]
-    n_prox, n_dist, n_ends, n_tips = int(m[o + 8]), int(m[o + 9]), int(m[o + 10]), int(m[o + 11])
-    q0, q2, v0, v1, v2 = x[0], x[2], x[3], x[4], x[5]
-    j = o + 12
-    c1, s1 = math.cos(q0), math.sin(q0)
-    bx, by = r1 * c1, r1 * s1
-    psi = q2 + alpha
-    ux, uy = math.cos(psi), math.sin(psi)
-    grip_force = 0.0
-    i = 0
-    for kind in range(4):
-        count = n_prox if kind == 0 else (n_dist if kind == 1 else (n_ends if kind == 2 else n_tips))
-        for _ in range(count):
-            if kind == 0:  # a circle on the proximal phalanx: p = s B
-                d, _, _, nx, ny, j1x, j1y, j3x, j3y = proximal_circle(m[j], m[j + 1], m[j + 2], r1, bx, by, s1, c1)
-                j += 3
-            elif kind == 1:  # a circle on the distal phalanx: p = B + ℓ e(ψ)
-                d, _, _, nx, ny, j1x, j1y, j3x, j3y = distal_circle(m[j], m[j + 1], m[j + 2], l3, bx, by, ux, uy)
-                j += 4
-            elif kind == 2:  # a plane against the joint B
-                d, _, _, nx, ny, j1x, j1y, j3x, j3y = joint_plane(m[j], m[j + 1], m[j + 2], m[j + 3], m[j + 4], bx, by)
-                j += 5
-            else:  # a plane against the fingertip
-                d, _, _, nx, ny, j1x, j1y, j3x, j3y = tip_plane(m[j], m[j + 1], m[j + 2], m[j + 3], m[j + 4], l3, bx, by,
-                                                          ux, uy)
-                j += 6
-            gaps[i] = -d
-            (g0, g2), g1 = gap_gradient(nx, ny, j1x, j1y, j3x, j3y), 0.0
-            rates[i] = g0 * v0 + g1 * v1 + g2 * v2
-            if d > 0.0:
-                vx, vy = point_velocity(j1x, j1y, j3x, j3y, v0, v2)
-                fn = normal_force(d, nx, ny, vx, vy, k, e, dd)
-                grip_force += fn if fn > 0.0 else 0.0
-            i += 1
-    return i, grip_force
+    ctx = (gaps, rates, x[3], x[4], x[5], m[o + 3], m[o + 4], m[o + 5])
+    return _walk_states(m, o, x[0], x[2], True, (0, 0.0), ctx)
 
 
 @njit(**JIT)

@@ -18,7 +18,8 @@ from numba import njit  # noqa: E402  (after the cache folder is set)
 
 from finger_sim.simulation import locate  # noqa: E402
 from finger_sim.kernel.layout import CONTACT, HEADER  # noqa: E402
-from finger_sim.kernel.numerics import distal_circle, joint_plane, proximal_circle, tip_plane  # noqa: E402
+from finger_sim.kernel.jit import LAW  # noqa: E402
+from finger_sim.kernel.numerics import candidate_walk  # noqa: E402
 
 #: `locate.EVENT_TOLERANCE`: a gap counts as closed below −EVENT_TOLERANCE.
 EVENT_TOLERANCE = locate.EVENT_TOLERANCE
@@ -37,36 +38,22 @@ def stop_closed(x, limits):
     return x[0] - limits[0] < -EVENT_TOLERANCE or limits[1] - x[0] < -EVENT_TOLERANCE
 
 
+@njit(**LAW)
+def _store_gap(count, gap, i, geometry):
+    """gap[i] = −δ of candidate i (m); count + 1."""
+    gap[i] = -geometry[0]
+    return count + 1
+
+
+#: The candidate loop (`effects.contact_candidates`) storing every candidate's gap.
+_walk_gaps = candidate_walk(_store_gap)
+
+
 @njit(**SERIAL)
 def contact_gaps(m, o, q0, q2, gap):
     """Each contact candidate's gap −δ (m) into `gap`: `Contact.gaps`, in its order and with its
-    arithmetic (`Contact._hits`, every candidate: the force's geometry, `numerics.proximal_circle` …);
-    returns their count."""
-    r1, l3, alpha = m[o], m[o + 1], m[o + 2]
-    n_prox, n_dist, n_ends, n_tips = int(m[o + 8]), int(m[o + 9]), int(m[o + 10]), int(m[o + 11])
-    j = o + 12
-    c1, s1 = math.cos(q0), math.sin(q0)
-    bx, by = r1 * c1, r1 * s1
-    i = 0
-    for _ in range(n_prox):
-        gap[i] = -proximal_circle(m[j], m[j + 1], m[j + 2], r1, bx, by, s1, c1)[0]
-        j += 3
-        i += 1
-    psi = q2 + alpha
-    ux, uy = math.cos(psi), math.sin(psi)
-    for _ in range(n_dist):
-        gap[i] = -distal_circle(m[j], m[j + 1], m[j + 2], l3, bx, by, ux, uy)[0]
-        j += 4
-        i += 1
-    for _ in range(n_ends):
-        gap[i] = -joint_plane(m[j], m[j + 1], m[j + 2], m[j + 3], m[j + 4], bx, by)[0]
-        j += 5
-        i += 1
-    for _ in range(n_tips):
-        gap[i] = -tip_plane(m[j], m[j + 1], m[j + 2], m[j + 3], m[j + 4], l3, bx, by, ux, uy)[0]
-        j += 6
-        i += 1
-    return i
+    arithmetic; returns their count."""
+    return _walk_gaps(m, o, q0, q2, True, 0, gap)
 
 
 @njit(**SERIAL)

@@ -5,11 +5,11 @@ The laws are not written here: the acceleration solve (`dynamics.schur_solve`), 
 by `element_force`, generated from the registry: `kernel.force_laws`) and the torque profiles
 (`inputs.torque_at`, `inputs.switches_inside`) are the plain functions the Python path calls, compiled
 here as they are, and so is the contact law (`effects.contact_law`: the candidates' geometry and the force).
-So is a DOP853 attempt (`integrators.steps.dop853_attempt`, compiled with this module's `_rhs`). What
-remains is the flat model's force sum, the contact's candidate loop over its flat parameters
-(`Contact.kernel_params`, the order of `Contact._hits`), and the fixed-step steppers: the same
-arithmetic, in the same order, as their Python references (`ExplicitRungeKutta.step`), so both paths
-agree to round-off (the tests ask 1e-13 rad).
+So are a DOP853 attempt (`integrators.steps.dop853_attempt`, compiled with this module's `_rhs`) and the
+contact's candidate loop (`effects.contact_candidates.walk_candidates`, compiled with the force sum as its
+visitor). What remains is the flat model's force sum and the fixed-step steppers: the same arithmetic, in
+the same order, as their Python references (`ExplicitRungeKutta.step`), so both paths agree to round-off
+(the tests ask 1e-13 rad).
 Compiled by numba on first use and cached on disk (`cache=True`; see `finger_sim.kernel`).
 Errors are status codes, raised as exceptions by the Python callers.
 """
@@ -23,7 +23,7 @@ import numpy as np
 from finger_sim.kernel.jit import JIT, LAW, compiled, njit  # first: it keys numba's cache
 
 from finger_sim import dynamics, inputs, projection
-from finger_sim.effects import contact_law, friction_modes
+from finger_sim.effects import contact_candidates, contact_law, friction_modes
 from finger_sim.effects.friction_modes import KERNEL_BLOCK as SLIP_BLOCK
 from finger_sim.effects.friction_modes import SLIDING
 from finger_sim.integrators import steps
@@ -76,63 +76,9 @@ def _contact(m, o, q0, q2, v0, v2, slide, direction, mu_k, mu_s, v_st, n3):
     """Contact's (Q1, Q3): `finger_sim.effects.contact.Contact.force`, same order of terms. `slide`: the
     stick–slip law's sliding friction too (`StickSlipContact._forces`; direction ±1, μ_k, μ_s, v_st m/s,
     n3 = dθ3/dθ1)."""
-    r1, l3, alpha = m[o], m[o + 1], m[o + 2]
     k, e, d, mu, vs = m[o + 3], m[o + 4], m[o + 5], m[o + 6], m[o + 7]
-    n_prox, n_dist, n_ends, n_tips = int(m[o + 8]), int(m[o + 9]), int(m[o + 10]), int(m[o + 11])
-    j = o + 12
-    c1, s1 = math.cos(q0), math.sin(q0)
-    bx, by = r1 * c1, r1 * s1
-    out1 = 0.0
-    out3 = 0.0
-    for _ in range(n_prox):
-        delta, _, _, nx, ny, j1x, j1y, j3x, j3y = proximal_circle(m[j], m[j + 1], m[j + 2], r1, bx, by, s1, c1)
-        j += 3
-        if delta > 0.0:
-            f1, f3 = _contact_force(delta, nx, ny, j1x, j1y, j3x, j3y, v0, v2, k, e, d, mu, vs,
-                                     slide, direction, mu_k, mu_s, v_st, n3)
-            out1 += f1
-            out3 += f3
-    ux = uy = 0.0
-    have_u = False
-    for _ in range(n_dist):
-        cx, cy, rad, reach2 = m[j], m[j + 1], m[j + 2], m[j + 3]
-        j += 4
-        dx, dy = cx - bx, cy - by
-        if dx * dx + dy * dy > reach2:
-            continue
-        if not have_u:
-            psi = q2 + alpha
-            ux, uy, have_u = math.cos(psi), math.sin(psi), True
-        delta, _, _, nx, ny, j1x, j1y, j3x, j3y = distal_circle(cx, cy, rad, l3, bx, by, ux, uy)
-        if delta > 0.0:
-            f1, f3 = _contact_force(delta, nx, ny, j1x, j1y, j3x, j3y, v0, v2, k, e, d, mu, vs,
-                                     slide, direction, mu_k, mu_s, v_st, n3)
-            out1 += f1
-            out3 += f3
-    for _ in range(n_ends):
-        delta, _, _, nx, ny, j1x, j1y, j3x, j3y = joint_plane(m[j], m[j + 1], m[j + 2], m[j + 3], m[j + 4], bx, by)
-        j += 5
-        if delta > 0.0:
-            f1, f3 = _contact_force(delta, nx, ny, j1x, j1y, j3x, j3y, v0, v2, k, e, d, mu, vs,
-                                     slide, direction, mu_k, mu_s, v_st, n3)
-            out1 += f1
-            out3 += f3
-    for _ in range(n_tips):
-        ox, oy, nx, ny, rho, reach = m[j], m[j + 1], m[j + 2], m[j + 3], m[j + 4], m[j + 5]
-        j += 6
-        height_b = nx * (bx - ox) + ny * (by - oy)
-        if height_b - reach >= 0.0:
-            continue
-        if not have_u:
-            psi = q2 + alpha
-            ux, uy, have_u = math.cos(psi), math.sin(psi), True
-        delta, _, _, nx, ny, j1x, j1y, j3x, j3y = tip_plane(ox, oy, nx, ny, rho, l3, bx, by, ux, uy)
-        if delta > 0.0:
-            f1, f3 = _contact_force(delta, nx, ny, j1x, j1y, j3x, j3y, v0, v2, k, e, d, mu, vs,
-                                     slide, direction, mu_k, mu_s, v_st, n3)
-            out1 += f1
-            out3 += f3
-    return out1, out3
+    return contact_forces(m, o, q0, q2, False, (0.0, 0.0),
+                          (v0, v2, k, e, d, mu, vs, slide, direction, mu_k, mu_s, v_st, n3))
 
 
 @njit(**JIT)
@@ -146,6 +92,29 @@ def _contact_force(delta, nx, ny, j1x, j1y, j3x, j3y, v0, v2, k, e, d, mu, vs, s
         ft = sliding_friction(fn, tangent_gain(nx, ny, j1x, j1y, j3x, j3y, n3), direction, v0, mu_k, mu_s, v_st)
         fx, fy = along_tangent(fx, fy, ft, nx, ny)
     return generalized(j1x, j1y, j3x, j3y, fx, fy)
+
+
+@njit(**LAW)
+def _add_force(acc, ctx, i, geometry):
+    """acc = (Q1, Q3) plus J_pᵀ F of candidate i where in contact: `Contact.force`'s sum, one candidate."""
+    delta, _, _, nx, ny, j1x, j1y, j3x, j3y = geometry
+    if not delta > 0.0:
+        return acc
+    v0, v2, k, e, d, mu, vs, slide, direction, mu_k, mu_s, v_st, n3 = ctx
+    f1, f3 = _contact_force(delta, nx, ny, j1x, j1y, j3x, j3y, v0, v2, k, e, d, mu, vs, slide, direction, mu_k, mu_s,
+                            v_st, n3)
+    return acc[0] + f1, acc[1] + f3
+
+
+def candidate_walk(visit):  # type: ignore[no-untyped-def]
+    """The candidate loop (`effects.contact_candidates.walk_candidates`) compiled with `visit` as its `_visit`
+    and the compiled geometry (inlined into its caller)."""
+    return compiled(contact_candidates.walk_candidates, _visit=visit, proximal_circle=proximal_circle,
+                    distal_circle=distal_circle, joint_plane=joint_plane, tip_plane=tip_plane)
+
+
+#: The candidate loop summing the force: (Q1, Q3), N·m.
+contact_forces = candidate_walk(_add_force)
 
 
 @njit(**JIT)
