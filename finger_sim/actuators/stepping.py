@@ -110,6 +110,8 @@ def start(sim: Simulator) -> None:
     global _compiled_guards
     system: DrivenSystem = sim.system  # type: ignore[assignment]
     model = getattr(sim.integrator, "model", None)  # a compiled integrator's model: its guards are compiled
+    if model is None and sim.requested_kernel != "python":  # our DOP853's compiled stages: its guards too
+        model = getattr(sim.integrator, "guard_model", None)
     system.drive.kernel_model, system.drive.guard_cache, system.drive.margin_cache = model, None, None
     system.keeps_holding_torque, system._held = sim._friction is None and sim._actuator is None, None
     system.holding_torque_is_steady = all(_steady(e) for e in system.elements)

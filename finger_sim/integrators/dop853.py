@@ -122,6 +122,9 @@ class DormandPrince853(Integrator):
             driven = compiled.compiled_drive()
             self._rhs, self._attempt = driven.driven_rhs, driven.driven_dop853_attempt
         self._changes = -1  # `Drive.changes` the internal solution was computed under
+        #: the compiled model whose drive block follows the mesh mode, for the drive's compiled guards
+        #: (`actuators.stepping.start`); None without a drive or with stages in Python
+        self.guard_model = model if self.compiled and self._drive is not None else None
         #: a stick–slip contact's friction mode (`StickSlipContact.law_state`), and the one the solution is under
         self._friction = next((e for e in system.elements if hasattr(e, "law_state")), None)
         self._law_state: tuple | None = None

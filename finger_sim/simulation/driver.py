@@ -81,6 +81,9 @@ class Simulator:
         #: the stick–slip contact (spec §7) whose friction modes this Simulator steps, or None
         self._friction = stick_slip.element(self.system)
         self._method_cls, self._integrator_cls, self.kernel = setup.method_cls, setup.integrator_cls, setup.kernel
+        #: the kernel asked for: "python" keeps a drive's mesh guards in Python under our DOP853 too
+        #: (whose stages are compiled by construction, `self.kernel` naming the compiled kernel)
+        self.requested_kernel = kernel
         if actuator is not None:
             self._integrator_cls, self.substeps, self.kernel, note = actuated.integrator_class(scene, setup, actuator,
                                                                                               requested)
