@@ -41,7 +41,7 @@ WRITER = "import sys; from finger_sim.log.writer_process import main; sys.exit(m
 
 def writer_input(path: Path, log: Path, messages: int) -> None:
     """The writer process's stdin for `messages` messages (a multiple of the topics is used)."""
-    parts = [control_record(Start(str(log), CHUNK_INTERVAL_NS, CHUNK_SIZE, ZSTD, 1.0, 1.0, 0.05))]
+    parts = [control_record(Start(str(log), CHUNK_INTERVAL_NS, CHUNK_SIZE, ZSTD, 1.0, 1.0))]
     parts += [control_record(Register(i, topic, type_name, "", {})) for i, (topic, type_name, _) in enumerate(TOPICS)]
     payloads = [b"\x00\x01\x00\x00" + bytes((i * 37 + k) % 256 for k in range(size - 4)) for i, (_, _, size) in enumerate(TOPICS)]
     for n in range(messages):

@@ -108,9 +108,10 @@ DEFAULT_QUEUE_SIZE = 10_000  # pending messages (~1 s of a 1 kHz node's six topi
 MAX_QUEUED_BYTES = 64 << 20  # pending payload bytes before dropping: a few huge messages cannot fill memory
 DEFAULT_IDLE_FLUSH_S = 1.0  # wall seconds without messages after which the open chunk is closed
 DEFAULT_CHUNK_WALL_S = 1.0  # wall seconds after which an open chunk is closed, whatever its log-time span
-#: Wall seconds between handovers to the writer process. Its CPU at a node's few messages a step is
-#: mostly per handover: 0.05 s cost it about twice as much (docs/node_performance.md).
-DEFAULT_HANDOVER_S = 0.1
+#: Wall seconds between handovers to the writer process. Its CPU, the sender's and the status thread's
+#: at a node's few messages a step is largely per handover: 0.1 s cost the three about 3.5 µs a 1 kHz
+#: step more than 0.25 s (docs/node_performance.md). A kill -9 of the caller loses at most this much.
+DEFAULT_HANDOVER_S = 0.25
 _PIPE_BYTES = 1 << 20  # the pipe to the writer process: Linux's default pipe-max-size (its default is 64 kB)
 MAX_METADATA_BYTES = 1 << 16  # UTF-8 bytes of one metadata record's keys and values
 _MAX_TIME_NS = 1 << 64  # MCAP timestamps are uint64
@@ -245,7 +246,7 @@ class McapRecorder:
         self._broken = False  # the writer process is gone (or its pipe failed)
         self._finished = False  # the writer process reported the file finished
         self._start = Start(str(self._path), self._interval_ns, chunk_size, compression.value, idle_flush_s,
-                            chunk_wall_s, handover_s)
+                            chunk_wall_s)
         self._channels: dict[str, _Channel] = {}
         # write_records' last topic list and its channels, one tuple: replaced whole, read whole (threads)
         self._last_batch: tuple[list[str], list[_Channel]] = ([], [])

@@ -21,7 +21,8 @@ finished.
 Chunking and crash safety are the recorder's (see finger_sim.log.recorder): a chunk is closed
 before its log-time span would reach the interval, once its payload reaches chunk_size, after
 idle_flush_s wall seconds without messages and once it has been open chunk_wall_s wall
-seconds. End of input without `Close` (the caller was killed) closes the open chunk and exits
+seconds. The process sleeps in its read until input comes or the open chunk's next such deadline
+(no periodic wake-up). End of input without `Close` (the caller was killed) closes the open chunk and exits
 without a summary: the file reads as a crash, and keeps everything that was handed over.
 The process runs in its own session, and ignores SIGINT and SIGTERM once started: the caller
 decides when the file ends, by `Close` or by dying.
@@ -105,7 +106,6 @@ class Start:
     compression: str  # a CompressionType value
     idle_flush_s: float
     chunk_wall_s: float
-    handover_s: float
 
 
 @dataclass(frozen=True, slots=True)
@@ -436,8 +436,10 @@ class _Writer:
             self._do(lambda file: file.add_metadata(item) or 0)
         return False
 
-    def tick(self, got_messages: bool) -> None:
-        """After each read (or timeout): close the open chunk if idle or open too long in wall time."""
+    def tick(self, got_messages: bool) -> float | None:
+        """After each read (or timeout): close the open chunk if idle or open too long in wall time.
+        Returns the wall s until the open chunk's next such deadline (None: no open chunk, nothing to
+        wait for but input)."""
         now = time.monotonic()
         if got_messages:
             self.last_message = now
@@ -446,6 +448,10 @@ class _Writer:
                                                   or now - file.opened_at >= self.start.chunk_wall_s):
             self._do(ChunkedFile.close_chunk)
         self.report()
+        file = self.file
+        if file is None or not file.pending:
+            return None
+        return max(0.0, min(self.last_message + self.start.idle_flush_s, file.opened_at + self.start.chunk_wall_s) - now)
 
     def report(self) -> None:
         """A status line, if the counts changed since the last one."""
@@ -481,9 +487,9 @@ def main() -> int:
     fd, status = sys.stdin.buffer.fileno(), sys.stdout.buffer
     pending = bytearray()
     writer: _Writer | None = None
+    wait: float | None = None  # wall s until the open chunk's idle or wall-time deadline: no wake-up without one
     prefix_size, unpack_from = _RECORD_PREFIX.size, _RECORD_PREFIX.unpack_from
     while True:
-        wait = writer.start.handover_s if writer is not None else None
         chunk = os.read(fd, _READ_BYTES) if select.select([fd], [], [], wait)[0] else None
         if chunk == b"":  # the caller ended without Close (killed): keep what was handed over
             if writer is not None:
@@ -522,5 +528,5 @@ def main() -> int:
                 got = True
             del pending[:at]
         if writer is not None:
-            writer.tick(got)
+            wait = writer.tick(got)
 
