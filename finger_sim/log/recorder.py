@@ -100,7 +100,8 @@ from .definitions import message_definition, normalize_type_name, type_name_of
 from .errors import LogArgumentError, RecorderStateError
 from . import writer_process
 from .qos import OFFERED_QOS_PROFILES, offered_qos_profiles
-from .writer_process import HEADER, MAX_CHANNELS, MESSAGE_FIELDS, MESSAGE_OPCODE, Close, Metadata, Register, Start, control_record
+from .writer_process import (HEADER, MAX_CHANNELS, MESSAGE_FIELDS, MESSAGE_OPCODE, Close, Metadata, Register, Start, control_record,
+                             message_run)
 
 DEFAULT_CHUNK_INTERVAL_S = 0.5  # log-time span of one chunk: what a kill -9 may lose
 DEFAULT_CHUNK_SIZE = 1 << 20  # uncompressed bytes; bounds memory if an interval holds many messages
@@ -610,10 +611,11 @@ _Pending = bytes | tuple[Sequence[_Channel], Sequence[bytes], int, int] | _Chann
 
 
 def _records(pending: list[_Pending]) -> bytearray:
-    """The writer process's input for `pending`, in order: control records as they are, messages
-    as MCAP Message records (writer_process.HEADER + data) numbered per channel from its last
-    number (uint32: wraps). Sender thread only: it alone counts the channels' numbers."""
-    out, pack = bytearray(), _pack_header
+    """The writer process's input for `pending`, in order: control records as they are, the
+    messages between two of them as one run (writer_process.message_run) of MCAP Message records
+    (writer_process.HEADER + data) numbered per channel from its last number (uint32: wraps).
+    Sender thread only: it alone counts the channels' numbers."""
+    out, run, starts, pack = bytearray(), bytearray(), [], _pack_header
     for item in pending:
         if type(item) is tuple:
             channels, datas, log_ns, publish_ns = item
@@ -622,12 +624,18 @@ def _records(pending: list[_Pending]) -> bytearray:
                 if sequence == _SEQUENCE_MODULUS:
                     sequence = 0
                 channel.last_sequence = sequence
-                out += pack(MESSAGE_OPCODE, MESSAGE_FIELDS + len(data), channel.record_id, sequence, log_ns, publish_ns)
-                out += data
+                starts.append(len(run))
+                run += pack(MESSAGE_OPCODE, MESSAGE_FIELDS + len(data), channel.record_id, sequence, log_ns, publish_ns)
+                run += data
         elif type(item) is _Channel:
             item.last_sequence = (item.last_sequence + 1) % _SEQUENCE_MODULUS
         else:
+            if starts:
+                out += message_run(run, starts)
+                run, starts = bytearray(), []
             out += item  # type: ignore[arg-type]
+    if starts:
+        out += message_run(run, starts)
     return out
 
 

@@ -9,12 +9,14 @@ reference to each message (or state) to a list; a sender thread builds their rec
 them over through this process's stdin every handover_s (one write, the GIL released), and
 everything mcap does happens in this process, on the other core.
 
-Stdin carries records, each an opcode and a length (`_RECORD_PREFIX`) and its body. A message
-comes as the MCAP Message record it becomes in the file (`HEADER`: opcode, length, channel id =
-the recorder's channel index + 1, sequence, log and publish time ns; then the data:
-`message_record`), so that a run of them is appended to the open chunk as it is. Opcode
-`CONTROL` (not an MCAP opcode) marks a pickled control item instead (`Start` first, then
-`Register`, `Metadata` and `Close`), so that controls keep their order among the messages. Stdout carries status lines back: `S taken taken_bytes written lost` after
+Stdin carries records, each an opcode and a length (`_RECORD_PREFIX`) and its body. Messages
+come in runs (opcode `RUN`, `message_run`): a count (uint32), where each message starts in the run
+(uint32 offsets), then the messages as the MCAP Message records they become in the file (`HEADER`:
+opcode, length, channel id = the recorder's channel index + 1, sequence, log and publish time ns;
+then the data: `message_record`), so that a run is appended to the open chunk as it is and this
+process finds its messages without reading them one by one. Opcode `CONTROL` marks a pickled
+control item instead (`Start` first, then `Register`, `Metadata` and `Close`), so that controls
+keep their order among the messages. Both opcodes are outside MCAP's (0x80-0xFF are left to users). Stdout carries status lines back: `S taken taken_bytes written lost` after
 each change of the counts, `E text` once for the first I/O failure, `D` when the file is
 finished.
 
@@ -32,8 +34,8 @@ but the per-message part of Writer.add_message (a Message object written field b
 quarter of it the message index written entry by entry) is done here in bulk, to the same bytes
 (`ChunkedFile.add_messages`, `PackedMessageIndex`): the records arrive as mcap writes them, each
 run between two chunk boundaries is appended in one write, and its message index entries, time
-range and counts are taken with numpy over the whole run; Python touches a message only to find
-where the next one starts (docs/node_performance.md: 2.0 µs a message before, 22k messages a
+range and counts are taken with numpy over the whole run; Python does not touch a message
+(docs/node_performance.md: 2.0 µs a message before, 22k messages a
 second for a 10-finger hand). This works with
 mcap's Writer's private state (its open chunk, statistics and chunk index list, mcap 1.x); a
 Writer without it is refused at start, and test/log/test_writer_memory.py compares whole files
@@ -59,7 +61,7 @@ import struct
 import sys
 import tempfile
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, BinaryIO
@@ -79,6 +81,10 @@ MESSAGE_OPCODE = int(Opcode.MESSAGE)
 MESSAGE_FIELDS = HEADER.size - struct.calcsize("<BQ")  # less its opcode and length
 #: The opcode of a control record, whose body is a pickled control item (MCAP leaves 0x80-0xFF to users).
 CONTROL = 0xFF
+#: The opcode of a run of messages (`message_run`).
+RUN = 0xFE
+_COUNT = struct.Struct("<I")  # a run's message count
+_OFFSET_BYTES = 4  # a run's offset of one message (uint32, little-endian)
 #: Channels a recorder can have (indexes 0 … MAX_CHANNELS - 1; MCAP channel id = index + 1, a uint16).
 MAX_CHANNELS = 0xFFFF
 LIBRARY = f"finger_sim.log; {LIBRARY_IDENTIFIER}"
@@ -134,6 +140,14 @@ def control_record(item: Start | Register | Metadata | Close) -> bytes:
     """A control item as one stdin record."""
     payload = pickle.dumps(item, protocol=pickle.HIGHEST_PROTOCOL)
     return _RECORD_PREFIX.pack(CONTROL, len(payload)) + payload
+
+
+def message_run(records: bytes | bytearray, starts: list[int]) -> bytes:
+    """Message records (`message_record`s, concatenated) as one stdin record; `starts`: where each
+    begins in `records`."""
+    count = len(starts)
+    head = _RECORD_PREFIX.pack(RUN, _COUNT.size + _OFFSET_BYTES * count + len(records)) + _COUNT.pack(count)
+    return head + struct.pack(f"<{count}I", *starts) + records
 
 
 def message_record(index: int, sequence: int, log_ns: int, publish_ns: int, data: bytes) -> bytes:
@@ -272,7 +286,7 @@ class ChunkedFile:
         self._writer.add_metadata(item.name, item.data)
         self._file.flush()  # the record is outside chunks: push it out without cutting the chunk
 
-    def add_messages(self, records: bytearray, start: int, stop: int, positions: list[int] | None = None) -> int:
+    def add_messages(self, records: bytearray, start: int, stop: int, positions: Sequence[int] | None = None) -> int:
         """Add the Message records in records[start:stop] (no control among them; `positions`:
         where each starts, if known), in order; returns the messages newly committed to the file
         (chunks closed).
@@ -289,7 +303,7 @@ class ChunkedFile:
             while at < stop:  # the one per-message Python step: where each record starts
                 positions.append(at)
                 at += length_at + unpack_length(records, at + _LENGTH_AT)[0]
-        if not positions:
+        if not len(positions):
             return 0
         pos = np.array(positions, dtype=np.int64)
         ends = np.append(pos[1:], stop)
@@ -414,11 +428,11 @@ class _Writer:
         except Exception as exc:  # OSError, or mcap's UnsupportedCompressionError
             self._fail(exc)
 
-    def messages(self, records: bytearray, positions: list[int], stop: int) -> None:
+    def messages(self, records: bytearray, positions: Sequence[int], stop: int) -> None:
         """The Message records that start at `positions` in `records`, the last ending at `stop`."""
         count = len(positions)
         self.taken += count
-        self.taken_bytes += stop - positions[0] - count * HEADER.size
+        self.taken_bytes += stop - int(positions[0]) - count * HEADER.size
         if self.file is None:
             self.lost += count
             return
@@ -500,32 +514,28 @@ def main() -> int:
         if chunk:
             pending += chunk
             at, end = 0, len(pending)
-            positions: list[int] = []  # where each message since the last control starts
             while end - at >= prefix_size:
                 opcode, length = unpack_from(pending, at)
                 stop = at + prefix_size + length
                 if stop > end:
                     break
-                if opcode != CONTROL:
-                    positions.append(at)
-                    at = stop
-                    continue
-                if positions:  # the messages before a control go first
+                body, at = at + prefix_size, stop
+                if opcode == RUN:
                     assert writer is not None
-                    writer.messages(pending, positions, at)
-                    got, positions = True, []
-                item = pickle.loads(pending[at + prefix_size:stop])
-                at = stop
+                    count = _COUNT.unpack_from(pending, body)[0]
+                    first = body + _COUNT.size + _OFFSET_BYTES * count
+                    # a copy: `pending` must not stay exported (it is resized below)
+                    starts = np.frombuffer(pending, "<u4", count, body + _COUNT.size).astype(np.int64)
+                    writer.messages(pending, starts + first, stop)
+                    got = True
+                    continue
+                item = pickle.loads(pending[body:stop])
                 if isinstance(item, Start):
                     writer = _Writer(item, status)
                 elif writer is not None and writer.control(item):
                     writer.report()
                     writer._line("D")
                     return 0
-            if positions:
-                assert writer is not None
-                writer.messages(pending, positions, at)
-                got = True
             del pending[:at]
         if writer is not None:
             wait = writer.tick(got)
