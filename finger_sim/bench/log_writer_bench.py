@@ -19,7 +19,6 @@ the same library string (the file is otherwise what mcap writes).
 from __future__ import annotations
 
 import argparse
-from itertools import accumulate
 import os
 import statistics
 import subprocess
@@ -52,10 +51,10 @@ def writer_input(path: Path, log: Path, messages: int) -> None:
         step, index = divmod(n, len(TOPICS))
         t = step * STEP_NS
         data = payloads[index][:-4] + (step % (1 << 32)).to_bytes(4, "little")  # a changing field, as in a real log
-        records.append(message_record(index, step + 1, t, t, data))
+        records.append((message_record(index, step + 1, t, t, data), len(data)))
     for first in range(0, messages, RUN_MESSAGES):  # in runs, as the recorder hands them over
         run = records[first:first + RUN_MESSAGES]
-        parts.append(message_run(b"".join(run), [0, *accumulate(map(len, run[:-1]))]))
+        parts.append(message_run(b"".join(record for record, _ in run), [size for _, size in run]))
     parts.append(control_record(Close()))
     path.write_bytes(b"".join(parts))
 

@@ -10,10 +10,10 @@ them over through this process's stdin every handover_s (one write, the GIL rele
 everything mcap does happens in this process, on the other core.
 
 Stdin carries records, each an opcode and a length (`_RECORD_PREFIX`) and its body. Messages
-come in runs (opcode `RUN`, `message_run`): a count (uint32), where each message starts in the run
-(uint32 offsets), then the messages as the MCAP Message records they become in the file (`HEADER`:
+come in runs (opcode `RUN`, `open_run`): a count (uint32), the messages as the MCAP Message
+records they become in the file (`HEADER`:
 opcode, length, channel id = the recorder's channel index + 1, sequence, log and publish time ns;
-then the data: `message_record`), so that a run is appended to the open chunk as it is and this
+then the data: `message_record`), then each one's data size (uint32), so that a run is appended to the open chunk as it is and this
 process finds its messages without reading them one by one. Opcode `CONTROL` marks a pickled
 control item instead (`Start` first, then `Register`, `Metadata` and `Close`), so that controls
 keep their order among the messages. Both opcodes are outside MCAP's (0x80-0xFF are left to users). Stdout carries status lines back: `S taken taken_bytes written lost` after
@@ -81,10 +81,11 @@ MESSAGE_OPCODE = int(Opcode.MESSAGE)
 MESSAGE_FIELDS = HEADER.size - struct.calcsize("<BQ")  # less its opcode and length
 #: The opcode of a control record, whose body is a pickled control item (MCAP leaves 0x80-0xFF to users).
 CONTROL = 0xFF
-#: The opcode of a run of messages (`message_run`).
+#: The opcode of a run of messages (`open_run`, `close_run`).
 RUN = 0xFE
-_COUNT = struct.Struct("<I")  # a run's message count
-_OFFSET_BYTES = 4  # a run's offset of one message (uint32, little-endian)
+_RUN_HEAD = struct.Struct("<BQI")  # a run's opcode, length and message count
+_COUNT = struct.Struct("<I")  # a run's message count, at the start of its body
+_SIZE_BYTES = 4  # a run's data size of one message (uint32, little-endian)
 #: Channels a recorder can have (indexes 0 … MAX_CHANNELS - 1; MCAP channel id = index + 1, a uint16).
 MAX_CHANNELS = 0xFFFF
 LIBRARY = f"finger_sim.log; {LIBRARY_IDENTIFIER}"
@@ -142,12 +143,28 @@ def control_record(item: Start | Register | Metadata | Close) -> bytes:
     return _RECORD_PREFIX.pack(CONTROL, len(payload)) + payload
 
 
-def message_run(records: bytes | bytearray, starts: list[int]) -> bytes:
-    """Message records (`message_record`s, concatenated) as one stdin record; `starts`: where each
-    begins in `records`."""
-    count = len(starts)
-    head = _RECORD_PREFIX.pack(RUN, _COUNT.size + _OFFSET_BYTES * count + len(records)) + _COUNT.pack(count)
-    return head + struct.pack(f"<{count}I", *starts) + records
+def open_run(out: bytearray) -> int:
+    """Begin a run of messages at the end of `out`: append its `message_record`s, then `close_run`.
+    Returns where the run begins."""
+    at = len(out)
+    out += bytes(_RUN_HEAD.size)  # filled by close_run
+    return at
+
+
+def close_run(out: bytearray, at: int, sizes: list[int]) -> None:
+    """End the run begun at `at`; `sizes`: the data bytes of each message in it (a sender gets
+    them with one call per state; the reader adds HEADER.size to find where each starts)."""
+    out += struct.pack(f"<{len(sizes)}I", *sizes)
+    _RUN_HEAD.pack_into(out, at, RUN, len(out) - at - _RECORD_PREFIX.size, len(sizes))
+
+
+def message_run(records: bytes, sizes: list[int]) -> bytearray:
+    """Message records (`message_record`s, concatenated; `sizes`: their data bytes) as one run."""
+    out = bytearray()
+    at = open_run(out)
+    out += records
+    close_run(out, at, sizes)
+    return out
 
 
 def message_record(index: int, sequence: int, log_ns: int, publish_ns: int, data: bytes) -> bytes:
@@ -523,11 +540,13 @@ def main() -> int:
                 if opcode == RUN:
                     assert writer is not None
                     count = _COUNT.unpack_from(pending, body)[0]
-                    first = body + _COUNT.size + _OFFSET_BYTES * count
-                    # a copy: `pending` must not stay exported (it is resized below)
-                    starts = np.frombuffer(pending, "<u4", count, body + _COUNT.size).astype(np.int64)
-                    writer.messages(pending, starts + first, stop)
-                    got = True
+                    if count:
+                        records_stop = stop - _SIZE_BYTES * count
+                        # a copy: `pending` must not stay exported (it is resized below)
+                        lengths = np.frombuffer(pending, "<u4", count, records_stop).astype(np.int64) + HEADER.size
+                        starts = np.cumsum(lengths) - lengths  # where each record starts in the run
+                        writer.messages(pending, starts + (body + _COUNT.size), records_stop)
+                        got = True
                     continue
                 item = pickle.loads(pending[body:stop])
                 if isinstance(item, Start):
