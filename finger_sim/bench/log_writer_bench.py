@@ -4,7 +4,8 @@
 
 The writer process (finger_sim.log.writer_process.main) is run on a prepared input: a `Start`,
 three channels, `--messages` messages as a node logs them at 1 kHz (joint_states, fingertip_pose
-and /clock every step: 148, 84 and 12 bytes of CDR, log times 1 ms apart) and `Close`; chunks close
+and /clock every step: 148, 84 and 12 bytes of CDR, log times 1 ms apart; in runs of 750, a
+default handover) and `Close`; chunks close
 every 0.5 s of log time, zstd, as finger_node records. The input comes from a file, so that the
 writer never waits for a caller. CPU: utime + stime of the writer process (os.wait4), less the
 median of the same process given no messages (interpreter start and imports), per message.
@@ -26,13 +27,14 @@ import tempfile
 from datetime import datetime, timezone
 from pathlib import Path
 
-from finger_sim.log.writer_process import Close, Register, Start, control_record, message_record
+from finger_sim.log.writer_process import Close, Register, Start, control_record, message_record, message_run
 
 ROOT = Path(__file__).resolve().parents[2]
 #: The node's three per-step messages: topic, type, CDR bytes (a JointState of three joints, a PoseStamped, a Clock).
 TOPICS = (("/joint_states", "sensor_msgs/msg/JointState", 148), ("/fingertip_pose", "geometry_msgs/msg/PoseStamped", 84),
           ("/clock", "rosgraph_msgs/msg/Clock", 12))
 STEP_NS = 1_000_000  # 1 kHz
+RUN_MESSAGES = 750  # messages a run: a default handover (0.25 s) of the node's three topics at 1 kHz
 CHUNK_INTERVAL_NS = 500_000_000  # finger_sim.log.recorder.DEFAULT_CHUNK_INTERVAL_S
 CHUNK_SIZE = 1 << 20
 ZSTD = 3  # mcap.writer.CompressionType.ZSTD
@@ -41,14 +43,18 @@ WRITER = "import sys; from finger_sim.log.writer_process import main; sys.exit(m
 
 def writer_input(path: Path, log: Path, messages: int) -> None:
     """The writer process's stdin for `messages` messages (a multiple of the topics is used)."""
-    parts = [control_record(Start(str(log), CHUNK_INTERVAL_NS, CHUNK_SIZE, ZSTD, 1.0, 1.0, 0.05))]
+    parts = [control_record(Start(str(log), CHUNK_INTERVAL_NS, CHUNK_SIZE, ZSTD, 1.0, 1.0))]
     parts += [control_record(Register(i, topic, type_name, "", {})) for i, (topic, type_name, _) in enumerate(TOPICS)]
     payloads = [b"\x00\x01\x00\x00" + bytes((i * 37 + k) % 256 for k in range(size - 4)) for i, (_, _, size) in enumerate(TOPICS)]
+    records = []
     for n in range(messages):
         step, index = divmod(n, len(TOPICS))
         t = step * STEP_NS
         data = payloads[index][:-4] + (step % (1 << 32)).to_bytes(4, "little")  # a changing field, as in a real log
-        parts.append(message_record(index, step + 1, t, t, data))
+        records.append((message_record(index, step + 1, t, t, data), len(data)))
+    for first in range(0, messages, RUN_MESSAGES):  # in runs, as the recorder hands them over
+        run = records[first:first + RUN_MESSAGES]
+        parts.append(message_run(b"".join(record for record, _ in run), [size for _, size in run]))
     parts.append(control_record(Close()))
     path.write_bytes(b"".join(parts))
 

@@ -100,7 +100,8 @@ from .definitions import message_definition, normalize_type_name, type_name_of
 from .errors import LogArgumentError, RecorderStateError
 from . import writer_process
 from .qos import OFFERED_QOS_PROFILES, offered_qos_profiles
-from .writer_process import HEADER, MAX_CHANNELS, MESSAGE_FIELDS, MESSAGE_OPCODE, Close, Metadata, Register, Start, control_record
+from .writer_process import (HEADER, MAX_CHANNELS, MESSAGE_FIELDS, MESSAGE_OPCODE, Close, Metadata, Register, Start, control_record,
+                             close_run, open_run)
 
 DEFAULT_CHUNK_INTERVAL_S = 0.5  # log-time span of one chunk: what a kill -9 may lose
 DEFAULT_CHUNK_SIZE = 1 << 20  # uncompressed bytes; bounds memory if an interval holds many messages
@@ -108,9 +109,10 @@ DEFAULT_QUEUE_SIZE = 10_000  # pending messages (~1 s of a 1 kHz node's six topi
 MAX_QUEUED_BYTES = 64 << 20  # pending payload bytes before dropping: a few huge messages cannot fill memory
 DEFAULT_IDLE_FLUSH_S = 1.0  # wall seconds without messages after which the open chunk is closed
 DEFAULT_CHUNK_WALL_S = 1.0  # wall seconds after which an open chunk is closed, whatever its log-time span
-#: Wall seconds between handovers to the writer process. Its CPU at a node's few messages a step is
-#: mostly per handover: 0.05 s cost it about twice as much (docs/node_performance.md).
-DEFAULT_HANDOVER_S = 0.1
+#: Wall seconds between handovers to the writer process. Its CPU, the sender's and the status thread's
+#: at a node's few messages a step is largely per handover: 0.1 s cost the three about 3.5 µs a 1 kHz
+#: step more than 0.25 s (docs/node_performance.md). A kill -9 of the caller loses at most this much.
+DEFAULT_HANDOVER_S = 0.25
 _PIPE_BYTES = 1 << 20  # the pipe to the writer process: Linux's default pipe-max-size (its default is 64 kB)
 MAX_METADATA_BYTES = 1 << 16  # UTF-8 bytes of one metadata record's keys and values
 _MAX_TIME_NS = 1 << 64  # MCAP timestamps are uint64
@@ -245,7 +247,7 @@ class McapRecorder:
         self._broken = False  # the writer process is gone (or its pipe failed)
         self._finished = False  # the writer process reported the file finished
         self._start = Start(str(self._path), self._interval_ns, chunk_size, compression.value, idle_flush_s,
-                            chunk_wall_s, handover_s)
+                            chunk_wall_s)
         self._channels: dict[str, _Channel] = {}
         # write_records' last topic list and its channels, one tuple: replaced whole, read whole (threads)
         self._last_batch: tuple[list[str], list[_Channel]] = ([], [])
@@ -609,13 +611,18 @@ _Pending = bytes | tuple[Sequence[_Channel], Sequence[bytes], int, int] | _Chann
 
 
 def _records(pending: list[_Pending]) -> bytearray:
-    """The writer process's input for `pending`, in order: control records as they are, messages
-    as MCAP Message records (writer_process.HEADER + data) numbered per channel from its last
-    number (uint32: wraps). Sender thread only: it alone counts the channels' numbers."""
-    out, pack = bytearray(), _pack_header
+    """The writer process's input for `pending`, in order: control records as they are, the
+    messages between two of them as one run (writer_process.open_run) of MCAP Message records
+    (writer_process.HEADER + data) numbered per channel from its last number (uint32: wraps).
+    Built in place in one buffer (a 10-finger hand's handover is ~1 MB: no copy of it).
+    Sender thread only: it alone counts the channels' numbers."""
+    out, sizes, run_at, pack = bytearray(), [], None, _pack_header
     for item in pending:
         if type(item) is tuple:
             channels, datas, log_ns, publish_ns = item
+            if run_at is None:
+                run_at = open_run(out)
+            sizes += map(len, datas)
             for channel, data in zip(channels, datas):
                 sequence = channel.last_sequence + 1
                 if sequence == _SEQUENCE_MODULUS:
@@ -626,7 +633,12 @@ def _records(pending: list[_Pending]) -> bytearray:
         elif type(item) is _Channel:
             item.last_sequence = (item.last_sequence + 1) % _SEQUENCE_MODULUS
         else:
+            if run_at is not None:
+                close_run(out, run_at, sizes)
+                run_at, sizes = None, []
             out += item  # type: ignore[arg-type]
+    if run_at is not None:
+        close_run(out, run_at, sizes)
     return out
 
 

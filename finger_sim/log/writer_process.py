@@ -9,19 +9,22 @@ reference to each message (or state) to a list; a sender thread builds their rec
 them over through this process's stdin every handover_s (one write, the GIL released), and
 everything mcap does happens in this process, on the other core.
 
-Stdin carries records, each an opcode and a length (`_RECORD_PREFIX`) and its body. A message
-comes as the MCAP Message record it becomes in the file (`HEADER`: opcode, length, channel id =
-the recorder's channel index + 1, sequence, log and publish time ns; then the data:
-`message_record`), so that a run of them is appended to the open chunk as it is. Opcode
-`CONTROL` (not an MCAP opcode) marks a pickled control item instead (`Start` first, then
-`Register`, `Metadata` and `Close`), so that controls keep their order among the messages. Stdout carries status lines back: `S taken taken_bytes written lost` after
+Stdin carries records, each an opcode and a length (`_RECORD_PREFIX`) and its body. Messages
+come in runs (opcode `RUN`, `open_run`): a count (uint32), the messages as the MCAP Message
+records they become in the file (`HEADER`:
+opcode, length, channel id = the recorder's channel index + 1, sequence, log and publish time ns;
+then the data: `message_record`), then each one's data size (uint32), so that a run is appended to the open chunk as it is and this
+process finds its messages without reading them one by one. Opcode `CONTROL` marks a pickled
+control item instead (`Start` first, then `Register`, `Metadata` and `Close`), so that controls
+keep their order among the messages. Both opcodes are outside MCAP's (0x80-0xFF are left to users). Stdout carries status lines back: `S taken taken_bytes written lost` after
 each change of the counts, `E text` once for the first I/O failure, `D` when the file is
 finished.
 
 Chunking and crash safety are the recorder's (see finger_sim.log.recorder): a chunk is closed
 before its log-time span would reach the interval, once its payload reaches chunk_size, after
 idle_flush_s wall seconds without messages and once it has been open chunk_wall_s wall
-seconds. End of input without `Close` (the caller was killed) closes the open chunk and exits
+seconds. The process sleeps in its read until input comes or the open chunk's next such deadline
+(no periodic wake-up). End of input without `Close` (the caller was killed) closes the open chunk and exits
 without a summary: the file reads as a crash, and keeps everything that was handed over.
 The process runs in its own session, and ignores SIGINT and SIGTERM once started: the caller
 decides when the file ends, by `Close` or by dying.
@@ -31,8 +34,8 @@ but the per-message part of Writer.add_message (a Message object written field b
 quarter of it the message index written entry by entry) is done here in bulk, to the same bytes
 (`ChunkedFile.add_messages`, `PackedMessageIndex`): the records arrive as mcap writes them, each
 run between two chunk boundaries is appended in one write, and its message index entries, time
-range and counts are taken with numpy over the whole run; Python touches a message only to find
-where the next one starts (docs/node_performance.md: 2.0 µs a message before, 22k messages a
+range and counts are taken with numpy over the whole run; Python does not touch a message
+(docs/node_performance.md: 2.0 µs a message before, 22k messages a
 second for a 10-finger hand). This works with
 mcap's Writer's private state (its open chunk, statistics and chunk index list, mcap 1.x); a
 Writer without it is refused at start, and test/log/test_writer_memory.py compares whole files
@@ -58,7 +61,7 @@ import struct
 import sys
 import tempfile
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, BinaryIO
@@ -78,6 +81,11 @@ MESSAGE_OPCODE = int(Opcode.MESSAGE)
 MESSAGE_FIELDS = HEADER.size - struct.calcsize("<BQ")  # less its opcode and length
 #: The opcode of a control record, whose body is a pickled control item (MCAP leaves 0x80-0xFF to users).
 CONTROL = 0xFF
+#: The opcode of a run of messages (`open_run`, `close_run`).
+RUN = 0xFE
+_RUN_HEAD = struct.Struct("<BQI")  # a run's opcode, length and message count
+_COUNT = struct.Struct("<I")  # a run's message count, at the start of its body
+_SIZE_BYTES = 4  # a run's data size of one message (uint32, little-endian)
 #: Channels a recorder can have (indexes 0 … MAX_CHANNELS - 1; MCAP channel id = index + 1, a uint16).
 MAX_CHANNELS = 0xFFFF
 LIBRARY = f"finger_sim.log; {LIBRARY_IDENTIFIER}"
@@ -105,7 +113,6 @@ class Start:
     compression: str  # a CompressionType value
     idle_flush_s: float
     chunk_wall_s: float
-    handover_s: float
 
 
 @dataclass(frozen=True, slots=True)
@@ -134,6 +141,30 @@ def control_record(item: Start | Register | Metadata | Close) -> bytes:
     """A control item as one stdin record."""
     payload = pickle.dumps(item, protocol=pickle.HIGHEST_PROTOCOL)
     return _RECORD_PREFIX.pack(CONTROL, len(payload)) + payload
+
+
+def open_run(out: bytearray) -> int:
+    """Begin a run of messages at the end of `out`: append its `message_record`s, then `close_run`.
+    Returns where the run begins."""
+    at = len(out)
+    out += bytes(_RUN_HEAD.size)  # filled by close_run
+    return at
+
+
+def close_run(out: bytearray, at: int, sizes: list[int]) -> None:
+    """End the run begun at `at`; `sizes`: the data bytes of each message in it (a sender gets
+    them with one call per state; the reader adds HEADER.size to find where each starts)."""
+    out += struct.pack(f"<{len(sizes)}I", *sizes)
+    _RUN_HEAD.pack_into(out, at, RUN, len(out) - at - _RECORD_PREFIX.size, len(sizes))
+
+
+def message_run(records: bytes, sizes: list[int]) -> bytearray:
+    """Message records (`message_record`s, concatenated; `sizes`: their data bytes) as one run."""
+    out = bytearray()
+    at = open_run(out)
+    out += records
+    close_run(out, at, sizes)
+    return out
 
 
 def message_record(index: int, sequence: int, log_ns: int, publish_ns: int, data: bytes) -> bytes:
@@ -272,7 +303,7 @@ class ChunkedFile:
         self._writer.add_metadata(item.name, item.data)
         self._file.flush()  # the record is outside chunks: push it out without cutting the chunk
 
-    def add_messages(self, records: bytearray, start: int, stop: int, positions: list[int] | None = None) -> int:
+    def add_messages(self, records: bytearray, start: int, stop: int, positions: Sequence[int] | None = None) -> int:
         """Add the Message records in records[start:stop] (no control among them; `positions`:
         where each starts, if known), in order; returns the messages newly committed to the file
         (chunks closed).
@@ -289,7 +320,7 @@ class ChunkedFile:
             while at < stop:  # the one per-message Python step: where each record starts
                 positions.append(at)
                 at += length_at + unpack_length(records, at + _LENGTH_AT)[0]
-        if not positions:
+        if not len(positions):
             return 0
         pos = np.array(positions, dtype=np.int64)
         ends = np.append(pos[1:], stop)
@@ -414,11 +445,11 @@ class _Writer:
         except Exception as exc:  # OSError, or mcap's UnsupportedCompressionError
             self._fail(exc)
 
-    def messages(self, records: bytearray, positions: list[int], stop: int) -> None:
+    def messages(self, records: bytearray, positions: Sequence[int], stop: int) -> None:
         """The Message records that start at `positions` in `records`, the last ending at `stop`."""
         count = len(positions)
         self.taken += count
-        self.taken_bytes += stop - positions[0] - count * HEADER.size
+        self.taken_bytes += stop - int(positions[0]) - count * HEADER.size
         if self.file is None:
             self.lost += count
             return
@@ -436,8 +467,10 @@ class _Writer:
             self._do(lambda file: file.add_metadata(item) or 0)
         return False
 
-    def tick(self, got_messages: bool) -> None:
-        """After each read (or timeout): close the open chunk if idle or open too long in wall time."""
+    def tick(self, got_messages: bool) -> float | None:
+        """After each read (or timeout): close the open chunk if idle or open too long in wall time.
+        Returns the wall s until the open chunk's next such deadline (None: no open chunk, nothing to
+        wait for but input)."""
         now = time.monotonic()
         if got_messages:
             self.last_message = now
@@ -446,6 +479,10 @@ class _Writer:
                                                   or now - file.opened_at >= self.start.chunk_wall_s):
             self._do(ChunkedFile.close_chunk)
         self.report()
+        file = self.file
+        if file is None or not file.pending:
+            return None
+        return max(0.0, min(self.last_message + self.start.idle_flush_s, file.opened_at + self.start.chunk_wall_s) - now)
 
     def report(self) -> None:
         """A status line, if the counts changed since the last one."""
@@ -481,9 +518,9 @@ def main() -> int:
     fd, status = sys.stdin.buffer.fileno(), sys.stdout.buffer
     pending = bytearray()
     writer: _Writer | None = None
+    wait: float | None = None  # wall s until the open chunk's idle or wall-time deadline: no wake-up without one
     prefix_size, unpack_from = _RECORD_PREFIX.size, _RECORD_PREFIX.unpack_from
     while True:
-        wait = writer.start.handover_s if writer is not None else None
         chunk = os.read(fd, _READ_BYTES) if select.select([fd], [], [], wait)[0] else None
         if chunk == b"":  # the caller ended without Close (killed): keep what was handed over
             if writer is not None:
@@ -494,33 +531,31 @@ def main() -> int:
         if chunk:
             pending += chunk
             at, end = 0, len(pending)
-            positions: list[int] = []  # where each message since the last control starts
             while end - at >= prefix_size:
                 opcode, length = unpack_from(pending, at)
                 stop = at + prefix_size + length
                 if stop > end:
                     break
-                if opcode != CONTROL:
-                    positions.append(at)
-                    at = stop
-                    continue
-                if positions:  # the messages before a control go first
+                body, at = at + prefix_size, stop
+                if opcode == RUN:
                     assert writer is not None
-                    writer.messages(pending, positions, at)
-                    got, positions = True, []
-                item = pickle.loads(pending[at + prefix_size:stop])
-                at = stop
+                    count = _COUNT.unpack_from(pending, body)[0]
+                    if count:
+                        records_stop = stop - _SIZE_BYTES * count
+                        # a copy: `pending` must not stay exported (it is resized below)
+                        lengths = np.frombuffer(pending, "<u4", count, records_stop).astype(np.int64) + HEADER.size
+                        starts = np.cumsum(lengths) - lengths  # where each record starts in the run
+                        writer.messages(pending, starts + (body + _COUNT.size), records_stop)
+                        got = True
+                    continue
+                item = pickle.loads(pending[body:stop])
                 if isinstance(item, Start):
                     writer = _Writer(item, status)
                 elif writer is not None and writer.control(item):
                     writer.report()
                     writer._line("D")
                     return 0
-            if positions:
-                assert writer is not None
-                writer.messages(pending, positions, at)
-                got = True
             del pending[:at]
         if writer is not None:
-            writer.tick(got)
+            wait = writer.tick(got)
 
