@@ -76,6 +76,9 @@ COMPILED_CHUNK = 32
 MAX_OUTPUTS, KEEP_OUTPUTS = 4096, 256
 #: An empty block of deferred estimates (`DormandPrince853.defer_estimates`): a single output's.
 NO_ROWS = np.empty((0, 4))
+#: `straddles` leaves a kink straddled by fewer than this many units in the last place of its time (s): the
+#: internal step to it would be too short to take (`_advance`'s floor is 10).
+CUT_ULPS = 100
 
 _N_STAGES = coefficients.N_STAGES
 #: Stage nodes of one attempt: the 12 stages, t + h, then the 3 extra dense-output stages.
@@ -315,20 +318,58 @@ class DormandPrince853(Integrator):
             self._changes = self._drive.changes
         if self._friction is not None:
             self._law_state = self._friction.law_state()
+        self._slope(t, torque)
+        if self._h <= 0.0:
+            self._h = initial_step(self._y, self._f, self.rtol, self.atol, dt)
+
+    def _slope(self, t: float, torque: TorqueFn) -> None:
+        """_f = y' at (t, _y) under `torque`."""
         if self.compiled:
             self._rhs(self._model, t, self._y, torque(t), self._f)
         else:
             f = [0.0] * 6
             rhs(self._stages, t, self._y.tolist(), torque(t), f)
             self._f[:] = f
-        if self._h <= 0.0:
-            self._h = initial_step(self._y, self._f, self.rtol, self.atol, dt)
 
-    def _advance_compiled(self, target: float, held: float) -> None:
+    def cut_at(self, s: float, t: float, q: Vec3, v: Vec3, torque: TorqueFn) -> tuple[Vec3, Vec3] | None:
+        """The output at s (s) of the internal solution started (or continued) at (t, q, q') under `torque`,
+        retaken so that an internal step ends exactly at s: a located kink (a contact onset or release),
+        which the accepted internal step across it straddles. The force is not smooth there (δ^1.5), so
+        that step's local error estimate misses its error; the steps up to s, and those after it (which
+        continue from this output), each lie on one side. None (nothing changed): the solution is not the
+        one from (t, q, q'), or no internal step straddles s (`straddles`)."""
+        if torque is not self._torque or self._origin != (t, q, v) or not t < s <= self._t:
+            return None
+        i = bisect.bisect_left(self._history_starts, s) - 1  # the step with t_old < s ≤ t_old + h_old
+        if i < 0:
+            return None
+        t_old, h_old, y_old, _, err_old, _ = self._history[i]
+        if not straddles(s, t_old, h_old):
+            return None
+        proposed = self._h
+        del self._history[i:], self._history_starts[i:]
+        self._t, self._y, self._err, self._h = t_old, y_old, err_old, h_old
+        self._slope(t_old, torque)
+        held = getattr(torque, "value", None)  # as `step`: a held torque's internal steps compiled
+        if held is not None and self._steps is not None:
+            self._advance_compiled(s, held, bounded=True)
+        while self._t < s:
+            self._advance(torque, s)
+        self._h = max(self._h, proposed)  # not the clipped step's: error control shrinks it where needed
+        status, q1, v1 = self._numerics.dop853_output(self._model, self._t_old, self._h_old, self._y_old,
+                                                      self._dense, s, self._out)
+        if status != self._numerics.OK:
+            raise SimulationDiverged("non-finite or unprojectable state", method=self.name, t=s)
+        self._last = (s, q1, v1)
+        self._remember(q1, s, self._t_old, self._h_old, self._err_old, self._err)
+        return q1, v1
+
+    def _advance_compiled(self, target: float, held: float, bounded: bool = False) -> None:
         """`while _t < target: _advance(torque)` under the held torque `held` (N·m) in compiled chunks of
         COMPILED_CHUNK internal steps (`kernel.internal_steps.advance_to`, the same numbers), each step
         kept in the history as `_advance` keeps it; it stops before a step that fails, which the Python
-        loop then retries and reports. The rejected attempts are not counted here."""
+        loop then retries and reports. The rejected attempts are not counted here. `bounded` (`cut_at`):
+        the last step ends exactly at target, as `_advance(torque, target)` ends it."""
         k = self._steps
         st, y, f = self._step_scalars, self._y_next, self._f_next
         self._taus.fill(held)
@@ -337,7 +378,7 @@ class DormandPrince853(Integrator):
             y[:], f[:] = self._y, self._f
             rows = np.empty((COMPILED_CHUNK, k.ROW_SIZE))  # the history keeps views of its rows
             n = k.advance_to(self._model, self.rtol, self.atol, st, y, f, self._y_scratch, self._dense, self._kk,
-                             self._y_new, self._taus, HELD_ARRAY, target, rows)
+                             self._y_new, self._taus, HELD_ARRAY, target, rows, bounded)
             done = n if n >= 0 else -n - 1
             if done:
                 self._t, self._h, self._t_old, self._h_old, self._err, self._err_old = st.tolist()
@@ -352,10 +393,11 @@ class DormandPrince853(Integrator):
             if n < 0:
                 return
 
-    def _advance(self, torque: TorqueFn) -> None:
-        """One accepted internal step from _t (scipy's `RungeKutta._step_impl` without t_bound)."""
+    def _advance(self, torque: TorqueFn, bound: float = math.inf) -> None:
+        """One accepted internal step from _t (scipy's `RungeKutta._step_impl`), ending at `bound` (s) at
+        the latest (scipy's t_bound: `cut_at`)."""
         num = self._numerics
-        t, h = self._t, self._h
+        t, h = self._t, min(self._h, bound - self._t)
         y_new = np.empty(6)
         rejected = False
         for _ in range(MAX_ATTEMPTS):
@@ -381,7 +423,7 @@ class DormandPrince853(Integrator):
                 # written again once it is y_old, so the history keeps it as it is)
                 self._y_old, self._y = self._y, y_new
                 self._f[:] = self._kk[_N_STAGES]
-                self._t = t + h
+                self._t = bound if h == bound - t else t + h
                 self._h = min(MAX_STEP, h * (min(1.0, factor) if rejected else factor))
                 self.accepted += 1
                 if self._keep_history:
@@ -408,6 +450,14 @@ class DormandPrince853(Integrator):
     @classmethod
     def is_stable(cls, z: complex) -> bool:
         return True  # error control shrinks the internal step as needed
+
+
+def straddles(s: float, t_old: float, h_old: float) -> bool:
+    """Whether the accepted internal step (t_old, h_old) (s) straddles a located kink at s, t_old < s ≤
+    t_old + h_old, so that it is retaken to end there (`DormandPrince853.cut_at`): not when it ends at s
+    already, nor when fewer than CUT_ULPS units in the last place of s lie before s (too short a step to
+    take). A plain function: the kernel compiles it (`kernel.event_step`), on the same numbers."""
+    return t_old + h_old != s and s - t_old >= CUT_ULPS * (math.nextafter(s, math.inf) - s)
 
 
 def interpolated_estimate(target: float, t_old: float, h_old: float, err_old: float, err: float) -> float:

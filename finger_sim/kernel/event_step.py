@@ -95,6 +95,10 @@ LAST_OUTPUT_SLACK = 1e-9
 E53, E3_WEIGHT = dop853._E53, dop853.E3_WEIGHT
 #: DOP853's first internal step (`DormandPrince853._restart`), its one plain function compiled.
 initial_step = njit(**JIT)(dop853.initial_step)
+#: `_cut_at`'s answers.
+CUT_NONE, CUT, CUT_PYTHONS, CUT_FAILED = 0, 1, 2, 3
+#: Whether an internal step straddles a located kink (`DormandPrince853.cut_at`), its one plain function compiled.
+straddles = njit(**JIT)(dop853.straddles)
 
 
 def workspace_size(n_model: int, n_plan: int, n_gaps: int) -> int:
@@ -247,7 +251,8 @@ def _step(m, plan, st, arr, work, t, t1, command, prof, same, locate, q, v, log)
 def _settle(m, plan, st, arr, work, side, t, t1, command, prof, q, v, q1, v1, log):
     """`Simulator._advance`'s event loop for a step whose screen (start rows `side`) shows a possible
     crossing, the solution advanced to t1 with its internal steps in log: each crossing located
-    (`event_crossing.first_crossing`), the internal solution continued or restarted from it as
+    (`event_crossing.first_crossing`; a kink's straddling internal step retaken to end there, `_cut_at`), the
+    internal solution continued or restarted from it as
     `DormandPrince853.step` does (its internal steps logged for the next location), the rest of the step
     checked again. Returns (SETTLED, q1, q1', …) with the solution and its last output's origin set (OK: no
     crossing found; ENDED: the crossing ends the step, its state and estimate returned, the last output set);
@@ -271,6 +276,11 @@ def _settle(m, plan, st, arr, work, side, t, t1, command, prof, q, v, q1, v1, lo
         if code == event_crossing.DECLINE or event == MAX_EVENTS_PER_STEP:  # Python acts
             return (EVENT if event == 0 else PYTHON), q1, v1, target, 0.0
         s = found[event_crossing.OUT_S]
+        cut = _cut_at(m, st, arr, log, s, t1, command, prof, found)
+        if cut == CUT_FAILED:
+            return PYTHON, q1, v1, target, 0.0
+        if cut == CUT_PYTHONS:
+            return (EVENT if event == 0 else PYTHON), q1, v1, target, 0.0
         q = (found[event_crossing.OUT_Q], found[event_crossing.OUT_Q + 1], found[event_crossing.OUT_Q + 2])
         v = (found[event_crossing.OUT_V], found[event_crossing.OUT_V + 1], found[event_crossing.OUT_V + 2])
         lq = found[event_crossing.OUT_LAST_Q:event_crossing.OUT_LAST_V]
@@ -317,6 +327,63 @@ def _settle(m, plan, st, arr, work, side, t, t1, command, prof, q, v, q1, v1, lo
             st[KNOWN], st[SIDE] = 1.0, 2 - side
             return SETTLED, q1, v1, target, 0.0
     return PYTHON, q1, v1, target, 0.0  # (not reached: the last round returns)
+
+
+@njit(**JIT)
+def _cut_at(m, st, arr, log, s, t1, command, prof, found):
+    """`DormandPrince853.cut_at` for the kink `event_crossing.first_crossing` located at s (s) in the step to
+    t1: the logged internal step that straddles it (`dop853.straddles`) and those after it dropped, the
+    solution retaken from that step's start with internal steps ending exactly at s, its output there put in
+    found as the crossing and the last trial (OUT_*), then advanced on to `DormandPrince853.step`'s target
+    s + (t1 − s), logged (what the continued step does). Returns CUT_NONE (no step straddles s: nothing
+    changed), CUT (done), CUT_PYTHONS (the straddling step is the one that covered a continued step's start,
+    which the log does not hold: nothing changed) or CUT_FAILED (an internal step failed: Python retakes)."""
+    n, pre = int(log[COUNT]), 1 if log[BRANCH] == CONTINUED else 0
+    j, row = n - 1, log[ROWS_AT:ROWS_AT + ROW_SIZE]
+    while j >= 0 and not log[ROWS_AT + j * ROW_SIZE + ROW_T] < s:
+        j -= 1
+    if j >= 0:
+        row = log[ROWS_AT + j * ROW_SIZE:ROWS_AT + (j + 1) * ROW_SIZE]
+        t_old, h_old = row[ROW_T], row[ROW_H]
+    elif pre and st[SAVED + T_OLD] < s:
+        t_old, h_old = st[SAVED + T_OLD], st[SAVED + H_OLD]
+    else:
+        return CUT_NONE
+    if not straddles(s, t_old, h_old):
+        return CUT_NONE
+    if j < 0:
+        return CUT_PYTHONS
+    y, f, y_old, dense, kk, y_new, out = arr[Y], arr[F], arr[Y_OLD], arr[DENSE:KK], arr[KK:Y_NEW], arr[Y_NEW], arr[OUT]
+    taus = st[TAUS:SAVED]
+    proposed = st[H]
+    st[T], st[H], st[ERR] = t_old, h_old, row[ROW_ERR_OLD]
+    y[:] = row[ROW_Y_OLD:ROW_DENSE]
+    log[COUNT] = j
+    _rhs(m, t_old, y, torque_at(prof, command, t_old), f)
+    while st[T] < s:
+        if not internal_steps.bounded_step(m, st[RTOL], st[ATOL], st, y, f, y_old, dense, kk, y_new, taus, prof, s):
+            return CUT_FAILED
+        st[ERR_OLD] = st[ERR]
+        st[ERR] += dop853_theta_error(E53, kk, st[H_OLD], E3_WEIGHT)
+        record(log, st, y_old, dense)
+    st[H] = max(st[H], proposed)  # not the clipped step's: error control shrinks it where needed
+    status, q, v = dop853_output(m, st[T_OLD], st[H_OLD], y_old, dense, s, out)
+    if status != OK:
+        return CUT_FAILED
+    estimate = _estimate(s, st[T_OLD], st[H_OLD], st[ERR_OLD], st[ERR])
+    found[event_crossing.OUT_Q:event_crossing.OUT_Q + 3], found[event_crossing.OUT_V:event_crossing.OUT_V + 3] = q, v
+    found[event_crossing.OUT_LAST_Q:event_crossing.OUT_LAST_Q + 3] = q
+    found[event_crossing.OUT_LAST_V:event_crossing.OUT_LAST_V + 3] = v
+    found[event_crossing.OUT_EST] = found[event_crossing.OUT_LAST_EST] = estimate
+    found[event_crossing.OUT_HAS_LAST], found[event_crossing.OUT_LAST_T] = 1.0, s
+    target = s + (t1 - s)
+    while st[T] < target:
+        if not _advance(m, st[RTOL], st[ATOL], st, y, f, y_old, dense, kk, y_new, taus, prof):
+            return CUT_FAILED
+        st[ERR_OLD] = st[ERR]
+        st[ERR] += dop853_theta_error(E53, kk, st[H_OLD], E3_WEIGHT)
+        record(log, st, y_old, dense)
+    return CUT if log[COUNT] <= HISTORY_ROWS else CUT_FAILED
 
 
 @njit(**JIT)

@@ -11,13 +11,15 @@ located event's cost in Python.
 
 from __future__ import annotations
 
+from math import inf
+
 from finger_sim.kernel import use_writable_cache
 
 use_writable_cache()  # before numba reads NUMBA_CACHE_DIR
 from numba import njit  # noqa: E402  (after the cache folder is set)
 
 from finger_sim.integrators import dop853  # noqa: E402
-from finger_sim.kernel.closed_loop import I_H_OLD, I_T, I_T_OLD, _advance  # noqa: E402
+from finger_sim.kernel.closed_loop import I_H, I_H_OLD, I_T, I_T_OLD, _advance  # noqa: E402
 from finger_sim.kernel.numerics import JIT, dop853_theta_error  # noqa: E402
 
 #: The scalars of `advance_to`'s st: closed_loop's t, next h, t_old, h_old (s), then the θ error
@@ -31,15 +33,28 @@ E53, E3_WEIGHT = dop853._E53, dop853.E3_WEIGHT
 
 
 @njit(**JIT)
-def advance_to(m, rtol, atol, st, y, f, y_old, dense, kk, y_new, taus, prof, target, history):
+def bounded_step(m, rtol, atol, st, y, f, y_old, dense, kk, y_new, taus, prof, bound):
+    """`closed_loop._advance` ending at `bound` (s) at the latest: `DormandPrince853._advance(torque, bound)`
+    (scipy's t_bound, `DormandPrince853.cut_at`). False if it fails."""
+    st[I_H] = min(st[I_H], bound - st[I_T])
+    if not _advance(m, rtol, atol, st, y, f, y_old, dense, kk, y_new, taus, prof):
+        return False
+    if st[I_H_OLD] == bound - st[I_T_OLD]:
+        st[I_T] = bound
+    return True
+
+
+@njit(**JIT)
+def advance_to(m, rtol, atol, st, y, f, y_old, dense, kk, y_new, taus, prof, target, history, bounded):
     """Accepted internal steps from st[T] until st[T] ≥ target (s), at most len(history) of them, under
     the held torque in taus (prof: `inputs.HELD_ARRAY`); m: the model; y, f, y_old, dense: the solution
     (in place); kk, y_new: the attempt's scratch. Row i of history gets the i-th step (ROW_* layout).
+    `bounded`: the last step ends exactly at target (`bounded_step`).
     Returns the number of steps taken, or −(that number + 1) where the next one fails (st, y, f as
     after the steps taken: Python retries it and raises)."""
     n = 0
     while st[I_T] < target and n < history.shape[0]:
-        if not _advance(m, rtol, atol, st, y, f, y_old, dense, kk, y_new, taus, prof):
+        if not bounded_step(m, rtol, atol, st, y, f, y_old, dense, kk, y_new, taus, prof, target if bounded else inf):
             return -(n + 1)
         st[ERR_OLD] = st[ERR]
         st[ERR] += dop853_theta_error(E53, kk, st[I_H_OLD], E3_WEIGHT)

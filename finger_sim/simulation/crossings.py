@@ -73,6 +73,13 @@ def first_crossing(sim: Simulator, t: float, q: Vec3, v: Vec3, t1: float, q1: Ve
                 first = crossing
     if first is not None and isinstance(first.gap.element, DepthLimit):  # a phalanx axis reached an object
         raise first.gap.element.crossed(first.gap.index, first.t, first.q, first.v, sim.method)
+    cut = getattr(sim.integrator, "cut_at", None)
+    if first is not None and first.gap.restitution is None and cut is not None:
+        # a kink: its state from internal steps that end there (`DormandPrince853.cut_at`), the rest of the
+        # step continued from it, so that no internal step straddles the non-smooth force
+        ended = cut(first.t, t, q, v, torque)
+        if ended is not None:
+            first = Crossing(first.t, *ended, first.gap)
     return first
 
 

@@ -26,9 +26,16 @@ from finger_sim.simulate import Simulator, simulate
 HARD = Path(__file__).resolve().parents[2] / "config" / "hard"
 #: issue 22's table: the six scenes where the table's fixed-step choice missed 1e-6 rad by up to 400×
 SIX = ("elastic_impact", "chatter_wall", "grasp_release", "friction_table", "rigid_fast", "stops_elastic")
-#: An estimate is an estimate: the run's estimated error is within this factor of its true error
-#: (measured 0.15-3.5×: a sum of local errors, without their growth or decay along the flow).
+#: An estimate is an estimate: the run's estimated error is at least its true error / ESTIMATE_FACTOR (an
+#: optimistic estimate hides an error: this side is the promise) and at most PESSIMISM × its true error (a
+#: pessimistic one only warns early). It is a sum of local errors, without their cancelling, growth or decay
+#: along the flow; since a located contact onset or release ends an internal step (`DormandPrince853.cut_at`)
+#: the true error fell up to 11× on the hard scenes while the sum kept or grew (measured 0.7-14×:
+#: friction_table's estimate 1.15e-9 → 1.14e-9 rad while its error fell 1.8e-10 → 9.5e-11; grasp_release's
+#: 1.0e-8 → 2.1e-8, the steps ending at its releases each adding their own local estimate, while its error
+#: fell 2.0e-8 → 1.8e-9).
 ESTIMATE_FACTOR = 10.0
+PESSIMISM = 100.0
 
 
 def data(name: str) -> dict:
@@ -59,7 +66,7 @@ def test_auto_is_within_its_tolerance_on_the_hard_scenes(name, references):
     assert error <= scene.tolerance, (name, run.method, error)
     # the run reports its own estimate, and it is an honest one
     assert math.isfinite(run.error_estimate) and run.error_estimate <= scene.tolerance
-    assert error / ESTIMATE_FACTOR <= run.error_estimate <= error * ESTIMATE_FACTOR, (error, run.error_estimate)
+    assert error / ESTIMATE_FACTOR <= run.error_estimate <= error * PESSIMISM, (error, run.error_estimate)
     assert f"est. error = {run.error_estimate:.1e} rad" in run.summary()
 
 

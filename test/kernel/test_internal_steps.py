@@ -46,13 +46,13 @@ def run(scene, compiled: bool, event_step: bool, command: Command = lambda k, si
     counts = {"compiled": 0}
     original = DormandPrince853._advance_compiled
 
-    def counted(integ, target, held):
+    def counted(integ, target, held, bounded=False):
         before = integ.accepted
-        original(integ, target, held)
+        original(integ, target, held, bounded)
         counts["compiled"] += integ.accepted - before
 
     if compiled:
-        sim.integrator._advance_compiled = lambda target, held: counted(sim.integrator, target, held)
+        sim.integrator._advance_compiled = lambda target, held, bounded=False: counted(sim.integrator, target, held, bounded)
     else:
         sim.integrator._steps = None  # the Python loop of `_advance` (main's path)
     rows, error = [], ""
