@@ -29,7 +29,7 @@ from finger_sim.effects.friction_modes import LOCKED, SLIDING, StickSlipContact
 from finger_sim.errors import SimulationDiverged
 from finger_sim.integrators.base import TorqueFn
 from finger_sim.kinematics import Vec3, assemble, dependent_rates
-from finger_sim.simulation.locate import GUARD_TOLERANCE, LOCATE_TOLERANCE, MAX_LOCATE_ITERATIONS, illinois
+from finger_sim.simulation.locate import first_guard_crossing
 
 if TYPE_CHECKING:
     from finger_sim.simulate import Simulator
@@ -180,17 +180,18 @@ def _carry(sim: Simulator, q_from: Vec3, q_to: Vec3, error: float) -> None:
 def _turn_event(sim: Simulator, friction: StickSlipContact, t: float, q: Vec3, v: Vec3, t1: float, q1: Vec3,
                 v1: Vec3, torque: TorqueFn) -> tuple[float, Vec3, Vec3] | None:
     """(s, q, q') where the slip direction·(θ1' − ω) crosses 0 in (t, t1], the far side; None if the step
-    ends on the near side. Illinois regula falsi, as `stick_slip._turn_event`."""
+    ends on the near side (`locate.first_guard_crossing`, the guard `stick_slip.TURN_GUARD`; its start
+    value is lazy: ω(t, q) is asked only of a step that crosses)."""
+    from finger_sim.stick_slip import TURN_GUARD
+
     s_dir = friction.direction
-    gb = s_dir * (v1[0] - friction.stick_speed(t1, q1))
-    if gb >= -GUARD_TOLERANCE:
-        return None
 
-    def at(s: float) -> tuple[float, tuple[Vec3, Vec3]]:
+    def slip(s: float, qs: Vec3, vs: Vec3) -> float:
+        return s_dir * (vs[0] - friction.stick_speed(s, qs))
+
+    def at(_: int, s: float) -> tuple[float, tuple[Vec3, Vec3]]:
         qs, vs = sim._step(t, q, v, s - t, torque)
-        return s_dir * (vs[0] - friction.stick_speed(s, qs)), (qs, vs)
+        return slip(s, qs, vs), (qs, vs)
 
-    ga = max(s_dir * (v[0] - friction.stick_speed(t, q)), 0.0)
-    b, (qb, vb) = illinois(at, lambda g: g < 0.0, t, ga, t1, gb, (q1, v1),
-                           width=LOCATE_TOLERANCE * (t1 - t), iterations=MAX_LOCATE_ITERATIONS)
-    return b, qb, vb
+    event = first_guard_crossing(TURN_GUARD, (lambda: slip(t, q, v),), (slip(t1, q1, v1),), at, t, t1, (q1, v1))
+    return None if event is None else (event.t, *event.state)

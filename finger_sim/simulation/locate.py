@@ -36,7 +36,12 @@ class GuardCrossing(NamedTuple):
     guard: int
 
 
-def first_guard_crossing(two_sided: tuple[bool, ...], g0: tuple[float, ...], g1: tuple[float, ...],
+#: A guard's value at the step's start: a number, or (a one-sided guard only) a callable that gives
+#: it, called only when the step crosses (a start value that costs, or that can raise off the crossing).
+StartValue = float | Callable[[], float]
+
+
+def first_guard_crossing(two_sided: tuple[bool, ...], g0: tuple[StartValue, ...], g1: tuple[float, ...],
                          at: Callable[[int, float], tuple[float, tuple]], a: float, b: float,
                          far: tuple) -> GuardCrossing | None:
     """The earliest crossing of a step's mode guards in (a, b], located; None if the step crosses none.
@@ -44,16 +49,18 @@ def first_guard_crossing(two_sided: tuple[bool, ...], g0: tuple[float, ...], g1:
     The guards are declared by `two_sided` (one entry per guard, ≥ 0 while its mode holds): a
     one-sided guard (a mode's condition) crosses where its end value g1 is below −GUARD_TOLERANCE,
     located from max(g0, 0); a two-sided one (a kink, no mode change) where g0 and g1 lie on
-    opposite sides of 0. g0, g1: the guards at a and b (s); `far` the state at b; at(k, s) →
-    (guard k at s, state at s) takes a trial step. Each crossing is located by `illinois` to
-    LOCATE_TOLERANCE of the step, on the bracket's far side (the guard crossed).
+    opposite sides of 0. g0, g1: the guards at a and b (s), a one-sided guard's g0 may be lazy
+    (`StartValue`); `far` the state at b; at(k, s) → (guard k at s, state at s) takes a trial step.
+    Each crossing is located by `illinois` to LOCATE_TOLERANCE of the step, on the bracket's far
+    side (the guard crossed).
     """
     first: GuardCrossing | None = None
     for k, both in enumerate(two_sided):
         crossed = (g0[k] < 0.0) != (g1[k] < 0.0) if both else g1[k] < -GUARD_TOLERANCE
         if not crossed:
             continue
-        ga = g0[k] if both else max(g0[k], 0.0)
+        start = g0[k]
+        ga = start if both else max(start() if callable(start) else start, 0.0)
         s, state = illinois(lambda s, k=k: at(k, s), crossing_test(both, ga), a, ga, b, g1[k], far,
                             width=LOCATE_TOLERANCE * (b - a), iterations=MAX_LOCATE_ITERATIONS)
         if first is None or s < first.t:
