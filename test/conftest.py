@@ -52,6 +52,9 @@ START_TIMEOUT = 20.0
 STOP_TIMEOUT = 10.0
 WAIT_TIMEOUT = 20.0
 SPIN_SLICE = 0.01
+SERVICE_SETTLE = 0.25  # s a new service client waits after it is ready (see RosClient.call)
+RESEND_AFTER = 3.0  # s before an unanswered idempotent request is sent again
+IDEMPOTENT_SERVICES = {"SetBool", "GetParameters", "SetParameters"}
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
@@ -232,6 +235,7 @@ class RosClient:
         self.node = rclpy.create_node("test_client", context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
+        self._clients: dict[str, Any] = {}
 
     def spin(self, timeout: float = SPIN_SLICE) -> None:
         self.executor.spin_once(timeout_sec=timeout)
@@ -251,15 +255,33 @@ class RosClient:
         return self.node.create_publisher(msg_type, topic, qos)
 
     def call(self, srv_type: type, name: str, request: Any = None, timeout: float = WAIT_TIMEOUT) -> Any:
-        """Call a service and return its response (waits for the server first)."""
-        client = self.node.create_client(srv_type, name)
-        try:
-            self.wait_for(lambda: client.service_is_ready(), f"service {name}", timeout)
-            future = client.call_async(request if request is not None else srv_type.Request())
-            self.wait_for(future.done, f"a response from {name}", timeout)
-            return future.result()
-        finally:
-            self.node.destroy_client(client)
+        """Call a service and return its response.
+
+        A client is made once per service and kept: each new one is a DDS endpoint to discover. A
+        ready client (our request writer matched) does not mean the server has matched our
+        response reader yet, and a response sent before that is lost for good (volatile
+        durability), so a new client waits SERVICE_SETTLE before its first call, and requests
+        that can be repeated without effect (SetBool, parameters) are sent again every
+        RESEND_AFTER until answered."""
+        client = self._clients.get(name)
+        if client is None or not client.service_is_ready():
+            client = client or self._clients.setdefault(name, self.node.create_client(srv_type, name))
+            self.wait_for(client.service_is_ready, f"service {name}", timeout)
+            settled = time.monotonic() + SERVICE_SETTLE
+            self.wait_for(lambda: time.monotonic() > settled, f"service {name} to settle", timeout)
+        request = request if request is not None else srv_type.Request()
+        resend = srv_type.__name__ in IDEMPOTENT_SERVICES
+        deadline = time.monotonic() + timeout
+        while True:
+            future = client.call_async(request)
+            window = min(deadline, time.monotonic() + RESEND_AFTER) if resend else deadline
+            try:
+                wait_until(future.done, max(window - time.monotonic(), 0.0), f"a response from {name}", spin=self.spin)
+                return future.result()
+            except AssertionError:
+                client.remove_pending_request(future)
+                if not resend or time.monotonic() >= deadline:
+                    raise AssertionError(f"timed out after {timeout:g} s waiting for a response from {name}") from None
 
     def close(self) -> None:
         import rclpy

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from std_srvs.srv import Trigger
+from std_srvs.srv import SetBool, Trigger
 
 from finger_sim.ros import conversions
 
@@ -29,3 +29,14 @@ def start_when_heard(client, node_name: str, *received: list) -> None:
         return False
 
     client.wait_for(heard, f"the first messages from {node_name}")
+
+
+def resume(client, node_name: str, timeout: float | None = None) -> str:
+    """Resume a node started paused; its answer. A no-op ~/pause(true) goes first and is answered:
+    from then on the node's ~/pause server has matched our client, so the resume's answer cannot be
+    lost to discovery, even if the node then runs its scene in a moment and exits."""
+    kwargs = {} if timeout is None else {"timeout": timeout}
+    assert client.call(SetBool, f"{node_name}/pause", SetBool.Request(data=True), **kwargs).success
+    answer = client.call(SetBool, f"{node_name}/pause", SetBool.Request(data=False), **kwargs)
+    assert answer.success, answer.message
+    return answer.message

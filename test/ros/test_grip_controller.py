@@ -25,7 +25,7 @@ rclpy = pytest.importorskip("rclpy")
 from geometry_msgs.msg import WrenchStamped  # noqa: E402
 from rosbags.highlevel import AnyReader  # noqa: E402
 from std_msgs.msg import Float64  # noqa: E402
-from std_srvs.srv import SetBool, Trigger  # noqa: E402
+from std_srvs.srv import Trigger  # noqa: E402
 from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
 
 from finger_sim import kinematics  # noqa: E402
@@ -37,7 +37,7 @@ from finger_sim.tasks.controllers import grip_pi  # noqa: E402
 from finger_sim.tasks.ros_runner import lockstep_task, run_ros_task  # noqa: E402
 from finger_sim.tasks.runner import run_task  # noqa: E402
 from finger_sim.tasks.schema import Task, task_from_dict  # noqa: E402
-from ros_helpers import stamp  # noqa: E402
+from ros_helpers import resume, stamp  # noqa: E402
 
 NODE = "finger_sim.ros.node"
 CONFIG = Path(__file__).resolve().parents[2] / "config"
@@ -165,7 +165,7 @@ def test_node_contact_topics_match_the_offline_run(launcher, ros_client, tmp_pat
         return False
 
     ros_client.wait_for(heard, "the first contact messages")
-    assert ros_client.call(SetBool, "/finger_node/pause", SetBool.Request(data=False)).success
+    resume(ros_client, "/finger_node")
     assert node.wait(30.0) == 0, node.output()
     scene = load_scene(CUP).with_overrides(dt=1.0 / RATE)
     steps = scene.step_count

@@ -33,7 +33,7 @@ from finger_sim.scene import load_scene  # noqa: E402
 from finger_sim.simulate import Simulator, simulate  # noqa: E402
 from conftest import Launcher, allocate_domain_id, ros_environment  # noqa: E402
 from helpers import NODE  # noqa: E402
-from ros_helpers import start_when_heard, stamp, values  # noqa: E402
+from ros_helpers import resume, stamp, start_when_heard, values  # noqa: E402
 
 CONFIG = Path(__file__).resolve().parents[2] / "config"
 PAPER = CONFIG / "paper_flexion.yaml"
@@ -204,7 +204,7 @@ def test_commands_take_effect_at_the_logged_steps(launcher, ros_client):
     start_when_heard(ros_client, "/finger_node", states)
     ros_client.wait_for(lambda: torque_pub.get_subscription_count() and effort_pub.get_subscription_count(), "the command subscriptions")
     probe_command_log(ros_client, torque_pub, log)
-    assert ros_client.call(SetBool, "/finger_node/pause", SetBool.Request(data=False)).success
+    resume(ros_client, "/finger_node")
 
     first = publish_until(ros_client, torque_pub, Float64(data=0.003), log, lambda v: v["event"] == "accepted", "0.003 N·m accepted")
     later = (int(first["step"]) + 50) * DT_NS  # let the first torque act for a while
@@ -249,7 +249,7 @@ def test_bad_commands_saturation_and_timeout(launcher, ros_client):
     effort_pub = ros_client.publisher(Float64MultiArray, "/effort_commands")
     start_when_heard(ros_client, "/finger_node", states)
     ros_client.wait_for(lambda: torque_pub.get_subscription_count() and effort_pub.get_subscription_count(), "the command subscriptions")
-    assert ros_client.call(SetBool, "/finger_node/pause", SetBool.Request(data=False)).success
+    resume(ros_client, "/finger_node")
 
     def refused(reason):
         return lambda v: v["event"] == "refused" and v["reason"] == reason
@@ -344,7 +344,7 @@ def test_pause_step_reset_and_clock(launcher, ros_client):
     np.testing.assert_allclose([p.x, p.y, p.z], [0.0885, 0.0, 0.0], rtol=0, atol=TOL)
     assert (o.w, o.x, o.y, o.z) == (1.0, 0.0, 0.0, 0.0)
 
-    assert ros_client.call(SetBool, "/finger_node/pause", SetBool.Request(data=False)).success
+    resume(ros_client, "/finger_node")
     ros_client.wait_for(lambda: stamp(clocks[-1]) >= clock_r + 100 * DT_NS, "/clock running again")
     ticks = [stamp(c) for c in clocks]
     assert all(b >= a for a, b in zip(ticks, ticks[1:])), "the clock went back"
@@ -379,7 +379,7 @@ def test_several_fingers_in_namespaces(launcher, ros_client):
     probe_command_log(ros_client, torque_pub, index_log)
     probe_command_log(ros_client, middle_pub, middle_log)
     for ns in ("/index", "/middle"):
-        assert ros_client.call(SetBool, f"{ns}/finger_node/pause", SetBool.Request(data=False)).success
+        resume(ros_client, f"{ns}/finger_node")
     publish_until(ros_client, torque_pub, Float64(data=0.003), index_log, lambda v: v["event"] == "accepted", "index command")
     ros_client.wait_for(lambda: index[-1].position[0] > 0.1, "the index finger flexing")
     ros_client.wait_for(lambda: stamp(middle[-1]) >= 200 * DT_NS, "the middle finger running")
@@ -666,7 +666,7 @@ def test_run_time_parameters_apply_from_the_next_step(launcher, ros_client, tmp_
     torque_pub = ros_client.publisher(Float64, "/motor_torque")
     start_when_heard(ros_client, "/finger_node", states)
     ros_client.wait_for(lambda: torque_pub.get_subscription_count(), "the command subscription")
-    assert ros_client.call(SetBool, "/finger_node/pause", SetBool.Request(data=False)).success
+    resume(ros_client, "/finger_node")
     publish_until(ros_client, torque_pub, Float64(data=0.008), log, lambda v: v["event"] == "accepted", "0.008 N·m accepted")
     _, step_p, _ = where(ros_client.call(SetBool, "/finger_node/pause", SetBool.Request(data=True)).message)
 

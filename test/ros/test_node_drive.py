@@ -21,7 +21,6 @@ from diagnostic_msgs.msg import DiagnosticStatus  # noqa: E402
 from rosbags.highlevel import AnyReader  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Float64, String  # noqa: E402
-from std_srvs.srv import SetBool  # noqa: E402
 
 from finger_sim.actuators.drive import MESH_MODES  # noqa: E402
 from finger_sim.log import read_log  # noqa: E402
@@ -31,7 +30,7 @@ from finger_sim.scene import load_scene  # noqa: E402
 from finger_sim.simulate import Simulator, simulate  # noqa: E402
 from conftest import WAIT_TIMEOUT  # noqa: E402
 from helpers import NODE  # noqa: E402
-from ros_helpers import start_when_heard, stamp, values  # noqa: E402
+from ros_helpers import resume, stamp, start_when_heard, values  # noqa: E402
 from test_node import DT_NS, REPUBLISH_S, publish_until, state_by_step  # noqa: E402
 
 CONFIG = Path(__file__).resolve().parents[2] / "config"
@@ -110,7 +109,7 @@ def test_voltage_command_is_saturated_held_and_torque_topics_are_refused(launche
     refused = publish_until(ros_client, torque_pub, Float64(data=0.01), log, lambda v: v["event"] == "refused",
                             "the torque refused")
     assert (refused["source"], refused["reason"]) == ("/motor_torque", REFUSED_TORQUE)
-    assert ros_client.call(SetBool, "/finger_node/pause", SetBool.Request(data=False)).success
+    resume(ros_client, "/finger_node")
     first = wait_while_stepping(ros_client, states, event(log, lambda v: v["event"] == "accepted"), "100 V accepted",
                                 lambda: voltage_pub.publish(Float64(data=100.0)))
     assert (first["torque"], first["requested"], first["saturated"]) == ("6.0", "100.0", "True")  # the supply

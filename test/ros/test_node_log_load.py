@@ -28,6 +28,7 @@ from finger_sim.log.reader import LogReader  # noqa: E402
 from finger_sim.ros import conversions  # noqa: E402
 from conftest import WAIT_TIMEOUT, Launcher, allocate_domain_id, ros_client_on, ros_environment, wait_until  # noqa: E402
 from helpers import NODE, child_pids, run_cli, run_cli_here, wait_until_gone  # noqa: E402
+from ros_helpers import resume  # noqa: E402
 
 CONFIG = Path(__file__).resolve().parents[2] / "config"
 PAPER = CONFIG / "paper_flexion.yaml"
@@ -143,7 +144,7 @@ def loaded_runs(tmp_path_factory) -> dict[str, tuple[int, str, Path]]:
             # resumed only now: started running, a loaded machine could run the whole scene while the
             # writer started, leaving too few steps after the stop to fill the pipe (no drop in 60 s)
             with ros_client_on(int(launchers[-1].env["ROS_DOMAIN_ID"])) as client:
-                assert client.call(SetBool, "/finger_node/pause", SetBool.Request(data=False), timeout=60.0).success
+                resume(client, "/finger_node", timeout=60.0)
             wait_until(lambda: "dropping messages" in node.output(), 60.0, "the node's report of dropped messages")
         finally:
             os.kill(writer, signal.SIGCONT)

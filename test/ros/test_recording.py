@@ -44,7 +44,7 @@ from rosbags.highlevel import AnyReader  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Float64  # noqa: E402
-from std_srvs.srv import SetBool, Trigger  # noqa: E402
+from std_srvs.srv import Trigger  # noqa: E402
 
 import finger_sim  # noqa: E402
 from finger_sim.log import McapRecorder, read_log  # noqa: E402
@@ -52,7 +52,7 @@ from finger_sim.run_log import FINGER_SIM_METADATA, load_run, resimulate  # noqa
 from finger_sim.scene import load_scene, scene_from_dict  # noqa: E402
 from finger_sim.simulate import Simulator  # noqa: E402
 from helpers import NODE, child_pids, run_cli, run_cli_here, wait_until_gone  # noqa: E402
-from ros_helpers import stamp, start_when_heard, values  # noqa: E402
+from ros_helpers import resume, stamp, start_when_heard, values  # noqa: E402
 
 CONTROLLER = "finger_sim.ros.pd_controller"
 ROOT = Path(__file__).resolve().parents[2]
@@ -277,7 +277,7 @@ def test_round_trip_read_by_rosbags_and_mcap(launcher, ros_client, tmp_path):
     ros_client.wait_for(lambda: torque_pub.get_subscription_count(), "the motor_torque subscription")
     sent: list[float] = []
     publish_until(ros_client, torque_pub, math.nan, sent, events, lambda v: v["event"] == "refused", "NaN refused")
-    assert ros_client.call(SetBool, "/finger_node/pause", SetBool.Request(data=False)).success
+    resume(ros_client, "/finger_node")
     sat = publish_until(ros_client, torque_pub, 1e9, sent, events, lambda v: v["event"] == "accepted", "1e9 saturated")
     held = publish_until(ros_client, torque_pub, 0.003, sent, events,
                          lambda v: v["event"] == "accepted" and v["torque"] == "0.003", "0.003 accepted")
@@ -485,7 +485,7 @@ def test_kill_9_leaves_a_readable_prefix(launcher, ros_client, tmp_path):
     states = ros_client.collect(JointState, "/joint_states")
     diagnostics = ros_client.collect(DiagnosticArray, "/diagnostics")
     start_when_heard(ros_client, "/finger_node", states)
-    assert ros_client.call(SetBool, "/finger_node/pause", SetBool.Request(data=False)).success
+    resume(ros_client, "/finger_node")
     first = stamp(states[0])
     paused_written = log_written(diagnostics)
     ros_client.wait_for(lambda: stamp(states[-1]) >= first + 8 * CHUNK_S * 1e9
