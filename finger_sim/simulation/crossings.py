@@ -1,9 +1,10 @@
 """The gap events of a Simulator's non-smooth force elements: a stop impact, a contact onset or release.
 
-Every gap of every non-smooth element (`ForceElement.gaps`) is an event function. A step whose
-ends, or whose predicted path (`locate.predicted_crossing`), show a gap crossing is searched for it
-(`bracket`), and the crossing located by Illinois regula falsi on the gap (`locate_gap`); the
-Simulator ends the step there. The functions read the Simulator's set-up (`_gaps`, `_gap_elements`,
+Every gap of every non-smooth element (`ForceElement.gaps`) is an event function, declared to the one
+guard loop (`locate.first_guard_crossing`) as an ON_GAP guard. A step whose ends, or whose predicted
+path (`locate.predicted_crossing`), show a gap crossing is searched for it (`bracket`), and the crossing
+located by Illinois regula falsi on the gap (`locate_gap`, `locate.regula_falsi_gap`); the Simulator
+ends the step there. The functions read the Simulator's set-up (`_gaps`, `_gap_elements`,
 `_depth_sources`, `_timed`) and take its trial steps (`Simulator._step`).
 """
 
@@ -15,7 +16,8 @@ from finger_sim.depth_guard import DepthLimit
 from finger_sim.effects import ForceElement
 from finger_sim.integrators import TorqueFn
 from finger_sim.kinematics import Vec3
-from finger_sim.simulation.locate import EVENT_TOLERANCE, predicted_crossing, regula_falsi_gap
+from finger_sim.simulation.locate import (EVENT_TOLERANCE, ON_GAP, GuardCrossing, first_guard_crossing,
+                                         predicted_crossing, regula_falsi_gap)
 
 if TYPE_CHECKING:
     from finger_sim.simulation.driver import Simulator
@@ -58,19 +60,23 @@ def first_crossing(sim: Simulator, t: float, q: Vec3, v: Vec3, t1: float, q1: Ve
     screen = sim._gap_screen
     if screen is not None and screen.clear(t, q, v, t1, q1, v1):
         return None
-    first: Crossing | None = None
-    start, end = gap_states(sim, t, q, v), gap_states(sim, t1, q1, v1)
-    h = t1 - t
-    for gap, (g0, r0), (g1, r1) in zip(sim._gaps, start, end):
+    gaps, h = sim._gaps, t1 - t
+
+    def onto_gap(k: int, start: tuple[float, float], end: tuple[float, float]) -> GuardCrossing | None:
+        gap, (g0, r0), (g1, r1) = gaps[k], start, end
         if gap.restitution is not None:
             g0 = max(g0, 0.0)  # an impact gap: the step starts on the open side
         if min(g0, g1) > h * (abs(r0) + abs(r1)):
-            continue  # open at both ends, and too far for `predicted_crossing` to see a crossing between
+            return None  # open at both ends, and too far for `predicted_crossing` to see a crossing between
         found = bracket(sim, gap, t, q, v, torque, (t, g0, r0), (t1, g1, r1, q1, v1), BRACKET_DEPTH)
-        if found is not None:
-            crossing = sim._locate(gap, t, q, v, (t, g0), found, torque)  # `locate_gap`
-            if first is None or crossing.t < first.t:
-                first = crossing
+        if found is None:
+            return None
+        crossing = sim._locate(gap, t, q, v, (t, g0), found, torque)  # `locate_gap`
+        return GuardCrossing(crossing.t, (crossing.q, crossing.v), k)
+
+    event = first_guard_crossing((ON_GAP,) * len(gaps), gap_states(sim, t, q, v), gap_states(sim, t1, q1, v1),
+                                 None, t, t1, (q1, v1), onto_gap)
+    first = None if event is None else Crossing(event.t, *event.state, gaps[event.guard])
     if first is not None and isinstance(first.gap.element, DepthLimit):  # a phalanx axis reached an object
         raise first.gap.element.crossed(first.gap.index, first.t, first.q, first.v, sim.method)
     cut = getattr(sim.integrator, "cut_at", None)

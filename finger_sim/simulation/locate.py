@@ -3,8 +3,8 @@
 Both are plain functions of floats and callables: the Simulator's gap events, the drive's mesh
 guards (`actuators.stepping`, `actuators.inductive_stepping`) and the stick–slip turn all locate
 their crossings with them; the compiled event checks compile `predicted_crossing` itself
-(`kernel.event_checks`). `first_guard_crossing` is the one loop over an element's declared mode
-guards that finds the earliest one a step crosses.
+(`kernel.event_checks`). `first_guard_crossing` is the one loop over a step's declared guards (an
+element's mode guards, or the gaps of the non-smooth elements) that finds the earliest one it crosses.
 """
 
 from __future__ import annotations
@@ -36,32 +36,47 @@ class GuardCrossing(NamedTuple):
     guard: int
 
 
+#: A guard declared ON_GAP (`first_guard_crossing`): a gap, two-sided and predicted from the step's ends
+#: (it may close and open again inside the step), located onto its value by `regula_falsi_gap`.
+ON_GAP = "gap"
+#: A guard's declaration: one-sided (False), two-sided (True) or ON_GAP.
+GuardKind = bool | str
+#: An ON_GAP guard's search: onto_gap(k, g0, g1) → its located crossing in the step, or None.
+OntoGap = Callable[[int, tuple, tuple], "GuardCrossing | None"]
+
 #: A guard's value at the step's start: a number, or (a one-sided guard only) a callable that gives
 #: it, called only when the step crosses (a start value that costs, or that can raise off the crossing).
 StartValue = float | Callable[[], float]
 
 
-def first_guard_crossing(two_sided: tuple[bool, ...], g0: tuple[StartValue, ...], g1: tuple[float, ...],
-                         at: Callable[[int, float], tuple[float, tuple]], a: float, b: float,
-                         far: tuple) -> GuardCrossing | None:
-    """The earliest crossing of a step's mode guards in (a, b], located; None if the step crosses none.
+def first_guard_crossing(kinds: tuple[GuardKind, ...], g0: tuple, g1: tuple,
+                         at: Callable[[int, float], tuple[float, tuple]] | None, a: float, b: float,
+                         far: tuple, onto_gap: OntoGap | None = None) -> GuardCrossing | None:
+    """The earliest crossing of a step's guards in (a, b], located; None if the step crosses none.
 
-    The guards are declared by `two_sided` (one entry per guard, ≥ 0 while its mode holds): a
-    one-sided guard (a mode's condition) crosses where its end value g1 is below −GUARD_TOLERANCE,
-    located from max(g0, 0); a two-sided one (a kink, no mode change) where g0 and g1 lie on
-    opposite sides of 0. g0, g1: the guards at a and b (s), a one-sided guard's g0 may be lazy
-    (`StartValue`); `far` the state at b; at(k, s) → (guard k at s, state at s) takes a trial step.
-    Each crossing is located by `illinois` to LOCATE_TOLERANCE of the step, on the bracket's far
-    side (the guard crossed).
+    The guards are declared by `kinds` (one entry per guard, ≥ 0 while its mode holds): a
+    one-sided guard (False, a mode's condition) crosses where its end value g1 is below
+    −GUARD_TOLERANCE, located from max(g0, 0); a two-sided one (True, a kink of a mode guard) where
+    g0 and g1 lie on opposite sides of 0. g0, g1: the guards at a and b (s), a one-sided guard's g0
+    may be lazy (`StartValue`); `far` the state at b; at(k, s) → (guard k at s, state at s) takes a
+    trial step. Each such crossing is located by `illinois` to LOCATE_TOLERANCE of the step, on the
+    bracket's far side (the guard crossed). An ON_GAP guard's g0, g1 are its (gap, rate) at a and b,
+    searched and located by `onto_gap` (a prediction between the ends, `regula_falsi_gap`). Of
+    crossings at the same time the first declared counts.
     """
     first: GuardCrossing | None = None
-    for k, both in enumerate(two_sided):
-        crossed = (g0[k] < 0.0) != (g1[k] < 0.0) if both else g1[k] < -GUARD_TOLERANCE
+    for k, kind in enumerate(kinds):
+        if kind == ON_GAP:
+            found = onto_gap(k, g0[k], g1[k])
+            if found is not None and (first is None or found.t < first.t):
+                first = found
+            continue
+        crossed = (g0[k] < 0.0) != (g1[k] < 0.0) if kind else g1[k] < -GUARD_TOLERANCE
         if not crossed:
             continue
         start = g0[k]
-        ga = start if both else max(start() if callable(start) else start, 0.0)
-        s, state = illinois(lambda s, k=k: at(k, s), crossing_test(both, ga), a, ga, b, g1[k], far,
+        ga = start if kind else max(start() if callable(start) else start, 0.0)
+        s, state = illinois(lambda s, k=k: at(k, s), crossing_test(kind, ga), a, ga, b, g1[k], far,
                             width=LOCATE_TOLERANCE * (b - a), iterations=MAX_LOCATE_ITERATIONS)
         if first is None or s < first.t:
             first = GuardCrossing(s, state, k)
