@@ -114,7 +114,17 @@ def start(sim: Simulator) -> None:
             friction.remember(0.0, sim.q)
         return
     if sim.v[0] == 0.0:
-        sim.v = _turn(sim, friction, 0.0, sim.q, sim.scene.torque)
+        drive = sim._drive
+        kept = sim.kept_start.get(__name__)  # the holding test's outcome depends on the scene alone
+        if kept is None:
+            sim.v = _turn(sim, friction, 0.0, sim.q, sim.scene.torque)
+            sim.kept_start[__name__] = (friction.mode, friction.direction, friction.hold,
+                                        None if drive is None else (drive.mode, drive.direction))
+        else:
+            friction.mode, friction.direction, friction.hold, mesh = kept
+            if drive is not None:
+                drive.mode, drive.direction = mesh
+            sim.v = ZERO
         friction.remember(0.0, sim.q)
     else:  # a drive's flank was chosen by `actuators.stepping.start`
         friction.mode, friction.direction = SLIDING, math.copysign(1.0, sim.v[0])

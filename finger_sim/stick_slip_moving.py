@@ -46,12 +46,22 @@ def start(sim: Simulator, torque: TorqueFn) -> None:
     test; else sliding towards sgn(θ1' − ω)."""
     friction: StickSlipContact = sim._friction
     friction.holds.clear()
-    slip = sim.v[0] - friction.stick_speed(0.0, sim.q)
-    if slip == 0.0:
-        sim.q, sim.v = _turn(sim, friction, 0.0, sim.q, torque)
-        friction.remember(0.0, sim.q, sim.v)
+    start_q = sim.q
+    kept = sim.kept_start.get(__name__)  # the test's outcome depends on the scene alone (torque: its input)
+    if kept is None:
+        slip = sim.v[0] - friction.stick_speed(0.0, start_q)
+        if slip == 0.0:
+            sim.q, sim.v = _turn(sim, friction, 0.0, start_q, torque)
+        else:
+            friction.mode, friction.direction = SLIDING, math.copysign(1.0, slip)
+        kept = sim.kept_start[__name__] = (slip == 0.0, sim.q, sim.v, friction.mode, friction.direction,
+                                           friction.hold)
     else:
-        friction.mode, friction.direction = SLIDING, math.copysign(1.0, slip)
+        turned, sim.q, sim.v, friction.mode, friction.direction, friction.hold = kept
+        if turned:
+            _carry(sim, start_q, sim.q, 0.0)  # as `_turn` does
+    if kept[0]:  # at rest relative to the objects
+        friction.remember(0.0, sim.q, sim.v)
 
 
 def advance(sim: Simulator, t0: float, t1: float, torque: TorqueFn) -> None:

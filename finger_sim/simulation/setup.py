@@ -48,6 +48,10 @@ class Setup(NamedTuple):
     fast_stepper: object  # kernel.integrators.FastStepper | None
     #: the system holds run state (a drive, an element with its own modes): each Simulator builds its own
     own_system: bool
+    #: what the first Simulator's start found at the scene's initial state (a function of the scene alone:
+    #: the mesh's turning-point rule, the holding test riding a moving object), by its owner's module;
+    #: filled once, read by the next Simulators' `reset`
+    kept_start: dict[str, tuple[object, ...]]
 
 
 def for_simulator(scene: Scene, kernel: str, effects: tuple[Effect, ...]) -> Setup:
@@ -140,7 +144,7 @@ def setup_for(scene: Scene, kernel: str, effects: tuple[Effect, ...]) -> Setup:
         fast_stepper = stepper_slot.kernel().fast_stepper(integrator_cls(system), scene.dt, scene.torque)
     own_system = getattr(system, "drive", None) is not None or any(isinstance(e, OwnModes) for e in system.elements)
     return Setup(system, method, reason, substeps, options, method_cls, integrator_cls, kernel_name, gaps, kinks,
-                 gap_elements, depth_sources, fast_stepper, own_system)
+                 gap_elements, depth_sources, fast_stepper, own_system, {})
 
 
 def stable_under_auto(scene: Scene, system: FingerSystem, name: str) -> bool:

@@ -50,9 +50,10 @@ def _own_elements(sim: Simulator) -> bool:
                    for e in sim.system.elements) for g in sim._gaps)
 
 
-@pytest.mark.parametrize("name", ["friction/hold_table", "drive_grasp"])
+@pytest.mark.parametrize("name", ["friction/hold_table", "friction/pushed_table", "drive_grasp"])
 def test_a_scene_whose_system_holds_run_state_shares_the_set_up_but_builds_its_own_system(name):
-    # a friction mode, a drive's mesh mode: state of the system, so each Simulator needs its own
+    # a friction mode, a drive's mesh mode: state of the system, so each Simulator needs its own; the
+    # start's findings (the holding test, the mesh's rule at the initial state) are kept with the set-up
     scene = load_scene(CONFIG / f"{name}.yaml")
     steps = 300
     setup_for.cache_clear()
@@ -66,6 +67,7 @@ def test_a_scene_whose_system_holds_run_state_shares_the_set_up_but_builds_its_o
     assert first.system is not second.system and first.system is not uncached.system
     assert _own_elements(first) and _own_elements(second) and len(first._gaps) == len(uncached._gaps) > 0
     assert first._integrator_cls is second._integrator_cls and first.method == uncached.method
+    assert first.kept_start is second.kept_start is uncached.kept_start and uncached.kept_start
     for _ in range(steps):
         first.step()
     assert second.step_index == 0 and second.q == scene.initial_state()[0] and second.modes == start_modes
