@@ -152,6 +152,9 @@ def test_three_fingers_one_clock_their_own_runs_one_log(launcher, ros_client, tm
         received = {stamp(m): (list(m.name), m.header.frame_id, list(m.position), list(m.velocity), list(m.effort))
                     for m in states[spec.name] if stamp(m) >= offset}
         assert end in received and received == {t: log_states[t] for t in received}, spec.name
+        # command_log is a topic of its own: its event may reach us after the states did
+        ros_client.wait_for(lambda: any(conversions.parse_values(m)["event"] == "accepted" for m in logs[spec.name]),
+                            f"{spec.name}'s accepted command in its command_log")
         event = conversions.parse_values(logs[spec.name][-1])
         assert (event["event"], event["step"], event["source"]) == ("accepted", "0", f"/{spec.name}/{topic}")
     assert got[STEPS][2][0] > 0.1  # the ring finger flexed; index and middle differ from it
