@@ -167,11 +167,13 @@ class EventStep:
                 v = ZERO
         self._moved = True
         integ._torque = fn  # noqa: SLF001
-        # `DormandPrince853._remember` (its `_estimates` property read only when estimates are deferred)
-        estimates = integ._estimates if integ._deferred else integ._settled  # noqa: SLF001
-        if len(estimates) >= MAX_OUTPUTS:
-            estimates = integ._estimates = dict(list(estimates.items())[-KEEP_OUTPUTS:])  # noqa: SLF001
-        estimates[q] = estimate
+        if integ._deferred:  # noqa: SLF001  (a stretch's blocks: kept deferred, the dict not built)
+            integ.store_estimate(q, estimate)
+        else:  # `DormandPrince853.store_estimate`, inline
+            estimates = integ._settled  # noqa: SLF001
+            if len(estimates) >= MAX_OUTPUTS:
+                estimates = integ._estimates = dict(list(estimates.items())[-KEEP_OUTPUTS:])  # noqa: SLF001
+            estimates[q] = estimate
         sim.q, sim.v, sim.torque, sim.step_index = q, v, end, k + 1
         self._q, self._v = q, v
         if status == self._ended or status == self._rested:  # its state is not the solution's last output
