@@ -7,9 +7,10 @@ compiled in `kernel.locate_event`). `first_crossing` here takes the same tests o
 gaps and rates at both ends are the screen's (`gap_screen.gap_states`), every trial of the location is
 answered from the internal steps the kernel took (as `DormandPrince853.step` answers them from its
 history). Where Python would need more, it declines (DECLINE) before anything is changed: `bracket`'s
-trial steps (a crossing predicted between two ends on the same side), an impact or a depth gap crossing
-first (the impact's velocity jump and rest, the depth error), a trial the internal steps do not answer,
-or a crossing at the step's start. Python then locates it as always.
+trial steps (a crossing predicted between two ends on the same side), a depth gap crossing first (the
+depth error), a trial the internal steps do not answer, or a crossing at the step's start. Python then
+locates it as always. A stop's impact gap crossing first is located and answered IMPACT: the caller applies
+the impact and its rest test (`event_step._impact`).
 
 Besides the crossing, Python's trials leave the integrator's last output (the last trial) and the error
 estimate of every trial state: the caller reads them in `out` (the OUT_* slots), to continue or restart
@@ -32,6 +33,9 @@ from finger_sim.simulation.crossings import MAX_LOCATE_ITERATIONS
 
 #: `first_crossing`'s answers: no crossing in the step; one located (in out); Python must look.
 NONE, FOUND, DECLINE = 0, 1, 2
+#: `first_crossing`'s answer when the earliest crossing is a stop's impact gap (located, out filled): the
+#: caller applies the impact law and the rest test (`event_step._impact`).
+IMPACT = 3
 #: out's slots: the crossing (s, q, q', the error estimate at q in rad), then the last trial (HAS_LAST 1/0,
 #: its time, q, q', its estimate).
 OUT_S, OUT_Q, OUT_V, OUT_EST = 0, 1, 4, 7
@@ -55,7 +59,7 @@ def first_crossing(m, plan, work, a, t, q, v, t1, q1, v1, est1, segs, y_olds, de
     `crossings.first_crossing` finds and locates it. work: the screen's rows (a, a + 1: the start's gaps and
     rates; 2 − a, 3 − a: the end's); est1: the error estimate at q1 (rad); segs, y_olds, denses: the internal
     steps that answer trials (`locate_event`'s layout, the current one last); end: the internal solution's
-    time (s). Returns (NONE, FOUND or DECLINE, the crossing gap's position); FOUND fills out (OUT_*)."""
+    time (s). Returns (NONE, FOUND, IMPACT or DECLINE, the crossing gap's position); FOUND and IMPACT fill out (OUT_*)."""
     n, b, h = int(plan[0]), 2 - a, t1 - t
     flags, deep = plan.shape[0] - n, depth_from(plan)
     meta, x = np.empty(META_SIZE), np.empty(6)
@@ -104,6 +108,6 @@ def first_crossing(m, plan, work, a, t, q, v, t1, q1, v1, est1, segs, y_olds, de
         out[OUT_V], out[OUT_V + 1], out[OUT_V + 2] = vs[0], vs[1], vs[2]
     if first < 0:
         return NONE, first
-    if plan[flags + first] != 0.0 or first >= deep:
-        return DECLINE, first  # an impact (its jump and rest) or a phalanx axis in the object (an error): Python's
-    return FOUND, first
+    if first >= deep:
+        return DECLINE, first  # a phalanx axis in the object (an error): Python's
+    return (IMPACT if plan[flags + first] != 0.0 else FOUND), first

@@ -17,7 +17,7 @@ from finger_sim.kernel import use_writable_cache
 use_writable_cache()  # before numba reads NUMBA_CACHE_DIR
 from numba import njit  # noqa: E402  (after the cache folder is set)
 
-from finger_sim.kernel.event_step import (AT_LAST, ENDED, EVENT, SAME, SETTLED, common_step, pushes_at,  # noqa: E402
+from finger_sim.kernel.event_step import (AT_LAST, ENDED, EVENT, RESTED, SAME, SETTLED, common_step, pushes_at,  # noqa: E402
                                           restore, stays_at_rest)
 from finger_sim.kernel.numerics import JIT, OK  # noqa: E402
 
@@ -36,8 +36,9 @@ def run(ws, k0, n, dt, command, flags, out):
         k = k0 + i
         status, q, v, estimate, tau = common_step(ws, k * dt, (k + 1) * dt, command, flags)
         if status != OK and status != SETTLED:  # (SETTLED: crossings located and stepped past, as OK)
-            if status == EVENT or status == ENDED:  # a stretch hands Python the step as it was (`sim.step()`
-                restore(ws)  # takes it again; after ENDED the next step does not start at the last output)
+            if status == EVENT or status == ENDED or status == RESTED:  # a stretch hands Python the step as it
+                restore(ws)  # was (`sim.step()` takes it again; after ENDED the next step does not start at the last
+                # output; after RESTED the Simulator enters the rest mode)
             return i, end
         out[i, 0], out[i, 1], out[i, 2], out[i, 3], out[i, 4], out[i, 5] = q[0], q[1], q[2], v[0], v[1], v[2]
         out[i, 6] = estimate

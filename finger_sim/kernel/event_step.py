@@ -33,6 +33,7 @@ use_writable_cache()  # before numba reads NUMBA_CACHE_DIR
 import numpy as np  # noqa: E402
 from numba import njit  # noqa: E402  (after the cache folder is set)
 
+from finger_sim.effects import stops  # noqa: E402
 from finger_sim.integrators import dop853  # noqa: E402
 from finger_sim.kernel.closed_loop import I_H, I_H_OLD, I_T, I_T_OLD, N_NODES, _advance  # noqa: E402
 from finger_sim.kernel.gap_screen import screen  # noqa: E402
@@ -61,7 +62,10 @@ HAS_ORIGIN, ORIGIN_T, ORIGIN_Q, ORIGIN_V, KNOWN, SIDE, RTOL, ATOL, X = 15, 16, 1
 #: The output of a step a crossing ended (ENDED; HAS_END 1/0, its q and error estimate), which is not the last
 #: output: a restart from it at the next step reads its estimate (`DormandPrince853.error_estimate`).
 HAS_END, END_Q, END_EST = 33, 34, 37
-N_SCALARS = 38
+#: The stops' restitution e (set by `simulation.event_step`); the impacts the kernel applied (a counter the
+#: Simulator reads and clears: `Simulator.impacts`); the position of the gap the last RESTED step rests on.
+RESTITUTION, IMPACTS, REST_GAP = 38, 39, 40
+N_SCALARS = 41
 TAUS = N_SCALARS
 SAVED = TAUS + N_NODES
 #: The profile's slot (code and up to three parameters), then the held value's code.
@@ -80,6 +84,10 @@ SETTLED = 3
 #: Its answer when a located crossing ends the step (`Simulator._advance`): its state is the output, and the
 #: solution's last output is the location's last trial (the next step starts off it: not AT_LAST).
 ENDED = 4
+#: Its answer when a stop's impact starts the rest on it (`simulation.impact.impact`) and the rest holds to the
+#: step's end (`stays_at_rest`): the state at the impact with q' = 0, its gap's position in st[REST_GAP], the
+#: solution's last output set as after ENDED. The Simulator enters the rest mode.
+RESTED = 5
 #: `common_step`'s flags: the solution is under this command's torque function; the step starts at
 #: the last output (else at st[X:X + 6]); the torque is the profile in st (else the held command); a
 #: crossing may be located here (Python's step would integrate under the same function: `_settle`).
@@ -95,6 +103,10 @@ LAST_OUTPUT_SLACK = 1e-9
 E53, E3_WEIGHT = dop853._E53, dop853.E3_WEIGHT
 #: DOP853's first internal step (`DormandPrince853._restart`), its one plain function compiled.
 initial_step = njit(**JIT)(dop853.initial_step)
+#: `_impact`'s verdicts.
+BOUNCES, RESTS, UNSURE = 0, 1, 2
+#: `effects.stops.REST_HEIGHT` (rad): the rest test's bound on the rebound's height.
+REST_HEIGHT = stops.REST_HEIGHT
 #: `_cut_at`'s answers.
 CUT_NONE, CUT, CUT_PYTHONS, CUT_FAILED = 0, 1, 2, 3
 #: Whether an internal step straddles a located kink (`DormandPrince853.cut_at`), its one plain function compiled.
@@ -234,7 +246,7 @@ def _step(m, plan, st, arr, work, t, t1, command, prof, same, locate, q, v, log)
             return EVENT, q, v, 0.0
         status, q1, v1, target, estimate = _settle(m, plan, st, arr, work, side, t, t1, command, prof, q, v, q1, v1,
                                                    log)
-        if status == ENDED:
+        if status == ENDED or status == RESTED:
             return status, q1, v1, estimate
         if status != SETTLED and status != OK:
             return status, q, v, 0.0
@@ -268,7 +280,7 @@ def _settle(m, plan, st, arr, work, side, t, t1, command, prof, q, v, q1, v1, lo
     for event in range(MAX_EVENTS_PER_STEP + 1):
         est1 = _estimate(target, st[T_OLD], st[H_OLD], st[ERR_OLD], st[ERR])
         segs, y_olds, denses = _history(st, arr, log)
-        code, _ = event_crossing.first_crossing(m, plan, work, side, s, q, v, t1, q1, v1, est1, segs, y_olds,
+        code, gap = event_crossing.first_crossing(m, plan, work, side, s, q, v, t1, q1, v1, est1, segs, y_olds,
                                                 denses, st[T], found)
         if code == event_crossing.NONE:
             st[KNOWN] = 0.0
@@ -276,16 +288,29 @@ def _settle(m, plan, st, arr, work, side, t, t1, command, prof, q, v, q1, v1, lo
         if code == event_crossing.DECLINE or event == MAX_EVENTS_PER_STEP:  # Python acts
             return (EVENT if event == 0 else PYTHON), q1, v1, target, 0.0
         s = found[event_crossing.OUT_S]
-        cut = _cut_at(m, st, arr, log, s, t1, command, prof, found)
-        if cut == CUT_FAILED:
-            return PYTHON, q1, v1, target, 0.0
-        if cut == CUT_PYTHONS:
-            return (EVENT if event == 0 else PYTHON), q1, v1, target, 0.0
         q = (found[event_crossing.OUT_Q], found[event_crossing.OUT_Q + 1], found[event_crossing.OUT_Q + 2])
         v = (found[event_crossing.OUT_V], found[event_crossing.OUT_V + 1], found[event_crossing.OUT_V + 2])
         lq = found[event_crossing.OUT_LAST_Q:event_crossing.OUT_LAST_V]
         lv = found[event_crossing.OUT_LAST_V:event_crossing.OUT_LAST_V + 3]
-        if s >= t1:  # the crossing ends the step: its state the output, the last trial (else the end) the last output
+        rests = False
+        if code == event_crossing.IMPACT:  # no cut (`crossings.first_crossing`: the impact restarts the solution)
+            sign = plan[plan.shape[0] - int(plan[0]) + gap]
+            verdict, v = _impact(m, st, s, t1, command, prof, sign, q, v)
+            if verdict == UNSURE:  # near the rest test's edge: Python decides on its own acceleration
+                return (EVENT if event == 0 else PYTHON), q1, v1, target, 0.0
+            st[IMPACTS] += 1.0
+            rests = verdict == RESTS
+            if rests:
+                st[REST_GAP] = gap
+        else:
+            cut = _cut_at(m, st, arr, log, s, t1, command, prof, found)
+            if cut == CUT_FAILED:
+                return PYTHON, q1, v1, target, 0.0
+            if cut == CUT_PYTHONS:
+                return (EVENT if event == 0 else PYTHON), q1, v1, target, 0.0
+            q = (found[event_crossing.OUT_Q], found[event_crossing.OUT_Q + 1], found[event_crossing.OUT_Q + 2])
+            v = (found[event_crossing.OUT_V], found[event_crossing.OUT_V + 1], found[event_crossing.OUT_V + 2])
+        if s >= t1 or rests:  # the crossing ends the step: its state the output, the last trial (else the end) the last output
             if found[event_crossing.OUT_HAS_LAST] == 1.0:
                 st[LAST_T], st[LAST_EST] = found[event_crossing.OUT_LAST_T], found[event_crossing.OUT_LAST_EST]
                 _put(st, LAST_Q, (lq[0], lq[1], lq[2]), (lv[0], lv[1], lv[2]))
@@ -295,7 +320,7 @@ def _settle(m, plan, st, arr, work, side, t, t1, command, prof, q, v, q1, v1, lo
             st[HAS_LAST], st[KNOWN] = 1.0, 0.0
             st[HAS_END], st[END_EST] = 1.0, found[event_crossing.OUT_EST]
             st[END_Q], st[END_Q + 1], st[END_Q + 2] = q[0], q[1], q[2]
-            return ENDED, q, v, target, found[event_crossing.OUT_EST]
+            return (RESTED if rests else ENDED), q, v, target, found[event_crossing.OUT_EST]
         st[HAS_ORIGIN], st[ORIGIN_T] = 1.0, s
         _put(st, ORIGIN_Q, q, v)
         target = s + (t1 - s)  # `DormandPrince853.step`'s from the crossing
@@ -327,6 +352,31 @@ def _settle(m, plan, st, arr, work, side, t, t1, command, prof, q, v, q1, v1, lo
             st[KNOWN], st[SIDE] = 1.0, 2 - side
             return SETTLED, q1, v1, target, 0.0
     return PYTHON, q1, v1, target, 0.0  # (not reached: the last round returns)
+
+
+@njit(**JIT)
+def _impact(m, st, s, t1, command, prof, sign, q, v):
+    """`simulation.impact.impact` at the located impact (s, q, q') on a stop gap whose gradient's θ1 component is
+    `sign`, in the step to t1 (s): (verdict, q' after it). RESTS: the rebound −e q' rises no higher than
+    `stops.REST_HEIGHT` against the free acceleration (`JointStops.rests`) and the rest holds to t1
+    (`JointStops.release_time` finds none): q' = 0; BOUNCES: q' = −e q'; UNSURE: the compiled acceleration is
+    within REST_MARGIN of either test's edge (the Simulator decides on its own)."""
+    e = st[RESTITUTION]
+    v_plus = (-e * v[0], -e * v[1], -e * v[2])
+    y, f = np.empty(6), np.empty(6)
+    y[0], y[1], y[2], y[3], y[4], y[5] = q[0], q[1], q[2], 0.0, 0.0, 0.0
+    _rhs(m, s, y, torque_at(prof, command, s), f)
+    closing, rate = sign * f[3], sign * v_plus[0]
+    slack = REST_MARGIN * max(1.0, abs(f[3]))
+    lift = rate * rate - 2.0 * REST_HEIGHT * -closing  # ≤ 0: the rebound rises no higher than REST_HEIGHT
+    if closing > slack or lift > 2.0 * REST_HEIGHT * slack:  # either test fails beyond the round-off
+        return BOUNCES, v_plus
+    if closing >= -slack or lift >= -2.0 * REST_HEIGHT * slack:
+        return UNSURE, v
+    _rhs(m, t1, y, torque_at(prof, command, t1), f)  # the push into the stop at t1 keeps the rest
+    if -sign * f[3] <= REST_MARGIN * max(1.0, abs(f[3])):
+        return UNSURE, v
+    return RESTS, (0.0, 0.0, 0.0)
 
 
 @njit(**JIT)

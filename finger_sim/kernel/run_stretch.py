@@ -85,6 +85,7 @@ def _stretch(sim: Simulator, events: EventStep, compiled: Any, rows: np.ndarray,
     else:  # a state the kernel did not produce
         events._st[events._x] = (*sim.q, *sim.v)  # noqa: SLF001
     count, end = compiled.run(events._ws, k, n, dt, value, flags, rows)  # noqa: SLF001
+    events.count_impacts(sim)  # bounces on a stop applied in the stretch
     if count:
         xs[:count] = rows[:count, :6]
         last = rows[count - 1].tolist()

@@ -13,8 +13,10 @@ A step whose end gaps show a possible contact onset or release is taken whole in
 Python's step would integrate it under the same function (a held command, a constant or smooth profile):
 the kernel locates each crossing on its internal steps' dense output and continues or restarts the
 solution from it (`kernel.event_step._settle`, `kernel.event_crossing`), on Python's numbers. Where
-Python must act (an impact on a stop, a crossing predicted between two ends on the same side, a phalanx
-axis in the object), the kernel hands the advanced step over (`hand_over`) and Python locates it.
+Python must act (a crossing predicted between two ends on the same side, a phalanx axis in the object, an
+impact whose rest test lies within the kernel's margin of its edge), the kernel hands the advanced step over
+(`hand_over`) and Python locates it. A stop's impact is applied in the kernel (`kernel.event_step._impact`:
+q' → −e q', or the rest on the stop when it holds to the step's end, RESTED), as `simulation.impact` applies it.
 
 A smooth profile (ramp, sine) is evaluated in the kernel (its compiled form, `inputs.profile_array`);
 a piecewise-constant one (step, square) is held at its segment's value (`Profile.on_segment`). A step
@@ -83,6 +85,8 @@ class EventStep:
         self._arr = ws[o:o + compiled.ROWS * WIDTH].reshape(compiled.ROWS, WIDTH)
         self._log = ws[len(ws) - compiled.internal_steps.HISTORY_SIZE:]  # `kernel.event_step.log_of`
         self._st[compiled.RTOL], self._st[compiled.ATOL] = integ.rtol, integ.atol
+        self._st[compiled.RESTITUTION] = sim.scene.restitution  # the stops' (`kernel.event_step._impact`)
+        self._impacts, self._rest_gap, self._rested = compiled.IMPACTS, compiled.REST_GAP, compiled.RESTED
         self._st[compiled.HELD_AT] = HELD
         self._profile_at = slice(compiled.PROFILE_AT, compiled.PROFILE_AT + compiled.PROFILE_SIZE)
         self._profile_flag = compiled.PROFILE
@@ -154,22 +158,35 @@ class EventStep:
             flags |= self._locate
         status, q, v, estimate, end = self._call(self._ws, k * dt, (k + 1) * dt, value, flags)  # (floats, an int)
         if status != self._ok:
-            if status != self._settled and status != self._ended:  # (else: crossings located and stepped past here)
+            if status != self._settled and status != self._ended and status != self._rested:
                 return self._decline(integ, fn, status == self._event, continues)
-            self.settled += 1
+            self.settled += 1  # crossings located (and impacts applied) and stepped past here
+            self.count_impacts(sim)
+            if status == self._rested:
+                sim._resting = sim._gaps[int(self._st[self._rest_gap])]  # noqa: SLF001  (`simulation.impact.impact`)
+                v = ZERO
         self._moved = True
         integ._torque = fn  # noqa: SLF001
-        # `DormandPrince853._remember` (its `_estimates` property read only when estimates are deferred)
-        estimates = integ._estimates if integ._deferred else integ._settled  # noqa: SLF001
-        if len(estimates) >= MAX_OUTPUTS:
-            estimates = integ._estimates = dict(list(estimates.items())[-KEEP_OUTPUTS:])  # noqa: SLF001
-        estimates[q] = estimate
+        if integ._deferred:  # noqa: SLF001  (a stretch's blocks: kept deferred, the dict not built)
+            integ.store_estimate(q, estimate)
+        else:  # `DormandPrince853.store_estimate`, inline
+            estimates = integ._settled  # noqa: SLF001
+            if len(estimates) >= MAX_OUTPUTS:
+                estimates = integ._estimates = dict(list(estimates.items())[-KEEP_OUTPUTS:])  # noqa: SLF001
+            estimates[q] = estimate
         sim.q, sim.v, sim.torque, sim.step_index = q, v, end, k + 1
         self._q, self._v = q, v
-        if status == self._ended:  # a crossing ended the step: its state is not the solution's last output
+        if status == self._ended or status == self._rested:  # its state is not the solution's last output
             self._q = None
         self.taken += 1
         return _new_state(self._state, ((k + 1) * dt, q, v))
+
+    def count_impacts(self, sim: Simulator) -> None:
+        """Add the stop impacts the kernel applied since the last count to `sim.impacts`."""
+        count = self._st[self._impacts]
+        if count:
+            sim.impacts += int(count)
+            self._st[self._impacts] = 0.0
 
     def _decline(self, integ: DormandPrince853, fn: Any, event: bool, continues: bool) -> None:
         """After `common_step` left the step to Python: the integrator made ready for Python's step. On

@@ -46,7 +46,9 @@ def plan_for(sim: Simulator) -> np.ndarray | None:
     n = len(sim._gaps)
     if n != sum(len(indices) for _, indices in sim._gap_elements) + len(sim._depth_sources):
         return None
-    impacts = [0.0 if gap.restitution is None else 1.0 for gap in sim._gaps]
+    # an impact gap's flag: its gradient's θ1 component (±1 for the stops), which the kernel's rest test reads
+    impacts = [0.0 if gap.restitution is None else gap.element.gap_gradient(gap.index, (0.0, 0.0, 0.0))[0]
+               for gap in sim._gaps]
     return np.array([float(n), float(len(sim._gap_elements)), *body, float(len(sim._depth_sources)), *depth,
                      *impacts], dtype=np.float64)
 
