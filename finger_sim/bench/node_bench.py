@@ -32,13 +32,15 @@ every-step publishing and recording, and every joint state in the log; 5 kHz phy
 at 1 kHz in real time; a 10-finger finger_hand at 1 kHz. No subscriber but the benchmark's
 /diagnostics client; the figures come from the node's own 1 s diagnostics windows and /proc.
 
-    python -m finger_sim.bench.node_bench --recording [--old <checkout>] [--target-duration 10] [--rounds 3]
+    python -m finger_sim.bench.node_bench --recording [--old <checkout>] [--target-duration 10] [--rounds 3] [--no-hand]
 
 measures the two recording goals in one command: finger_node at 1 kHz with recording off and on
 (the CPU recording adds, goal ≤ 20 %) and the 10-finger hand with recording off and on (goal
 ≤ 0.35 cores with it on), the four runs in turn each round (and each followed by the same run
 of `--old` if given), with the log writer process's share; writes them between the RECORDING
-markers of --out and prints them.
+markers of --out and prints them, with each configuration's spread over the rounds and the
+rounds' paired differences (recording on minus the off run next to it). `--no-hand` runs
+finger_node's pair only.
 """
 
 from __future__ import annotations
@@ -491,42 +493,68 @@ def recording_report(runs: dict[tuple[str, str], list[Window]], command: str, ol
     def ok(flag: bool) -> str:
         return "yes" if flag else "**no**"
 
+    def spread(name: str, side: str, value: Callable[[Window], float] = lambda w: w.cpu_per_sim_s) -> str:
+        values = [value(w) for w in runs[(name, side)]]
+        return f"{min(values):.3f}–{max(values):.3f}"
+
+    def paired(rec: str, off: str, side: str) -> list[float]:
+        """Each round's recording-on run minus the recording-off run next to it, CPU s per sim s."""
+        return [a.cpu_per_sim_s - b.cpu_per_sim_s for a, b in zip(runs[(rec, side)], runs[(off, side)])]
+
     writer = lambda w: w.writer_per_sim_s  # noqa: E731
+    hand = ("hand10_off", "new") in runs
     rows = []
     for side in sides:
+        diffs = paired("1k_rec", "1k_off", side)
         rows += [
-            (side, "finger_node 1 kHz, recording off", each("1k_off", side), f"{med('1k_off', side):.3f}", "", ""),
-            (side, "finger_node 1 kHz, recording on", each("1k_rec", side), f"{med('1k_rec', side):.3f}", "", ""),
-            (side, "  of which its log writer process", each("1k_rec", side, writer), f"{med('1k_rec', side, writer):.3f}", "", ""),
-            (side, "**CPU added by recording at 1 kHz**", "", f"{100 * added('1k_rec', '1k_off', side):+.0f} %",
+            (side, "finger_node 1 kHz, recording off", each("1k_off", side), f"{med('1k_off', side):.3f}",
+             spread("1k_off", side), "", ""),
+            (side, "finger_node 1 kHz, recording on", each("1k_rec", side), f"{med('1k_rec', side):.3f}",
+             spread("1k_rec", side), "", ""),
+            (side, "  of which its log writer process", each("1k_rec", side, writer), f"{med('1k_rec', side, writer):.3f}",
+             spread("1k_rec", side, writer), "", ""),
+            (side, "  on − off, round by round", ", ".join(f"{d:+.3f}" for d in diffs),
+             f"{statistics.median(diffs):+.3f}", f"{min(diffs):+.3f} to {max(diffs):+.3f}", "", ""),
+            (side, "**CPU added by recording at 1 kHz** (ratio of medians; median of the rounds' differences)", "",
+             f"{100 * added('1k_rec', '1k_off', side):+.0f} %; "
+             f"{100 * statistics.median(diffs) / med('1k_off', side):+.0f} %", "",
              f"≤ {100 * t['record_cpu']:.0f} %", ok(added("1k_rec", "1k_off", side) <= t["record_cpu"])),
-            (side, f"{HAND_FINGERS}-finger finger_hand 1 kHz, recording off", each("hand10_off", side),
-             f"{med('hand10_off', side):.3f}", "", ""),
-            (side, f"**{HAND_FINGERS}-finger finger_hand 1 kHz, recording on**", each("hand10_rec", side),
-             f"{med('hand10_rec', side):.3f}", f"≤ {t['hand_cores']:g}", ok(med("hand10_rec", side) <= t["hand_cores"])),
-            (side, "  of which its log writer process", each("hand10_rec", side, writer),
-             f"{med('hand10_rec', side, writer):.3f}", "", ""),
-            (side, "  CPU added by recording, hand", "", f"{100 * added('hand10_rec', 'hand10_off', side):+.0f} %", "", ""),
-            (side, "  real-time factor, median window (1 kHz off, on; hand off, on)", "",
-             " / ".join(f"{med(n, side, lambda w: statistics.median(w.rtf) if w.rtf else float('nan')):.3f}"
-                        for n in RECORDING_CONFIGS), "", ""),
         ]
+        if not hand:
+            continue
+        rows += [
+            (side, f"{HAND_FINGERS}-finger finger_hand 1 kHz, recording off", each("hand10_off", side),
+             f"{med('hand10_off', side):.3f}", spread("hand10_off", side), "", ""),
+            (side, f"**{HAND_FINGERS}-finger finger_hand 1 kHz, recording on**", each("hand10_rec", side),
+             f"{med('hand10_rec', side):.3f}", spread("hand10_rec", side), f"≤ {t['hand_cores']:g}",
+             ok(med("hand10_rec", side) <= t["hand_cores"])),
+            (side, "  of which its log writer process", each("hand10_rec", side, writer),
+             f"{med('hand10_rec', side, writer):.3f}", spread("hand10_rec", side, writer), "", ""),
+            (side, "  CPU added by recording, hand", "", f"{100 * added('hand10_rec', 'hand10_off', side):+.0f} %", "",
+             "", ""),
+        ]
+    names = sorted({name for name, _ in runs}, key=RECORDING_CONFIGS.index)
+    for side in sides:
+        rows.append((side, f"  real-time factor, median window ({', '.join(names)})", "",
+                     " / ".join(f"{med(n, side, lambda w: statistics.median(w.rtf) if w.rtf else float('nan')):.3f}"
+                                for n in names), "", "", ""))
     old_text = f", old = `{old}` first on PYTHONPATH (the same venv)" if old is not None else ""
+    hand_text = f"; a {HAND_FINGERS}-finger finger_hand of finger_default, off, on" if hand else ""
     return "\n".join([
         RECORDING_BEGIN,
         "## Recording's cost and the 10-finger hand, recording on and off side by side",
         "",
         f"Command: `{command}` ({datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC). New = this checkout{old_text}. "
-        f"The four runs (finger_node paper_flexion, recording off, on; a {HAND_FINGERS}-finger finger_hand of "
-        "finger_default, off, on; torque from the topic, nobody sending; publishing every step) in turn, "
+        f"The runs (finger_node paper_flexion, recording off, on{hand_text}; torque from the topic, nobody sending; "
+        "publishing every step) in turn, "
         f"{rounds} rounds (A B A B), {duration:g} s measured after {WARMUP_S:g} s of warm-up each; the node's "
         "default executor. Figures: CPU s (utime + stime of the node process and its log writer process) per "
         "sim s, from the node's 1 s /diagnostics windows: the cores the run takes at real time. "
         f"Load average at start {load[0][0]:.1f}, at end {load[1][0]:.1f} on 2 cores.",
         "",
-        "| side | run | CPU s per sim s, each round | median | goal | met |",
-        "|---|---|---|---|---|---|",
-        *(f"| {a} | {b} | {c} | {d} | {e} | {f} |" for a, b, c, d, e, f in rows),
+        "| side | run | CPU s per sim s, each round | median | min–max | goal | met |",
+        "|---|---|---|---|---|---|---|",
+        *(f"| {' | '.join(row)} |" for row in rows),
         RECORDING_END,
     ])
 
@@ -647,13 +675,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--old", type=Path, default=None, help="with --targets (required) or --recording: the old checkout")
     parser.add_argument("--target-duration", type=float, default=10.0, help="with --targets, --recording: measured s per run")
     parser.add_argument("--rounds", type=int, default=2, help="with --targets, --recording: A B rounds")
+    parser.add_argument("--no-hand", action="store_true",
+                        help="with --recording: finger_node's pair only (more rounds in the same time)")
     args = parser.parse_args(argv)
     isolate_dds(args.domain_id)
     command = "python -m finger_sim.bench.node_bench " + " ".join(argv if argv is not None else sys.argv[1:])
     load0 = os.getloadavg()
     if args.recording:
         with tempfile.TemporaryDirectory(prefix="node_recording_") as tmp:
-            runs = targets(args.old, args.target_duration, args.rounds, args.domain_id, Path(tmp), RECORDING_CONFIGS)
+            names = RECORDING_CONFIGS[:2] if args.no_hand else RECORDING_CONFIGS
+            runs = targets(args.old, args.target_duration, args.rounds, args.domain_id, Path(tmp), names)
         section = recording_report(runs, command.strip(), args.old, args.target_duration, args.rounds, (load0, os.getloadavg()))
         write_section(args.out, section, RECORDING_BEGIN, RECORDING_END)
         print(section)

@@ -430,15 +430,16 @@ class McapRecorder:
         is kept as one reference (its records are built by the sender thread, `_records`)."""
         if len(topics) != len(datas):
             raise LogArgumentError("datas", f"one CDR message per topic ({len(topics)})", f"{len(datas)} messages")
-        last_topics, channels = self._last_batch
+        last_topics, channels = self._last_batch  # only lists of registered topics are kept
         if topics != last_topics:  # not the last state's topics (equal str objects compare by identity)
             get = self._channels.get
             channels = [get(topic) for topic in topics]  # type: ignore[misc]
-            if None not in channels:
-                self._last_batch = (list(topics), channels)
-        if (None in channels or {*map(type, datas)} - _BYTES_ONLY or self._state is not _State.OPEN
+            if None in channels:
+                return self._write_each(topics, datas, log_time_ns)  # its checks and errors
+            self._last_batch = (list(topics), channels)
+        if (self._state is not _State.OPEN or not _BYTES_ONLY.issuperset(map(type, datas))
                 or not (type(log_time_ns) is int and 0 <= log_time_ns < self._time_limit_ns)):
-            return sum(self.write(topic, data, log_time_ns) for topic, data in zip(topics, datas))  # its checks and errors
+            return self._write_each(topics, datas, log_time_ns)
         size = sum(map(len, datas))
         if self.back_pressure:
             self._wait_for_room()
@@ -454,8 +455,12 @@ class McapRecorder:
                 if waiting < self._queue_size // 2 <= waiting + len(datas):
                     self._wake.set()  # a burst: take it before the bound is reached
         if not fits:  # outside the lock: a blocked write() (back-pressure) must let the sender take the buffer
-            return sum(self.write(topic, data, log_time_ns) for topic, data in zip(topics, datas))
+            return self._write_each(topics, datas, log_time_ns)
         return len(datas)
+
+    def _write_each(self, topics: Sequence[str], datas: Sequence[Any], log_time_ns: int) -> int:
+        """write() of each message in turn: how many were buffered."""
+        return sum(self.write(topic, data, log_time_ns) for topic, data in zip(topics, datas))
 
     @property
     def path(self) -> Path:
