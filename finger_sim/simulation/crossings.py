@@ -16,7 +16,7 @@ from finger_sim.depth_guard import DepthLimit
 from finger_sim.effects import ForceElement
 from finger_sim.integrators import TorqueFn
 from finger_sim.kinematics import Vec3
-from finger_sim.simulation.locate import (EVENT_TOLERANCE, ON_GAP, GuardCrossing, first_guard_crossing,
+from finger_sim.simulation.locate import (EVENT_TOLERANCE, ON_GAP, GapSearch, GuardCrossing, first_guard_crossing,
                                          predicted_crossing, regula_falsi_gap)
 
 if TYPE_CHECKING:
@@ -24,6 +24,8 @@ if TYPE_CHECKING:
 
 #: Regula-falsi iterations allowed to locate one crossing.
 MAX_LOCATE_ITERATIONS = 60
+#: A NamedTuple made without its Python-level __new__ (as `locate._new`).
+_new = tuple.__new__
 #: How deep `bracket` refines a predicted crossing inside a step that its check did not confirm
 #: (each level probes both halves: at most 2^depth − 1 extra integrator steps).
 BRACKET_DEPTH = 3
@@ -60,22 +62,22 @@ def first_crossing(sim: Simulator, t: float, q: Vec3, v: Vec3, t1: float, q1: Ve
     screen = sim._gap_screen
     if screen is not None and screen.clear(t, q, v, t1, q1, v1):
         return None
-    gaps, h = sim._gaps, t1 - t
+    gaps = sim._gaps
 
-    def onto_gap(k: int, start: tuple[float, float], end: tuple[float, float]) -> GuardCrossing | None:
-        gap, (g0, r0), (g1, r1) = gaps[k], start, end
-        if gap.restitution is not None:
-            g0 = max(g0, 0.0)  # an impact gap: the step starts on the open side
-        if min(g0, g1) > h * (abs(r0) + abs(r1)):
-            return None  # open at both ends, and too far for `predicted_crossing` to see a crossing between
-        found = bracket(sim, gap, t, q, v, torque, (t, g0, r0), (t1, g1, r1, q1, v1), BRACKET_DEPTH)
-        if found is None:
-            return None
-        crossing = sim._locate(gap, t, q, v, (t, g0), found, torque)  # `locate_gap`
+    def across(k: int, g0: float, g1: float) -> GuardCrossing:
+        crossing = sim._locate(gaps[k], t, q, v, (t, g0), (t1, g1, q1, v1), torque)  # `locate_gap`
         return GuardCrossing(crossing.t, (crossing.q, crossing.v), k)
 
-    event = first_guard_crossing((ON_GAP,) * len(gaps), gap_states(sim, t, q, v), gap_states(sim, t1, q1, v1),
-                                 None, t, t1, (q1, v1), onto_gap)
+    def inside(k: int, g0: float, r0: float, g1: float, r1: float, x: float) -> GuardCrossing | None:
+        found = bracket(sim, gaps[k], t, q, v, torque, (t, g0, r0), (t1, g1, r1, q1, v1), x, BRACKET_DEPTH)
+        if found is None:
+            return None
+        crossing = sim._locate(gaps[k], t, q, v, (t, g0), found, torque)
+        return GuardCrossing(crossing.t, (crossing.q, crossing.v), k)
+
+    search = _new(GapSearch, (sim._gap_impacts, across, inside))
+    event = first_guard_crossing(sim._gap_kinds, gap_states(sim, t, q, v), gap_states(sim, t1, q1, v1), None, t, t1,
+                                 (q1, v1), search)
     first = None if event is None else Crossing(event.t, *event.state, gaps[event.guard])
     if first is not None and isinstance(first.gap.element, DepthLimit):  # a phalanx axis reached an object
         raise first.gap.element.crossed(first.gap.index, first.t, first.q, first.v, sim.method)
@@ -111,30 +113,24 @@ def gap_states(sim: Simulator, t: float, q: Vec3, v: Vec3) -> list[tuple[float, 
 
 
 def bracket(sim: Simulator, gap: Gap, t: float, q: Vec3, v: Vec3, torque: TorqueFn,
-            lo: tuple[float, float, float], hi: tuple[float, float, float, Vec3, Vec3],
+            lo: tuple[float, float, float], hi: tuple[float, float, float, Vec3, Vec3], x: float,
             depth: int) -> tuple[float, float, Vec3, Vec3] | None:
     """(s, gap, q, q') at a time s in (lo, hi] where the gap is on the other side than at lo,
     or None. lo = (s, gap, gap'), hi = (s, gap, gap', q, q'): states of the step from
-    (t, q, q'), so the state at s is one step from t.
+    (t, q, q') on the same side of the gap, so the state at s is one step from t.
 
-    Either hi is across already, or the gap crosses and comes back inside: predicted by
-    `predicted_crossing` from the ends' values and rates, then checked by stepping to the
+    The gap crosses and comes back inside, as `predicted_crossing` predicts from the ends' values
+    and rates (at the fraction x of the interval, `locate.gap_guard`): checked by stepping to the
     predicted time; a check that finds no crossing checks the cubic's extremum too (the start's
     rate falls short of a convex gap's crossing, e.g. an axis passing a circle), then refines on
-    both halves, `depth` deep.
+    both halves where their ends predict a crossing, `depth` levels deep in all (≥ 1).
     """
     sa, ga, ra = lo
-    sb, gb, rb, qb, vb = hi
+    sb, gb, rb, _, _ = hi
     closed = ga < -EVENT_TOLERANCE
-    if (gb < -EVENT_TOLERANCE) != closed:
-        return sb, gb, qb, vb
-    x = predicted_crossing(ga, ra, gb, rb, sb - sa, closed)
-    if x is None or depth == 0:
-        return None
     s = sa + x * (sb - sa)
     qs, vs = sim._step(t, q, v, s - t, torque)
     gs, rs = gap_states(sim, s, qs, vs)[sim._gaps.index(gap)]
-    mid = (s, gs, rs, qs, vs)
     if (gs < -EVENT_TOLERANCE) != closed:
         return s, gs, qs, vs
     extremum = predicted_crossing(ga, ra, gb, rb, sb - sa, closed, False)
@@ -144,8 +140,14 @@ def bracket(sim: Simulator, gap: Gap, t: float, q: Vec3, v: Vec3, torque: Torque
         g2, _ = gap_states(sim, s2, q2, v2)[sim._gaps.index(gap)]
         if (g2 < -EVENT_TOLERANCE) != closed:
             return s2, g2, q2, v2
-    return (bracket(sim, gap, t, q, v, torque, lo, mid, depth - 1)
-            or bracket(sim, gap, t, q, v, torque, (s, gs, rs), hi, depth - 1))
+    if depth == 1:
+        return None
+    for part_lo, part_hi in ((lo, (s, gs, rs, qs, vs)), ((s, gs, rs), hi)):  # both halves on lo's side
+        y = predicted_crossing(part_lo[1], part_lo[2], part_hi[1], part_hi[2], part_hi[0] - part_lo[0], closed)
+        found = None if y is None else bracket(sim, gap, t, q, v, torque, part_lo, part_hi, y, depth - 1)
+        if found is not None:
+            return found
+    return None
 
 
 def locate_gap(sim: Simulator, gap: Gap, t: float, q: Vec3, v: Vec3, lo: tuple[float, float],

@@ -28,6 +28,7 @@ from finger_sim.scene import Scene
 from finger_sim.simulation import actuated, actuated_events, crossings, event_step, gap_screen, impact
 from finger_sim.simulation.crossings import Crossing, Gap
 from finger_sim.simulation.impact import FREE, REST_MODE, RESTING
+from finger_sim.simulation.locate import ON_GAP
 from finger_sim.simulation.setup import for_simulator
 from finger_sim.state_layout import ModeValues, StateLayout, layout_of
 from finger_sim.stepper_slot import BREAKPOINT
@@ -93,6 +94,9 @@ class Simulator:
         #: the declared state: (q, q', then the drive's or `actuator`'s own slots), and the elements' modes
         self.layout: StateLayout = layout_of(self.system.elements, actuator or self._drive)
         self._gaps, self._kinks, self._gap_elements = setup.gaps, setup.kinks, setup.gap_elements
+        #: the gaps declared to the guard loop (`crossings.first_crossing`): all ON_GAP, and which are impact gaps
+        self._gap_kinds = (ON_GAP,) * len(self._gaps)
+        self._gap_impacts = tuple(gap.restitution is not None for gap in self._gaps)
         #: the start's findings at the initial state, shared by the scene's Simulators (`Setup.kept_start`)
         self.kept_start = setup.kept_start
         #: the run's discrete state: each declared mode's value, in `layout.modes` order

@@ -4,13 +4,14 @@ Both are plain functions of floats and callables: the Simulator's gap events, th
 guards (`actuators.stepping`, `actuators.inductive_stepping`) and the stick–slip turn all locate
 their crossings with them; the compiled event checks compile `predicted_crossing` itself
 (`kernel.event_checks`). `first_guard_crossing` is the one loop over a step's declared guards (an
-element's mode guards, or the gaps of the non-smooth elements) that finds the earliest one it crosses.
+element's mode guards, or the gaps of the non-smooth elements) that finds the earliest one it crosses:
+`guard_loop` with `gap_guard`, written once for Python and for the compiled event step.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import NamedTuple, TypeVar
 
 #: A gap crossing (a stop) is located to this tolerance on the gap (rad for the MCP stops);
@@ -36,51 +37,164 @@ class GuardCrossing(NamedTuple):
     guard: int
 
 
-#: A guard declared ON_GAP (`first_guard_crossing`): a gap, two-sided and predicted from the step's ends
-#: (it may close and open again inside the step), located onto its value by `regula_falsi_gap`.
-ON_GAP = "gap"
-#: A guard's declaration: one-sided (False), two-sided (True) or ON_GAP.
-GuardKind = bool | str
-#: An ON_GAP guard's search: onto_gap(k, g0, g1) → its located crossing in the step, or None.
-OntoGap = Callable[[int, tuple, tuple], "GuardCrossing | None"]
+#: A guard's declaration (`first_guard_crossing`): one-sided (a mode's condition, ≥ 0 while the mode
+#: holds; False declares it too), two-sided (a kink of a mode guard; True too), or ON_GAP: a gap, two-sided
+#: and predicted from the step's ends (it may close and open again inside the step), located onto its
+#: value by `regula_falsi_gap`.
+ONE_SIDED, TWO_SIDED, ON_GAP = 0, 1, 2
+GuardKind = int
+#: A guard's search answers (`guard_loop`): no crossing; one crossed, located; the caller must look (a
+#: compiled search that cannot answer, before it changed anything).
+NONE, FOUND, DECLINE = 0, 1, 2
 
 #: A guard's value at the step's start: a number, or (a one-sided guard only) a callable that gives
 #: it, called only when the step crosses (a start value that costs, or that can raise off the crossing).
 StartValue = float | Callable[[], float]
 
 
-def first_guard_crossing(kinds: tuple[GuardKind, ...], g0: tuple, g1: tuple,
+class GapSearch(NamedTuple):
+    """How the Python path searches a step's ON_GAP guards past `gap_guard`'s tests: impact[k], whether
+    guard k is an impact gap (a stop: it counts as open at the step's start); across(k, g0, g1) → the
+    crossing located between ends on opposite sides; inside(k, g0, r0, g1, r1, x) → the crossing that
+    `predicted_crossing` predicts at the fraction x of the step between ends on the same side, found by
+    trial steps and located, or None."""
+
+    impact: Sequence[bool]
+    across: Callable[[int, float, float], GuardCrossing]
+    inside: Callable[[int, float, float, float, float, float], GuardCrossing | None]
+
+
+def first_guard_crossing(kinds: Sequence[GuardKind], g0: Sequence, g1: Sequence,
                          at: Callable[[int, float], tuple[float, tuple]] | None, a: float, b: float,
-                         far: tuple, onto_gap: OntoGap | None = None) -> GuardCrossing | None:
+                         far: tuple, gaps: GapSearch | None = None) -> GuardCrossing | None:
     """The earliest crossing of a step's guards in (a, b], located; None if the step crosses none.
 
-    The guards are declared by `kinds` (one entry per guard, ≥ 0 while its mode holds): a
-    one-sided guard (False, a mode's condition) crosses where its end value g1 is below
-    −GUARD_TOLERANCE, located from max(g0, 0); a two-sided one (True, a kink of a mode guard) where
-    g0 and g1 lie on opposite sides of 0. g0, g1: the guards at a and b (s), a one-sided guard's g0
-    may be lazy (`StartValue`); `far` the state at b; at(k, s) → (guard k at s, state at s) takes a
-    trial step. Each such crossing is located by `illinois` to LOCATE_TOLERANCE of the step, on the
-    bracket's far side (the guard crossed). An ON_GAP guard's g0, g1 are its (gap, rate) at a and b,
-    searched and located by `onto_gap` (a prediction between the ends, `regula_falsi_gap`). Of
-    crossings at the same time the first declared counts.
+    The guards are declared by `kinds` (one entry per guard): a one-sided guard crosses where its end
+    value g1 is below −GUARD_TOLERANCE, located from max(g0, 0); a two-sided one where g0 and g1 lie on
+    opposite sides of 0. g0, g1: the guards at a and b (s), a one-sided guard's g0 may be lazy
+    (`StartValue`); `far` the state at b; at(k, s) → (guard k at s, state at s) takes a trial step. Each
+    such crossing is located by `illinois` to LOCATE_TOLERANCE of the step, on the bracket's far side (the
+    guard crossed). An ON_GAP guard's g0, g1 are its (gap, rate) at a and b, tested by `gap_guard` and
+    searched and located by `gaps`. Of crossings at the same time the first declared counts. The loop is
+    `guard_loop`, which the compiled event step compiles from its source (`kernel.event_crossing`).
     """
-    first: GuardCrossing | None = None
-    for k, kind in enumerate(kinds):
+    ctx = _new(_Guards, (kinds, g0, g1, at, far, gaps, {}))
+    status, k = guard_loop(ctx, len(kinds), a, b)
+    return ctx.found[k] if status == FOUND else None
+
+
+def guard_loop(ctx, n: int, a: float, b: float) -> tuple[int, int]:  # type: ignore[no-untyped-def]
+    """The earliest of n declared guards to cross in the step (a, b] (s): (FOUND, its index), (NONE, −1),
+    or (DECLINE, the guard whose search or `keep` declined). Of crossings at the same time the first
+    declared counts.
+
+    Written once for both paths: the per-guard work is behind the functions it calls by name,
+    `guard_kind(ctx, k)` (its declaration), `gap_guard(ctx, k, a, b)` and `mode_guard(ctx, k, kind, a, b)`
+    (each → (status, the crossing's time)) and `keep(ctx, k, t)` (the crossing becomes the earliest so far
+    → FOUND or DECLINE).
+    `first_guard_crossing` runs it with this module's (ctx a `_Guards`); the compiled event step compiles
+    it with its own bound under those names (`kernel.jit.compiled`).
+    """
+    first, first_t = -1, 0.0
+    for k in range(n):
+        kind = guard_kind(ctx, k)
         if kind == ON_GAP:
-            found = onto_gap(k, g0[k], g1[k])
-            if found is not None and (first is None or found.t < first.t):
-                first = found
-            continue
-        crossed = (g0[k] < 0.0) != (g1[k] < 0.0) if kind else g1[k] < -GUARD_TOLERANCE
-        if not crossed:
-            continue
-        start = g0[k]
-        ga = start if kind else max(start() if callable(start) else start, 0.0)
-        s, state = illinois(lambda s, k=k: at(k, s), crossing_test(kind, ga), a, ga, b, g1[k], far,
-                            width=LOCATE_TOLERANCE * (b - a), iterations=MAX_LOCATE_ITERATIONS)
-        if first is None or s < first.t:
-            first = GuardCrossing(s, state, k)
-    return first
+            status, t = gap_guard(ctx, k, a, b)
+        else:
+            status, t = mode_guard(ctx, k, kind, a, b)
+        if status == FOUND and (first < 0 or t < first_t):
+            status = keep(ctx, k, t)
+            first, first_t = k, t
+        if status == DECLINE:
+            return DECLINE, k
+    if first < 0:
+        return NONE, first
+    return FOUND, first
+
+
+def gap_guard(ctx, k: int, a: float, b: float) -> tuple[int, float]:  # type: ignore[no-untyped-def]
+    """An ON_GAP guard's search in the step (a, b] (s) → (status, the crossing's time): its (gap, rate) at
+    both ends from `gap_ends(ctx, k)`; an impact gap counts as open at the start. A gap open at both ends
+    and too far to close inside is skipped; ends on opposite sides cross (`onto_gap` locates it); ends on
+    the same side cross only where `predicted_crossing` predicts it (`inside_step` looks there).
+    Written once for both paths, as `guard_loop`."""
+    g0, r0, g1, r1, impact = gap_ends(ctx, k)
+    if impact:
+        g0 = max(g0, 0.0)  # an impact gap: the step starts on the open side
+    h = b - a
+    if min(g0, g1) > h * (abs(r0) + abs(r1)):
+        return NONE, 0.0  # open at both ends, and too far for `predicted_crossing` to see a crossing between
+    closed = g0 < -EVENT_TOLERANCE
+    if (g1 < -EVENT_TOLERANCE) != closed:
+        return onto_gap(ctx, k, g0, g1, impact)
+    x = predicted_crossing(g0, r0, g1, r1, h, closed)
+    if x is None:
+        return NONE, 0.0
+    return inside_step(ctx, k, g0, r0, g1, r1, x)
+
+
+#: A NamedTuple made without its Python-level __new__, which costs about as much as a guard's tests.
+_new = tuple.__new__
+
+
+class _Guards(NamedTuple):
+    """The Python path's ctx of `guard_loop`: `first_guard_crossing`'s arguments, and the crossings
+    found, by guard."""
+
+    kinds: Sequence[GuardKind]
+    g0: Sequence
+    g1: Sequence
+    at: Callable[[int, float], tuple[float, tuple]] | None
+    far: tuple
+    gaps: GapSearch | None
+    found: dict[int, GuardCrossing]
+
+
+def guard_kind(ctx: _Guards, k: int) -> GuardKind:
+    """Guard k's declaration (Python path)."""
+    return ctx.kinds[k]
+
+
+def mode_guard(ctx: _Guards, k: int, kind: GuardKind, a: float, b: float) -> tuple[int, float]:
+    """A one-sided or two-sided guard's search in (a, b] (Python path): `first_guard_crossing`'s tests,
+    located by `illinois` on ctx.at."""
+    g0, g1 = ctx.g0[k], ctx.g1[k]
+    crossed = (g0 < 0.0) != (g1 < 0.0) if kind else g1 < -GUARD_TOLERANCE
+    if not crossed:
+        return NONE, 0.0
+    ga = g0 if kind else max(g0() if callable(g0) else g0, 0.0)
+    s, state = illinois(lambda s: ctx.at(k, s), crossing_test(kind, ga), a, ga, b, g1, ctx.far,
+                        width=LOCATE_TOLERANCE * (b - a), iterations=MAX_LOCATE_ITERATIONS)
+    return _found(ctx, k, GuardCrossing(s, state, k))
+
+
+def gap_ends(ctx: _Guards, k: int) -> tuple[float, float, float, float, bool]:
+    """ON_GAP guard k's (gap, rate) at the step's start and end, and whether it is an impact gap (Python path)."""
+    (g0, r0), (g1, r1) = ctx.g0[k], ctx.g1[k]
+    return g0, r0, g1, r1, ctx.gaps.impact[k]
+
+
+def onto_gap(ctx: _Guards, k: int, g0: float, g1: float, impact: bool) -> tuple[int, float]:
+    """The crossing of ON_GAP guard k between ends on opposite sides (Python path: `GapSearch.across`)."""
+    return _found(ctx, k, ctx.gaps.across(k, g0, g1))
+
+
+def inside_step(ctx: _Guards, k: int, g0: float, r0: float, g1: float, r1: float, x: float) -> tuple[int, float]:
+    """The crossing of ON_GAP guard k predicted at the fraction x of the step (Python path: `GapSearch.inside`)."""
+    return _found(ctx, k, ctx.gaps.inside(k, g0, r0, g1, r1, x))
+
+
+def keep(ctx: _Guards, k: int, t: float) -> int:
+    """Guard k's crossing is the earliest so far (Python path: ctx.found holds it already)."""
+    return FOUND
+
+
+def _found(ctx: _Guards, k: int, crossing: GuardCrossing | None) -> tuple[int, float]:
+    """(NONE, 0) or (FOUND, its time), the crossing kept in ctx.found."""
+    if crossing is None:
+        return NONE, 0.0
+    ctx.found[k] = crossing
+    return FOUND, crossing.t
 
 
 def crossing_test(two_sided: bool, ga: float) -> Callable[[float], bool]:

@@ -1,5 +1,5 @@
 """A step with a contact onset or release taken whole in the kernel (`kernel.event_step._settle`,
-`kernel.event_crossing`).
+`kernel.event_crossing`, whose gap loop is Python's guard loop compiled: `locate.guard_loop`, `locate.gap_guard`).
 
 The kernel locates the crossing on its internal steps' dense output and continues or restarts the
 solution from it, as Python's step does after the hand-over. Two references, stepped side by side:
@@ -119,3 +119,13 @@ def test_stop_impacts_in_the_kernel_equal_the_python_step(name: str) -> None:
     states, estimates and impact counts bit for bit (`run_side_by_side`), no crossing located in Python."""
     settled, _, in_python, reference = run_side_by_side(event_scene(name))
     assert reference and settled == len(set(reference)) and not in_python
+
+
+def test_the_kernels_gap_loop_is_the_python_guard_loop() -> None:
+    """`event_crossing.first_crossing` runs `locate.guard_loop` and `locate.gap_guard` compiled from their own
+    code objects (not copies); the side-by-side runs above hold its answers to Python's bit for bit."""
+    from finger_sim.kernel import event_crossing
+    from finger_sim.simulation import locate
+
+    assert event_crossing._guard_loop.py_func.__code__ is locate.guard_loop.__code__
+    assert event_crossing._gap_guard.py_func.__code__ is locate.gap_guard.__code__
