@@ -5,7 +5,8 @@ step functions are numerics' own (`euler_step`, `rk_step`, `rk_step_tuple`) comp
 with `accelerations` bound to `driven_accelerations`: the same code object under other globals,
 so nothing is copied, and a scene without a drive compiles and runs exactly what it did before.
 The drive's block ends the model (`Drive.kernel_block`; its first slot is the mesh mode, kept
-current by `Drive.mirror`).
+current by `Drive.mirror`). With L > 0 the current is a seventh state, stepped by `inductive_rk_step`: the
+template of `rk_step` (`kernel.rk_template`) with the width 7 and the stage `inductive_rates`.
 """
 
 from __future__ import annotations
@@ -20,8 +21,9 @@ import numpy as np
 from finger_sim.actuators import drive as law
 from finger_sim.actuators.stepping import GUARD_TOLERANCE
 from finger_sim.inputs import BREAK_EPS, HELD_ARRAY, SQUARE, STEP, Profile, profile_array
-from finger_sim.kernel import numerics
+from finger_sim.kernel import numerics, rk_steps
 from finger_sim.kernel.integrators import WARM_UP_STATE, CompiledRungeKutta, FastStepper, _entry_point
+from finger_sim.kernel.jit import compiled
 from finger_sim.kernel.layout import BREAKPOINT, OK
 from finger_sim.kernel.numerics import (JIT, generalized_force, njit, plan_parts, project, solved_accelerations,
                                         switches_inside, torque_at, trig)
@@ -190,33 +192,10 @@ def inductive_rates(m, t, q0, q1, q2, v0, v1, v2, u, i):
     return a0, a1, a2, di
 
 
-@njit(**JIT)
-def inductive_rk_step(m, tab, t, x, h, taus, k):
-    """`numerics.rk_step` on x = (q, q', i) in place (`integrators.stateful.StatefulRungeKutta._substep`). Status."""
-    s = tab.shape[1]
-    for r in range(s):
-        x0, x1, x2, w0, w1, w2, c6 = x[0], x[1], x[2], x[3], x[4], x[5], x[6]
-        for j in range(r):
-            a = tab[r, j]
-            if a != 0.0:
-                ha = h * a
-                x0 += ha * k[j, 0]
-                x1 += ha * k[j, 1]
-                x2 += ha * k[j, 2]
-                w0 += ha * k[j, 3]
-                w1 += ha * k[j, 4]
-                w2 += ha * k[j, 5]
-                c6 += ha * k[j, 6]
-        k[r, 0], k[r, 1], k[r, 2] = w0, w1, w2
-        tau = taus[int(tab[s + 2, r])]
-        k[r, 3], k[r, 4], k[r, 5], k[r, 6] = inductive_rates(m, t + tab[s + 1, r] * h, x0, x1, x2, w0, w1, w2, tau, c6)
-    for j in range(s):
-        b = tab[s, j]
-        if b != 0.0:
-            hb = h * b
-            for c in range(7):
-                x[c] += hb * k[j, c]
-    return project(m, x)
+#: `numerics.rk_step` on x = (q, q', i) in place (`integrators.stateful.StatefulRungeKutta._substep`): the
+#: same template of the stage loop (`kernel.rk_template`) with `inductive_rates`. Status.
+inductive_rk_step = compiled(rk_steps.inductive_rk_step, options=JIT, inductive_rates=inductive_rates,
+                             project=project)
 
 
 @njit(**JIT)

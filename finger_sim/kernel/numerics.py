@@ -7,9 +7,10 @@ by `element_force`, generated from the registry: `kernel.force_laws`) and the to
 here as they are, and so is the contact law (`effects.contact_law`: the candidates' geometry and the force).
 So are a DOP853 attempt (`integrators.steps.dop853_attempt`, compiled with this module's `_rhs`) and the
 contact's candidate loop (`effects.contact_candidates.walk_candidates`, compiled with the force sum as its
-visitor). What remains is the flat model's force sum and the fixed-step steppers: the same arithmetic, in
-the same order, as their Python references (`ExplicitRungeKutta.step`), so both paths agree to round-off
-(the tests ask 1e-13 rad).
+visitor). The explicit Runge–Kutta step is generated from one template of the stage loop (`kernel.rk_template`,
+`rk_steps.py`) and compiled here with `accelerations`. What remains is the flat model's force sum and the
+fixed-step steppers: the same arithmetic, in the same order, as their Python references
+(`ExplicitRungeKutta.step`), so both paths agree to round-off (the tests ask 1e-13 rad).
 Compiled by numba on first use and cached on disk (`cache=True`; see `finger_sim.kernel`).
 Errors are status codes, raised as exceptions by the Python callers.
 """
@@ -28,6 +29,7 @@ from finger_sim.effects.friction_modes import KERNEL_BLOCK as SLIP_BLOCK
 from finger_sim.effects.friction_modes import SLIDING
 from finger_sim.integrators import steps
 from finger_sim.inputs import BREAK_EPS, SQUARE, STEP
+from finger_sim.kernel import rk_steps
 from finger_sim.kernel.force_laws import element_forces
 from finger_sim.kernel.layout import (BREAKPOINT, CONTACT, HEADER, NON_FINITE, NOT_CONVERGED, OK, STATE_NON_FINITE,
                                      STICK_SLIP_CONTACT)
@@ -178,37 +180,9 @@ def euler_step(m, t, x, h, tau):
     return OK
 
 
-@njit(**JIT)
-def rk_step(m, tab, t, x, h, taus, k):
-    """One projected explicit RK step on x = (q, q') in place: `ExplicitRungeKutta.step`.
-
-    tab: (s + 3) × s tableau (A, B, C rows, then each stage's node index; `layout.tableau_array`);
-    taus: τ at each distinct node time t + c h (N·m); k: s × 6 work array of stage derivatives.
-    Zero tableau entries are skipped, as in Python.
-    """
-    s = tab.shape[1]
-    for i in range(s):
-        x0, x1, x2, w0, w1, w2 = x[0], x[1], x[2], x[3], x[4], x[5]
-        for j in range(i):
-            a = tab[i, j]
-            if a != 0.0:
-                ha = h * a
-                x0 += ha * k[j, 0]
-                x1 += ha * k[j, 1]
-                x2 += ha * k[j, 2]
-                w0 += ha * k[j, 3]
-                w1 += ha * k[j, 4]
-                w2 += ha * k[j, 5]
-        k[i, 0], k[i, 1], k[i, 2] = w0, w1, w2
-        tau = taus[int(tab[s + 2, i])]
-        k[i, 3], k[i, 4], k[i, 5] = accelerations(m, t + tab[s + 1, i] * h, x0, x1, x2, w0, w1, w2, tau)
-    for j in range(s):
-        b = tab[s, j]
-        if b != 0.0:
-            hb = h * b
-            for c in range(6):
-                x[c] += hb * k[j, c]
-    return project(m, x)
+#: One projected explicit RK step on x = (q, q') in place (`ExplicitRungeKutta.step`), generated from the
+#: template of the stage loop (`kernel.rk_template`) with this module's `accelerations` and `project`.
+rk_step = compiled(rk_steps.rk_step, options=JIT, accelerations=accelerations, project=project)
 
 
 # -- DOP853: Hairer's embedded 8(5,3) pair with its 7th-order dense output ------------------

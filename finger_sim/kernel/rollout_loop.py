@@ -33,7 +33,8 @@ from numba import njit, prange  # noqa: E402  (after the cache folder is set)
 
 from finger_sim.inputs import CONSTANT, HELD, RAMP, SINE  # noqa: E402
 from finger_sim.kernel.event_checks import RATE_STEP, kink, residual, stop_closed  # noqa: E402
-from finger_sim.kernel.layout import DAMPING, GRAVITY, HEADER, NO_FORCE, SPRING, TIP_FORCE  # noqa: E402
+from finger_sim.kernel.force_laws import element_forces  # noqa: E402
+from finger_sim.kernel.layout import HEADER, NO_FORCE  # noqa: E402
 from finger_sim.kernel.numerics import (NON_FINITE, NOT_CONVERGED, OK, STATE_NON_FINITE, _profile_step,  # noqa: E402
                                         plan_parts, torque_at)
 from finger_sim.kernel.vector_trig import LANES, sincos_row  # noqa: E402
@@ -48,8 +49,10 @@ SERIAL = {"cache": True, "nogil": True, "error_model": "numpy"}
 #: Fingers stepped together by `run_lockstep`: a tile's state, stages and work arrays
 #: (~40 arrays of TILE floats) stay in the core's L1/L2 cache; tiles run on every thread.
 TILE = 64
+#: The declared laws written out for a tile (`force_laws.tile_statements`), generated from each law's source.
+tile_element_force = element_forces().tile_element_force
 #: Force element codes `run_lockstep` evaluates (contact's branches per candidate stay in `run`).
-LOCKSTEP_CODES = (NO_FORCE, SPRING, DAMPING, GRAVITY, TIP_FORCE)
+LOCKSTEP_CODES = (NO_FORCE, *element_forces().TILE_CODES)
 #: Input kinds with no switch inside a step: rows under them can step in lock-step.
 SMOOTH_INPUTS = (HELD, CONSTANT, RAMP, SINE)
 #: Rows of a tile's trig work array: sin, cos of θ1, θ2, θ3 and of u = θ1 − θ3 − α, then u.
@@ -239,47 +242,16 @@ def _tile(dt, tab, models, profiles, control, q, v, status, reached, lo, hi):
 @njit(**SERIAL)
 def _accelerations(m, y, tau, force, out, trig, n):
     """q'' of every finger at stage state y (6 × n) into out[3:6] (6 × n): `numerics.accelerations`
-    with `generalized_force`, the same operations in the same order, a loop over fingers each,
-    the sines and cosines of θ1, θ2, θ3 and θ1 − θ3 − α a row at a time (`sincos_row`; trig:
-    TRIG_ROWS × n work)."""
+    with `generalized_force`, the same operations in the same order, a loop over fingers each (the
+    elements' laws as `tile_element_force` writes them out from their source), the sines and cosines
+    of θ1, θ2, θ3 and θ1 − θ3 − α a row at a time (`sincos_row`; trig: TRIG_ROWS × n work)."""
     for f in range(n):
         force[0, f], force[1, f], force[2, f] = tau[f], 0.0, 0.0
     o = HEADER + 1
     for _ in range(int(m[HEADER, 0])):
         law, size = int(m[o, 0]), int(m[o + 1, 0])
         o += 2
-        if law == SPRING:
-            for f in range(n):
-                kb = m[o, f] * (y[2, f] + m[o + 1, f] - y[0, f])
-                force[0, f] += kb
-                force[1, f] += 0.0
-                force[2, f] += -kb
-        elif law == DAMPING:
-            for f in range(n):
-                c = m[o, f]
-                beta_dot = y[5, f] - y[3, f]
-                force[0, f] += -c * y[3, f] + c * beta_dot
-                force[1, f] += -c * y[4, f]
-                force[2, f] += -c * beta_dot
-        elif law == GRAVITY:
-            for f in range(n):
-                gx, gy, w1, w2, w3, alpha = m[o, f], m[o + 1, f], m[o + 2, f], m[o + 3, f], m[o + 4, f], m[o + 5, f]
-                psi = y[2, f] + alpha
-                force[0, f] += w1 * (-math.sin(y[0, f]) * gx + math.cos(y[0, f]) * gy)
-                force[1, f] += w2 * (-math.sin(y[1, f]) * gx + math.cos(y[1, f]) * gy)
-                force[2, f] += w3 * (-math.sin(psi) * gx + math.cos(psi) * gy)
-        elif law == TIP_FORCE:
-            for f in range(n):
-                fx, fy, r1, l3, alpha = m[o, f], m[o + 1, f], m[o + 2, f], m[o + 3, f], m[o + 4, f]
-                psi = y[2, f] + alpha
-                force[0, f] += r1 * (-math.sin(y[0, f]) * fx + math.cos(y[0, f]) * fy)
-                force[1, f] += 0.0
-                force[2, f] += l3 * (-math.sin(psi) * fx + math.cos(psi) * fy)
-        else:  # NO_FORCE (a stop's element): Q = 0
-            for f in range(n):
-                force[0, f] += 0.0
-                force[1, f] += 0.0
-                force[2, f] += 0.0
+        tile_element_force(law, m, o, y, force, n)
         o += size
     for f in range(n):
         trig[U, f] = y[0, f] - y[2, f] - m[7, f]
