@@ -331,13 +331,16 @@ class DormandPrince853(Integrator):
             rhs(self._stages, t, self._y.tolist(), torque(t), f)
             self._f[:] = f
 
-    def cut_at(self, s: float, t: float, q: Vec3, v: Vec3, torque: TorqueFn) -> tuple[Vec3, Vec3] | None:
+    def cut_at(self, s: float, t: float, q: Vec3, v: Vec3, torque: TorqueFn,
+               onset: bool) -> tuple[Vec3, Vec3] | None:
         """The output at s (s) of the internal solution started (or continued) at (t, q, q') under `torque`,
         retaken so that an internal step ends exactly at s: a located kink (a contact onset or release),
         which the accepted internal step across it straddles. The force is not smooth there (δ^1.5), so
         that step's local error estimate misses its error; the steps up to s, and those after it (which
-        continue from this output), each lie on one side. None (nothing changed): the solution is not the
-        one from (t, q, q'), or no internal step straddles s (`straddles`)."""
+        continue from this output), each lie on one side. The next internal step from s (`restart_step`):
+        on an `onset` (the gap open at t) the one the error control took just past the kink before the cut.
+        None (nothing changed): the solution is not the one from (t, q, q'), or no internal step straddles
+        s (`straddles`)."""
         if torque is not self._torque or self._origin != (t, q, v) or not t < s <= self._t:
             return None
         i = bisect.bisect_left(self._history_starts, s) - 1  # the step with t_old < s ≤ t_old + h_old
@@ -346,6 +349,7 @@ class DormandPrince853(Integrator):
         t_old, h_old, y_old, _, err_old, _ = self._history[i]
         if not straddles(s, t_old, h_old):
             return None
+        past = self._history[i + 1][1] if i + 1 < len(self._history) else 0.0  # (t_old, h_old, …)
         proposed = self._h
         del self._history[i:], self._history_starts[i:]
         self._t, self._y, self._err, self._h = t_old, y_old, err_old, h_old
@@ -355,7 +359,7 @@ class DormandPrince853(Integrator):
             self._advance_compiled(s, held, bounded=True)
         while self._t < s:
             self._advance(torque, s)
-        self._h = max(self._h, proposed)  # not the clipped step's: error control shrinks it where needed
+        self._h = restart_step(onset, past, self._h, proposed)
         status, q1, v1 = self._numerics.dop853_output(self._model, self._t_old, self._h_old, self._y_old,
                                                       self._dense, s, self._out)
         if status != self._numerics.OK:
@@ -458,6 +462,20 @@ def straddles(s: float, t_old: float, h_old: float) -> bool:
     already, nor when fewer than CUT_ULPS units in the last place of s lie before s (too short a step to
     take). A plain function: the kernel compiles it (`kernel.event_step`), on the same numbers."""
     return t_old + h_old != s and s - t_old >= CUT_ULPS * (math.nextafter(s, math.inf) - s)
+
+
+def restart_step(onset: bool, past: float, bounded: float, proposed: float) -> float:
+    """The next internal step (s) after `DormandPrince853.cut_at` ended one at a kink. On an `onset`: `past`,
+    the step the error control took just past the kink before the cut (0: none, the straddling step was the
+    last). On a release, or without `past`: the larger of the bounded step's next one and the one `proposed`
+    at the end of the internal steps before the cut (the clipped step's own is too short; error control
+    shrinks it where needed). After an onset the contact's transient needs short steps, which the larger one
+    overshoots and retries 5-6 times; after a release the free flight takes the large one at once (the steps
+    past it before the cut were held back by the growth limit, not by the error). A plain function: the
+    kernel compiles it (`kernel.event_step._cut_at`), on the same numbers."""
+    if onset and past > 0.0:
+        return past
+    return max(bounded, proposed)
 
 
 def interpolated_estimate(target: float, t_old: float, h_old: float, err_old: float, err: float) -> float:

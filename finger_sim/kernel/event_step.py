@@ -43,6 +43,7 @@ from finger_sim.kernel.internal_steps import (BRANCH, CONTINUED, COUNT, HISTORY_
                                               RESTARTED, ROW_DENSE, ROW_ERR, ROW_ERR_OLD, ROW_H, ROW_SIZE, ROW_T,
                                               ROW_Y_OLD, ROWS_AT, record)
 from finger_sim.kernel import event_crossing  # noqa: E402
+from finger_sim.kernel.event_checks import EVENT_TOLERANCE  # noqa: E402
 from finger_sim.kernel.locate_event import _estimate  # noqa: E402
 from finger_sim.kernel.numerics import JIT, OK, _rhs, dop853_output, dop853_theta_error, torque_at  # noqa: E402
 
@@ -111,6 +112,8 @@ REST_HEIGHT = stops.REST_HEIGHT
 CUT_NONE, CUT, CUT_PYTHONS, CUT_FAILED = 0, 1, 2, 3
 #: Whether an internal step straddles a located kink (`DormandPrince853.cut_at`), its one plain function compiled.
 straddles = njit(**JIT)(dop853.straddles)
+#: The next internal step after a cut at a kink (`DormandPrince853.cut_at`), its one plain function compiled.
+restart_step = njit(**JIT)(dop853.restart_step)
 
 
 def workspace_size(n_model: int, n_plan: int, n_gaps: int) -> int:
@@ -303,7 +306,8 @@ def _settle(m, plan, st, arr, work, side, t, t1, command, prof, q, v, q1, v1, lo
             if rests:
                 st[REST_GAP] = gap
         else:
-            cut = _cut_at(m, st, arr, log, s, t1, command, prof, found)
+            onset = not work[side, gap] < -EVENT_TOLERANCE  # open at the start: the contact closes
+            cut = _cut_at(m, st, arr, log, s, t1, command, prof, found, onset)
             if cut == CUT_FAILED:
                 return PYTHON, q1, v1, target, 0.0
             if cut == CUT_PYTHONS:
@@ -380,12 +384,13 @@ def _impact(m, st, s, t1, command, prof, sign, q, v):
 
 
 @njit(**JIT)
-def _cut_at(m, st, arr, log, s, t1, command, prof, found):
+def _cut_at(m, st, arr, log, s, t1, command, prof, found, onset):
     """`DormandPrince853.cut_at` for the kink `event_crossing.first_crossing` located at s (s) in the step to
-    t1: the logged internal step that straddles it (`dop853.straddles`) and those after it dropped, the
-    solution retaken from that step's start with internal steps ending exactly at s, its output there put in
-    found as the crossing and the last trial (OUT_*), then advanced on to `DormandPrince853.step`'s target
-    s + (t1 − s), logged (what the continued step does). Returns CUT_NONE (no step straddles s: nothing
+    t1 (an `onset`: the gap open at the step's start): the logged internal step that straddles it
+    (`dop853.straddles`) and those after it dropped, the solution retaken from that step's start with internal
+    steps ending exactly at s, its output there put in found as the crossing and the last trial (OUT_*), then
+    advanced on to `DormandPrince853.step`'s target s + (t1 − s) from the next step `dop853.restart_step`
+    chooses, logged (what the continued step does). Returns CUT_NONE (no step straddles s: nothing
     changed), CUT (done), CUT_PYTHONS (the straddling step is the one that covered a continued step's start,
     which the log does not hold: nothing changed) or CUT_FAILED (an internal step failed: Python retakes)."""
     n, pre = int(log[COUNT]), 1 if log[BRANCH] == CONTINUED else 0
@@ -405,6 +410,7 @@ def _cut_at(m, st, arr, log, s, t1, command, prof, found):
         return CUT_PYTHONS
     y, f, y_old, dense, kk, y_new, out = arr[Y], arr[F], arr[Y_OLD], arr[DENSE:KK], arr[KK:Y_NEW], arr[Y_NEW], arr[OUT]
     taus = st[TAUS:SAVED]
+    past = log[ROWS_AT + (j + 1) * ROW_SIZE + ROW_H] if j + 1 < n else 0.0
     proposed = st[H]
     st[T], st[H], st[ERR] = t_old, h_old, row[ROW_ERR_OLD]
     y[:] = row[ROW_Y_OLD:ROW_DENSE]
@@ -416,7 +422,7 @@ def _cut_at(m, st, arr, log, s, t1, command, prof, found):
         st[ERR_OLD] = st[ERR]
         st[ERR] += dop853_theta_error(E53, kk, st[H_OLD], E3_WEIGHT)
         record(log, st, y_old, dense)
-    st[H] = max(st[H], proposed)  # not the clipped step's: error control shrinks it where needed
+    st[H] = restart_step(onset, past, st[H], proposed)
     status, q, v = dop853_output(m, st[T_OLD], st[H_OLD], y_old, dense, s, out)
     if status != OK:
         return CUT_FAILED

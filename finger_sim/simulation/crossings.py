@@ -76,8 +76,8 @@ def first_crossing(sim: Simulator, t: float, q: Vec3, v: Vec3, t1: float, q1: Ve
         return GuardCrossing(crossing.t, (crossing.q, crossing.v), k)
 
     search = _new(GapSearch, (sim._gap_impacts, across, inside))
-    event = first_guard_crossing(sim._gap_kinds, gap_states(sim, t, q, v), gap_states(sim, t1, q1, v1), None, t, t1,
-                                 (q1, v1), search)
+    start = gap_states(sim, t, q, v)
+    event = first_guard_crossing(sim._gap_kinds, start, gap_states(sim, t1, q1, v1), None, t, t1, (q1, v1), search)
     first = None if event is None else Crossing(event.t, *event.state, gaps[event.guard])
     if first is not None and isinstance(first.gap.element, DepthLimit):  # a phalanx axis reached an object
         raise first.gap.element.crossed(first.gap.index, first.t, first.q, first.v, sim.method)
@@ -85,7 +85,8 @@ def first_crossing(sim: Simulator, t: float, q: Vec3, v: Vec3, t1: float, q1: Ve
     if first is not None and first.gap.restitution is None and cut is not None:
         # a kink: its state from internal steps that end there (`DormandPrince853.cut_at`), the rest of the
         # step continued from it, so that no internal step straddles the non-smooth force
-        ended = cut(first.t, t, q, v, torque)
+        onset = not start[event.guard][0] < -EVENT_TOLERANCE  # open at the step's start: the contact closes
+        ended = cut(first.t, t, q, v, torque, onset)
         if ended is not None:
             first = Crossing(first.t, *ended, first.gap)
     return first

@@ -3,7 +3,8 @@
 - static equilibrium: `test_contact.equilibrium`, a 1-D root of dU/dθ1 on closed-form kinematics;
 - energy: T + V + V_c is conserved through a bounce without contact damping, never grows with it;
 - the hard cases (grasp_impact, grasp_rigid at dt = 1 ms with auto): a DOP853 solve at rtol 1e-12
-  of the index-1 equations, restarted at every contact onset and release (scipy's event location);
+  of the index-1 equations, restarted at every contact onset and release (scipy's event location), and
+  test/hybrid_reference.py (the spec written again, nothing of finger_sim);
 - outputs: the CSV's contact columns, read back with numpy, equal Σ F_n and the forces per phalanx.
 """
 
@@ -16,6 +17,7 @@ import pytest
 import yaml
 from scipy.integrate import solve_ivp
 
+import hybrid_reference as hybrid
 import reference as ref
 from finger_sim.effects.contact import Contact
 from finger_sim.errors import StabilityError
@@ -29,6 +31,13 @@ CONTACT_COLUMNS = ["grip_force", "contact_force_proximal_x", "contact_force_prox
 #: Achieved by auto at dt = 1 ms against the tight reference through the impact (max over the run, rad):
 #: measured 8e-7 (grasp_impact, rk4 in 4 substeps while in contact) and 3.2e-6 (grasp_rigid, 18 substeps).
 HARD_CASE_BOUNDS = {"grasp_impact": 2e-6, "grasp_rigid": 6e-6}
+#: The internal steps the run's DOP853 accepts and rejects (deterministic; every attempt counted on the Python
+#: path) and its error against test/hybrid_reference.py (max over the run, rad), since the internal step after a
+#: contact onset's cut is the one error control took just past the onset before the cut (`dop853.restart_step`).
+#: Before (the larger of the contact's smooth steps, rejected 5-6 times there): rejected 31 / 38, error 1.18e-9 /
+#: 1.88e-9; after: 24 / 27, 1.46e-9 / 1.21e-9 (accepted 52 / 63 → 52 / 62).
+ATTEMPTS_AT_MOST = {"grasp_impact": (52, 24), "grasp_rigid": (62, 27)}  # accepted, rejected
+HYBRID_BOUND = 2e-9
 #: Peak penetration, m: the reference's peak is 0.96 mm (k_c = 1e5) and 0.074 mm (k_c = 1e7).
 PENETRATION_BOUNDS = {"grasp_impact": 1.0e-3, "grasp_rigid": 0.08e-3}
 
@@ -159,6 +168,19 @@ def test_hard_case_matches_the_tight_reference_through_the_impact(hard_case):
     name, _, _, xs, reference = hard_case
     assert reference[:, 3].min() < -2.0  # the reference bounced: θ1' reversed
     assert np.max(np.abs(xs[:, 0] - reference[:, 0])) < HARD_CASE_BOUNDS[name]
+
+
+def test_hard_case_does_not_retry_the_step_after_an_onset_and_keeps_its_accuracy(hard_case):
+    name, scene, _, xs, _ = hard_case
+    data = yaml.safe_load((ref.CONFIG / f"{name}.yaml").read_text(encoding="utf-8"))
+    reference = hybrid.solve(data).states(np.arange(len(xs)) * scene.dt)[:3].T
+    assert np.max(np.abs(xs[:, :3] - reference)) <= HYBRID_BOUND
+    counted = Simulator(scene)
+    counted._event_step, counted.integrator._steps = None, None  # every internal step in Python's loop, counted
+    for _ in range(scene.step_count):
+        counted.step()
+    accepted, rejected = ATTEMPTS_AT_MOST[name]
+    assert counted.integrator.accepted <= accepted and counted.integrator.rejected <= rejected
 
 
 @pytest.mark.parametrize("method", ["euler", "rk4", "rk6"])
