@@ -16,7 +16,7 @@ from finger_sim.depth_guard import DepthLimit
 from finger_sim.effects import ForceElement
 from finger_sim.integrators import TorqueFn
 from finger_sim.kinematics import Vec3
-from finger_sim.simulation.locate import (EVENT_TOLERANCE, ON_GAP, GapSearch, GuardCrossing, first_guard_crossing,
+from finger_sim.simulation.locate import (EVENT_TOLERANCE, GapSearch, GuardCrossing, first_guard_crossing,
                                          predicted_crossing, regula_falsi_gap)
 
 if TYPE_CHECKING:
