@@ -40,6 +40,22 @@ RELEASE_RTOL = 4 * 2.0**-52
 REST = ModeSet("rest", ("free", "resting"), ("impact", "release"))
 #: ∂gap/∂q of the lower gap θ1 − lower and of the upper gap upper − θ1.
 _GRADIENTS: tuple[Vec3, Vec3] = ((1.0, 0.0, 0.0), (-1.0, 0.0, 0.0))
+#: `rest_verdict`'s answers.
+BOUNCES, RESTS, UNSURE = 0, 1, 2
+
+
+def rest_verdict(closing: float, rate: float, slack: float) -> int:
+    """The rest test after an impact: RESTS when the free acceleration into the gap at q' = 0, `closing`
+    (d²gap/dt², rad/s²), closes it and the rebound's gap rate `rate` (rad/s) would rise no higher than
+    REST_HEIGHT; BOUNCES when either fails; UNSURE when either lies within `slack` (rad/s²) of its edge.
+    `JointStops.rests` asks with slack 0; the kernel's impact (`kernel.event_step._impact`) with a margin
+    for its own round-off, and leaves UNSURE to the Simulator."""
+    lift = rate * rate - 2.0 * REST_HEIGHT * -closing  # ≤ 0: the rebound rises no higher than REST_HEIGHT
+    if closing > slack or lift > 2.0 * REST_HEIGHT * slack:
+        return BOUNCES
+    if closing >= -slack or lift >= -2.0 * REST_HEIGHT * slack:
+        return UNSURE
+    return RESTS
 
 
 @dataclass(frozen=True)
@@ -92,7 +108,7 @@ class JointStops:
         n = _GRADIENTS[index]
         closing = n[0] * a_free[0] + n[1] * a_free[1] + n[2] * a_free[2]  # d²gap/dt² at rest
         rate = n[0] * v_plus[0] + n[1] * v_plus[1] + n[2] * v_plus[2]
-        return closing < 0.0 and rate * rate <= 2.0 * REST_HEIGHT * -closing
+        return rest_verdict(closing, rate, 0.0) == RESTS
 
     def release_time(self, index: int, t: float, t1: float, q: Vec3,
                      free_acceleration: Callable[[float], Vec3]) -> float | None:

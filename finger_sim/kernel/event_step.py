@@ -104,10 +104,9 @@ LAST_OUTPUT_SLACK = 1e-9
 E53, E3_WEIGHT = dop853._E53, dop853.E3_WEIGHT
 #: DOP853's first internal step (`DormandPrince853._restart`), its one plain function compiled.
 initial_step = njit(**JIT)(dop853.initial_step)
-#: `_impact`'s verdicts.
-BOUNCES, RESTS, UNSURE = 0, 1, 2
-#: `effects.stops.REST_HEIGHT` (rad): the rest test's bound on the rebound's height.
-REST_HEIGHT = stops.REST_HEIGHT
+#: `_impact`'s verdicts: `stops.rest_verdict`'s, whose one plain function is compiled.
+BOUNCES, RESTS, UNSURE = stops.BOUNCES, stops.RESTS, stops.UNSURE
+rest_verdict = njit(**JIT)(stops.rest_verdict)
 #: `_cut_at`'s answers.
 CUT_NONE, CUT, CUT_PYTHONS, CUT_FAILED = 0, 1, 2, 3
 #: Whether an internal step straddles a located kink (`DormandPrince853.cut_at`), its one plain function compiled.
@@ -370,12 +369,10 @@ def _impact(m, st, s, t1, command, prof, sign, q, v):
     y, f = np.empty(6), np.empty(6)
     y[0], y[1], y[2], y[3], y[4], y[5] = q[0], q[1], q[2], 0.0, 0.0, 0.0
     _rhs(m, s, y, torque_at(prof, command, s), f)
-    closing, rate = sign * f[3], sign * v_plus[0]
-    slack = REST_MARGIN * max(1.0, abs(f[3]))
-    lift = rate * rate - 2.0 * REST_HEIGHT * -closing  # ≤ 0: the rebound rises no higher than REST_HEIGHT
-    if closing > slack or lift > 2.0 * REST_HEIGHT * slack:  # either test fails beyond the round-off
+    verdict = rest_verdict(sign * f[3], sign * v_plus[0], REST_MARGIN * max(1.0, abs(f[3])))
+    if verdict == BOUNCES:  # either test fails beyond the round-off
         return BOUNCES, v_plus
-    if closing >= -slack or lift >= -2.0 * REST_HEIGHT * slack:
+    if verdict == UNSURE:
         return UNSURE, v
     _rhs(m, t1, y, torque_at(prof, command, t1), f)  # the push into the stop at t1 keeps the rest
     if -sign * f[3] <= REST_MARGIN * max(1.0, abs(f[3])):

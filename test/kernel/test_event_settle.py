@@ -129,3 +129,24 @@ def test_the_kernels_gap_loop_is_the_python_guard_loop() -> None:
 
     assert event_crossing._guard_loop.py_func.__code__ is locate.guard_loop.__code__
     assert event_crossing._gap_guard.py_func.__code__ is locate.gap_guard.__code__
+
+
+def test_the_kernels_rest_test_is_the_stops_rest_verdict() -> None:
+    """The impact's rest test in the kernel (`event_step._impact`) is `stops.rest_verdict` compiled from its
+    own code object, and `JointStops.rests` asks the same function with no slack: the spec's rule (the free
+    acceleration closes the gap and the rebound rises no higher than REST_HEIGHT, h = ṙ² / 2|a|) at states
+    on either side of each edge, and the kernel's margin turning them UNSURE."""
+    from finger_sim.effects import stops
+    from finger_sim.kernel import event_step
+
+    assert event_step.rest_verdict.py_func.__code__ is stops.rest_verdict.__code__
+    joint_stops, a = stops.JointStops(0.0, 1.0, 0.0), 2.0  # a: |free acceleration into the upper gap|, rad/s²
+    edge = (2.0 * stops.REST_HEIGHT * a) ** 0.5  # the rebound rate that rises exactly REST_HEIGHT, rad/s
+    for rate, rests in ((0.0, True), (0.99 * edge, True), (1.01 * edge, False)):
+        v_plus = (-rate, 0.0, 0.0)  # leaving the upper gap (upper − θ1) at gap' = rate
+        assert joint_stops.rests(1, (1.0, 0.0, 0.0), v_plus, (a, 0.0, 0.0)) is rests
+        assert joint_stops.rests(1, (1.0, 0.0, 0.0), v_plus, (-a, 0.0, 0.0)) is False  # pulled off the stop
+        verdict = stops.RESTS if rests else stops.BOUNCES
+        assert event_step.rest_verdict(-a, rate, 0.0) == stops.rest_verdict(-a, rate, 0.0) == verdict
+    assert event_step.rest_verdict(-a, 0.999 * edge, 0.01 * a) == stops.UNSURE  # within the margin of the edge
+    assert event_step.rest_verdict(-1e-12, 0.0, 1e-9) == stops.UNSURE
