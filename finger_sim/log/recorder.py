@@ -124,7 +124,6 @@ _PIPE_BYTES = 1 << 20  # the pipe to the writer process: Linux's default pipe-ma
 MAX_METADATA_BYTES = 1 << 16  # UTF-8 bytes of one metadata record's keys and values
 _MAX_TIME_NS = 1 << 64  # MCAP timestamps are uint64
 _SEQUENCE_MODULUS = 1 << 32  # MCAP sequence numbers are uint32: they wrap
-_BYTES_ONLY = {bytes}  # the types write_records takes as they are (immutable: no copy)
 #: write_records calls per one timed by the caller's thread CPU clock (`cpu()`): its three reads are system
 #: calls (~0.5 µs each warm, more cold), as dear as the call they time; one call in 32 adds ~50 ns a call.
 CPU_SAMPLE_EVERY = 32
@@ -253,6 +252,7 @@ class McapRecorder:
         self._time_limit_ns = _MAX_TIME_NS - self._offset_ns  # caller times at or past it overflow uint64
         self._compression = compression
         self._queue_size = queue_size
+        self._half_queue = queue_size // 2  # waiting messages that wake the sender before its handover time
         self._idle_flush_s = idle_flush_s
         self._chunk_wall_s = chunk_wall_s
         self._on_problem = on_problem if on_problem is not None else _logger.warning
@@ -446,7 +446,7 @@ class McapRecorder:
                 self._pending.append(((channel,), (data,), log_ns, publish_ns))
                 self._queued += 1
                 self._queued_bytes += len(data)
-                if waiting == self._queue_size // 2:
+                if waiting == self._half_queue:
                     self._wake.set()  # a burst: take it before the bound is reached
                 return True
         self._report(problem, text)
@@ -478,26 +478,33 @@ class McapRecorder:
             if None in channels:
                 return self._write_each(topics, datas, log_time_ns)  # its checks and errors
             self._last_batch = (list(topics), channels)
-        if (self._state is not _State.OPEN or not _BYTES_ONLY.issuperset(map(type, datas))
-                or not (type(log_time_ns) is int and 0 <= log_time_ns < self._time_limit_ns)):
+        # The fewest operations on the hot path: a 1 kHz caller runs it with cold caches (~3.5 µs, against 1.2 µs
+        # back to back); one loop checks the types and adds the sizes (a paced loop: 0.72x the set test and two maps).
+        # The recorder's state is checked under the lock only: a recorder not open takes the slow path there.
+        if type(log_time_ns) is not int or not 0 <= log_time_ns < self._time_limit_ns:
             return self._write_each(topics, datas, log_time_ns)
-        size = sum(map(len, datas))
+        size = 0
+        for data in datas:
+            if type(data) is not bytes:  # bytes are immutable: kept as they are, no copy
+                return self._write_each(topics, datas, log_time_ns)
+            size += len(data)
         if self.back_pressure:
             self._wait_for_room()
+        count = len(datas)
         log_ns = log_time_ns + self._offset_ns
         with self._lock:
             waiting = self._queued - self._taken
-            fits = (self._state is _State.OPEN and waiting + len(datas) <= self._queue_size
-                    and not (waiting and self._queued_bytes - self._taken_bytes + size > MAX_QUEUED_BYTES))
+            fits = (self._state is _State.OPEN and waiting + count <= self._queue_size
+                    and (not waiting or self._queued_bytes - self._taken_bytes + size <= MAX_QUEUED_BYTES))
             if fits:
                 self._pending.append((channels, tuple(datas), log_ns, log_ns))  # type: ignore[arg-type]
-                self._queued += len(datas)
+                self._queued += count
                 self._queued_bytes += size
-                if waiting < self._queue_size // 2 <= waiting + len(datas):
+                if waiting < self._half_queue <= waiting + count:
                     self._wake.set()  # a burst: take it before the bound is reached
         if not fits:  # outside the lock: a blocked write() (back-pressure) must let the sender take the buffer
             return self._write_each(topics, datas, log_time_ns)
-        return len(datas)
+        return count
 
     def _timed_write_records(self, topics: Sequence[str], datas: Sequence[bytes], log_time_ns: int) -> int:
         """write_records timed on the calling thread's CPU clock: three reads, the first two giving the
