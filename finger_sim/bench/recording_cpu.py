@@ -97,7 +97,8 @@ def report(off: Sequence[Any], on: Sequence[Any], command: str, duration: float,
         f"## Recording's own CPU at 1 kHz, counted by thread ({datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC)",
         "",
         f"Command: `{command}`. finger_node (paper_flexion, 1 kHz, publishing every step, nobody sending) with "
-        f"recording off, then on, {rounds} rounds, {duration:g} s measured after the warm-up each; CPU s per sim s "
+        f"recording off and on, {rounds} rounds (off, on, then on, off), {duration:g} s measured after the warm-up "
+        "each; CPU s per sim s "
         "from the node's 1 s /diagnostics windows (its `log_cpu_*` keys: `McapRecorder.cpu`) and each thread's "
         "/proc schedstat (finger_sim.log.cpu_clocks). "
         f"Load average at start {load[0][0]:.1f}, at end {load[1][0]:.1f} on 2 cores.",
