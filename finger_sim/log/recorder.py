@@ -182,7 +182,9 @@ class RecorderCpu:
     caller_s: its callers' threads inside write_records (a node's stepping thread handing over each
         state), estimated from one call in CPU_SAMPLE_EVERY timed with the calling thread's CPU clock,
         the clock reads' own cost (a pair read just before, in the same state of the caches) taken off;
-        write() and the serializing a caller does before are not in it.
+        write() and the serializing a caller does before are not in it. Made for one calling thread (a
+        node's): callers contending on several threads make it err high (a timed call also catches the
+        GIL's hand-overs; 2.4x once in a test of two threads calling back to back).
     threads_s: its sender and status threads.
     writer_s: its writer process (all its threads).
     """
@@ -467,7 +469,7 @@ class McapRecorder:
         One call in CPU_SAMPLE_EVERY is timed on the caller's CPU clock (`cpu()`; `_timed`: that call)."""
         if not _timed:
             self._calls_to_sample -= 1
-            if not self._calls_to_sample:
+            if self._calls_to_sample <= 0:  # <=: two calling threads may both count one call down past 0
                 return self._timed_write_records(topics, datas, log_time_ns)
         if len(topics) != len(datas):
             raise LogArgumentError("datas", f"one CDR message per topic ({len(topics)})", f"{len(datas)} messages")
