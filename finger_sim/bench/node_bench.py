@@ -42,11 +42,12 @@ markers of --out and prints them, with each configuration's spread over the roun
 rounds' paired differences (recording on minus the off run next to it). `--no-hand` runs
 finger_node's pair only.
 
-    python -m finger_sim.bench.node_bench --recording-cpu [--target-duration 10] [--rounds 6]
+    python -m finger_sim.bench.node_bench --recording-cpu [--old <checkout>] [--target-duration 10] [--rounds 6]
 
 counts recording's own CPU at 1 kHz where it runs (the node's /diagnostics `log_cpu_*`) and every
 thread of the node, recording off and on, and writes it between the RECORDING_CPU markers of --out
-(finger_sim.bench.recording_cpu).
+(finger_sim.bench.recording_cpu); with --old (a checkout whose node reports `log_cpu_*` too), each run
+is followed by the same run of the old code and recording's parts are compared side by side.
 """
 
 from __future__ import annotations
@@ -707,7 +708,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="measure recording's added CPU at 1 kHz and the 10-finger hand's cores, recording on and off")
     parser.add_argument("--recording-cpu", action="store_true",
                         help="recording's own CPU at 1 kHz, counted by thread, against the node's without recording")
-    parser.add_argument("--old", type=Path, default=None, help="with --targets (required) or --recording: the old checkout")
+    parser.add_argument("--old", type=Path, default=None, help="with --targets (required), --recording or --recording-cpu: the old checkout")
     parser.add_argument("--target-duration", type=float, default=10.0,
                         help="with --targets, --recording, --recording-cpu: measured s per run")
     parser.add_argument("--rounds", type=int, default=2, help="with --targets, --recording, --recording-cpu: A B rounds")
@@ -718,16 +719,17 @@ def main(argv: list[str] | None = None) -> int:
     command = "python -m finger_sim.bench.node_bench " + " ".join(argv if argv is not None else sys.argv[1:])
     load0 = os.getloadavg()
     if args.recording_cpu:
-        off, on = [], []
+        runs: dict[tuple[str, str], list[Window]] = {}
         with tempfile.TemporaryDirectory(prefix="node_recording_cpu_") as tmp:
             for r in range(args.rounds):  # off, on, then on, off: a drift of the machine's load falls on both alike
                 order = RECORDING_CONFIGS[:2] if r % 2 == 0 else RECORDING_CONFIGS[1::-1]
                 folder = Path(tmp) / f"round{r}"
                 folder.mkdir()
-                runs = targets(None, args.target_duration, 1, args.domain_id, folder, order)
-                off += runs[("1k_off", "new")]
-                on += runs[("1k_rec", "new")]
-        section = recording_cpu.report(off, on, command.strip(), args.target_duration, (load0, os.getloadavg()))
+                for key, windows in targets(args.old, args.target_duration, 1, args.domain_id, folder, order).items():
+                    runs.setdefault(key, []).extend(windows)
+        old = (runs[("1k_off", "old")], runs[("1k_rec", "old")]) if args.old is not None else None
+        section = recording_cpu.report(runs[("1k_off", "new")], runs[("1k_rec", "new")], command.strip(),
+                                       args.target_duration, (load0, os.getloadavg()), old)
         write_section(args.out, section, recording_cpu.BEGIN, recording_cpu.END)
         print(section)
         return 0

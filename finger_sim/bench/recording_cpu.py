@@ -47,9 +47,24 @@ def own_cpu(w: Any) -> float:
     return sum(w.recorder.values())
 
 
-def report(off: Sequence[Any], on: Sequence[Any], command: str, duration: float, load: tuple[tuple, tuple]) -> str:
+def compared(sides: dict[str, tuple[Sequence[Any], Sequence[Any]]]) -> list[str]:
+    """A table of recording's own CPU by part, side by side: side → its (off, on) runs, measured in the
+    same rounds (node_bench --recording-cpu --old)."""
+    lines = ["| side | recording's own, in all | stepping thread in write_records | sender + status threads | "
+             "writer process | own / least recording-off round |", "|---|---|---|---|---|---|"]
+    for side, (off, on) in sides.items():
+        floor = min(w.cpu_per_sim_s for w in off)
+        parts = [_spread([w.recorder.get(k, 0.0) for w in on]) for k in ("caller", "threads", "writer")]
+        ratios = [own_cpu(w) / floor for w in on]
+        lines.append(f"| {side} | {_spread([own_cpu(w) for w in on])} | {' | '.join(parts)} | "
+                     f"{_spread([100 * r for r in ratios], '.1f')} % |")
+    return lines
+
+
+def report(off: Sequence[Any], on: Sequence[Any], command: str, duration: float, load: tuple[tuple, tuple],
+           old: tuple[Sequence[Any], Sequence[Any]] | None = None) -> str:
     """The dated section of docs/node_performance.md for the runs `off` and `on` (node_bench.Window, in
-    round order)."""
+    round order), and `old`'s (off, on) runs beside them if given (the same rounds, another checkout)."""
     rounds = len(off)
     node_off = [w.cpu_per_sim_s for w in off]
     own = [own_cpu(w) for w in on]
@@ -115,6 +130,8 @@ def report(off: Sequence[Any], on: Sequence[Any], command: str, duration: float,
         *by_round,
         "",
         *per_thread,
+        *(["", "Side by side with the old checkout (`--old`), measured in the same rounds, CPU s per sim s, "
+           "median (min–max):", "", *compared({"new": (off, on), "old": old})] if old is not None else []),
         END,
     ])
 

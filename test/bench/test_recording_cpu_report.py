@@ -57,3 +57,18 @@ def test_threads_grouped_by_name_without_their_number() -> None:
     after = {1: ("stepping", 50_000_000), 2: ("dds.shm.7000", 3_000_000), 3: ("dds.shm.23661", 1_000_000),
              5: ("new", 9_000_000)}
     assert _per_thread_name(before, after, 2.0) == {"stepping": 0.025, "dds.shm.#": 0.0015}
+
+
+def test_old_side_by_side_table() -> None:
+    old_on = [Window(cpu_per_sim_s=c, recorder={"caller": k + 0.001, "threads": THREADS, "writer": WRITER})
+              for c, k in zip(ON, CALLER)]
+    section = recording_cpu.report(_off(), _on(), "cmd", 10.0, ((1.0,), (1.0,)), old=(_off(), old_on))
+    old_own = np.array(CALLER) + 0.001 + THREADS + WRITER
+    (line,) = [line for line in section.splitlines() if line.startswith("| old |")]
+    cells = [cell.strip() for cell in line.strip("|").split("|")]
+    assert cells[1] == f"{np.median(old_own):.4f} ({old_own.min():.4f}–{old_own.max():.4f})"
+    caller = np.array(CALLER) + 0.001
+    assert cells[2] == f"{np.median(caller):.4f} ({caller.min():.4f}–{caller.max():.4f})"
+    ratios = 100 * old_own / min(OFF)
+    assert cells[5] == f"{np.median(ratios):.1f} ({ratios.min():.1f}–{ratios.max():.1f}) %"
+    assert "| new |" in section and "| old |" not in recording_cpu.report(_off(), _on(), "cmd", 10.0, ((1.0,), (1.0,)))
