@@ -41,12 +41,20 @@ of `--old` if given), with the log writer process's share; writes them between t
 markers of --out and prints them, with each configuration's spread over the rounds and the
 rounds' paired differences (recording on minus the off run next to it). `--no-hand` runs
 finger_node's pair only.
+
+    python -m finger_sim.bench.node_bench --recording-cpu [--old <checkout>] [--target-duration 10] [--rounds 6]
+
+counts recording's own CPU at 1 kHz where it runs (the node's /diagnostics `log_cpu_*`) and every
+thread of the node, recording off and on, and writes it between the RECORDING_CPU markers of --out
+(finger_sim.bench.recording_cpu); with --old (a checkout whose node reports `log_cpu_*` too), each run
+is followed by the same run of the old code and recording's parts are compared side by side.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import re
 import statistics
 import sys
 import tempfile
@@ -58,8 +66,10 @@ from pathlib import Path
 
 import numpy as np
 
+from finger_sim.bench import recording_cpu
 from finger_sim.bench.processes import (ROOT, START_TIMEOUT_S, cpu_seconds, isolate_dds, machine, ros_env, start_node, stop,
                                         tree_cpu_seconds)
+from finger_sim.log.cpu_clocks import threads_cpu_ns
 
 DEFAULT_DOMAIN_ID = 31
 WARMUP_S = 3.0
@@ -75,6 +85,8 @@ TARGETS_BEGIN = "<!-- TARGETS begin: written by finger_sim/bench/node_bench.py -
 TARGETS_END = "<!-- TARGETS end -->"
 RECORDING_BEGIN = "<!-- RECORDING begin: written by finger_sim/bench/node_bench.py --recording -->"
 RECORDING_END = "<!-- RECORDING end -->"
+#: Recording's own CPU in the node's /diagnostics (runtime.diagnostics): part → its running total's key.
+RECORDER_PARTS = {"caller": "log_cpu_caller_s", "threads": "log_cpu_threads_s", "writer": "log_cpu_writer_s"}
 
 
 @dataclass
@@ -238,6 +250,11 @@ class Window:
     log_dropped: int = -1  # the log's status record; -1: not recording
     states_logged: int = 0  # joint_states in the log
     states_expected: int = 0  # steps + 1 by the last logged stamp (every-step publishing)
+    # CPU s per sim s of each of the node process's threads, by OS name (cpu_clocks.threads_cpu_ns; numbered
+    # names such as dds.shm.7000 summed as dds.shm.#), and of recording's own parts from the node's
+    # /diagnostics (log_cpu_caller_s, …: caller, threads, writer; empty from a node that does not report them)
+    threads: dict[str, float] = field(default_factory=dict)
+    recorder: dict[str, float] = field(default_factory=dict)
 
 
 def _hand_file(folder: Path) -> Path:
@@ -316,6 +333,7 @@ def measure_window(params: dict, duration: float, domain_id: int, workdir: Path,
     windows: list[dict[str, str]] = []
     cpu_at: list[float] = []  # the node's CPU s (with its children) when each window arrived
     own_at: list[float] = []  # the node process's alone
+    threads_at: list[dict[int, tuple[str, int]]] = []  # its threads' CPU ns
 
     def on_diagnostics(msg: DiagnosticArray) -> None:
         first = [s for s in msg.status if s.name.endswith("simulation")][:1]
@@ -323,6 +341,7 @@ def measure_window(params: dict, duration: float, domain_id: int, workdir: Path,
         for _ in first:
             own_at.append(cpu_seconds(proc.pid))
             cpu_at.append(tree_cpu_seconds(proc.pid))
+            threads_at.append(threads_cpu_ns(proc.pid))
 
     node.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, QoSProfile(depth=100))
     out = Window()
@@ -347,6 +366,10 @@ def measure_window(params: dict, duration: float, domain_id: int, workdir: Path,
         out.cpu_per_sim_s = (cpu_at[-1] - cpu_at[first - 1]) / sim_s if sim_s > 0 else float("nan")
         children = (cpu_at[-1] - own_at[-1]) - (cpu_at[first - 1] - own_at[first - 1])
         out.writer_per_sim_s = children / sim_s if sim_s > 0 else float("nan")
+        if sim_s > 0:
+            out.threads = _per_thread_name(threads_at[first - 1], threads_at[-1], sim_s)
+            out.recorder = {part: (float(windows[-1][key]) - float(windows[first - 1][key])) / sim_s
+                            for part, key in RECORDER_PARTS.items() if key in windows[-1]}
         if measured:
             out.dropped_steps = int(measured[-1]["dropped_steps"]) - int(windows[first - 1]["dropped_steps"])
     finally:
@@ -361,6 +384,17 @@ def measure_window(params: dict, duration: float, domain_id: int, workdir: Path,
         stamps = [m.log_time for _, _, m in log.raw_messages([topic], log_time_order=False)]
         out.log_dropped, out.states_logged = log.dropped, len(stamps)
         out.states_expected = round((max(stamps) - min(stamps)) * params["physics_rate_hz"] / 1e9) + 1 if stamps else 0
+    return out
+
+
+def _per_thread_name(before: dict[int, tuple[str, int]], after: dict[int, tuple[str, int]], sim_s: float) -> dict[str, float]:
+    """CPU s per sim s of the threads alive at both readings (tid → OS name, CPU ns), summed by name with a
+    trailing number replaced by '#' (Fast DDS names its threads by port: dds.shm.7000)."""
+    out: dict[str, float] = {}
+    for tid, (name, ns) in after.items():
+        if tid in before:
+            key = re.sub(r"\d+$", "#", name)
+            out[key] = out.get(key, 0.0) + (ns - before[tid][1]) / 1e9 / sim_s
     return out
 
 
@@ -672,15 +706,33 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--targets", action="store_true", help="measure the ROS layer's cost targets, new against --old")
     parser.add_argument("--recording", action="store_true",
                         help="measure recording's added CPU at 1 kHz and the 10-finger hand's cores, recording on and off")
-    parser.add_argument("--old", type=Path, default=None, help="with --targets (required) or --recording: the old checkout")
-    parser.add_argument("--target-duration", type=float, default=10.0, help="with --targets, --recording: measured s per run")
-    parser.add_argument("--rounds", type=int, default=2, help="with --targets, --recording: A B rounds")
+    parser.add_argument("--recording-cpu", action="store_true",
+                        help="recording's own CPU at 1 kHz, counted by thread, against the node's without recording")
+    parser.add_argument("--old", type=Path, default=None, help="with --targets (required), --recording or --recording-cpu: the old checkout")
+    parser.add_argument("--target-duration", type=float, default=10.0,
+                        help="with --targets, --recording, --recording-cpu: measured s per run")
+    parser.add_argument("--rounds", type=int, default=2, help="with --targets, --recording, --recording-cpu: A B rounds")
     parser.add_argument("--no-hand", action="store_true",
                         help="with --recording: finger_node's pair only (more rounds in the same time)")
     args = parser.parse_args(argv)
     isolate_dds(args.domain_id)
     command = "python -m finger_sim.bench.node_bench " + " ".join(argv if argv is not None else sys.argv[1:])
     load0 = os.getloadavg()
+    if args.recording_cpu:
+        runs: dict[tuple[str, str], list[Window]] = {}
+        with tempfile.TemporaryDirectory(prefix="node_recording_cpu_") as tmp:
+            for r in range(args.rounds):  # off, on, then on, off: a drift of the machine's load falls on both alike
+                order = RECORDING_CONFIGS[:2] if r % 2 == 0 else RECORDING_CONFIGS[1::-1]
+                folder = Path(tmp) / f"round{r}"
+                folder.mkdir()
+                for key, windows in targets(args.old, args.target_duration, 1, args.domain_id, folder, order).items():
+                    runs.setdefault(key, []).extend(windows)
+        old = (runs[("1k_off", "old")], runs[("1k_rec", "old")]) if args.old is not None else None
+        section = recording_cpu.report(runs[("1k_off", "new")], runs[("1k_rec", "new")], command.strip(),
+                                       args.target_duration, (load0, os.getloadavg()), old)
+        write_section(args.out, section, recording_cpu.BEGIN, recording_cpu.END)
+        print(section)
+        return 0
     if args.recording:
         with tempfile.TemporaryDirectory(prefix="node_recording_") as tmp:
             names = RECORDING_CONFIGS[:2] if args.no_hand else RECORDING_CONFIGS

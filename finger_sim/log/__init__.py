@@ -25,7 +25,7 @@ from .errors import (
 )
 from .qos import OFFERED_QOS_PROFILES, offered_qos_profiles
 from .reader import LogMessage, LogReader, TopicInfo, read_log
-from .recorder import DEFAULT_CHUNK_INTERVAL_S, RECORDING_STATUS, McapRecorder
+from .recorder import DEFAULT_CHUNK_INTERVAL_S, RECORDING_STATUS, McapRecorder, RecorderCpu
 
 __all__ = [
     "DEFAULT_CHUNK_INTERVAL_S",
@@ -45,6 +45,7 @@ __all__ = [
     "LogNotFoundError",
     "LogReader",
     "McapRecorder",
+    "RecorderCpu",
     "MessageDefinitionNotFoundError",
     "MissingMetadataError",
     "MissingTopicsError",

@@ -67,6 +67,7 @@ from std_srvs.srv import SetBool, Trigger
 
 from finger_sim.errors import FingerSimError
 from finger_sim.log import LogError
+from finger_sim.log.cpu_clocks import name_os_thread
 from finger_sim.log.cdr_writer import clock_cdr
 from finger_sim.ros import conversions, parameters
 from finger_sim.ros.finger import Finger
@@ -237,7 +238,9 @@ class SteppingNode(Node, BatchedStateOutput, SteppingSession):
     def _loop(self) -> None:
         """The session's stepping loop, holding every publisher's use guard for its run: the
         endpoints send with the C publisher's publish_raw alone (interfaces.raw_sender), and a
-        destroy_node meanwhile is deferred until the loop ends, as each message's guard did."""
+        destroy_node meanwhile is deferred until the loop ends, as each message's guard did. The
+        thread is 'stepping' to the operating system (`top -H`, a benchmark's per-thread CPU)."""
+        name_os_thread("stepping")
         with contextlib.ExitStack() as held:
             for out in self._endpoints():
                 if out.send is not None:

@@ -32,6 +32,7 @@ from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.task import Future
 
+from finger_sim.log.cpu_clocks import name_os_thread
 from finger_sim.runtime.parameters import Executor
 
 __all__ = ["EXIT_SIGNALS", "spin_until_done"]
@@ -62,6 +63,7 @@ def _spin_events(node: Node, done: Future) -> None:
     failure: list[BaseException] = []
 
     def spin() -> None:  # the executor's thread; also ends on the context's shutdown or a callback's exception
+        name_os_thread("executor")  # as the operating system shows it (`top -H`)
         try:
             while not finished.is_set() and node.context.ok():
                 events.spin_once(timeout_sec=SPIN_SLICE_S)

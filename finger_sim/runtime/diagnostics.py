@@ -7,12 +7,18 @@ Level, most severe first:
   node publishes /clock too, or commands were refused or steps dropped in the last window.
 - OK otherwise. The message starts with the run state (running, paused, finished, diverged).
 Windows are the spans between two reports (about 1 s of wall time).
+
+Recording's own CPU (`log_cpu_*`): the CPU s the log has cost, in all and by where it ran (the
+stepping thread's hand-over of each state, the recorder's sender and status threads, its writer
+process: finger_sim.log.McapRecorder.cpu), read once a report; `log_cpu_per_sim_s` is the
+window's share per sim s, at real time the cores recording takes. All 0 without a log.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import IntEnum
+from typing import Any
 
 from finger_sim.runtime.commands import TorqueCommands
 from finger_sim.runtime.pacing import Lateness, Pacer
@@ -34,6 +40,7 @@ class LogStatus:
     written: int = 0
     dropped: int = 0
     error: str | None = None  # the first failure (unwritable folder, full disk)
+    cpu: Any = None  # what recording has cost so far: a finger_sim.log RecorderCpu (caller_s, threads_s, writer_s, total_s); None: nothing
 
 
 @dataclass(frozen=True)
@@ -71,6 +78,7 @@ class DiagnosticsWindow:
         self.wall = now  # wall s at the start of the current window
         self._steps, self._refused, self._dropped_steps = 0, 0, 0
         self._lockstep_timeouts = 0
+        self._log_cpu_s = 0.0  # the recorder's CPU s at the last report
 
     def restart(self, now: float) -> None:
         """Start the first window at `now` (when stepping begins)."""
@@ -111,6 +119,9 @@ class DiagnosticsWindow:
         if snap.crushes:  # an event of the simulated world, not a fault of the node: the level stays
             problems.append(f"{len(snap.crushes)} objects crushed this episode, the last: {snap.crushes[-1]}")
         message = "; ".join([snap.state, *problems])
+        cpu = log.cpu
+        log_cpu_s = cpu.total_s if cpu is not None else 0.0
+        window_sim_s = (snap.steps_total - self._steps) * snap.dt
         late_w = pacer.window if pacer is not None else Lateness()  # at realtime_factor 0: no wake-ups
         late = pacer.lateness if pacer is not None else late_w
         age: object = (snap.step - commands.command_step) * snap.dt if commands.command_step is not None else "none"
@@ -148,6 +159,12 @@ class DiagnosticsWindow:
             "log_messages_written": log.written,
             "log_messages_dropped": log.dropped,
             "log_error": log.error if log.error is not None else "none",
+            # recording's own CPU: this window's per sim s (0 while sim time stands still), the total and its parts
+            "log_cpu_per_sim_s": (log_cpu_s - self._log_cpu_s) / window_sim_s if window_sim_s > 0 else 0.0,
+            "log_cpu_s": log_cpu_s,
+            "log_cpu_caller_s": cpu.caller_s if cpu is not None else 0.0,
+            "log_cpu_threads_s": cpu.threads_s if cpu is not None else 0.0,
+            "log_cpu_writer_s": cpu.writer_s if cpu is not None else 0.0,
             "clock_publishers": snap.clock_publishers if snap.clock_publishers is not None else "not publishing",
             "lockstep_timeouts": snap.lockstep_timeouts if snap.lockstep_timeouts is not None else "no lockstep",
         }
@@ -155,6 +172,7 @@ class DiagnosticsWindow:
             values["objects_crushed"] = len(snap.crushes)
             values["last_crush"] = snap.crushes[-1] if snap.crushes else "none"
         self._lockstep_timeouts = snap.lockstep_timeouts or 0
+        self._log_cpu_s = log_cpu_s
         self.wall, self._steps = now, snap.steps_total
         self._refused, self._dropped_steps = counts.refused, dropped_steps
         if pacer is not None and new_window:

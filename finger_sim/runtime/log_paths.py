@@ -123,5 +123,9 @@ class UnwritableLog:
         self.dropped += len(datas)
         return 0
 
+    def cpu(self) -> None:
+        """No threads, no process: recording costs nothing worth counting (the diagnostics show 0)."""
+        return None
+
     def close(self) -> None:
         """Nothing to close."""

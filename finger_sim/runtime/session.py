@@ -219,7 +219,7 @@ class SteppingSession:
         rec = self.recorder
         if rec is None:
             return LogStatus(None)
-        return LogStatus(str(rec.path), rec.written, rec.dropped, rec.error)
+        return LogStatus(str(rec.path), rec.written, rec.dropped, rec.error, rec.cpu())
 
     def _apply_settings(self, s: RunSettings) -> None:
         """The run-time parameters' effect (stepping thread, between two steps)."""

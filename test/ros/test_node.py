@@ -494,6 +494,7 @@ def test_an_unwritable_record_dir_turns_diagnostics_to_error(launcher, ros_clien
     assert status.message.startswith("paused; log failed: cannot create a log in record_dir 'afile/bags': ")
     assert status.message.endswith(f"; {v['log_messages_dropped']} messages lost")
     assert v["log_messages_written"] == "0" and "Not a directory" in v["log_error"]
+    assert [float(v[k]) for k in ("log_cpu_per_sim_s", "log_cpu_s", "log_cpu_caller_s", "log_cpu_threads_s", "log_cpu_writer_s")] == [0.0] * 5  # no log: recording costs nothing
     assert node.running() and "Traceback" not in node.output()
     assert [p for p in tmp_path.iterdir() if p.is_dir()] == []  # no folder made, no file left
 
@@ -518,6 +519,7 @@ def test_reliable_command_qos_receives_a_burst_in_full(launcher, ros_client):
     ros_client.wait_for(lambda: received() >= 1 + burst, f"{burst} more commands counted")
     status = last_status(diagnostics, lambda s: True)
     assert (received(), int(values(status)["commands_accepted"])) == (1 + burst, 1 + burst)
+    assert [float(values(status)[k]) for k in ("log_cpu_per_sim_s", "log_cpu_s", "log_cpu_caller_s", "log_cpu_threads_s", "log_cpu_writer_s")] == [0.0] * 5  # record false: no recording's CPU
 
 
 def test_a_second_clock_publisher_is_warned_about(launcher, ros_client):

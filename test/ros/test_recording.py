@@ -284,6 +284,7 @@ def test_round_trip_read_by_rosbags_and_mcap(launcher, ros_client, tmp_path):
     end = int(held["stamp_ns"]) + 300 * DT_NS
     ros_client.wait_for(lambda: stamp(states[-1]) >= end, "300 steps after the last command")
     ros_client.wait_for(lambda: diagnostics, "diagnostics (about 1 Hz of wall time)")
+    check_recording_cpu(ros_client, diagnostics, node.pid)
     assert node.stop() == 0, output(node)
     out = output(node)
     assert "Traceback" not in out, out
@@ -377,6 +378,31 @@ def test_round_trip_read_by_rosbags_and_mcap(launcher, ros_client, tmp_path):
     assert (meta["method"], meta["method_reason"]) == (sim.method, sim.method_reason)
     assert meta["version"] == finger_sim.__version__ == importlib.metadata.version("finger_sim")
     assert (meta["torque_source"], meta["dt"]) == ("topic", "0.001")
+
+
+def stat_cpu_s(pid: int) -> float:
+    """utime + stime of process `pid` (all its threads), s, from /proc/<pid>/stat."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def check_recording_cpu(ros_client: Any, diagnostics: list, node_pid: int) -> None:
+    """The recorder's CPU in /diagnostics (`log_cpu_*`, McapRecorder.cpu) against /proc, read after the report
+    was published: each part > 0 while recording, the stepping thread's and the recorder's threads' within the
+    node process's utime + stime, the writer's within its process's (two clock ticks of rounding each)."""
+    def running_log() -> dict[str, str] | None:
+        last = values(diagnostics[-1].status[0])
+        return last if min(float(last[k]) for k in ("log_cpu_caller_s", "log_cpu_threads_s", "log_cpu_writer_s")) > 0 else None
+
+    report = ros_client.wait_for(running_log, "a report counting every part of recording's CPU")
+    (writer,) = child_pids(node_pid)
+    tick = 1.0 / os.sysconf("SC_CLK_TCK")
+    node_s, writer_s = stat_cpu_s(node_pid), stat_cpu_s(writer)
+    caller, threads, writer_part = (float(report[k]) for k in ("log_cpu_caller_s", "log_cpu_threads_s", "log_cpu_writer_s"))
+    assert caller + threads <= node_s + 2 * tick, (report, node_s)
+    assert writer_part <= writer_s + 2 * tick, (report, writer_s)
+    assert float(report["log_cpu_s"]) == pytest.approx(caller + threads + writer_part)
+    assert float(report["log_cpu_per_sim_s"]) >= 0.0
 
 
 def values_of(fields: dict) -> dict[str, str]:

@@ -17,6 +17,7 @@ import finger_sim.runtime
 from finger_sim.errors import ConfigError
 from finger_sim.run_log import CommandEvent
 from finger_sim.runtime.commands import REFUSED_NOT_FINITE, REFUSED_SCENE, Inbox, TorqueCommands, timeout_steps
+from finger_sim.log import RecorderCpu
 from finger_sim.runtime.diagnostics import ClockWatch, DiagnosticsWindow, Level, LogStatus, Snapshot
 from finger_sim.runtime.log_paths import LogFolder, UnwritableLog, create_log_file, safe_component
 from finger_sim.runtime.pacing import CATCHUP_LIMIT_S, Lateness, Pacer
@@ -284,6 +285,26 @@ def test_diagnostics_levels_and_counts():
     level, message, _ = window.report(snapshot(), c, pacer, now=5.5)
     assert (level, message) == (Level.OK, "running")  # nothing new in this window
     assert window.report(snapshot(state="diverged", diverged=True), c, None, now=6.5)[0] == Level.ERROR
+
+
+def test_diagnostics_report_recording_cpu_per_window():
+    """log_cpu_*: the recorder's totals as read, and each window's growth over the sim time it advanced
+    (hand-computed here); 0 without a log and while sim time stands still."""
+    c = commands()
+    window = DiagnosticsWindow(now=0.0)
+    _, _, values = window.report(snapshot(log=LogStatus(None), steps_total=1000), c, None, now=1.0)
+    assert [values[k] for k in ("log_cpu_per_sim_s", "log_cpu_s", "log_cpu_caller_s", "log_cpu_threads_s",
+                                "log_cpu_writer_s")] == [0.0] * 5
+    first = RecorderCpu(caller_s=0.004, threads_s=0.002, writer_s=0.25)  # the writer's start-up is in its total
+    _, _, values = window.report(snapshot(log=LogStatus("x.mcap", cpu=first), steps_total=3000), c, None, now=3.0)
+    assert values["log_cpu_s"] == pytest.approx(0.256) and values["log_cpu_writer_s"] == 0.25
+    assert values["log_cpu_per_sim_s"] == pytest.approx(0.256 / (2000 * DT))
+    later = RecorderCpu(caller_s=0.010, threads_s=0.004, writer_s=0.256)  # +0.014 CPU s in 500 steps
+    _, _, values = window.report(snapshot(log=LogStatus("x.mcap", cpu=later), steps_total=3500), c, None, now=3.5)
+    assert values["log_cpu_per_sim_s"] == pytest.approx(0.014 / (500 * DT))
+    assert (values["log_cpu_caller_s"], values["log_cpu_threads_s"]) == (0.010, 0.004)
+    _, _, values = window.report(snapshot(log=LogStatus("x.mcap", cpu=later), steps_total=3500), c, None, now=4.5)
+    assert values["log_cpu_per_sim_s"] == 0.0  # paused: no sim time in the window
 
 
 # -- log paths -------------------------------------------------------------------------------

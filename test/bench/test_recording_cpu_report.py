@@ -1,0 +1,74 @@
+"""node_bench --recording-cpu's report: the ratio, its spread and the per-thread rows are those of its runs
+(computed here with numpy from the same figures); threads are grouped by OS name as documented."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from finger_sim.bench import recording_cpu
+from finger_sim.bench.node_bench import Window, _per_thread_name
+
+OFF = [0.081, 0.067, 0.057, 0.068, 0.075, 0.066]  # node process, recording off, CPU s per sim s
+STEP_OFF = [0.079, 0.065, 0.055, 0.068, 0.074, 0.065]
+ON = [0.103, 0.077, 0.095, 0.083, 0.095, 0.084]
+STEP_ON = [0.095, 0.070, 0.089, 0.076, 0.087, 0.078]
+CALLER = [0.0072, 0.0052, 0.0064, 0.0038, 0.0053, 0.0037]
+THREADS, WRITER = 0.0021, 0.0036
+
+
+def _off() -> list[Window]:
+    return [Window(cpu_per_sim_s=c, threads={"stepping": s, "executor": 0.0007}) for c, s in zip(OFF, STEP_OFF)]
+
+
+def _on() -> list[Window]:
+    return [Window(cpu_per_sim_s=c, threads={"stepping": s, "executor": 0.0007, "mcap sender": 0.0019},
+                   recorder={"caller": k, "threads": THREADS, "writer": WRITER}) for c, s, k in zip(ON, STEP_ON, CALLER)]
+
+
+def _cells(section: str, label: str) -> list[str]:
+    (line,) = [line for line in section.splitlines() if line.startswith(f"| {label} |")]
+    return [cell.strip() for cell in line.strip("|").split("|")]
+
+
+def test_ratio_to_the_least_recording_off_round_with_its_spread() -> None:
+    section = recording_cpu.report(_off(), _on(), "cmd", 10.0, ((1.4,), (2.2,)))
+    own = np.array(CALLER) + THREADS + WRITER
+    ratios = own / min(OFF)
+    verdict = "Met" if np.median(ratios) <= 0.20 else "Not met"
+    assert (f"**{verdict}: recording's own CPU is {100 * np.median(ratios):.1f} % (rounds {100 * ratios.min():.1f}–"
+            f"{100 * ratios.max():.1f} %) of the least CPU the node took without recording ({min(OFF):.4f}") in section
+    assert f"{100 * np.median(own) / np.median(OFF):.1f} % of the median recording-off round" in section
+    assert _cells(section, "**recording's own, in all**")[1:7] == [f"{x:.4f}" for x in own]
+    outside = np.array(STEP_ON) - np.array(CALLER)
+    assert _cells(section, "stepping thread outside write_records, recording on")[1:7] == [f"{x:.4f}" for x in outside]
+    paired = outside - np.array(STEP_OFF)
+    indirect = np.median(paired)
+    assert (f"median of the rounds): {indirect:+.4f} CPU s per sim s (rounds {paired.min():+.4f} to {paired.max():+.4f}; "
+            f"{100 * indirect / min(OFF):+.1f} % of the least recording-off round; own and indirect together "
+            f"{100 * (np.median(own) + indirect) / min(OFF):.1f} %)") in section
+    stepping = _cells(section, "stepping")
+    assert stepping[1] == f"{np.median(STEP_OFF):.4f} ({min(STEP_OFF):.4f}–{max(STEP_OFF):.4f})"
+    assert _cells(section, "mcap sender")[1:] == ["0.0000 (0.0000–0.0000)", "0.0019 (0.0019–0.0019)"]
+    assert section.startswith(recording_cpu.BEGIN) and section.endswith(recording_cpu.END)
+
+
+def test_threads_grouped_by_name_without_their_number() -> None:
+    before = {1: ("stepping", 0), 2: ("dds.shm.7000", 1_000_000), 3: ("dds.shm.23661", 0), 4: ("gone", 5)}
+    after = {1: ("stepping", 50_000_000), 2: ("dds.shm.7000", 3_000_000), 3: ("dds.shm.23661", 1_000_000),
+             5: ("new", 9_000_000)}
+    assert _per_thread_name(before, after, 2.0) == {"stepping": 0.025, "dds.shm.#": 0.0015}
+
+
+def test_old_side_by_side_table() -> None:
+    old_on = [Window(cpu_per_sim_s=c, recorder={"caller": k + 0.001, "threads": THREADS, "writer": WRITER})
+              for c, k in zip(ON, CALLER)]
+    section = recording_cpu.report(_off(), _on(), "cmd", 10.0, ((1.0,), (1.0,)), old=(_off(), old_on))
+    old_own = np.array(CALLER) + 0.001 + THREADS + WRITER
+    (line,) = [line for line in section.splitlines() if line.startswith("| old |")]
+    cells = [cell.strip() for cell in line.strip("|").split("|")]
+    assert cells[1] == f"{np.median(old_own):.4f} ({old_own.min():.4f}–{old_own.max():.4f})"
+    caller = np.array(CALLER) + 0.001
+    assert cells[2] == f"{np.median(caller):.4f} ({caller.min():.4f}–{caller.max():.4f})"
+    ratios = 100 * old_own / min(OFF)
+    assert cells[5] == f"{np.median(ratios):.1f} ({ratios.min():.1f}–{ratios.max():.1f}) %"
+    assert "| new |" in section and "| old |" not in recording_cpu.report(_off(), _on(), "cmd", 10.0, ((1.0,), (1.0,)))
