@@ -156,16 +156,23 @@ def common_step(ws, t, t1, command, flags):
     as `Simulator.step` takes a step with no gap crossing, on the workspace ws (module docstring); flags:
     SAME, AT_LAST, PROFILE (or'ed). Returns (status, q1, q1', the error estimate at q1 in rad, τ at t1
     in N·m): OK; or PYTHON with ws as it was."""
-    m, plan, st, arr, work = parts(ws)
+    return step_on(parts(ws), log_of(ws), t, t1, command, flags)
+
+
+@njit(**JIT)
+def step_on(views, log, t, t1, command, flags):
+    """`common_step` on the workspace's `parts` (views) and `log_of` (log), sliced once by a caller that
+    steps many times (`event_run.run`: slicing ws costs about as much as a step's projected output)."""
+    m, plan, st, arr, work = views
     st[SAVED:SAVED + N_SCALARS] = st[:N_SCALARS]
     arr[ROWS - KEPT:] = arr[:KEPT]
     o = LAST_Q if flags & AT_LAST else X
     q, v = (st[o], st[o + 1], st[o + 2]), (st[o + 3], st[o + 4], st[o + 5])
     prof = st[PROFILE_AT:PROFILE_AT + PROFILE_SIZE] if flags & PROFILE else st[HELD_AT:HELD_AT + 1]
     status, q1, v1, estimate = _step(m, plan, st, arr, work, t, t1, command, prof, (flags & SAME) != 0,
-                                     (flags & LOCATE) != 0, q, v, log_of(ws))
+                                     (flags & LOCATE) != 0, q, v, log)
     if status == PYTHON:
-        restore(ws)
+        restore_views(st, arr)
     return status, q1, v1, estimate, torque_at(prof, command, t1)
 
 
@@ -173,6 +180,12 @@ def common_step(ws, t, t1, command, flags):
 def restore(ws):
     """The solution in ws as it was before the last `common_step`."""
     _, _, st, arr, _ = parts(ws)
+    restore_views(st, arr)
+
+
+@njit(**JIT)
+def restore_views(st, arr):
+    """`restore` on the workspace's st and arr (`parts`)."""
     st[:N_SCALARS] = st[SAVED:SAVED + N_SCALARS]
     arr[:KEPT] = arr[ROWS - KEPT:]
 
@@ -474,19 +487,27 @@ def stays_at_rest(ws, t, t1, command, flags, sign, q0, q1, q2):
     `command` (N·m) or, with flag PROFILE, st's profile, as `JointStops.release_time` decides it (the push
     −sign·θ1'' into the gap > 0 at t and at t1; sign: the gap gradient's θ1 component), with REST_MARGIN to
     spare (else False: the Simulator decides). Returns (stays, τ at t1 in N·m)."""
-    if not pushes_at(ws, t, command, flags, sign, q0, q1, q2)[0]:
+    rest = rest_views(ws, flags)
+    if not pushes_at(rest, t, command, sign, q0, q1, q2)[0]:
         return False, 0.0
-    stays, tau = pushes_at(ws, t1, command, flags, sign, q0, q1, q2)
+    stays, tau = pushes_at(rest, t1, command, sign, q0, q1, q2)
     return (True, tau) if stays else (False, 0.0)
 
 
 @njit(**JIT)
-def pushes_at(ws, s, command, flags, sign, q0, q1, q2):
-    """`stays_at_rest`'s test at one time s (s): (whether the push into the stop at rest at q exceeds
-    REST_MARGIN, τ at s in N·m)."""
+def rest_views(ws, flags):
+    """What `pushes_at` reads of ws, sliced once for a run of tests: (the model, the torque profile that flags
+    select, two scratch rows)."""
     m, _, st, arr, _ = parts(ws)
     prof = st[PROFILE_AT:PROFILE_AT + PROFILE_SIZE] if flags & PROFILE else st[HELD_AT:HELD_AT + 1]
-    y, f = arr[OUT], arr[Y_NEW]  # scratch rows: neither is read across steps
+    return m, prof, arr[OUT], arr[Y_NEW]  # scratch rows: neither is read across steps
+
+
+@njit(**JIT)
+def pushes_at(rest, s, command, sign, q0, q1, q2):
+    """`stays_at_rest`'s test at one time s (s) on its `rest_views`: (whether the push into the stop at rest
+    at q exceeds REST_MARGIN, τ at s in N·m)."""
+    m, prof, y, f = rest
     y[0], y[1], y[2], y[3], y[4], y[5] = q0, q1, q2, 0.0, 0.0, 0.0
     tau = torque_at(prof, command, s)
     _rhs(m, s, y, tau, f)
