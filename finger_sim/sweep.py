@@ -40,9 +40,9 @@ from finger_sim.sweep_plan import Progress, check_values, combination, scene_blo
 STATE_COLUMNS = tuple(Trajectory.CSV_HEADER.split(",")[1:7])
 RESULT_COLUMNS = (*STATE_COLUMNS, "max_constraint_residual", "energy_change")
 GRIP_COLUMN = GRIP_FORCE.name
-#: Finger-steps a sweep may take unless the user raises the limit: about a minute of the
-#: compiled batch on two cores (≈ 0.5 µs of CPU per rk6 finger-step, docs/sweep_performance.md),
-#: hours in Python.
+#: Finger-steps a sweep may take unless the user raises the limit: about a minute of CPU for the
+#: compiled batch (0.27–0.34 µs of CPU per rk6 finger-step, 2026-11-27, docs/sweep_performance.md),
+#: half a minute on two cores; hours in Python.
 DEFAULT_MAX_SWEEP_STEPS = 200_000_000
 #: Finger-steps whose angles `--plot` may hold (24 B each, measured: ≈ 480 MB).
 MAX_PLOT_STEPS = 20_000_000

@@ -50,15 +50,15 @@ PYTHON = "python"
 #: The values of `Simulator(kernel=...)`.
 KERNELS = ("auto", "compiled", PYTHON)
 #: An offline run shorter than this (steps) runs in Python under kernel "auto" when numba is
-#: not loaded yet: loading numba and the cached kernel costs ≈ 0.5 s of CPU, which the kernel
-#: earns back at ≈ 33 µs of CPU per rk6 step saved (35 µs in Python against 2.4 µs compiled at a
-#: load of 16–19, docs/speed.md, 2026-11-26) only after some 15 000–20 000 steps.
+#: not loaded yet: loading numba and the cached kernel costs ≈ 0.35 s of CPU, which the kernel
+#: earns back at ≈ 18 µs of CPU per rk6 step saved (20 µs in Python against 1.8 µs compiled,
+#: 2026-11-27, load 0.9–1.3, docs/figures_audit.md) only after some 19 000 steps.
 #: Both paths give the same numbers (the tests hold them to 1e-13 rad; in practice bit for bit).
 OFFLINE_BREAK_EVEN_STEPS = 20_000
 #: What a step of an inductive drive (L > 0) saves on the compiled kernel, in rk6 steps of the rule above:
 #: every stage of its electrical substeps runs in Python there, 12.5 ms per step against 0.12 ms compiled
-#: (free motion, L = 1 mH, 32 substeps; 2026-11-26, load 4): ≈ 370 × 33 µs. So such a run is compiled
-#: from some 60 steps on (a 0.2 s grasp took 57 s on the Python path).
+#: (free motion, L = 1 mH, 32 substeps; 2026-11-26, load 4): ≈ 690 × 18 µs; the weight keeps to the safe
+#: side of it. So such a run is compiled from some 70 steps on (a 0.2 s grasp took 57 s on the Python path).
 INDUCTIVE_STEP_WEIGHT = 300
 #: NUMBA_CACHE_DIR used when none is set and the package folder is read-only.
 FALLBACK_CACHE_DIR = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "finger_sim" / "numba"
