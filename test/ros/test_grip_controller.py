@@ -165,7 +165,7 @@ def test_node_contact_topics_match_the_offline_run(launcher, ros_client, tmp_pat
         return False
 
     ros_client.wait_for(heard, "the first contact messages")
-    resume(ros_client, "/finger_node")
+    resume(ros_client, "/finger_node", process=node)
     assert node.wait(30.0) == 0, node.output()
     scene = load_scene(CUP).with_overrides(dt=1.0 / RATE)
     steps = scene.step_count
