@@ -18,7 +18,7 @@ use_writable_cache()  # before numba reads NUMBA_CACHE_DIR
 from numba import njit  # noqa: E402  (after the cache folder is set)
 
 from finger_sim.kernel.event_step import (AT_LAST, ENDED, EVENT, RESTED, SAME, SETTLED, log_of, parts,  # noqa: E402
-                                          pushes_at, rest_views, restore_views, stays_at_rest, step_on)
+                                          profile_of, pushes_at, restore_views, stays_at_rest, step_on)
 from finger_sim.kernel.numerics import JIT, OK  # noqa: E402
 
 #: Columns of `run`'s output rows: q (3), q' (3), the θ error estimate (rad).
@@ -32,13 +32,14 @@ def run(ws, k0, n, dt, command, flags, out):
     out (n × ROW) gets step k0 + i's (q, q', estimate). Returns (steps taken, τ at the last one's end
     in N·m): fewer than n where a step must go to Python."""
     end = 0.0
-    views, log = parts(ws), log_of(ws)
+    m, plan, st, arr, work = parts(ws)
+    log, prof = log_of(ws), profile_of(st, flags)  # (flags' PROFILE bit is the same for every step)
     for i in range(n):
         k = k0 + i
-        status, q, v, estimate, tau = step_on(views, log, k * dt, (k + 1) * dt, command, flags)
+        status, q, v, estimate, tau = step_on(m, plan, st, arr, work, log, prof, k * dt, (k + 1) * dt, command, flags)
         if status != OK and status != SETTLED:  # (SETTLED: crossings located and stepped past, as OK)
             if status == EVENT or status == ENDED or status == RESTED:  # a stretch hands Python the step as it
-                restore_views(views[2], views[3])  # was (`sim.step()` takes it again; after ENDED the next step does not start at the last
+                restore_views(st, arr)  # was (`sim.step()` takes it again; after ENDED the next step does not start at the last
                 # output; after RESTED the Simulator enters the rest mode)
             return i, end
         out[i, 0], out[i, 1], out[i, 2], out[i, 3], out[i, 4], out[i, 5] = q[0], q[1], q[2], v[0], v[1], v[2]
@@ -58,10 +59,11 @@ def rest_run(ws, k0, n, dt, command, flags, sign, q0, q1, q2):
     stays, end = stays_at_rest(ws, k0 * dt, (k0 + 1) * dt, command, flags, sign, q0, q1, q2)
     if not stays:
         return 0, 0.0
-    rest = rest_views(ws, flags)
+    m, _, st, _, _ = parts(ws)
+    prof = profile_of(st, flags)
     for i in range(1, n):
         k = k0 + i
-        stays, tau = pushes_at(rest, (k + 1) * dt, command, sign, q0, q1, q2)
+        stays, tau = pushes_at(m, prof, (k + 1) * dt, command, sign, q0, q1, q2)
         if not stays:
             return i, end
         end = tau

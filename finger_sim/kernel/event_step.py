@@ -20,8 +20,8 @@ attributes when Python steps:
     st: the scalars T … X below, the stage torques (N_NODES), a copy of the scalars, then the torque
         profile the PROFILE flag steps under (`inputs.profile_array`, zero-padded to PROFILE_SIZE) and
         a held value's code (`inputs.HELD`);
-    arr (ROWS × 6): y, f, y_old, dense (7 rows), the attempt's stages (16), y_new, out, then a
-        copy of y, f, y_old and dense;
+    arr (ROWS × 6): y, f, y_old, dense (7 rows), the attempt's stages (16), y_new, then a copy of y, f,
+        y_old and dense;
     work (4 × n_gaps): the gap screen's.
 """
 
@@ -45,7 +45,8 @@ from finger_sim.kernel.internal_steps import (BRANCH, CONTINUED, COUNT, HISTORY_
 from finger_sim.kernel import event_crossing  # noqa: E402
 from finger_sim.kernel.event_checks import EVENT_TOLERANCE  # noqa: E402
 from finger_sim.kernel.locate_event import _estimate  # noqa: E402
-from finger_sim.kernel.numerics import JIT, OK, _rhs, dop853_output, dop853_theta_error, torque_at  # noqa: E402
+from finger_sim.kernel.numerics import (JIT, OK, _rhs, accelerations, dop853_output_rows, dop853_theta_error,  # noqa: E402
+                                        torque_at)
 
 #: `common_step`'s answer when Python must take the step.
 PYTHON = 1
@@ -74,9 +75,9 @@ PROFILE_AT, PROFILE_SIZE = SAVED + N_SCALARS, 4
 HELD_AT = PROFILE_AT + PROFILE_SIZE
 ST_SIZE = HELD_AT + 1
 #: The rows of arr.
-Y, F, Y_OLD, DENSE, KK, Y_NEW, OUT = 0, 1, 2, 3, 10, 26, 27
+Y, F, Y_OLD, DENSE, KK, Y_NEW = 0, 1, 2, 3, 10, 26
 KEPT = KK  # y, f, y_old and dense: what a step changes of the solution
-ROWS = OUT + 1 + KEPT
+ROWS = Y_NEW + 1 + KEPT
 #: The workspace's header: the lengths of the model, the gap plan and the number of gaps.
 HEADER = 3
 #: Its answer when the step held gap crossings (contact onsets, releases) that it located and stepped past
@@ -136,7 +137,9 @@ def entry_point(ws):  # type: ignore[no-untyped-def]
 
 @njit(**JIT)
 def parts(ws):
-    """The workspace's views: (model, gap plan, st, arr, work)."""
+    """The workspace's views: (model, gap plan, st, arr, work); sliced once per call of a caller that steps many
+    times (`event_run.run`), passed whole to the step with row indices (a view made per step costs reference
+    counting: numba's atomic increments and decrements)."""
     nm, npl, ng = int(ws[0]), int(ws[1]), int(ws[2])
     o = HEADER
     m = ws[o:o + nm]
@@ -156,19 +159,28 @@ def common_step(ws, t, t1, command, flags):
     as `Simulator.step` takes a step with no gap crossing, on the workspace ws (module docstring); flags:
     SAME, AT_LAST, PROFILE (or'ed). Returns (status, q1, q1', the error estimate at q1 in rad, τ at t1
     in N·m): OK; or PYTHON with ws as it was."""
-    return step_on(parts(ws), log_of(ws), t, t1, command, flags)
+    m, plan, st, arr, work = parts(ws)
+    return step_on(m, plan, st, arr, work, log_of(ws), profile_of(st, flags), t, t1, command, flags)
 
 
 @njit(**JIT)
-def step_on(views, log, t, t1, command, flags):
-    """`common_step` on the workspace's `parts` (views) and `log_of` (log), sliced once by a caller that
-    steps many times (`event_run.run`: slicing ws costs about as much as a step's projected output)."""
-    m, plan, st, arr, work = views
-    st[SAVED:SAVED + N_SCALARS] = st[:N_SCALARS]
-    arr[ROWS - KEPT:] = arr[:KEPT]
+def profile_of(st, flags):
+    """The torque the step runs under, as `torque_at` reads it: st's profile with flag PROFILE, else the held
+    value's code."""
+    return st[PROFILE_AT:PROFILE_AT + PROFILE_SIZE] if flags & PROFILE else st[HELD_AT:HELD_AT + 1]
+
+
+@njit(**JIT)
+def step_on(m, plan, st, arr, work, log, prof, t, t1, command, flags):
+    """`common_step` on the workspace's `parts`, `log_of` and `profile_of` (for flags' PROFILE), sliced once by a
+    caller that steps many times (`event_run.run`)."""
+    for i in range(N_SCALARS):  # (element by element: a slice is a view)
+        st[SAVED + i] = st[i]
+    for r in range(KEPT):
+        for c in range(6):
+            arr[ROWS - KEPT + r, c] = arr[r, c]
     o = LAST_Q if flags & AT_LAST else X
     q, v = (st[o], st[o + 1], st[o + 2]), (st[o + 3], st[o + 4], st[o + 5])
-    prof = st[PROFILE_AT:PROFILE_AT + PROFILE_SIZE] if flags & PROFILE else st[HELD_AT:HELD_AT + 1]
     status, q1, v1, estimate = _step(m, plan, st, arr, work, t, t1, command, prof, (flags & SAME) != 0,
                                      (flags & LOCATE) != 0, q, v, log)
     if status == PYTHON:
@@ -186,8 +198,11 @@ def restore(ws):
 @njit(**JIT)
 def restore_views(st, arr):
     """`restore` on the workspace's st and arr (`parts`)."""
-    st[:N_SCALARS] = st[SAVED:SAVED + N_SCALARS]
-    arr[:KEPT] = arr[ROWS - KEPT:]
+    for i in range(N_SCALARS):
+        st[i] = st[SAVED + i]
+    for r in range(KEPT):
+        for c in range(6):
+            arr[r, c] = arr[ROWS - KEPT + r, c]
 
 
 @njit(**JIT)
@@ -208,8 +223,6 @@ def _step(m, plan, st, arr, work, t, t1, command, prof, same, locate, q, v, log)
     the step may hold are located here (`_settle`)."""
     h = t1 - t
     target = t + h
-    y, f, y_old, dense, kk, y_new, out = arr[Y], arr[F], arr[Y_OLD], arr[DENSE:KK], arr[KK:Y_NEW], arr[Y_NEW], arr[OUT]
-    taus = st[TAUS:SAVED]
     log[COUNT], log[BRANCH] = 0.0, 0.0
     ended = st[HAS_END] == 1.0 and st[END_Q] == q[0] and st[END_Q + 1] == q[1] and st[END_Q + 2] == q[2]
     st[HAS_END] = 0.0
@@ -229,26 +242,18 @@ def _step(m, plan, st, arr, work, t, t1, command, prof, same, locate, q, v, log)
             st[ERR] = st[ERR_OLD] = 0.0  # a new solution's first step (`simulation.event_step`: no estimates yet)
         else:
             return PYTHON, q, v, 0.0
-        st[T] = st[T_OLD] = t
-        y[0], y[1], y[2], y[3], y[4], y[5] = q[0], q[1], q[2], v[0], v[1], v[2]
-        _rhs(m, t, y, torque_at(prof, command, t), f)
-        if st[H] <= 0.0:  # the first internal step
-            st[H] = initial_step(y, f, st[RTOL], st[ATOL], h)
+        _restart(m, st, arr, t, q, v, torque_at(prof, command, t), h)
         st[HAS_ORIGIN], st[ORIGIN_T] = 1.0, t
         _put(st, ORIGIN_Q, q, v)
         log[BRANCH] = RESTARTED
     for c in range(N_NODES):
-        taus[c] = command  # a held command's (a profile's are set by each attempt)
-    while st[T] < target:
-        if not _advance(m, st[RTOL], st[ATOL], st, y, f, y_old, dense, kk, y_new, taus, prof):
-            return PYTHON, q, v, 0.0
-        st[ERR_OLD] = st[ERR]
-        st[ERR] += dop853_theta_error(E53, kk, st[H_OLD], E3_WEIGHT)
-        record(log, st, y_old, dense)
+        st[TAUS + c] = command  # a held command's (a profile's are set by each attempt)
+    if not _advance_to(m, st, arr, log, prof, target):
+        return PYTHON, q, v, 0.0
     t_old, h_old = st[T_OLD], st[H_OLD]
     if target < t_old:  # an earlier internal step's output: the history is Python's
         return PYTHON, q, v, 0.0
-    status, q1, v1 = dop853_output(m, t_old, h_old, y_old, dense, target, out)
+    status, q1, v1 = dop853_output_rows(m, t_old, h_old, arr, Y_OLD, DENSE, target)
     if status != OK:
         return PYTHON, q, v, 0.0
     side = int(st[SIDE])
@@ -275,6 +280,35 @@ def _step(m, plan, st, arr, work, t, t1, command, prof, same, locate, q, v, log)
 
 
 @njit(**JIT)
+def _restart(m, st, arr, t, q, v, tau, span):
+    """`DormandPrince853._restart`'s solution at (t, q, q') under τ (N·m) at t: y, f = y'(t), the internal
+    time; the first internal step (`initial_step` over `span`, s) where none is proposed yet."""
+    y, f = arr[Y], arr[F]
+    st[T] = st[T_OLD] = t
+    y[0], y[1], y[2], y[3], y[4], y[5] = q[0], q[1], q[2], v[0], v[1], v[2]
+    _rhs(m, t, y, tau, f)
+    if st[H] <= 0.0:
+        st[H] = initial_step(y, f, st[RTOL], st[ATOL], span)
+
+
+@njit(**JIT)
+def _advance_to(m, st, arr, log, prof, target):
+    """`DormandPrince853.step`'s internal steps until st[T] ≥ target (s) (`closed_loop._advance`), each with its
+    θ error estimate and recorded in log. False where one fails. The rows are sliced only when a step is due."""
+    if not st[T] < target:
+        return True
+    y, f, y_old, dense, kk, y_new = arr[Y], arr[F], arr[Y_OLD], arr[DENSE:KK], arr[KK:Y_NEW], arr[Y_NEW]
+    taus = st[TAUS:SAVED]
+    while st[T] < target:
+        if not _advance(m, st[RTOL], st[ATOL], st, y, f, y_old, dense, kk, y_new, taus, prof):
+            return False
+        st[ERR_OLD] = st[ERR]
+        st[ERR] += dop853_theta_error(E53, kk, st[H_OLD], E3_WEIGHT)
+        record(log, st, y_old, dense)
+    return True
+
+
+@njit(**JIT)
 def _settle(m, plan, st, arr, work, side, t, t1, command, prof, q, v, q1, v1, log):
     """`Simulator._advance`'s event loop for a step whose screen (start rows `side`) shows a possible
     crossing, the solution advanced to t1 with its internal steps in log: each crossing located
@@ -287,8 +321,6 @@ def _settle(m, plan, st, arr, work, side, t, t1, command, prof, q, v, q1, v1, lo
     moved: Python takes the step again) where Python must act (`first_crossing`'s DECLINE, a step that fails).
     The last two: the output's time (`DormandPrince853.step`'s target s + (t1 − s) from the last crossing s),
     and with ENDED the error estimate at the output (rad)."""
-    y, f, y_old, dense, kk, y_new, out = arr[Y], arr[F], arr[Y_OLD], arr[DENSE:KK], arr[KK:Y_NEW], arr[Y_NEW], arr[OUT]
-    taus = st[TAUS:SAVED]
     found = np.empty(event_crossing.OUT_SIZE)
     st[SAVED + KNOWN] = 0.0  # the screen's rows change here: a restored step computes its start's gaps again
     s, target = t, t + (t1 - t)
@@ -345,23 +377,15 @@ def _settle(m, plan, st, arr, work, side, t, t1, command, prof, q, v, q1, v1, lo
                 and abs(found[event_crossing.OUT_LAST_T] - s) <= LAST_OUTPUT_SLACK * (t1 - s) and target >= st[T_OLD]):
             # `DormandPrince853._restart` from the crossing (the next step size kept), its steps logged anew
             st[ERR] = st[ERR_OLD] = found[event_crossing.OUT_EST]
-            st[T] = st[T_OLD] = s
-            y[0], y[1], y[2], y[3], y[4], y[5] = q[0], q[1], q[2], v[0], v[1], v[2]
-            _rhs(m, s, y, torque_at(prof, command, s), f)
-            if st[H] <= 0.0:
-                st[H] = initial_step(y, f, st[RTOL], st[ATOL], t1 - s)
+            _restart(m, st, arr, s, q, v, torque_at(prof, command, s), t1 - s)
             log[COUNT], log[BRANCH] = 0.0, RESTARTED
-            while st[T] < target:
-                if not _advance(m, st[RTOL], st[ATOL], st, y, f, y_old, dense, kk, y_new, taus, prof):
-                    return PYTHON, q1, v1, target, 0.0
-                st[ERR_OLD] = st[ERR]
-                st[ERR] += dop853_theta_error(E53, kk, st[H_OLD], E3_WEIGHT)
-                record(log, st, y_old, dense)
+            if not _advance_to(m, st, arr, log, prof, target):
+                return PYTHON, q1, v1, target, 0.0
             if log[COUNT] > HISTORY_ROWS:
                 return PYTHON, q1, v1, target, 0.0
         if target < st[T_OLD]:  # an earlier internal step's output: the history is Python's
             return PYTHON, q1, v1, target, 0.0
-        status, q1, v1 = dop853_output(m, st[T_OLD], st[H_OLD], y_old, dense, target, out)
+        status, q1, v1 = dop853_output_rows(m, st[T_OLD], st[H_OLD], arr, Y_OLD, DENSE, target)
         if status != OK:
             return PYTHON, q1, v1, target, 0.0
         if not screen(plan, work, side, False, t1 - s, q, v, q1, v1):
@@ -379,16 +403,13 @@ def _impact(m, st, s, t1, command, prof, sign, q, v):
     within REST_MARGIN of either test's edge (the Simulator decides on its own)."""
     e = st[RESTITUTION]
     v_plus = (-e * v[0], -e * v[1], -e * v[2])
-    y, f = np.empty(6), np.empty(6)
-    y[0], y[1], y[2], y[3], y[4], y[5] = q[0], q[1], q[2], 0.0, 0.0, 0.0
-    _rhs(m, s, y, torque_at(prof, command, s), f)
-    verdict = rest_verdict(sign * f[3], sign * v_plus[0], REST_MARGIN * max(1.0, abs(f[3])))
+    a = accelerations(m, s, q[0], q[1], q[2], 0.0, 0.0, 0.0, torque_at(prof, command, s))[0]  # θ1'' at rest
+    verdict = rest_verdict(sign * a, sign * v_plus[0], REST_MARGIN * max(1.0, abs(a)))
     if verdict == BOUNCES:  # either test fails beyond the round-off
         return BOUNCES, v_plus
     if verdict == UNSURE:
         return UNSURE, v
-    _rhs(m, t1, y, torque_at(prof, command, t1), f)  # the push into the stop at t1 keeps the rest
-    if -sign * f[3] <= REST_MARGIN * max(1.0, abs(f[3])):
+    if not pushes_at(m, prof, t1, command, sign, q[0], q[1], q[2])[0]:  # the push into the stop at t1 keeps the rest
         return UNSURE, v
     return RESTS, (0.0, 0.0, 0.0)
 
@@ -418,7 +439,7 @@ def _cut_at(m, st, arr, log, s, t1, command, prof, found, onset):
         return CUT_NONE
     if j < 0:
         return CUT_PYTHONS
-    y, f, y_old, dense, kk, y_new, out = arr[Y], arr[F], arr[Y_OLD], arr[DENSE:KK], arr[KK:Y_NEW], arr[Y_NEW], arr[OUT]
+    y, f, y_old, dense, kk, y_new = arr[Y], arr[F], arr[Y_OLD], arr[DENSE:KK], arr[KK:Y_NEW], arr[Y_NEW]
     taus = st[TAUS:SAVED]
     past = log[ROWS_AT + (j + 1) * ROW_SIZE + ROW_H] if j + 1 < n else 0.0
     proposed = st[H]
@@ -433,7 +454,7 @@ def _cut_at(m, st, arr, log, s, t1, command, prof, found, onset):
         st[ERR] += dop853_theta_error(E53, kk, st[H_OLD], E3_WEIGHT)
         record(log, st, y_old, dense)
     st[H] = restart_step(onset, past, st[H], proposed)
-    status, q, v = dop853_output(m, st[T_OLD], st[H_OLD], y_old, dense, s, out)
+    status, q, v = dop853_output_rows(m, st[T_OLD], st[H_OLD], arr, Y_OLD, DENSE, s)
     if status != OK:
         return CUT_FAILED
     estimate = _estimate(s, st[T_OLD], st[H_OLD], st[ERR_OLD], st[ERR])
@@ -442,13 +463,8 @@ def _cut_at(m, st, arr, log, s, t1, command, prof, found, onset):
     found[event_crossing.OUT_LAST_V:event_crossing.OUT_LAST_V + 3] = v
     found[event_crossing.OUT_EST] = found[event_crossing.OUT_LAST_EST] = estimate
     found[event_crossing.OUT_HAS_LAST], found[event_crossing.OUT_LAST_T] = 1.0, s
-    target = s + (t1 - s)
-    while st[T] < target:
-        if not _advance(m, st[RTOL], st[ATOL], st, y, f, y_old, dense, kk, y_new, taus, prof):
-            return CUT_FAILED
-        st[ERR_OLD] = st[ERR]
-        st[ERR] += dop853_theta_error(E53, kk, st[H_OLD], E3_WEIGHT)
-        record(log, st, y_old, dense)
+    if not _advance_to(m, st, arr, log, prof, s + (t1 - s)):
+        return CUT_FAILED
     return CUT if log[COUNT] <= HISTORY_ROWS else CUT_FAILED
 
 
@@ -487,29 +503,18 @@ def stays_at_rest(ws, t, t1, command, flags, sign, q0, q1, q2):
     `command` (N·m) or, with flag PROFILE, st's profile, as `JointStops.release_time` decides it (the push
     −sign·θ1'' into the gap > 0 at t and at t1; sign: the gap gradient's θ1 component), with REST_MARGIN to
     spare (else False: the Simulator decides). Returns (stays, τ at t1 in N·m)."""
-    rest = rest_views(ws, flags)
-    if not pushes_at(rest, t, command, sign, q0, q1, q2)[0]:
+    m, _, st, _, _ = parts(ws)
+    prof = profile_of(st, flags)
+    if not pushes_at(m, prof, t, command, sign, q0, q1, q2)[0]:
         return False, 0.0
-    stays, tau = pushes_at(rest, t1, command, sign, q0, q1, q2)
+    stays, tau = pushes_at(m, prof, t1, command, sign, q0, q1, q2)
     return (True, tau) if stays else (False, 0.0)
 
 
 @njit(**JIT)
-def rest_views(ws, flags):
-    """What `pushes_at` reads of ws, sliced once for a run of tests: (the model, the torque profile that flags
-    select, two scratch rows)."""
-    m, _, st, arr, _ = parts(ws)
-    prof = st[PROFILE_AT:PROFILE_AT + PROFILE_SIZE] if flags & PROFILE else st[HELD_AT:HELD_AT + 1]
-    return m, prof, arr[OUT], arr[Y_NEW]  # scratch rows: neither is read across steps
-
-
-@njit(**JIT)
-def pushes_at(rest, s, command, sign, q0, q1, q2):
-    """`stays_at_rest`'s test at one time s (s) on its `rest_views`: (whether the push into the stop at rest
-    at q exceeds REST_MARGIN, τ at s in N·m)."""
-    m, prof, y, f = rest
-    y[0], y[1], y[2], y[3], y[4], y[5] = q0, q1, q2, 0.0, 0.0, 0.0
+def pushes_at(m, prof, s, command, sign, q0, q1, q2):
+    """`stays_at_rest`'s test at one time s (s) on the model m under the torque `profile_of` selects: (whether
+    the push into the stop at rest at q exceeds REST_MARGIN, τ at s in N·m)."""
     tau = torque_at(prof, command, s)
-    _rhs(m, s, y, tau, f)
-    push = -sign * f[3]
-    return push > REST_MARGIN * max(1.0, abs(f[3])), tau
+    a = accelerations(m, s, q0, q1, q2, 0.0, 0.0, 0.0, tau)[0]  # θ1''
+    return -sign * a > REST_MARGIN * max(1.0, abs(a)), tau

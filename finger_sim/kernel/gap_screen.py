@@ -18,8 +18,6 @@ kind STOPS: (lower, upper), rad; kind CONTACT: `Contact.kernel_params()`.
 
 from __future__ import annotations
 
-import numpy as np
-
 from finger_sim.kernel import use_writable_cache
 
 use_writable_cache()  # before numba reads NUMBA_CACHE_DIR
@@ -33,9 +31,9 @@ STOPS, CONTACT = 1, 2
 
 
 @njit(**JIT)
-def gap_states(plan, x, gaps, rates):
-    """Every gap (in the Simulator's `_gaps` order) and its rate at the state x = (q, q') into
-    gaps and rates: `crossings.gap_states`' numbers."""
+def gap_states(plan, x, work, row):
+    """Every gap (in the Simulator's `_gaps` order) and its rate at the state x = (q, q') (a 6-tuple) into
+    work[row] and work[row + 1]: `crossings.gap_states`' numbers."""
     groups = int(plan[1])
     o = 2
     i = 0
@@ -43,13 +41,13 @@ def gap_states(plan, x, gaps, rates):
         kind, n = int(plan[o]), int(plan[o + 1])
         o += 2
         if kind == STOPS:
-            gaps[i], gaps[i + 1] = x[0] - plan[o], plan[o + 1] - x[0]
+            work[row, i], work[row, i + 1] = x[0] - plan[o], plan[o + 1] - x[0]
             # ∂gap/∂q · q' with ∂gap/∂q = (±1, 0, 0), in `crossings.gap_states`' order of terms
-            rates[i] = 1.0 * x[3] + 0.0 * x[4] + 0.0 * x[5]
-            rates[i + 1] = -1.0 * x[3] + 0.0 * x[4] + 0.0 * x[5]
+            work[row + 1, i] = 1.0 * x[3] + 0.0 * x[4] + 0.0 * x[5]
+            work[row + 1, i + 1] = -1.0 * x[3] + 0.0 * x[4] + 0.0 * x[5]
             i += 2
         else:
-            count, _ = contact_states(plan, o, x, gaps[i:], rates[i:])
+            count, _ = contact_states(plan, o, x, work[row, i:], work[row + 1, i:])
             i += count
         o += n
     depth = int(plan[o])
@@ -57,7 +55,7 @@ def gap_states(plan, x, gaps, rates):
     for _ in range(depth):
         p, rho = int(plan[o]), plan[o + 1]
         o += 2
-        gaps[i], rates[i] = gaps[p] + rho, rates[p]  # ρ − δ, at the rate of −δ
+        work[row, i], work[row + 1, i] = work[row, p] + rho, work[row + 1, p]  # ρ − δ, at the rate of −δ
         i += 1
 
 
@@ -71,12 +69,9 @@ def screen(plan, work, a, known, h, q, v, q1, v1):
     """
     n = int(plan[0])
     b = 2 - a
-    x = np.empty(6)
     if not known:
-        x[0], x[1], x[2], x[3], x[4], x[5] = q[0], q[1], q[2], v[0], v[1], v[2]
-        gap_states(plan, x, work[a], work[a + 1])
-    x[0], x[1], x[2], x[3], x[4], x[5] = q1[0], q1[1], q1[2], v1[0], v1[1], v1[2]
-    gap_states(plan, x, work[b], work[b + 1])
+        gap_states(plan, (q[0], q[1], q[2], v[0], v[1], v[2]), work, a)
+    gap_states(plan, (q1[0], q1[1], q1[2], v1[0], v1[1], v1[2]), work, b)
     flags = plan.shape[0] - n
     for i in range(n):
         g0 = work[a, i]

@@ -49,8 +49,7 @@ _estimate = njit(**LAW)(dop853.interpolated_estimate)
 def _gap_at(ctx, q, v):
     """The located gap at the state (q, q') (its rate is not used), from the compiled gap plan."""
     m, plan, segs, y_olds, denses, meta, work, x, log = ctx
-    x[0], x[1], x[2], x[3], x[4], x[5] = q[0], q[1], q[2], v[0], v[1], v[2]
-    gap_states(plan, x, work[0], work[1])
+    gap_states(plan, (q[0], q[1], q[2], v[0], v[1], v[2]), work, 0)
     return work[0, int(meta[META_GAP])]
 
 

@@ -218,19 +218,26 @@ def dop853_theta_error(e53, kk, h, weight):
     return abs(h) * worst
 
 
+@njit(**LAW)
+def dense_component(x, rows, first, i):
+    """Component i of the dense output's polynomial at x (the fraction of the step, (t − t_old)/h), its 7
+    coefficients in rows[first:first + 7, i] (`Dop853DenseOutput`'s Horner form), without y_old."""
+    acc = 0.0
+    for r in range(6, -1, -1):
+        acc += rows[first + r, i]
+        if (6 - r) % 2 == 0:
+            acc *= x
+        else:
+            acc *= 1.0 - x
+    return acc
+
+
 @njit(**JIT)
 def dop853_dense(t_old, h, y_old, dense, t, out):
     """The dense output of the last accepted step at t, into out (6): scipy's `Dop853DenseOutput`."""
     x = (t - t_old) / h
     for i in range(6):
-        acc = 0.0
-        for r in range(6, -1, -1):
-            acc += dense[r, i]
-            if (6 - r) % 2 == 0:
-                acc *= x
-            else:
-                acc *= 1.0 - x
-        out[i] = acc + y_old[i]
+        out[i] = dense_component(x, dense, 0, i) + y_old[i]
 
 
 @njit(**JIT)
@@ -253,12 +260,40 @@ def rk_step_tuple(m, tab, t, q, v, h, taus):
     return status, (x[0], x[1], x[2]), (x[3], x[4], x[5])
 
 
+@njit(**LAW)
+def all_finite(x):
+    """Whether every entry of the 1-D array x is finite (`np.isfinite(x).all()` without its temporary array)."""
+    for i in range(x.shape[0]):
+        if not math.isfinite(x[i]):
+            return False
+    return True
+
+
 @njit(**JIT)
 def dop853_output(m, t_old, h, y_old, dense, t, out):
     """The dense output at t projected (`dop853_dense`, then `project`): (status, q, q') as tuples."""
     dop853_dense(t_old, h, y_old, dense, t, out)
-    status = project(m, out) if np.isfinite(out).all() else NON_FINITE
+    status = project(m, out) if all_finite(out) else NON_FINITE
     return status, (out[0], out[1], out[2]), (out[3], out[4], out[5])
+
+
+@njit(**JIT)
+def dop853_output_rows(m, t_old, h, rows, y_old, dense, t):
+    """`dop853_output` from the rows of one 2-D array (rows[y_old]: y_old; rows[dense:dense + 7]: the dense
+    output's coefficients), on scalars: no view of rows, no output array. (status, q, q') as tuples, the
+    unprojected state where the status is not OK."""
+    x = (t - t_old) / h
+    y0, y1, y2 = (dense_component(x, rows, dense, 0) + rows[y_old, 0], dense_component(x, rows, dense, 1)
+                  + rows[y_old, 1], dense_component(x, rows, dense, 2) + rows[y_old, 2])
+    y3, y4, y5 = (dense_component(x, rows, dense, 3) + rows[y_old, 3], dense_component(x, rows, dense, 4)
+                  + rows[y_old, 4], dense_component(x, rows, dense, 5) + rows[y_old, 5])
+    if not (math.isfinite(y0) and math.isfinite(y1) and math.isfinite(y2) and math.isfinite(y3) and math.isfinite(y4)
+            and math.isfinite(y5)):
+        return NON_FINITE, (y0, y1, y2), (y3, y4, y5)
+    status, _, t1, t2, t3, w1, w2, w3 = project_state(m[4], m[5], m[6], m[8], m[9], y0, y1, y2, y3, y4, y5)
+    if status != OK:
+        return status, (y0, y1, y2), (y3, y4, y5)
+    return OK, (t1, t2, t3), (w1, w2, w3)
 
 
 @njit(**JIT)
@@ -266,7 +301,7 @@ def dop853_outputs(m, t_old, h, y_old, dense, targets, out):
     """`dop853_output` at every time of `targets` into the rows of out (len(targets) × 6). Status."""
     for n in range(targets.shape[0]):
         dop853_dense(t_old, h, y_old, dense, targets[n], out[n])
-        status = project(m, out[n]) if np.isfinite(out[n]).all() else NON_FINITE
+        status = project(m, out[n]) if all_finite(out[n]) else NON_FINITE
         if status != OK:
             return status
     return OK
