@@ -5,7 +5,7 @@ The goal's table compares the project's whole runs with scipy's (both timed whol
 the very states the error was measured on: each case below runs a scene both ways from the same start and holds
 every state equal, bit for bit. The cases are the paths `kernel.advance` takes: a fixed-step method's compiled
 fast path (paper_flexion), dop853's whole output grid (free_swing), a drive scene's steps with the stuck mesh's hold
-taken at once (drive_grasp: dop853 as the method and `auto` at a loose tolerance, the goal's front there), and a
+taken at once (drive_grasp: dop853 as the method, dop8 and `auto` at a loose tolerance, the goal's front there), and a
 scene's event stretches (paper_to_stop, grasp_cylinder).
 """
 
@@ -38,6 +38,7 @@ CASES = (
     ("paper_flexion", "rk4", 1e-3, None),
     ("free_swing", "dop853", 1e-3, None),
     ("drive_grasp", "dop853", 5e-3, None),
+    ("drive_grasp", "dop8", 1e-3, None),
     ("drive_grasp", AUTO, 1e-3, 1e-4),
     ("paper_to_stop", "dop853", 1e-3, None),
     ("grasp_cylinder", AUTO, 1e-3, 1e-5),
