@@ -12,7 +12,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 from finger_sim.auto import Row, Table
-from finger_sim.bench.plan import AUTO_DT, KINDS, RATES
+from finger_sim.bench.plan import AUTO_DT, KINDS, RATES, project_methods
 from finger_sim.bench.runners import AUTO, AUTO_WHOLE_RUN, FAMILY_MUJOCO, FAMILY_PROJECT, FAMILY_SCIPY, WHOLE_RUN_SUFFIX, Run
 
 #: Not recommended, whatever they measure: the error-controlled methods. `adaptive` restarts
@@ -94,16 +94,18 @@ class Candidate:
 
 
 def candidates(runs: Sequence[Run], kind: str, rate: int) -> list[Candidate]:
-    """Project methods that ran (not refused, not diverged) on every scene of `kind` at dt = 1/rate, cheapest first."""
+    """Project methods that ran (not refused, not diverged) on every scene of `kind` at dt = 1/rate, cheapest first:
+    their runs step by step (the node's path, which the table serves), `auto` and the whole runs left out."""
     dt = 1.0 / rate
     scenes = KINDS[kind]
     by_method: dict[str, list[Run]] = {}
     for r in runs:
         if (
             r.family == FAMILY_PROJECT
+            and r.method in project_methods()  # not auto, the table's user (run for the goal at its error)
             and r.method not in NOT_RECOMMENDED
-            and r.method not in (AUTO, AUTO_WHOLE_RUN)  # the table's user (run for the goal at its error), not a candidate
             and r.scene in scenes
+            and r.knob == "dt"
             and math.isclose(r.value, dt, rel_tol=1e-9)
         ):
             by_method.setdefault(r.method, []).append(r)
@@ -183,15 +185,25 @@ class ScipyComparison:
         return self.scipy / self.ours if 0 < self.ours < math.inf else math.nan
 
 
-def _project(runs: Sequence[Run], scene: str, max_dt: float | None) -> list[Run]:
-    """The project's runs on a scene, each timed one `Simulator.step` at a time (not a whole run); with max_dt,
-    only those whose step (so output interval) is ≤ max_dt."""
-    return [
-        r
-        for r in runs
-        if r.scene == scene and r.family == FAMILY_PROJECT and not r.method.endswith(WHOLE_RUN_SUFFIX)
-        and (max_dt is None or r.value <= max_dt * (1 + 1e-9))
-    ]
+def step_of(run: Run) -> float:
+    """A project run's step, so output interval (s): its dt, or AUTO_DT for a run over the tolerance grid."""
+    return run.value if run.knob == "dt" else AUTO_DT
+
+
+def _project(runs: Sequence[Run], scene: str, max_dt: float | None, *, whole_run: bool = False) -> list[Run]:
+    """The project's runs on a scene; with max_dt, only those whose step (so output interval) is ≤ max_dt.
+
+    Each run timed one `Simulator.step` at a time (the node's path); whole_run: each timed as `simulate` runs
+    it where that was measured (WHOLE_RUN_SUFFIX), else step by step (a method stepping in Python, whose whole
+    run is the same loop: `plan.WHOLE_RUN_METHODS`)."""
+    ours = [r for r in runs if r.scene == scene and r.family == FAMILY_PROJECT
+            and (max_dt is None or step_of(r) <= max_dt * (1 + 1e-9))]
+    stepped = [r for r in ours if not r.method.endswith(WHOLE_RUN_SUFFIX)]
+    if not whole_run:
+        return stepped
+    whole = [r for r in ours if r.method.endswith(WHOLE_RUN_SUFFIX)]
+    timed_whole = {(r.method.removesuffix(WHOLE_RUN_SUFFIX), r.knob, r.value) for r in whole}
+    return whole + [r for r in stepped if (r.method, r.knob, r.value) not in timed_whole]
 
 
 def _best_cost(runs: Sequence[Run], target: float) -> tuple[float, str]:
@@ -200,15 +212,18 @@ def _best_cost(runs: Sequence[Run], target: float) -> tuple[float, str]:
     return min(costs, default=(math.inf, "—"))
 
 
-def compare_scipy(runs: Sequence[Run], scene: str, *, max_dt: float | None = None, numpy_rhs: bool = False) -> ScipyComparison:
+def compare_scipy(runs: Sequence[Run], scene: str, *, max_dt: float | None = None, numpy_rhs: bool = False,
+                  whole_run: bool = False) -> ScipyComparison:
     """CPU time to reach SCIPY_TARGET: the project's best method against scipy's best (scalar RHS).
 
     max_dt: count only project runs with dt ≤ max_dt, i.e. with output at least as dense as
     scipy's (`t_eval` on the 1 ms grid); without it a large-step run is scored at its own steps.
     numpy_rhs: compare with scipy on the naive numpy right-hand side instead of the project's scalar one.
+    whole_run: the project's runs timed as `simulate` runs them, as scipy's `solve_ivp` is timed (`_project`);
+    else one `Simulator.step` at a time.
     """
     theirs = [r for r in runs if r.scene == scene and r.family == FAMILY_SCIPY and ("numpy" in r.method) == numpy_rhs]
-    ours, ours_m = _best_cost(_project(runs, scene, max_dt), SCIPY_TARGET)
+    ours, ours_m = _best_cost(_project(runs, scene, max_dt, whole_run=whole_run), SCIPY_TARGET)
     cost, method = _best_cost(theirs, SCIPY_TARGET)
     return ScipyComparison(scene, ours, ours_m, cost, method)
 
@@ -313,7 +328,7 @@ def compare_mujoco(runs: Sequence[Run], scene: str, floor: float, *, max_dt: flo
             better = [
                 o
                 for o in ours
-                if o.ok and math.isclose(o.value, r.value) and max(o.error, floor) * MUJOCO_ADVANTAGE <= r.error
+                if o.ok and math.isclose(step_of(o), r.value) and max(o.error, floor) * MUJOCO_ADVANTAGE <= r.error
             ]
             same = min(better, key=lambda o: o.cpu, default=None)
             out.append(MujocoComparison(scene, f"{r.method} @ {r.value:g} s", r.error, r.cpu, error_at(front, r.cpu), floor, same))

@@ -10,7 +10,7 @@ from pathlib import Path
 from finger_sim.bench import analysis as an
 from finger_sim.bench.plan import project_methods
 from finger_sim.bench.reference import Reference
-from finger_sim.bench.runners import FAMILY_PROJECT, FAMILY_SCIPY, Run
+from finger_sim.bench.runners import FAMILY_PROJECT, FAMILY_SCIPY, WHOLE_RUN_SUFFIX, Run
 from finger_sim.bench.tables import row_order
 
 #: Errors are floored here on log axes (an exact match would otherwise vanish).
@@ -67,9 +67,11 @@ def write_figure(name: str, runs: Sequence[Run], ref: Reference, out: Path) -> s
 
 def line_style(label: str, family: str) -> dict:
     """matplotlib line keywords of one row label: solid for the project, dashed for scipy, dash-dot for MuJoCo."""
-    if family == FAMILY_PROJECT:
-        methods = project_methods()
-        color = PROJECT_COLORS[methods.index(label) % len(PROJECT_COLORS)] if label in methods else "k"
+    if family == FAMILY_PROJECT:  # a whole run in its method's colour, thinner, diamonds
+        methods, method = project_methods(), label.removesuffix(WHOLE_RUN_SUFFIX)
+        color = PROJECT_COLORS[methods.index(method) % len(PROJECT_COLORS)] if method in methods else "k"
+        if method != label:
+            return {"color": color, "linestyle": (0, (5, 1, 1, 1)), "marker": "D", "ms": 3.5, "lw": 1.1}
         return {"color": color, "linestyle": "-", "marker": "o", "ms": 4, "lw": 1.6}
     if family == FAMILY_SCIPY:
         key = label.split()[1]

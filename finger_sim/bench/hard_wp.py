@@ -3,7 +3,8 @@
     python -m finger_sim.bench.hard_wp [--scenes NAME ...] [--out docs] [--report FILE] [--quick] [--repeats 3]
 
 By default the hard contact scenes (config/hard/); any bench scene may be named. On shipped scenes (which have
-scipy rows) the report starts with the goal table at `auto`'s own error (`markdown.render_auto_goal`).
+scipy rows) the report starts with the goal tables against scipy: at 1e-8 rad (`markdown.render_scipy_goal`) and
+at `auto`'s own error (`markdown.render_auto_goal`).
 
 The same measurements as `finger-sim bench` makes of these scenes (`plan.tasks`: every project method over
 its dt grid and `auto` itself, against the same reference, `reference.build_reference`), the same figures
@@ -22,10 +23,10 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from finger_sim.bench.figures import write_figure
-from finger_sim.bench.markdown import render_auto_goal, render_scene
+from finger_sim.bench.markdown import render_auto_goal, render_scene, render_scipy_goal
 from finger_sim.bench.plan import ALL_SCENES, ISSUE_HARD_SCENES, REPEATS, SPACING, scene_file, tasks
 from finger_sim.bench.reference import build_reference
-from finger_sim.bench.tables import auto_goal, scene_rows
+from finger_sim.bench.tables import auto_goal, scene_rows, scipy_goal
 from finger_sim.scene import load_scene
 
 
@@ -59,8 +60,9 @@ def main(argv: list[str] | None = None) -> None:
         sections += render_scene(scene, ref, figure, scene_rows(runs, name))
         every += runs
         floors[name] = ref.check_difference
-        goal = auto_goal(every, floors)
-        head = ["## At `auto`'s own error against scipy", "", *render_auto_goal(goal), ""] if goal else []
+        goal, at_target = auto_goal(every, floors), scipy_goal(every)
+        head = ["## Against scipy", "", *render_scipy_goal(at_target), ""] if at_target else []
+        head += ["## At `auto`'s own error against scipy", "", *render_auto_goal(goal), ""] if goal else []
         _write(args.out / args.report, command, started, load0, time.perf_counter() - wall0, head + sections)
 
 

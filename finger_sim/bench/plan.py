@@ -59,6 +59,15 @@ SPACING = 1e-3
 REPEATS = 3
 #: `auto` is compared with scipy at the error it delivers at this dt (s): the shipped scenes' own step.
 AUTO_DT = 1e-3
+#: `integrator.tolerance` grid (rad) of `auto` at AUTO_DT on the shipped scenes (`runners.AUTO_TOLERANCE`): the
+#: error-controlled dop853's work-precision front (rtol = 1e-3·tolerance), timed step by step and whole.
+FULL_TOLERANCES = (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9)
+QUICK_TOLERANCES = (1e-4, 1e-6)
+#: The project's methods that `simulate` runs offline in compiled stretches (`kernel.advance`: the compiled fast
+#: path of a fixed-step method, dop853's whole output grid, a scene's event stretches, a stuck mesh's hold): on
+#: the shipped scenes each of their runs is timed whole too. radau, rattle and adaptive step in Python, where a
+#: whole run is the same loop of `Simulator.step`; their step-by-step CPU stands for their whole run.
+WHOLE_RUN_METHODS = ("euler", "rk4", "rk6", "dop8", "dop853")
 
 _COARSE = (1e-1, 5e-2, 2e-2)
 _DECADES = (1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4, 1e-4)
@@ -155,6 +164,25 @@ def _accepts(scene: Scene, dt: float) -> bool:
     return True
 
 
+def whole_run_tasks(name: str, scene: Scene, ref: Reference, *, quick: bool, repeats: int = REPEATS) -> list[Task]:
+    """A shipped scene's runs as a user running it offline gets them (`simulate`'s whole run), timed as scipy's
+    `solve_ivp` is: auto at AUTO_DT, the WHOLE_RUN_METHODS over their dt grids, and auto over the tolerance grid
+    at AUTO_DT step by step and whole."""
+    kw = {"spacing": SPACING, "repeats": repeats}
+    out = [Task(f"{name} {AUTO} whole run dt={AUTO_DT:g}",
+                lambda s=scene, r=ref: run_method(s, AUTO, AUTO_DT, r, whole_run=True, **kw))]
+    for method in WHOLE_RUN_METHODS:
+        for dt in (d for d in dt_grid(method, quick=quick) if _accepts(scene, d)):
+            out.append(Task(f"{name} {method} whole run dt={dt:g}",
+                            lambda s=scene, m=method, d=dt, r=ref: run_method(s, m, d, r, whole_run=True, **kw)))
+    for tol in QUICK_TOLERANCES if quick else FULL_TOLERANCES:
+        for whole in (False, True):
+            out.append(Task(f"{name} {AUTO} tolerance={tol:g}" + (" whole run" if whole else ""),
+                            lambda s=scene, t=tol, w=whole, r=ref: run_method(s, AUTO, AUTO_DT, r, whole_run=w,
+                                                                              tolerance=t, **kw)))
+    return out
+
+
 def tasks(scenes: dict[str, Scene], refs: dict[str, Reference], *, quick: bool, repeats: int = REPEATS,
           rtols: tuple[float, ...] | None = None) -> list[Task]:
     """The measurements, in the order they run: per scene the project's methods, then scipy and MuJoCo
@@ -170,9 +198,7 @@ def tasks(scenes: dict[str, Scene], refs: dict[str, Reference], *, quick: bool, 
             out += mujoco_tasks(name, scene, ref, quick=quick)
         if name not in SHIPPED_SCENES:
             continue
-        # auto's run as a user running the scene offline gets it (`simulate`'s whole run), timed as scipy is
-        out.append(Task(f"{name} {AUTO} whole run dt={AUTO_DT:g}",
-                        lambda s=scene, r=ref: run_method(s, AUTO, AUTO_DT, r, whole_run=True, **kw)))
+        out += whole_run_tasks(name, scene, ref, quick=quick, repeats=repeats)
         for method in SCIPY_METHODS:
             for rtol in rtols or (QUICK_RTOL if quick else FULL_RTOL):
                 out.append(Task(f"{name} scipy {method} rtol={rtol:g}", lambda s=scene, m=method, t=rtol, r=ref: run_scipy(s, m, t, r, **kw)))

@@ -49,6 +49,10 @@ AUTO = "auto"
 WHOLE_RUN_SUFFIX = " (whole run)"
 #: The label of `auto`'s whole run: what a user running the scene offline gets, timed as scipy is.
 AUTO_WHOLE_RUN = AUTO + WHOLE_RUN_SUFFIX
+#: The label of `auto` at dt = 1 ms over a grid of `integrator.tolerance` (knob "tolerance"): on a scene with
+#: events, a stiff mode or a drive, the error-controlled dop853 at rtol = atol = 1e-3·tolerance, its
+#: work-precision front; on a smooth one, the table's fixed-step method for that tolerance.
+AUTO_TOLERANCE = AUTO + " by tolerance"
 
 OK, REFUSED, DIVERGED, GAVE_UP, SKIPPED = "ok", "refused", "diverged", "gave up", "skipped"
 
@@ -157,21 +161,24 @@ def fill_grip(run: Run, times: np.ndarray, grip: np.ndarray) -> None:
 
 def run_method(
     scene: Scene, method: str, dt: float, reference: Reference, *, spacing: float, repeats: int, kernel: str = "auto",
-    whole_run: bool = False,
+    whole_run: bool = False, tolerance: float | None = None,
 ) -> Run:
     """`scene` stepped by the project's `method` at `dt` through `Simulator` (the node's path).
 
     method AUTO runs `method: auto` (its choice and, in contact, its substeps); the note says what ran.
     kernel: Simulator's kernel ("auto": compiled where it can, "python": CPython, "compiled").
     whole_run: the run to its end as `simulate` steps it (`kernel.advance`: stretches of steps in one
-    kernel call where the scene allows), not one `Simulator.step` per step; the same states. Its label is
-    the method's with WHOLE_RUN_SUFFIX.
+    kernel call where the scene allows), not one `Simulator.step` per step; the same states (`run_states`).
+    Its label is the method's with WHOLE_RUN_SUFFIX.
+    tolerance: the scene's `integrator.tolerance` (rad) instead of its own; the run's knob is then
+    "tolerance" with this value, and method AUTO is labelled AUTO_TOLERANCE.
     """
-    family = FAMILY_PROJECT
-    run = Run(scene.name, family, method + WHOLE_RUN_SUFFIX if whole_run else method, "dt", dt, scene.duration)
+    label = AUTO_TOLERANCE if tolerance is not None and method == AUTO else method
+    knob, value = ("dt", dt) if tolerance is None else ("tolerance", tolerance)
+    run = Run(scene.name, FAMILY_PROJECT, label + WHOLE_RUN_SUFFIX if whole_run else label, knob, value, scene.duration)
     n = round(scene.duration / dt)
     try:
-        resolved = scene.with_overrides(method=method, dt=dt)
+        resolved = scene.with_overrides(method=method, dt=dt, tolerance=tolerance)
         probe = Simulator(resolved, kernel=kernel)  # the stability check, outside the timing
         if method == AUTO:
             run.note = f"{probe.method}" + (f", {probe.substeps} substeps in contact" if probe.substeps > 1 else "")
@@ -182,28 +189,13 @@ def run_method(
         run.status, run.note = REFUSED, str(exc)
         return run
 
-    def timed_once() -> tuple[list, float]:
-        sim = Simulator(resolved, kernel=kernel)
-        states = [sim.state]
-        if whole_run:
-            start = time.process_time()
-            xs = stepper_slot.kernel().advance(sim, n)
-            cpu = time.process_time() - start
-            rows = xs.tolist()
-            return states + [State((k + 1) * sim.dt, tuple(r[:3]), tuple(r[3:])) for k, r in enumerate(rows)], cpu
-        step, append = sim.step, states.append
-        start = time.process_time()
-        for _ in range(n):
-            append(step())
-        return states, time.process_time() - start
-
     cpus: list[float] = []
-    states: list = []
+    states: list[State] = []
     try:
         if whole_run:  # an untimed run first: the whole run's compiled loops load (or compile) lazily, outside the timing
-            timed_once()
+            run_states(Simulator(resolved, kernel=kernel), n, whole_run=True)
         for k in range(repeats):
-            out, cpu = timed_once()
+            out, cpu = run_states(Simulator(resolved, kernel=kernel), n, whole_run=whole_run)
             cpus.append(cpu)
             if k == 0:
                 states = out
@@ -228,6 +220,25 @@ def run_method(
         if scene.objects:
             fill_grip(run, times, grip_forces(scene, times, q, v))
     return run
+
+
+def run_states(sim: Simulator, n: int, *, whole_run: bool) -> tuple[list[State], float]:
+    """(the states at the start and after each of n steps of a fresh `sim`, CPU s of the stepping alone).
+
+    whole_run: as `simulate` steps the scene (`kernel.advance`), else one `Simulator.step` per step (the node's path).
+    """
+    states = [sim.state]
+    if whole_run:
+        start = time.process_time()
+        xs = stepper_slot.kernel().advance(sim, n)
+        cpu = time.process_time() - start
+        states += [State((k + 1) * sim.dt, tuple(r[:3]), tuple(r[3:])) for k, r in enumerate(xs.tolist())]
+        return states, cpu
+    step, append = sim.step, states.append
+    start = time.process_time()
+    for _ in range(n):
+        append(step())
+    return states, time.process_time() - start
 
 
 # -- scipy ------------------------------------------------------------------------------------

@@ -156,11 +156,15 @@ def realtime_goal(scenes: dict[str, Scene], runs: Sequence[Run]) -> RealtimeGoal
 
 @dataclass(frozen=True)
 class ScipyGoalRow:
-    """Goal 2 on one smooth scene: every project run counted, and only those with output as dense as scipy's."""
+    """Goal 2 on one shipped scene: every project run counted, and only those with output as dense as scipy's;
+    each with the project's runs timed whole, as `simulate` runs them (scipy's `solve_ivp` is timed whole: the
+    goal's comparison), and step by step, one `Simulator.step` at a time (the node's path)."""
 
     scene: str
-    any_step: an.ScipyComparison
-    dense: an.ScipyComparison  # project runs with dt ≤ SPACING
+    any_step: an.ScipyComparison  # whole runs
+    dense: an.ScipyComparison  # whole runs with dt ≤ SPACING
+    stepped: an.ScipyComparison  # step by step
+    stepped_dense: an.ScipyComparison  # step by step with dt ≤ SPACING
 
     @property
     def met(self) -> bool:
@@ -170,7 +174,9 @@ class ScipyGoalRow:
 def scipy_goal(runs: Sequence[Run]) -> list[ScipyGoalRow]:
     """Goal 2 at SCIPY_TARGET on every shipped scene with scipy rows."""
     return [
-        ScipyGoalRow(name, an.compare_scipy(runs, name), an.compare_scipy(runs, name, max_dt=SPACING))
+        ScipyGoalRow(name, an.compare_scipy(runs, name, whole_run=True),
+                     an.compare_scipy(runs, name, max_dt=SPACING, whole_run=True),
+                     an.compare_scipy(runs, name), an.compare_scipy(runs, name, max_dt=SPACING))
         for name in SHIPPED_SCENES if any(r.scene == name and r.family == FAMILY_SCIPY for r in runs)
     ]
 
@@ -198,7 +204,7 @@ class Tables:
     realtime: RealtimeGoal
     scipy: list[ScipyGoalRow]
     auto_scipy: list[an.AutoScipyComparison]  # auto at its own error against scipy, every shipped scene
-    naive_scipy: an.ScipyComparison  # scipy on the naive numpy RHS against the project's best
+    naive_scipy: an.ScipyComparison  # scipy on the naive numpy RHS against the project's best whole run
     mujoco: dict[str, list[an.MujocoComparison]]  # smooth scene → its tight MuJoCo runs compared
     hard: list[HardRow]
     recommendation: list[RecommendationRow]
@@ -218,7 +224,7 @@ def build_tables(scenes: dict[str, Scene], floors: dict[str, float], runs: Seque
         realtime=realtime_goal(scenes, runs),
         scipy=scipy_goal(runs),
         auto_scipy=auto_goal(runs, floors),
-        naive_scipy=an.compare_scipy(runs, NUMPY_RHS_SCENE, numpy_rhs=True),
+        naive_scipy=an.compare_scipy(runs, NUMPY_RHS_SCENE, numpy_rhs=True, whole_run=True),
         mujoco={name: an.compare_mujoco(runs, name, floors[name]) for name in KINDS["smooth"]},
         hard=hard_rows(scenes, runs),
         recommendation=recommendation_rows(runs),

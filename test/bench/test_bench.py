@@ -40,12 +40,23 @@ from finger_sim.bench.plan import (
     QUICK_RTOL,
     SCIPY_METHODS,
     SHIPPED_SCENES,
+    WHOLE_RUN_METHODS,
     WP_SCENES,
     project_methods,
 )
 from finger_sim.bench.reference import build_reference
 from finger_sim.bench.report import measure, write_report
-from finger_sim.bench.runners import AUTO, AUTO_WHOLE_RUN, FAMILY_MUJOCO, FAMILY_PROJECT, FAMILY_SCIPY, Run, grip_forces
+from finger_sim.bench.runners import (
+    AUTO,
+    AUTO_TOLERANCE,
+    AUTO_WHOLE_RUN,
+    FAMILY_MUJOCO,
+    FAMILY_PROJECT,
+    FAMILY_SCIPY,
+    WHOLE_RUN_SUFFIX,
+    Run,
+    grip_forces,
+)
 from finger_sim.bench.tables import auto_pick, same_choices, shipped_pick
 from finger_sim.integrators import METHODS
 from finger_sim.scene import load_scene
@@ -94,6 +105,13 @@ def finite(run: Run) -> bool:
     return all(math.isfinite(getattr(run, key)) for key in FIGURES)
 
 
+def timed_whole(scene: str) -> set[str]:
+    """The labels of a scene's runs timed as `simulate` runs them, and of auto over the tolerance grid (shipped scenes)."""
+    if scene not in SHIPPED_SCENES:
+        return set()
+    return {m + WHOLE_RUN_SUFFIX for m in (*WHOLE_RUN_METHODS, AUTO, AUTO_TOLERANCE)} | {AUTO_TOLERANCE}
+
+
 @pytest.mark.slow
 def test_report_and_figures_are_written_with_the_command(bench):
     out, measured, tables = bench
@@ -123,7 +141,7 @@ def test_every_run_is_in_its_scene_table_once_and_rendered_as_one_row(bench):
 @pytest.mark.slow
 def test_every_project_method_has_rows_with_finite_numbers(bench, scene):
     every = [r for r in bench[2].scenes[scene] if r.family == FAMILY_PROJECT]
-    whole = {AUTO_WHOLE_RUN} if scene in SHIPPED_SCENES else set()  # a shipped scene's auto is timed whole too
+    whole = timed_whole(scene)  # a shipped scene's runs are timed whole too
     assert {r.method for r in every} == set(project_methods()) | {AUTO} | whole  # auto itself runs on every scene
     rows = [r for r in every if r.method not in {AUTO} | whole]
     assert {r.method for r in rows} == set(project_methods()) == set(METHODS)
@@ -183,7 +201,7 @@ MUJOCO_GRIP_RTOL = 3e-3
 @pytest.mark.slow
 def test_contact_scenes_have_every_method_and_auto_itself(bench, scene):
     rows = [r for r in bench[2].scenes[scene] if r.family == FAMILY_PROJECT]
-    whole = {AUTO_WHOLE_RUN} if scene in SHIPPED_SCENES else set()  # a shipped scene's auto is timed whole too
+    whole = timed_whole(scene)  # a shipped scene's runs are timed whole too
     assert {r.method for r in rows} == set(project_methods()) | {AUTO} | whole
     for r in rows:
         assert r.status in ("ok", "refused", "diverged"), r
@@ -223,7 +241,7 @@ def test_drive_scenes_have_every_method_auto_itself_and_a_reference_through_the_
         held = [p for p in ref.solution.pieces if p.sol is None]
         assert held and held[-1].t1 == pytest.approx(bench[1].scenes[scene].duration) and held[0].held[3:] == (0.0,) * 3
     rows = [r for r in bench[2].scenes[scene] if r.family == FAMILY_PROJECT]
-    assert {r.method for r in rows} == set(project_methods()) | {AUTO, AUTO_WHOLE_RUN}
+    assert {r.method for r in rows} == set(project_methods()) | {AUTO} | timed_whole(scene)
     for r in rows:
         if r.method == "rattle":
             assert r.status == "refused" and "drive" in r.note, r
@@ -234,6 +252,21 @@ def test_drive_scenes_have_every_method_auto_itself_and_a_reference_through_the_
     whole = next(r for r in rows if r.method == AUTO_WHOLE_RUN)
     stepped = next(r for r in rows if r.method == AUTO and r.value == 1e-3)
     assert whole.ok and whole.error == stepped.error < 1e-6, (whole, stepped)  # the same states, either way
+
+
+@pytest.mark.parametrize("scene", SHIPPED_SCENES)
+@pytest.mark.slow
+def test_every_whole_run_has_the_error_of_its_step_by_step_run(bench, scene):
+    """The same states either way (test_whole_runs.py holds them equal bit for bit): the same error and |Φ|."""
+    rows = bench[2].scenes[scene]
+    stepped = {(r.method, r.knob, r.value): r for r in rows if not r.method.endswith(WHOLE_RUN_SUFFIX)}
+    whole = [r for r in rows if r.family == FAMILY_PROJECT and r.method.endswith(WHOLE_RUN_SUFFIX)]
+    assert {r.method for r in whole} == timed_whole(scene) - {AUTO_TOLERANCE}
+    for r in whole:
+        partner = stepped[r.method.removesuffix(WHOLE_RUN_SUFFIX), r.knob, r.value]
+        assert r.status == partner.status, (r, partner)
+        if r.ok:
+            assert (r.error, r.max_phi) == (partner.error, partner.max_phi), (r, partner)
 
 
 @pytest.mark.parametrize("scene", CONTACT_WP_SCENES)
@@ -328,7 +361,9 @@ def test_goals(bench):
         assert c.at >= c.error and c.auto_cpu > 0.0 and c.scipy > 0.0 and 0.0 < c.cheapest <= c.auto_cpu * (1 + 1e-12), c
         assert c.whole_cpu > 0.0 and c.ratio == c.scipy / c.whole_cpu, c  # the goal: whole run against whole run
     for row in tables.scipy:  # the dense-output comparison counts fewer project runs: never cheaper
-        assert row.dense.ours >= row.any_step.ours
+        assert row.dense.ours >= row.any_step.ours and row.stepped_dense.ours >= row.stepped.ours
+        assert row.met == (row.any_step.ratio >= an.SCIPY_ADVANTAGE)  # scored on the whole runs
+        assert not row.stepped.ours_method.endswith(WHOLE_RUN_SUFFIX)
     assert tables.naive_scipy.scipy > 0.0
     if HAVE_MUJOCO:
         assert all(tables.mujoco[name] for name in KINDS["smooth"])
