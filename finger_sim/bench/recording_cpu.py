@@ -15,7 +15,7 @@ over the median recording-off round, with its CONFIDENCE bootstrap interval, the
 met when the whole interval is at or below GOAL, not met when it is all above, else not decided. One
 after the other on a 2-core KVM guest, the same configuration's CPU scattered between rounds by more than
 recording adds (a node process's stepping thread runs at ~0.05 or ~0.15 CPU s per sim s), so no interval
-decided; at once and pinned, the rounds' differences agreed to ±0.002 (docs/node_performance.md,
+decided; at once (and pinned) its intervals were 1.4 to 6 times narrower (docs/node_performance.md,
 2026-11-27). Beside it each run is split:
 
 - every thread of the node process, by its OS name (the node names its own: stepping, executor; the
