@@ -761,6 +761,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-hand", action="store_true",
                         help="with --recording: finger_node's pair only (more rounds in the same time)")
     args = parser.parse_args(argv)
+    if args.pin is not None and not set(args.pin) <= os.sched_getaffinity(0):
+        parser.error(f"--pin: two of the CPUs {sorted(os.sched_getaffinity(0))}, got {' '.join(map(str, args.pin))}")
     isolate_dds(args.domain_id)
     command = "python -m finger_sim.bench.node_bench " + " ".join(argv if argv is not None else sys.argv[1:])
     load0 = os.getloadavg()

@@ -96,7 +96,7 @@ def pin(pid: int, cpu: int, children_cpu: int) -> None:
     writer) on CPU `children_cpu` (sched_setaffinity by thread; a thread started later inherits its creator's)."""
     for owner, where in [(pid, cpu), *((child, children_cpu) for child in child_pids(pid))]:
         for task in Path(f"/proc/{owner}/task").iterdir():
-            with contextlib.suppress(OSError):  # the thread ended
+            with contextlib.suppress(ProcessLookupError):  # the thread ended
                 os.sched_setaffinity(int(task.name), {where})
 
 

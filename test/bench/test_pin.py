@@ -40,3 +40,13 @@ def test_pin_puts_a_process_and_its_children_on_their_cpus() -> None:
     finally:
         parent.stdin.close()
         parent.wait(10)
+
+
+def test_pin_outside_this_machine_is_a_one_line_error(capsys: pytest.CaptureFixture[str]) -> None:
+    from finger_sim.bench import node_bench
+
+    cpus = sorted(os.sched_getaffinity(0))
+    with pytest.raises(SystemExit) as exit_:
+        node_bench.main(["--recording-cpu", "--pin", "0", str(max(cpus) + 1)])
+    assert exit_.value.code == 2
+    assert capsys.readouterr().err.splitlines()[-1] == f"node_bench: error: --pin: two of the CPUs {cpus}, got 0 {max(cpus) + 1}"
