@@ -42,17 +42,22 @@ markers of --out and prints them, with each configuration's spread over the roun
 rounds' paired differences (recording on minus the off run next to it). `--no-hand` runs
 finger_node's pair only.
 
-    python -m finger_sim.bench.node_bench --recording-cpu [--old <checkout>] [--target-duration 10] [--rounds 6]
+    python -m finger_sim.bench.node_bench --recording-cpu [--at-once] [--pin NODE_CPU WRITER_CPU] [--old <checkout>]
+        [--target-duration 10] [--rounds 6]
 
-counts recording's own CPU at 1 kHz where it runs (the node's /diagnostics `log_cpu_*`) and every
-thread of the node, recording off and on, and writes it between the RECORDING_CPU markers of --out
-(finger_sim.bench.recording_cpu); with --old (a checkout whose node reports `log_cpu_*` too), each run
-is followed by the same run of the old code and recording's parts are compared side by side.
+decides the CPU recording adds at 1 kHz (a paired bootstrap interval over the rounds) and counts
+recording's own CPU where it runs (the node's /diagnostics `log_cpu_*`) and every thread of the node,
+recording off and on, and writes it between the RECORDING_CPU markers of --out
+(finger_sim.bench.recording_cpu); --at-once runs a round's two nodes at the same time (in --domain-id
+and the next), --pin puts the nodes' threads and their log writers on given CPUs; with --old (a checkout
+whose node reports `log_cpu_*` too), each run is followed by the same run of the old code and recording's
+parts are compared side by side.
 """
 
 from __future__ import annotations
 
 import argparse
+import functools
 import os
 import re
 import statistics
@@ -60,6 +65,7 @@ import sys
 import tempfile
 import time
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -67,8 +73,8 @@ from pathlib import Path
 import numpy as np
 
 from finger_sim.bench import recording_cpu
-from finger_sim.bench.processes import (ROOT, START_TIMEOUT_S, cpu_seconds, isolate_dds, machine, ros_env, start_node, stop,
-                                        tree_cpu_seconds)
+from finger_sim.bench.processes import (ROOT, START_TIMEOUT_S, cpu_seconds, isolate_dds, machine, pin, ros_env, start_node,
+                                        stop, tree_cpu_seconds)
 from finger_sim.log.cpu_clocks import threads_cpu_ns
 
 DEFAULT_DOMAIN_ID = 31
@@ -312,9 +318,10 @@ def window_medians(runs: list[Window]) -> tuple[float, float, float]:
     return statistics.median(rtf), min(rtf), statistics.median(w.cpu_per_sim_s for w in runs)
 
 def measure_window(params: dict, duration: float, domain_id: int, workdir: Path, env: dict[str, str], tag: str, *,
-                   hand: bool = False) -> Window:
+                   hand: bool = False, pin_cpus: tuple[int, int] | None = None) -> Window:
     """Start a stepping node, wait for its first /diagnostics, measure `duration` s after WARMUP_S,
-    stop it (SIGINT: the log is closed) and count its log."""
+    stop it (SIGINT: the log is closed) and count its log. pin_cpus: (the node's CPU, its log writer's),
+    set at the first /diagnostics (processes.pin), or None: where the kernel puts them."""
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.executors import SingleThreadedExecutor
@@ -327,7 +334,7 @@ def measure_window(params: dict, duration: float, domain_id: int, workdir: Path,
     proc = start_node(params, workdir, env, module="finger_sim.ros.hand" if hand else "finger_sim.ros.node", tag=tag)
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain_id)
-    node = rclpy.create_node("node_bench_targets", context=context)
+    node = rclpy.create_node(f"node_bench_{tag}", context=context)  # a name of its own: runs may share this process
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
     windows: list[dict[str, str]] = []
@@ -351,6 +358,8 @@ def measure_window(params: dict, duration: float, domain_id: int, workdir: Path,
             if time.monotonic() > deadline or proc.poll() is not None:
                 raise RuntimeError(f"the node did not come up; see {workdir}/node_{tag}.log")
             executor.spin_once(timeout_sec=0.05)
+        if pin_cpus is not None:
+            pin(proc.pid, *pin_cpus)
         end_warmup = time.monotonic() + WARMUP_S
         while time.monotonic() < end_warmup:
             executor.spin_once(timeout_sec=0.05)
@@ -403,10 +412,9 @@ TARGET_CONFIGS = ("1k_off", "1k_rec", "fast_rec", "5k_rec", "hand10_rec")
 RECORDING_CONFIGS = ("1k_off", "1k_rec", "hand10_off", "hand10_rec")
 
 
-def targets(old: Path | None, duration: float, rounds: int, domain_id: int, workdir: Path,
-            names: tuple[str, ...] = TARGET_CONFIGS) -> dict[tuple[str, str], list[Window]]:
-    """The runs of the configurations `names`, new then old (none without `old`), `rounds` times:
-    (config, 'new' | 'old') → runs."""
+def configs(workdir: Path) -> dict[str, tuple[dict, bool]]:
+    """Every configuration of `targets` by name: (the node's parameters, whether it is a finger_hand);
+    the hand's file is written to `workdir`."""
     base = dict(scene="paper_flexion", torque_source="topic", physics_rate_hz=1000.0, publish_rate_hz=0.0,
                 realtime_factor=1.0, command_timeout=0.5)
     hand = {k: v for k, v in base.items() if k != "scene"} | dict(hand=str(_hand_file(workdir)))
@@ -418,16 +426,50 @@ def targets(old: Path | None, duration: float, rounds: int, domain_id: int, work
         "hand10_off": (dict(hand, record=False), True),
         "hand10_rec": (hand, True),
     }
-    configs = {name: every[name] for name in names}
-    envs = {"new": ros_env(domain_id)} | ({} if old is None else {"old": dict(ros_env(domain_id), PYTHONPATH=str(old))})
+    return every
+
+
+def side_envs(old: Path | None, domain_id: int) -> dict[str, dict[str, str]]:
+    """'new' (and 'old', with `old` first on PYTHONPATH) → a node's environment in `domain_id`."""
+    return {"new": ros_env(domain_id)} | ({} if old is None else {"old": dict(ros_env(domain_id), PYTHONPATH=str(old))})
+
+
+def targets(old: Path | None, duration: float, rounds: int, domain_id: int, workdir: Path,
+            names: tuple[str, ...] = TARGET_CONFIGS, pin_cpus: tuple[int, int] | None = None
+            ) -> dict[tuple[str, str], list[Window]]:
+    """The runs of the configurations `names`, new then old (none without `old`), `rounds` times:
+    (config, 'new' | 'old') → runs. pin_cpus: see measure_window."""
+    every = configs(workdir)
+    envs = side_envs(old, domain_id)
     runs: dict[tuple[str, str], list[Window]] = {}
     for r in range(rounds):
-        for name, (params, is_hand) in configs.items():
+        for name in names:
+            params, is_hand = every[name]
             for side in envs:
                 tag = f"{name}_{side}_{r}"
                 print(f"targets: {tag}", file=sys.stderr, flush=True)
                 runs.setdefault((name, side), []).append(
-                    measure_window(params, duration, domain_id, workdir, envs[side], tag, hand=is_hand))
+                    measure_window(params, duration, domain_id, workdir, envs[side], tag, hand=is_hand, pin_cpus=pin_cpus))
+    return runs
+
+
+def at_once(old: Path | None, duration: float, domain_id: int, workdir: Path, names: tuple[str, ...],
+            pin_cpus: tuple[int, int] | None = None) -> dict[tuple[str, str], list[Window]]:
+    """One round of the configurations `names` run at the same time, the i-th in domain `domain_id` + i
+    and started in that order (new, then old the same way): (config, side) → [its run]. A drift of the
+    machine's load then falls on all of them alike. pin_cpus: see measure_window."""
+    every = configs(workdir)
+    runs: dict[tuple[str, str], list[Window]] = {}
+    for side in side_envs(old, domain_id):
+        with ThreadPoolExecutor(len(names)) as pool:
+            futures = {}
+            for i, name in enumerate(names):
+                params, is_hand = every[name]
+                env = side_envs(old, domain_id + i)[side]
+                print(f"at once: {name}_{side} (domain {domain_id + i})", file=sys.stderr, flush=True)
+                futures[(name, side)] = pool.submit(measure_window, params, duration, domain_id + i, workdir, env,
+                                                    f"{name}_{side}", hand=is_hand, pin_cpus=pin_cpus)
+            runs |= {key: [future.result()] for key, future in futures.items()}
     return runs
 
 
@@ -712,9 +754,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--target-duration", type=float, default=10.0,
                         help="with --targets, --recording, --recording-cpu: measured s per run")
     parser.add_argument("--rounds", type=int, default=2, help="with --targets, --recording, --recording-cpu: A B rounds")
+    parser.add_argument("--at-once", action="store_true",
+                        help="with --recording-cpu: each round's off and on nodes at the same time, in --domain-id and the next")
+    parser.add_argument("--pin", type=int, nargs=2, metavar=("NODE_CPU", "WRITER_CPU"), default=None,
+                        help="with --recording-cpu: every node's threads on NODE_CPU, its log writer process on WRITER_CPU")
     parser.add_argument("--no-hand", action="store_true",
                         help="with --recording: finger_node's pair only (more rounds in the same time)")
     args = parser.parse_args(argv)
+    if args.pin is not None and not set(args.pin) <= os.sched_getaffinity(0):
+        parser.error(f"--pin: two of the CPUs {sorted(os.sched_getaffinity(0))}, got {' '.join(map(str, args.pin))}")
     isolate_dds(args.domain_id)
     command = "python -m finger_sim.bench.node_bench " + " ".join(argv if argv is not None else sys.argv[1:])
     load0 = os.getloadavg()
@@ -725,11 +773,14 @@ def main(argv: list[str] | None = None) -> int:
                 order = RECORDING_CONFIGS[:2] if r % 2 == 0 else RECORDING_CONFIGS[1::-1]
                 folder = Path(tmp) / f"round{r}"
                 folder.mkdir()
-                for key, windows in targets(args.old, args.target_duration, 1, args.domain_id, folder, order).items():
+                run = at_once if args.at_once else functools.partial(targets, rounds=1)
+                for key, windows in run(args.old, args.target_duration, domain_id=args.domain_id, workdir=folder,
+                                        names=order, pin_cpus=tuple(args.pin) if args.pin else None).items():
                     runs.setdefault(key, []).extend(windows)
         old = (runs[("1k_off", "old")], runs[("1k_rec", "old")]) if args.old is not None else None
         section = recording_cpu.report(runs[("1k_off", "new")], runs[("1k_rec", "new")], command.strip(),
-                                       args.target_duration, (load0, os.getloadavg()), old)
+                                       args.target_duration, (load0, os.getloadavg()), old,
+                                       how=recording_cpu.design(args.at_once, args.pin))
         write_section(args.out, section, recording_cpu.BEGIN, recording_cpu.END)
         print(section)
         return 0

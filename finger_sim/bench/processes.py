@@ -8,6 +8,7 @@ the machine a report names.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import platform
 import signal
@@ -77,6 +78,26 @@ def tree_cpu_seconds(pid: int) -> float:
         if int(text.rsplit(")", 1)[1].split()[1]) == pid:  # ppid, the field after the state
             total += _stat_cpu(text)
     return total
+
+
+def child_pids(pid: int) -> list[int]:
+    """Process ids of the living child processes of process `pid` (any of its threads'), from /proc."""
+    pids: list[int] = []
+    for children in Path(f"/proc/{pid}/task").glob("*/children"):
+        try:
+            pids += [int(child) for child in children.read_text().split()]
+        except OSError:  # the thread ended
+            continue
+    return pids
+
+
+def pin(pid: int, cpu: int, children_cpu: int) -> None:
+    """Every thread of process `pid` on CPU `cpu` and every thread of its child processes (a node's log
+    writer) on CPU `children_cpu` (sched_setaffinity by thread; a thread started later inherits its creator's)."""
+    for owner, where in [(pid, cpu), *((child, children_cpu) for child in child_pids(pid))]:
+        for task in Path(f"/proc/{owner}/task").iterdir():
+            with contextlib.suppress(ProcessLookupError):  # the thread ended
+                os.sched_setaffinity(int(task.name), {where})
 
 
 def thread_cpu(pid: int) -> dict[int, tuple[str, float]]:

@@ -1,11 +1,22 @@
-"""Recording's own CPU at 1 kHz against the node's, counted where it runs; `node_bench --recording-cpu`.
+"""Recording's CPU at 1 kHz against the node's, counted where it runs; `node_bench --recording-cpu`.
 
-    python -m finger_sim.bench.node_bench --recording-cpu [--target-duration 10] [--rounds 6] [--domain-id <id>]
+    python -m finger_sim.bench.node_bench --recording-cpu [--at-once] [--pin NODE_CPU WRITER_CPU]
+        [--target-duration 10] [--rounds 6] [--domain-id <id>]
 
-finger_node (paper_flexion, 1 kHz, publishing every step, nobody sending commands) runs with recording off,
-then on, `--rounds` times (A B A B), each measured for `--target-duration` s after node_bench.WARMUP_S. A
-node-level difference (on − off) cannot decide the goal (≤ 20 %): the same configuration's CPU scatters
-between rounds by more than recording adds. So each run is split instead:
+finger_node (paper_flexion, 1 kHz, publishing every step, nobody sending commands) runs with recording off
+and on, `--rounds` times, each measured for `--target-duration` s after node_bench.WARMUP_S: one after the
+other (off, on, then on, off), or with `--at-once` both at the same time, each in its own DDS domain
+(`--domain-id` and the next), so that both see the same state of the host; `--pin` puts every node's
+threads on one CPU and its log writer process on the other (node_bench.measure_window).
+
+The verdict is the node-level figure: the median of the rounds' differences (the node's threads and its
+writer process with recording, less the node's threads without, CPU s per sim s to the ns: `node_cpu`)
+over the median recording-off round, with its CONFIDENCE bootstrap interval, the rounds resampled in pairs (scipy.stats.bootstrap):
+met when the whole interval is at or below GOAL, not met when it is all above, else not decided. One
+after the other on a 2-core KVM guest, the same configuration's CPU scattered between rounds by more than
+recording adds (a node process's stepping thread runs at ~0.05 or ~0.15 CPU s per sim s), so no interval
+decided; at once (and pinned) its intervals were 1.4 to 6 times narrower (docs/node_performance.md,
+2026-11-27). Beside it each run is split:
 
 - every thread of the node process, by its OS name (the node names its own: stepping, executor; the
   recorder's: mcap sender, mcap status), from /proc/<pid>/task/<tid>/schedstat read when each /diagnostics
@@ -13,22 +24,30 @@ between rounds by more than recording adds. So each run is split instead:
 - recording's own CPU, as the node reports it in /diagnostics (McapRecorder.cpu): the stepping thread's
   time inside write_records (sampled), the sender and status threads, the writer process.
 
-The figure: recording's own CPU per sim s over the node's CPU per sim s without recording. Its
+Recording's own CPU per sim s over the node's CPU per sim s without recording is given too. Its
 denominator is the *least* CPU a recording-off round took: the part of the node that is there in every
 round; the rounds above it were inflated by something recording does not cause, and dividing by them
 would flatter recording. So the ratio errs high, and so does its numerator (the sampled hand-over counts
-what remains of its clock reads). What it leaves out, recording's indirect cost on the stepping thread
+what remains of its clock reads). What the split leaves out, recording's indirect cost on the stepping thread
 (cold caches after the hand-over), is shown beside it: the stepping thread's CPU outside write_records with
-recording on, against the stepping thread with recording off in the same round. The rounds run off, on,
-then on, off (node_bench), so that a drift of the machine's load falls on both alike.
+recording on, against the stepping thread with recording off in the same round.
 """
 
 from __future__ import annotations
 
 import statistics
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from datetime import datetime, timezone
 from typing import Any
+
+import numpy as np
+import scipy.stats
+
+#: The bootstrap interval of the added fraction: its confidence and resamples (scipy.stats.bootstrap, paired
+#: by round, percentile method, a fixed seed so that a report's figures can be recomputed).
+CONFIDENCE = 0.95
+RESAMPLES = 20_000
+SEED = 37
 
 BEGIN = "<!-- RECORDING_CPU begin: written by finger_sim/bench/node_bench.py --recording-cpu -->"
 END = "<!-- RECORDING_CPU end -->"
@@ -42,6 +61,48 @@ def _spread(values: Sequence[float], fmt: str = ".4f") -> str:
     return f"{statistics.median(values):{fmt}} ({min(values):{fmt}}–{max(values):{fmt}})"
 
 
+def added_fraction(on: np.ndarray, off: np.ndarray, axis: int = -1) -> np.ndarray:
+    """CPU recording adds, as a fraction of the node's without it: the median of the rounds' differences
+    (each round's on run less its off run) over the median off run. Vectorized along `axis` (the rounds)."""
+    return np.median(on - off, axis=axis) / np.median(off, axis=axis)
+
+
+def added_cpu(on: np.ndarray, off: np.ndarray, axis: int = -1) -> np.ndarray:
+    """CPU recording adds, CPU s per sim s: the median of the rounds' differences (on run less off run)."""
+    return np.median(on - off, axis=axis)
+
+
+def interval(on: Sequence[float], off: Sequence[float], statistic: Callable[..., np.ndarray] = added_fraction
+             ) -> tuple[float, float]:
+    """The CONFIDENCE bootstrap interval of `statistic(on, off)` (`added_fraction`, `added_cpu`), the rounds
+    resampled in pairs (on and off of one round stay together): (low, high)."""
+    result = scipy.stats.bootstrap((np.asarray(on), np.asarray(off)), statistic, paired=True, vectorized=True,
+                                   confidence_level=CONFIDENCE, n_resamples=RESAMPLES, method="percentile",
+                                   random_state=np.random.default_rng(SEED))
+    return float(result.confidence_interval.low), float(result.confidence_interval.high)
+
+
+def decision(low: float, high: float) -> str:
+    """'met' when the whole interval is at or below GOAL, 'not met' when it is all above, else 'not decided'."""
+    return "met" if high <= GOAL else "not met" if low > GOAL else "not decided"
+
+
+def design(at_once: bool, pin: Sequence[int] | None) -> str:
+    """How a round's two nodes ran (node_bench --at-once, --pin), in words."""
+    when = ("at the same time, each in its own DDS domain (started off first in odd rounds, on first in even)" if at_once
+            else "one after the other (off, on, then on, off)")
+    where = (f"; every node's threads pinned to CPU {pin[0]}, its log writer process to CPU {pin[1]}" if pin is not None
+             else "; placed by the kernel")
+    return when + where
+
+
+def node_cpu(w: Any) -> float:
+    """The node's CPU s per sim s in one run (node_bench.Window) to the ns: its threads' schedstat and its log
+    writer process (the recorder's count). /proc's utime and stime (`cpu_per_sim_s`) count 10 ms ticks:
+    ±0.002 CPU s per sim s in a 10 s run, a fifth of what recording adds."""
+    return sum(w.threads.values()) + w.recorder.get("writer", 0.0)
+
+
 def own_cpu(w: Any) -> float:
     """Recording's own CPU s per sim s in one run (node_bench.Window): caller + threads + writer."""
     return sum(w.recorder.values())
@@ -53,7 +114,7 @@ def compared(sides: dict[str, tuple[Sequence[Any], Sequence[Any]]]) -> list[str]
     lines = ["| side | recording's own, in all | stepping thread in write_records | sender + status threads | "
              "writer process | own / least recording-off round |", "|---|---|---|---|---|---|"]
     for side, (off, on) in sides.items():
-        floor = min(w.cpu_per_sim_s for w in off)
+        floor = min(node_cpu(w) for w in off)
         parts = [_spread([w.recorder.get(k, 0.0) for w in on]) for k in ("caller", "threads", "writer")]
         ratios = [own_cpu(w) / floor for w in on]
         lines.append(f"| {side} | {_spread([own_cpu(w) for w in on])} | {' | '.join(parts)} | "
@@ -62,12 +123,14 @@ def compared(sides: dict[str, tuple[Sequence[Any], Sequence[Any]]]) -> list[str]
 
 
 def report(off: Sequence[Any], on: Sequence[Any], command: str, duration: float, load: tuple[tuple, tuple],
-           old: tuple[Sequence[Any], Sequence[Any]] | None = None) -> str:
+           old: tuple[Sequence[Any], Sequence[Any]] | None = None, how: str = design(False, None)) -> str:
     """The dated section of docs/node_performance.md for the runs `off` and `on` (node_bench.Window, in
-    round order), and `old`'s (off, on) runs beside them if given (the same rounds, another checkout)."""
+    round order), and `old`'s (off, on) runs beside them if given (the same rounds, another checkout);
+    `how`: how each round's nodes ran (`design()`)."""
     rounds = len(off)
-    node_off = [w.cpu_per_sim_s for w in off]
+    node_off = [node_cpu(w) for w in off]
     own = [own_cpu(w) for w in on]
+    node_on = [node_cpu(w) for w in on]
     floor, middle = min(node_off), statistics.median(node_off)
     ratios = [x / floor for x in own]
 
@@ -89,8 +152,8 @@ def report(off: Sequence[Any], on: Sequence[Any], command: str, duration: float,
     by_round = [
         "| CPU s per sim s | " + " | ".join(f"round {r + 1}" for r in range(rounds)) + " | median (min–max) |",
         "|---|" + "---|" * rounds + "---|",
-        ratio_row("node, recording off (process)", node_off),
-        ratio_row("node, recording on (process + writer process)", [w.cpu_per_sim_s for w in on]),
+        ratio_row("node, recording off (its threads)", node_off),
+        ratio_row("node, recording on (its threads + writer process)", node_on),
         ratio_row("recording's own: stepping thread in write_records (sampled)", part("caller")),
         ratio_row("recording's own: sender + status threads", part("threads")),
         ratio_row("recording's own: writer process", part("writer")),
@@ -102,20 +165,27 @@ def report(off: Sequence[Any], on: Sequence[Any], command: str, duration: float,
     per_thread = ["| thread (OS name) | recording off: median (min–max) | recording on: median (min–max) |", "|---|---|---|"]
     per_thread += [f"| {n} | {_spread(thread(off, n))} | {_spread(thread(on, n))} |" for n in names
                    if max(thread(off, n) + thread(on, n)) >= 5e-5]
-    met = statistics.median(ratios) <= GOAL
-    verdict = (f"**{'Met' if met else 'Not met'}: recording's own CPU is {100 * statistics.median(ratios):.1f} % "
+    fraction = float(added_fraction(np.array(node_on), np.array(node_off)))
+    low, high = interval(node_on, node_off)
+    cpu_low, cpu_high = interval(node_on, node_off, added_cpu)
+    verdict = (f"**{decision(low, high).capitalize()}: recording adds {100 * fraction:+.1f} % to the node's CPU at "
+               f"1 kHz (the median of the rounds' on − off differences over the median recording-off round; "
+               f"{100 * CONFIDENCE:.0f} % paired bootstrap interval {100 * low:+.1f} to {100 * high:+.1f} %), against "
+               f"≤ {100 * GOAL:.0f} %.** The difference itself: {float(added_cpu(np.array(node_on), np.array(node_off))):+.4f} "
+               f"CPU s per sim s (interval {cpu_low:+.4f} to {cpu_high:+.4f}, {cpu_high - cpu_low:.4f} wide). "
+               f"Recording's own CPU, counted where it runs: {100 * statistics.median(ratios):.1f} % "
                f"(rounds {100 * min(ratios):.1f}–{100 * max(ratios):.1f} %) of the least CPU the node took without "
-               f"recording ({floor:.4f} CPU s per sim s), against ≤ {100 * GOAL:.0f} %**; "
+               f"recording ({floor:.4f} CPU s per sim s), "
                f"{100 * statistics.median(own) / middle:.1f} % of the median recording-off round ({middle:.4f}).")
     return "\n".join([
         BEGIN,
         f"## Recording's own CPU at 1 kHz, counted by thread ({datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC)",
         "",
         f"Command: `{command}`. finger_node (paper_flexion, 1 kHz, publishing every step, nobody sending) with "
-        f"recording off and on, {rounds} rounds (off, on, then on, off), {duration:g} s measured after the warm-up "
-        "each; CPU s per sim s "
+        f"recording off and on, {rounds} rounds, the two nodes of a round {how}; {duration:g} s measured after the "
+        "warm-up each; CPU s per sim s "
         "from the node's 1 s /diagnostics windows (its `log_cpu_*` keys: `McapRecorder.cpu`) and each thread's "
-        "/proc schedstat (finger_sim.log.cpu_clocks). "
+        "/proc schedstat (finger_sim.log.cpu_clocks); the node's figure is its threads' sum and its writer process's. "
         f"Load average at start {load[0][0]:.1f}, at end {load[1][0]:.1f} on 2 cores.",
         "",
         verdict,
