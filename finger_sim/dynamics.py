@@ -9,11 +9,16 @@ hot path of every integrator.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Hashable, Sequence
+from typing import TYPE_CHECKING
 
 from finger_sim.effects.base import ForceElement
 from finger_sim.kinematics import Vec3, constraint, distal_offset
 from finger_sim.model import FingerParams
+from finger_sim.state_layout import OwnModes
+
+if TYPE_CHECKING:
+    from finger_sim.actuators.base import Actuator
 
 
 class FingerSystem:
@@ -21,12 +26,17 @@ class FingerSystem:
 
     Immutable after construction. The motor torque τ (N·m, on link 1) is an input
     to each call, not an element, so a held command and a scripted profile share
-    one path.
+    one path. `actuator`: one whose force a subclass applies inside the acceleration solve
+    (the drive's mesh, `actuators.drive.DrivenSystem`); None: the ideal torque source.
     """
 
-    def __init__(self, params: FingerParams, elements: Sequence[ForceElement] = ()) -> None:
+    def __init__(self, params: FingerParams, elements: Sequence[ForceElement] = (),
+                 actuator: Actuator | None = None) -> None:
         self.params = params
         self.elements = tuple(elements)
+        self.actuator = actuator
+        #: the elements and the actuator whose laws read their own modes (`state_layout.OwnModes`), in order
+        self.mode_owners: tuple[OwnModes, ...] = tuple(o for o in (*self.elements, actuator) if isinstance(o, OwnModes))
         self.alpha = distal_offset(params)
         p = params
         self._m11 = p.inertia_A + p.m3 * p.r1**2
@@ -35,6 +45,11 @@ class FingerSystem:
         self._c = p.m3 * p.r1 * p.L3 / 2.0
         self._r = (p.r1, p.r2, p.r3)
         self._forces = tuple(e.force for e in self.elements)
+
+    def mode_key(self) -> list[Hashable]:
+        """The mode keys of `mode_owners` (`OwnModes.mode_key`), in order: the equations this system
+        integrates change exactly when this does."""
+        return [o.mode_key() for o in self.mode_owners]
 
     # -- constraint geometry ----------------------------------------------------------
     def constraint(self, q: Vec3) -> tuple[float, float]:

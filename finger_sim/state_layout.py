@@ -10,12 +10,15 @@ The discrete state is the modes the elements own, each with the guards whose cro
 events and switch it (`ModeSet`): the stops' rest mode, the drive's mesh mode, stick–slip friction's
 lock. A mode is not part of x: it selects which equations x follows. A run keeps their values in one
 home beside x (`ModeValues`, like Drake's discrete state): each owner reads and writes its own entries,
-an element whose laws read its mode through `OwnModes.mode`, bound to the run's entry.
+an element whose laws read its mode through `OwnModes.mode`, bound to the run's entry. Such an owner
+also says when its laws changed (`OwnModes.mode_key`); the system collects the keys of its owners
+(`FingerSystem.mode_key`), and an integrator that keeps its own solution restarts it when they change,
+whatever owns them.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Hashable, Iterable, Sequence
 from typing import NamedTuple
 
 from finger_sim.kinematics import Vec3
@@ -176,3 +179,9 @@ class OwnModes:
 
     def mode_changed(self, value: int) -> None:
         """Called after every write of `mode` (an element mirrors it into compiled models here); nothing by default."""
+
+    def mode_key(self) -> Hashable:
+        """What its laws read of its discrete state, as one comparable value: an integrator that keeps its own
+        solution across steps restarts it when the system's key (`FingerSystem.mode_key`) changes. By default
+        the values of its modes; an owner whose laws read more (a direction) or that counts its switches says so."""
+        return tuple(self._mode_values[self._mode_at:self._mode_at + len(self.modes)])

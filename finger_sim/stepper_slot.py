@@ -9,8 +9,9 @@ the rooms are wired). Dependency inversion, as a plug-in registry: data flows co
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from types import ModuleType
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any, NamedTuple, Protocol
 
 if TYPE_CHECKING:
     import numpy as np
@@ -23,6 +24,21 @@ if TYPE_CHECKING:
 STEP_TOO_SMALL = 3  # DOP853's step fell below its floor
 BREAKPOINT = 4  # a torque switch lies inside the step: the caller splits it (state unchanged)
 STATE_NON_FINITE = 5  # the step ended in a non-finite state (the Simulator's own check)
+
+
+class StageFunctions(NamedTuple):
+    """The compiled functions that step one system's first-order form y = (q, q'): its right-hand side
+    `rhs(m, t, y, u, out)`, one DOP853 attempt (`integrators.steps.dop853_attempt`), one step of an explicit
+    Runge–Kutta tableau (`rk_step_tuple`, `kernel.integrators.CompiledRungeKutta`), and the loop of DOP853's
+    internal steps under a held input (`internal_steps()`: `kernel.internal_steps`, loaded on first call;
+    None: the system has none, its internal steps go one by one). An actuator whose force enters the
+    acceleration solve (the drive's mesh) registers its own with the kernel; the integrators ask for a
+    system's, never for an actuator by name."""
+
+    rhs: Callable[..., None]
+    dop853_attempt: Callable[..., float]
+    rk_step_tuple: Callable[..., tuple]
+    internal_steps: Callable[[], ModuleType | None]
 
 
 class CompiledKernel(Protocol):
@@ -59,6 +75,10 @@ class CompiledKernel(Protocol):
         """The compiled numerics (DOP853's attempt, dense output and right-hand side)."""
         ...
 
+    def stage_functions(self, system: FingerSystem) -> StageFunctions:
+        """The compiled stepping functions of `system`: the plain ones, or its actuator's (`system.actuator`)."""
+        ...
+
     def compiled_gap_screen(self) -> ModuleType:
         """The compiled step-end gap check (`screen`: whether a step may hold a gap crossing)."""
         ...
@@ -85,7 +105,7 @@ class CompiledKernel(Protocol):
         ...
 
     def compiled_drive(self) -> ModuleType:
-        """The compiled drive (spec §8): its right-hand side and DOP853 attempt under the mesh mode."""
+        """The compiled drive (spec §8): its guards and lean steps (`actuators.stepping`)."""
         ...
 
 

@@ -56,7 +56,7 @@ TURN_GUARD = (False,)
 #: declared chattering.
 MAX_EVENTS_PER_STEP = 64  # room for a stop's Zeno series down to its rest (effects.stops.REST_HEIGHT)
 #: auto's method on a stick–slip scene (`auto_method`): our error-controlled DOP853, restarted at every
-#: friction mode change (`StickSlipContact.law_state`).
+#: friction mode change (`StickSlipContact.mode_key`).
 AUTO_METHOD = "dop853"
 #: The torque step (N·m) by which `holding_torque` probes the affine map τ ↦ θ1''.
 PROBE_TORQUE = 1.0

@@ -231,7 +231,7 @@ class Drive(OwnModes, Actuator):
         self._mirrors: list[weakref.ref] = []  # compiled models whose block's first slot is the mode
         self.own_modes()  # DRIVE, MESH's initial value, until a run binds it
         self.direction = 1.0
-        #: how often the mode was set: an integrator that keeps its own solution restarts when it changes
+        #: how often the mode was set (`mode_key`)
         self.changes = 0
         #: L > 0: the current is a state (`i`), integrated with the linkage (`actuators.inductive`)
         self.inductive = params.inductance > 0.0
@@ -254,6 +254,10 @@ class Drive(OwnModes, Actuator):
             model = ref()
             if model is not None:
                 model[len(model) - KERNEL_BLOCK] = float(value)
+
+    def mode_key(self) -> int:
+        """`changes`: every setting of the mode, even to its value, starts the mesh law afresh."""
+        return self.changes
 
     def kernel_block(self) -> list[float]:
         """The drive as the compiled model's last KERNEL_BLOCK floats (`finger_sim.kernel.layout`)."""
@@ -319,7 +323,7 @@ class DrivenSystem(FingerSystem):
     the voltage command u (V) where FingerSystem takes τ, and applies the drive's current mode."""
 
     def __init__(self, params: FingerParams, elements: Sequence[ForceElement], drive: Drive) -> None:
-        super().__init__(params, elements)
+        super().__init__(params, elements, drive)
         self.drive = drive
         self._inductive = drive.inductive
         #: whether τ_h at a held state may be kept (`holding_torque`): set where no element carries a state

@@ -193,9 +193,8 @@ class StickSlipContact(OwnModes, Contact):
         self._direction = value
         self._mirror_modes()
 
-    def law_state(self) -> tuple[int, float]:
-        """(mode, direction): what the force law depends on besides the state (an integrator that keeps
-        its own solution restarts when it changes)."""
+    def mode_key(self) -> tuple[int, float]:
+        """(mode, direction): what the force law depends on besides the state (`OwnModes.mode_key`)."""
         return self.mode, self._direction
 
     def kernel_params(self) -> tuple[float, ...]:

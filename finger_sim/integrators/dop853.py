@@ -7,14 +7,15 @@ dense output of the internal step that covers t + dt, projected onto Φ = 0, Φ_
 The internal solution itself is never projected, so the output grid does not change it.
 
 It continues its internal solution only while the caller continues the last output with
-the same torque function (same object) and, on a drive scene (spec §8), the same mesh mode
-(the drive's mode changes are events of the Simulator's step); anything else (a reset, a torque breakpoint, an
-event's trial step, a held command) restarts it from the given state. The step-size
-control, error norm and dense output are scipy's DOP853 (scipy/integrate/_ivp/rk.py,
+the same torque function (same object) under the same modes of the system (`FingerSystem.mode_key`,
+whatever element or actuator owns them; their switches are events of the Simulator's step); anything
+else (a reset, a torque breakpoint, an event's trial step, a held command) restarts it from the given
+state. The step-size control, error norm and dense output are scipy's DOP853 (scipy/integrate/_ivp/rk.py,
 after Hairer, Nørsett & Wanner, *Solving ODEs I*, §II.10), with scipy's coefficients.
 
-An attempt is `steps.dop853_attempt`, which the kernel compiles. A system with a force element that
-has no compiled form (objects with different contact laws, a moving object) runs that same function in
+An attempt is `steps.dop853_attempt`, which the kernel compiles, with the system's right-hand side
+(`stepper_slot.StageFunctions`: an actuator in the acceleration solve brings its own). A system with a
+force element that has no compiled form (objects with different contact laws, a moving object) runs that same function in
 Python on lists, its stages `FingerSystem.accelerations` (`_python_attempt`): slower, the same numbers.
 """
 
@@ -114,23 +115,17 @@ class DormandPrince853(Integrator):
         self.compiled = model is not None
         if model is None:  # the geometry alone (no elements) for the compiled dense output and projection
             model = compiled.model_array(FingerSystem(system.params))
-        numerics = compiled.compiled_numerics()
-        self._numerics, self._model = numerics, model
+        self._numerics, self._model = compiled.compiled_numerics(), model
         self._stages = StageModel(system)  # the model of an attempt in Python
-        #: the right-hand side and the attempt: with a drive (spec §8) the ones applying its mesh mode,
-        #: and the internal solution restarts whenever the mode changes (`Drive.changes`)
-        self._rhs, self._attempt = numerics._rhs, numerics.dop853_attempt
-        self._drive = getattr(system, "drive", None)
-        if self._drive is not None:
-            driven = compiled.compiled_drive()
-            self._rhs, self._attempt = driven.driven_rhs, driven.driven_dop853_attempt
-        self._changes = -1  # `Drive.changes` the internal solution was computed under
-        #: the compiled model whose drive block follows the mesh mode, for the drive's compiled guards
-        #: (`actuators.stepping.start`); None without a drive or with stages in Python
-        self.guard_model = model if self.compiled and self._drive is not None else None
-        #: a stick–slip contact's friction mode (`StickSlipContact.law_state`), and the one the solution is under
-        self._friction = next((e for e in system.elements if hasattr(e, "law_state")), None)
-        self._law_state: tuple | None = None
+        #: the system's compiled right-hand side, attempt and internal-step loop (`stepper_slot.StageFunctions`)
+        stages = compiled.stage_functions(system)
+        self._rhs, self._attempt = stages.rhs, stages.dop853_attempt
+        #: the compiled model the stages run on, whose mode slots follow the system's modes, for an actuator's
+        #: compiled guards (`actuators.stepping.start`); None with stages in Python
+        self.guard_model = model if self.compiled else None
+        #: `system.mode_key` when it has modes, else None; and the key the internal solution is under
+        self._mode_key_now = system.mode_key if system.mode_owners else None
+        self._mode_key: list | None = None
         self.rtol, self.atol = rtol, atol
         self._torque: TorqueFn | None = None
         self._last: tuple[float, Vec3, Vec3] | None = None  # the last output (t, q, q')
@@ -159,8 +154,8 @@ class DormandPrince853(Integrator):
         self._history_starts: list[float] = []
         self._keep_history = True
         #: the compiled loop of internal steps under a held torque (`kernel.internal_steps`), or None
-        #: (stages in Python, a drive's mesh mode), and its scalars and scratch arrays
-        self._steps = compiled.compiled_internal_steps() if self.compiled and self._drive is None else None
+        #: (stages in Python, a system without one), and its scalars and scratch arrays
+        self._steps = stages.internal_steps() if self.compiled else None
         self._step_scalars, self._y_next, self._f_next = np.empty(6), np.empty(6), np.empty(6)
         self._y_scratch, self._y_new = np.empty(6), np.empty(6)
 
@@ -220,10 +215,8 @@ class DormandPrince853(Integrator):
     def step(self, t: float, q: Vec3, v: Vec3, dt: float, torque: TorqueFn) -> tuple[Vec3, Vec3]:
         target = t + dt
         last = self._last
-        if self._drive is not None and self._drive.changes != self._changes:
-            self._torque = None  # the mesh mode changed: the internal solution is another mode's
-        if self._friction is not None and self._friction.law_state() != self._law_state:
-            self._torque = None  # the friction mode changed: the same
+        if not self.under_current_modes():
+            self._torque = None  # a mode changed: the internal solution is another mode's
         if torque is self._torque and self._origin == (t, q, v) and target >= t:
             pass  # a trial from the internal solution's start (event location): answered from it
         elif torque is self._torque and last is not None and last[1] == q and last[2] == v \
@@ -248,7 +241,7 @@ class DormandPrince853(Integrator):
     @contextmanager
     def aside(self) -> Iterator[None]:
         """Steps inside are trials from the internal solution that leave its continuation as it was
-        (the drive's energy quadrature between two steps): the next step continues as without them."""
+        (an energy quadrature between two steps): the next step continues as without them."""
         last = self._last
         try:
             yield
@@ -314,13 +307,20 @@ class DormandPrince853(Integrator):
         self._err = self._err_old = self.error_estimate(q)  # (the deferred estimates left as they are)
         self._t = self._t_old = t
         self._y[:3], self._y[3:] = q, v
-        if self._drive is not None:
-            self._changes = self._drive.changes
-        if self._friction is not None:
-            self._law_state = self._friction.law_state()
+        self.adopt_modes()
         self._slope(t, torque)
         if self._h <= 0.0:
             self._h = initial_step(self._y, self._f, self.rtol, self.atol, dt)
+
+    def adopt_modes(self) -> None:
+        """Take the system's current modes as those the internal solution is under (at a restart, or for a
+        solution continued elsewhere under them, by a compiled batch)."""
+        if self._mode_key_now is not None:
+            self._mode_key = self._mode_key_now()
+
+    def under_current_modes(self) -> bool:
+        """Whether the internal solution was computed under the system's current modes."""
+        return self._mode_key_now is None or self._mode_key_now() == self._mode_key
 
     def _slope(self, t: float, torque: TorqueFn) -> None:
         """_f = y' at (t, _y) under `torque`."""

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import importlib
 import importlib.metadata
 import importlib.util
 import os
@@ -64,6 +65,9 @@ INDUCTIVE_STEP_WEIGHT = 300
 FALLBACK_CACHE_DIR = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "finger_sim" / "numba"
 
 
+#: The kernel module of each actuator whose force enters the acceleration solve (`FingerSystem.actuator`), by
+#: the actuator's name: its `STAGES` (`stepper_slot.StageFunctions`) step a system with it (`stage_functions`).
+ACTUATOR_STAGES = {"drive": "finger_sim.kernel.drive"}
 #: The package's folders whose modules the kernel compiles from (besides the top-level modules).
 COMPILED_FOLDERS = ("kernel", "effects", "integrators", "actuators", "simulation")
 
@@ -253,8 +257,18 @@ def compiled_numerics() -> "ModuleType":
     return compiled
 
 
+def stage_functions(system: "FingerSystem") -> stepper_slot.StageFunctions:
+    """The compiled stepping functions of `system`: numerics' own, or those its actuator's kernel module
+    registers (`ACTUATOR_STAGES`)."""
+    if system.actuator is None:
+        numerics = compiled_numerics()
+        return stepper_slot.StageFunctions(numerics._rhs, numerics.dop853_attempt, numerics.rk_step_tuple,
+                                           compiled_internal_steps)
+    return importlib.import_module(ACTUATOR_STAGES[system.actuator.name]).STAGES
+
+
 def compiled_drive() -> "ModuleType":
-    """The compiled drive module (spec §8)."""
+    """The compiled drive module (spec §8): its guards and lean steps."""
     from finger_sim.kernel import drive as compiled
 
     return compiled

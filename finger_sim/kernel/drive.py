@@ -27,6 +27,7 @@ from finger_sim.kernel.jit import compiled
 from finger_sim.kernel.layout import BREAKPOINT, OK
 from finger_sim.kernel.numerics import (JIT, generalized_force, njit, plan_parts, project, solved_accelerations,
                                         switches_inside, torque_at, trig)
+from finger_sim.stepper_slot import StageFunctions
 
 motor_current = njit(**JIT)(law.motor_current)
 unclamped_current = njit(**JIT)(law.unclamped_current)
@@ -174,6 +175,16 @@ class DrivenFastStepper:
 
 driven_rhs = _rebound(numerics._rhs, accelerations=driven_accelerations)
 driven_dop853_attempt = _rebound(numerics.dop853_attempt, _rhs=driven_rhs)
+
+
+def _no_internal_steps() -> None:
+    """DOP853's internal steps with the drive go one by one: `kernel.internal_steps` is compiled with numerics'
+    right-hand side."""
+    return None
+
+
+#: The stepping functions of a system with the drive (`kernel.ACTUATOR_STAGES`).
+STAGES = StageFunctions(driven_rhs, driven_dop853_attempt, driven_rk_step_tuple, _no_internal_steps)
 
 
 # -- L > 0: the current as a seventh state (`finger_sim.actuators.inductive`) ------------------

@@ -21,7 +21,7 @@ from finger_sim.errors import SimulationDiverged
 from finger_sim.integrators.base import Integrator, TorqueFn
 from finger_sim.integrators.explicit import ExplicitRungeKutta, PaperEuler
 from finger_sim.inputs import HELD_ARRAY, Profile, profile_array
-from finger_sim.kernel import numerics
+from finger_sim.kernel import numerics, stage_functions
 from finger_sim.kernel.layout import distinct_nodes, model_array, tableau_array
 from finger_sim.kinematics import Vec3
 
@@ -60,12 +60,8 @@ class CompiledRungeKutta(Integrator):
             self.tableau = np.zeros((3, 0))
         #: the distinct stage nodes c: τ is evaluated at t + c·dt for each
         self.nodes = distinct_nodes(ref.C) if issubclass(ref, ExplicitRungeKutta) else (0.0,)
-        #: the compiled single step; with a drive (spec §8) the same step applying it (kernel.drive)
-        self._single_step = numerics.rk_step_tuple
-        if getattr(system, "drive", None) is not None:
-            from finger_sim.kernel.drive import driven_rk_step_tuple
-
-            self._single_step = driven_rk_step_tuple
+        #: the system's compiled single step (`stepper_slot.StageFunctions`: an actuator's own where it has one)
+        self._single_step = stage_functions(system).rk_step_tuple
         # Load the compiled step now (from numba's disk cache: ~0.3-1 s the first time in a
         # process), not inside the first paced step of the node.
         self._single_step(self.model, self.tableau, 0.0, WARM_UP_STATE, WARM_UP_STATE, 0.0,

@@ -5,7 +5,8 @@ The kernel reads the model as pure data, so one compiled function serves every s
     [0:10]  m11, m22, m33, c, r1, r2, r3, α, k1 = r4 cos θ4, k2 = r4 sin θ4   (SI, rad)
     [10]    number of force elements
     then per element, in the system's summation order: code, n, then its n parameters;
-    with a drive (spec §8), its block last (`Drive.kernel_block`: the mode, ..., NaN as marker).
+    with an actuator in the acceleration solve, its block last (the drive's, spec §8: `Drive.kernel_block`,
+    the mode, ..., NaN as marker).
 
 An element's compiled form is `kernel_code` (a law its effect declares, `effects.base.kernel_law`, or one
 the kernel writes itself) and `kernel_params()` (floats) on the element itself (see
@@ -39,8 +40,9 @@ HEADER = 10
 
 
 def model_array(system: "FingerSystem") -> np.ndarray | None:
-    """The flat model of `system` for the kernel, or None when an element has no compiled form. A drive's
-    mode slot follows the drive's mode (`Drive.mirror`)."""
+    """The flat model of `system` for the kernel, or None when an element has no compiled form. The block of
+    an actuator in the acceleration solve (`FingerSystem.actuator`: `kernel_block`) ends it, and its mode slot
+    follows the actuator's mode (`mirror`, as `Drive.mirror`)."""
     p = system.params
     # the same expressions as FingerSystem.__init__, so the compiled solve sees the same bits
     data = [
@@ -57,12 +59,12 @@ def model_array(system: "FingerSystem") -> np.ndarray | None:
         if hasattr(element, "mirror"):
             mirrored.append((element, len(data) + 2))
         data += [float(code), float(len(params)), *params]
-    drive = getattr(system, "drive", None)
-    model = np.array(data if drive is None else data + drive.kernel_block(), dtype=np.float64)
+    actuator = system.actuator  # one in the acceleration solve (the drive): its block last, its mode mirrored
+    model = np.array(data if actuator is None else data + actuator.kernel_block(), dtype=np.float64)
     for element, offset in mirrored:  # a stick–slip contact's friction mode (`StickSlipContact.mirror`)
         element.mirror(model, offset)
-    if drive is not None:
-        drive.mirror(model)
+    if actuator is not None:
+        actuator.mirror(model)
     return model
 
 

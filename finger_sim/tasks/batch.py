@@ -93,7 +93,7 @@ def _sim_reason(sim: Simulator) -> str | None:
         return "stick-slip friction or a moving object"
     if sim.fast_stepper is not None:  # the lean path (no contact, no drive)
         return None if _plan_parts(sim.fast_stepper.plan)[2].shape[1] > 0 else "the paper's Euler"
-    if not isinstance(integ, DormandPrince853) or not integ.compiled or integ._drive is not None:  # noqa: SLF001
+    if not isinstance(integ, DormandPrince853) or not integ.compiled or sim.system.actuator is not None:
         return f"the scene steps with {sim.method} on the {sim.kernel} kernel, not the compiled dop853"
     contacts = [e for e in sim.system.elements if not e.smooth]
     if contacts and (len(contacts) > 1 or type(contacts[0]) is not Contact):

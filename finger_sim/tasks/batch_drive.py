@@ -108,12 +108,12 @@ class _Row(SweepRow):
         """`SweepRow.hand_over`; a solution the kernel continued is under the drive's current mode."""
         super().hand_over(i, rows)
         if not math.isnan(rows.integ[i, I_VALUE]):
-            self.sim.integrator._changes = self.sim._drive.changes  # type: ignore[attr-defined]  # noqa: SLF001
+            self.sim.integrator.adopt_modes()  # type: ignore[attr-defined]
 
     def read_back(self, i: int, rows: Rows) -> None:
         """`SweepRow.read_back`; a solution computed under another mesh mode than the current one restarts."""
         super().read_back(i, rows)
-        if self.sim.integrator._changes != self.sim._drive.changes:  # type: ignore[attr-defined]  # noqa: SLF001
+        if not self.sim.integrator.under_current_modes():  # type: ignore[attr-defined]
             rows.integ[i, I_VALUE] = math.nan
 
 

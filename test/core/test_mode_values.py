@@ -1,7 +1,7 @@
 """The modes' one home per run (`state_layout.ModeValues`, `Simulator.mode_values`): a new element that
 declares a mode, defined in this file alone, gets it stored in the run's home, reset and reported without
 a line of the Simulator naming it, and its run matches an independent tight solve of the switched law
-(test/reference.py's equations in numpy). The shipped owners (the stops' rest, friction's lock) keep
+(test/reference.py's equations in numpy), under DOP853 too (which restarts its solution when the mode changes). The shipped owners (the stops' rest, friction's lock) keep
 their values there too."""
 
 from __future__ import annotations
@@ -30,9 +30,13 @@ STIFFNESS = 0.02  # N·m/rad
 SCENE = {"model": {KEY: STIFFNESS, "spring_stiffness": 0.0}, "input": {"torque": {"type": "constant", "value": 0.0}},
          "initial": {"theta1": 0.4}, "duration": 0.05, "integrator": {"method": "rk4", "dt": 1e-3}}
 ENGAGE_AT, STEPS = 20, 50
+#: The reference's initial state (q, q') of SCENE.
+Y0 = [*ref.assemble(SCENE["initial"]["theta1"]), 0.0, 0.0, 0.0]
 #: rk4 at 1 ms over 50 ms against the tight solve, rad (the MCP spring's own test measures 6.5e-11 on
 #: the same swing; engaging at 20 ms moves θ1(50 ms) by ≈ 1e-3 rad from the free swing)
 REFERENCE_TOLERANCE = 1e-8
+#: our DOP853 (rtol 1e-10, atol 1e-12) over the same swing against the tight solve, rad
+DOP853_TOLERANCE = 1e-9
 
 
 class McpClutch(OwnModes, Smooth):
@@ -95,6 +99,17 @@ class ClutchReference(ref.Effects):
         return super().force(q, v, tau) - np.array([self.mcp * q[0], 0.0, 0.0])
 
 
+def switched_reference() -> np.ndarray:
+    """θ (rad) at the STEPS + 1 output times of `run` from the tight solve: free to the command, the engaged
+    spring from then on."""
+    dt, t_on = SCENE["integrator"]["dt"], ENGAGE_AT * SCENE["integrator"]["dt"]
+    free = ref.solve(lambda a, b: ref.constant(0.0), [], Y0, t_on, ClutchReference(k=0.0))
+    engaged = ref.solve(lambda a, b: ref.constant(0.0), [], free.y(t_on), SCENE["duration"] - t_on,
+                        ClutchReference(k=0.0, mcp=STIFFNESS))
+    t = dt * np.arange(STEPS + 1)
+    return np.vstack([free.y(t[:ENGAGE_AT + 1])[:3].T, engaged.y(t[ENGAGE_AT + 1:] - t_on)[:3].T])
+
+
 def test_a_new_elements_mode_is_stored_in_the_run_reset_and_reported() -> None:
     sim = Simulator(scene_from_dict(SCENE), kernel="python")
     assert [(owner, m) for owner, m in sim.layout.modes] == [("McpClutch", CLUTCH)]
@@ -106,15 +121,8 @@ def test_a_new_elements_mode_is_stored_in_the_run_reset_and_reported() -> None:
     sim.mode_values.values[0] = OPEN
     assert clutch_of(sim).mode == OPEN and sim.modes == ("open",)
     # against the tight solve: free to the command, the spring from then on (engaging moves θ1 by ≈ 1e-3 rad)
-    dt, t_on = SCENE["integrator"]["dt"], ENGAGE_AT * SCENE["integrator"]["dt"]
-    y0 = [*ref.assemble(SCENE["initial"]["theta1"]), 0.0, 0.0, 0.0]
-    free = ref.solve(lambda a, b: ref.constant(0.0), [], y0, t_on, ClutchReference(k=0.0))
-    engaged = ref.solve(lambda a, b: ref.constant(0.0), [], free.y(t_on), SCENE["duration"] - t_on,
-                        ClutchReference(k=0.0, mcp=STIFFNESS))
-    t = dt * np.arange(STEPS + 1)
-    expected = np.vstack([free.y(t[:ENGAGE_AT + 1])[:3].T, engaged.y(t[ENGAGE_AT + 1:] - t_on)[:3].T])
-    assert np.max(np.abs(thetas - expected)) < REFERENCE_TOLERANCE
-    never = ref.solve(lambda a, b: ref.constant(0.0), [], y0, SCENE["duration"], ClutchReference(k=0.0))
+    assert np.max(np.abs(thetas - switched_reference())) < REFERENCE_TOLERANCE
+    never = ref.solve(lambda a, b: ref.constant(0.0), [], Y0, SCENE["duration"], ClutchReference(k=0.0))
     assert abs(never.y(SCENE["duration"])[0] - thetas[-1, 0]) > 1e-4  # the engaged law made the difference
     # reset: the mode back to its declared initial value, and the same run again, bit for bit
     clutch_of(sim).mode = ENGAGED
@@ -172,3 +180,17 @@ def test_friction_lock_lives_in_the_runs_home() -> None:
     assert locked == still  # locked exactly where the step ends at rest
     assert not any(m for m, was_locked in zip(moved[1:], locked) if was_locked)  # and it stays where it locked
     assert all(locked[len(locked) // 2:]) and not all(locked)  # through the torque drop at 0.5 s
+
+
+def test_dop853_restarts_its_solution_when_a_new_elements_mode_changes() -> None:
+    """Our DOP853 keeps its internal solution across output steps; the clutch, declared in this file alone,
+    switches its law between two of them. The integrator restarts from the output where the system's mode
+    key (`FingerSystem.mode_key`, the clutch's `OwnModes.mode_key`) changed, as it does for the drive and
+    stick–slip friction, with no line naming the clutch: the run then matches the tight solve of the
+    switched law to the integrator's own tolerance. (Continuing the open-clutch solution past the switch
+    misses it by 0.06 rad.)"""
+    scene = scene_from_dict({**SCENE, "integrator": {"method": "dop853", "dt": 1e-3}})
+    sim = Simulator(scene)
+    assert sim.method == "dop853" and len(sim.system.mode_owners) == 1
+    thetas, _ = run(sim)
+    assert np.max(np.abs(thetas - switched_reference())) < DOP853_TOLERANCE
