@@ -147,11 +147,14 @@ class EventStep:
             if fn is _AT_REST:
                 return self._rest(sim, value, flags, k)
         status, q, v, estimate, end = self._call(self._ws, k * dt, (k + 1) * dt, value, flags)  # (floats, an int)
+        last = q  # the solution's last output, which the next step may continue
         if status != self._ok:
             if status != self._settled and status != self._ended and status != self._rested:
                 return self._decline(integ, fn, status == self._event, continues)
             self.settled += 1  # crossings located (and impacts applied) and stepped past here
             self.count_impacts(sim)
+            if status == self._ended or status == self._rested:  # its state is not the solution's last output
+                last = None
             if status == self._rested:
                 sim._resting = sim._gaps[int(self._st[self._rest_gap])]  # noqa: SLF001  (`simulation.impact.impact`)
                 v = ZERO
@@ -165,8 +168,7 @@ class EventStep:
                 estimates = integ._estimates = dict(list(estimates.items())[-KEEP_OUTPUTS:])  # noqa: SLF001
             estimates[q] = estimate
         sim.q, sim.v, sim.torque, sim.step_index = q, v, end, k + 1
-        # the state of a step a crossing ended, or at rest, is not the solution's last output
-        self._q, self._v = (None if status == self._ended or status == self._rested else q), v
+        self._q, self._v = last, v
         self.taken += 1
         return _new_state(self._state, ((k + 1) * dt, q, v))
 
