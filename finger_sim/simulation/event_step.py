@@ -59,6 +59,8 @@ WIDTH = 6
 ZERO = (0.0, 0.0, 0.0)
 #: State(t, q, v) without the NamedTuple's Python-level __new__ (as `Simulator.step`'s lean path).
 _new_state = tuple.__new__
+#: `EventStep._prepare`'s answer for a step resting on a stop (`EventStep._rest` takes it).
+_AT_REST = object()
 #: The compiled module → `common_step`'s entry point (its argument types never change: looked up once,
 #: ≈ 0.3 ms, not at every Simulator's construction).
 _ENTRY_POINTS: dict[Any, Any] = {}
@@ -98,6 +100,8 @@ class EventStep:
         self._stays = compiled.stays_at_rest
         self._x = slice(compiled.X, compiled.X + WIDTH)
         self._same, self._at_last = compiled.SAME, compiled.AT_LAST
+        #: the flags of the common step: continuing the kernel's last output under the same function, located
+        self._continuing = compiled.SAME | compiled.AT_LAST | compiled.LOCATE
         #: the scene's torque when it is a constant (its steps may run here), else None
         self._constant = sim.scene.torque if type(sim.scene.torque) is Constant else None
         self._constant_value = float(self._constant.value) if self._constant is not None else 0.0
@@ -122,9 +126,60 @@ class EventStep:
         """Take `sim.step(torque)` in the kernel: the state after it (the Simulator's state, torque and
         step index set); None: Python must take it (the integrator is then up to date)."""
         integ = sim.integrator
-        if not self.claim(integ):
-            return None
         k, dt = sim.step_index, sim.dt
+        # The common step continues the kernel's own last output under the function it stepped under (the
+        # scene's constant torque, or the same held value): what `_prepare` would find, decided at once.
+        if torque is None:
+            fn, value = self._constant, self._constant_value
+        elif type(torque) is float and (held := sim._held) is not None and held[0] == torque:  # noqa: SLF001
+            fn, value = held[1], torque
+        else:
+            fn = None
+        if (fn is not None and integ._torque is fn and sim.q is self._q and sim.v is self._v  # noqa: SLF001
+                and self._holds and self.locates and integ is self._integ and integ._last is self._token  # noqa: SLF001
+                and (self._token is not None or _untouched(integ))
+                and ((at := sim._rest_at) is None or not sim._mode_list[at])):  # noqa: SLF001
+            flags, continues = self._continuing, True
+        else:
+            fn, value, flags, continues = self._prepare(sim, integ, torque, k, dt)
+            if fn is None:
+                return None
+            if fn is _AT_REST:
+                return self._rest(sim, value, flags, k)
+        status, q, v, estimate, end = self._call(self._ws, k * dt, (k + 1) * dt, value, flags)  # (floats, an int)
+        last = q  # the solution's last output, which the next step may continue
+        if status != self._ok:
+            if status != self._settled and status != self._ended and status != self._rested:
+                return self._decline(integ, fn, status == self._event, continues)
+            self.settled += 1  # crossings located (and impacts applied) and stepped past here
+            self.count_impacts(sim)
+            if status == self._ended or status == self._rested:  # its state is not the solution's last output
+                last = None
+            if status == self._rested:
+                sim._resting = sim._gaps[int(self._st[self._rest_gap])]  # noqa: SLF001  (`simulation.impact.impact`)
+                v = ZERO
+        self._moved = True
+        integ._torque = fn  # noqa: SLF001
+        if integ._deferred:  # noqa: SLF001  (a stretch's blocks: kept deferred, the dict not built)
+            integ.store_estimate(q, estimate)
+        else:  # `DormandPrince853.store_estimate`, inline
+            estimates = integ._settled  # noqa: SLF001
+            if len(estimates) >= MAX_OUTPUTS:
+                estimates = integ._estimates = dict(list(estimates.items())[-KEEP_OUTPUTS:])  # noqa: SLF001
+            estimates[q] = estimate
+        sim.q, sim.v, sim.torque, sim.step_index = q, v, end, k + 1
+        self._q, self._v = last, v
+        self.taken += 1
+        return _new_state(self._state, ((k + 1) * dt, q, v))
+
+    def _prepare(self, sim: Simulator, integ: DormandPrince853, torque: Profile | float | None, k: int,
+                 dt: float) -> tuple[Any, float, int, bool]:
+        """For step k: (the torque function Python's step integrates under, the held command in N·m,
+        `common_step`'s flags, whether Python's step would integrate under that function itself rather than a
+        new segment's), the solution taken over into the arrays; fn None: Python takes the step; fn _AT_REST:
+        the finger rests on a stop (`_rest`)."""
+        if not self.claim(integ):
+            return None, 0.0, 0, False
         flags = 0
         continues = True  # Python's step integrates under fn itself (not a new segment's function)
         if torque is None and self._constant is not None:
@@ -141,45 +196,21 @@ class EventStep:
             fn = held[1]
         if fn is None:  # a profile's step that Python takes
             self.release()
-            return None
+            return None, 0.0, 0, False
         at = sim._rest_at  # noqa: SLF001  (the stop's rest mode: `Simulator._resting`, read inline)
         if at is not None and sim._mode_list[at]:  # noqa: SLF001
-            return self._rest(sim, value, flags, k)
+            return _AT_REST, value, flags, continues
         if not self._holds:
             self._take_over(integ)
         if fn is integ._torque:  # noqa: SLF001
             flags |= self._same
-        q, v = sim.q, sim.v
-        if q is self._q and v is self._v:
+        if sim.q is self._q and sim.v is self._v:
             flags |= self._at_last
         else:  # a state the kernel did not produce
-            self._st[self._x] = (*q, *v)
+            self._st[self._x] = (*sim.q, *sim.v)
         if continues and self.locates:
             flags |= self._locate
-        status, q, v, estimate, end = self._call(self._ws, k * dt, (k + 1) * dt, value, flags)  # (floats, an int)
-        if status != self._ok:
-            if status != self._settled and status != self._ended and status != self._rested:
-                return self._decline(integ, fn, status == self._event, continues)
-            self.settled += 1  # crossings located (and impacts applied) and stepped past here
-            self.count_impacts(sim)
-            if status == self._rested:
-                sim._resting = sim._gaps[int(self._st[self._rest_gap])]  # noqa: SLF001  (`simulation.impact.impact`)
-                v = ZERO
-        self._moved = True
-        integ._torque = fn  # noqa: SLF001
-        if integ._deferred:  # noqa: SLF001  (a stretch's blocks: kept deferred, the dict not built)
-            integ.store_estimate(q, estimate)
-        else:  # `DormandPrince853.store_estimate`, inline
-            estimates = integ._settled  # noqa: SLF001
-            if len(estimates) >= MAX_OUTPUTS:
-                estimates = integ._estimates = dict(list(estimates.items())[-KEEP_OUTPUTS:])  # noqa: SLF001
-            estimates[q] = estimate
-        sim.q, sim.v, sim.torque, sim.step_index = q, v, end, k + 1
-        self._q, self._v = q, v
-        if status == self._ended or status == self._rested:  # its state is not the solution's last output
-            self._q = None
-        self.taken += 1
-        return _new_state(self._state, ((k + 1) * dt, q, v))
+        return fn, value, flags, continues
 
     def count_impacts(self, sim: Simulator) -> None:
         """Add the stop impacts the kernel applied since the last count to `sim.impacts`."""

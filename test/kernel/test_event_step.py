@@ -101,6 +101,34 @@ def test_resets_a_state_set_from_outside_and_mixed_torques_equal_the_python_step
     assert assert_same(scene, command, between) > 0.5
 
 
+def test_the_common_steps_shortcut_gives_way_to_every_change_between_steps():
+    """`EventStep.step` continues its last output at once when nothing changed since; each change below
+    (the location switched off and on, a held value as another number type, the same value, the scene's
+    torque again, a state set from outside) takes the full preparation, as the Python step would see it."""
+    scene = load_scene(CONFIG / "grasp_impact.yaml")
+
+    def command(k, sim):
+        if k % 10 == 3:
+            return np.float64(0.001)  # not a float: the held value is converted, as `Simulator.step` does
+        if k % 10 in (4, 5):
+            return 0.001  # the same held value: its function object is kept
+        return None
+
+    located = []  # the compiled run's (whether the kernel may locate, the crossings it located so far) before each step
+
+    def between(k, sim):
+        events = sim._event_step
+        if events is not None:
+            events.locates = k % 25 < 20  # crossings handed over to Python for 5 steps in 25
+            located.append((events.locates, events.settled))
+        if k == 70:
+            sim.q, sim.v = tuple(list(sim.q)), tuple(list(sim.v))  # equal values, not the kernel's output objects
+
+    assert assert_same(scene, command, between) > 0.5
+    assert all(after == before for (may, before), (_, after) in zip(located, located[1:]) if not may)
+    assert located[-1][1] > 0  # and it located crossings itself where it might
+
+
 #: Torque profiles stepped by the kernel: smooth ones evaluated at every stage, piecewise-constant ones
 #: held on each segment (switches inside a step go to Python). Levels near each scene's own torque.
 @pytest.mark.parametrize("profile", sorted(PROFILES))
