@@ -261,32 +261,9 @@ def rk_step_tuple(m, tab, t, q, v, h, taus):
 
 
 @njit(**LAW)
-def all_finite(x):
-    """Whether every entry of the 1-D array x is finite (`np.isfinite(x).all()` without its temporary array)."""
-    for i in range(x.shape[0]):
-        if not math.isfinite(x[i]):
-            return False
-    return True
-
-
-@njit(**JIT)
-def dop853_output(m, t_old, h, y_old, dense, t, out):
-    """The dense output at t projected (`dop853_dense`, then `project`): (status, q, q') as tuples."""
-    dop853_dense(t_old, h, y_old, dense, t, out)
-    status = project(m, out) if all_finite(out) else NON_FINITE
-    return status, (out[0], out[1], out[2]), (out[3], out[4], out[5])
-
-
-@njit(**JIT)
-def dop853_output_rows(m, t_old, h, rows, y_old, dense, t):
-    """`dop853_output` from the rows of one 2-D array (rows[y_old]: y_old; rows[dense:dense + 7]: the dense
-    output's coefficients), on scalars: no view of rows, no output array. (status, q, q') as tuples, the
-    unprojected state where the status is not OK."""
-    x = (t - t_old) / h
-    y0, y1, y2 = (dense_component(x, rows, dense, 0) + rows[y_old, 0], dense_component(x, rows, dense, 1)
-                  + rows[y_old, 1], dense_component(x, rows, dense, 2) + rows[y_old, 2])
-    y3, y4, y5 = (dense_component(x, rows, dense, 3) + rows[y_old, 3], dense_component(x, rows, dense, 4)
-                  + rows[y_old, 4], dense_component(x, rows, dense, 5) + rows[y_old, 5])
+def projected_output(m, y0, y1, y2, y3, y4, y5):
+    """A dense output's state (q, q') checked finite and projected (`project_state`): (status, q, q') as
+    tuples, the unprojected state where the status is not OK (NON_FINITE or the projection's)."""
     if not (math.isfinite(y0) and math.isfinite(y1) and math.isfinite(y2) and math.isfinite(y3) and math.isfinite(y4)
             and math.isfinite(y5)):
         return NON_FINITE, (y0, y1, y2), (y3, y4, y5)
@@ -297,11 +274,35 @@ def dop853_output_rows(m, t_old, h, rows, y_old, dense, t):
 
 
 @njit(**JIT)
+def dop853_output(m, t_old, h, y_old, dense, t, out):
+    """The dense output at t projected (`dop853_dense`, then `projected_output`): (status, q, q') as tuples;
+    out (6) holds the state, projected where the status is OK."""
+    dop853_dense(t_old, h, y_old, dense, t, out)
+    status, q, v = projected_output(m, out[0], out[1], out[2], out[3], out[4], out[5])
+    if status == OK:
+        out[0], out[1], out[2], out[3], out[4], out[5] = q[0], q[1], q[2], v[0], v[1], v[2]
+    return status, q, v
+
+
+@njit(**JIT)
+def dop853_output_rows(m, t_old, h, rows, y_old, dense, t):
+    """`dop853_output` from the rows of one 2-D array (rows[y_old]: y_old; rows[dense:dense + 7]: the dense
+    output's coefficients), on scalars: no view of rows, no output array. (status, q, q') as tuples, the
+    unprojected state where the status is not OK."""
+    x = (t - t_old) / h
+    return projected_output(m, dense_component(x, rows, dense, 0) + rows[y_old, 0],
+                            dense_component(x, rows, dense, 1) + rows[y_old, 1],
+                            dense_component(x, rows, dense, 2) + rows[y_old, 2],
+                            dense_component(x, rows, dense, 3) + rows[y_old, 3],
+                            dense_component(x, rows, dense, 4) + rows[y_old, 4],
+                            dense_component(x, rows, dense, 5) + rows[y_old, 5])
+
+
+@njit(**JIT)
 def dop853_outputs(m, t_old, h, y_old, dense, targets, out):
     """`dop853_output` at every time of `targets` into the rows of out (len(targets) × 6). Status."""
     for n in range(targets.shape[0]):
-        dop853_dense(t_old, h, y_old, dense, targets[n], out[n])
-        status = project(m, out[n]) if all_finite(out[n]) else NON_FINITE
+        status, _, _ = dop853_output(m, t_old, h, y_old, dense, targets[n], out[n])
         if status != OK:
             return status
     return OK
