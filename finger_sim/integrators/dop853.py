@@ -25,7 +25,7 @@ import bisect
 import importlib.util
 import math
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from types import ModuleType
@@ -147,6 +147,10 @@ class DormandPrince853(Integrator):
         #: blocks of estimates not yet in it (`defer_estimates`), oldest first, and their row count
         self._deferred: list[tuple[np.ndarray, Vec3, float]] = []
         self._deferred_rows = 0
+        #: where estimates of this integrator's outputs are recorded outside it (the compiled common step's rows,
+        #: `simulation.event_step`), or None: called with the integrator before any estimate is read or stored
+        #: here, it hands them over, oldest first (n × 4: q, estimate in rad), and forgets them
+        self.estimates_elsewhere: Callable[[DormandPrince853], np.ndarray] | None = None
         #: (t, q, q') the internal solution started from at its last restart, or continued from
         self._origin: tuple[float, Vec3, Vec3] | None = None
         #: accepted internal steps since then, (t_old, h_old, y_old, dense, err_old, err), and their starts
@@ -165,6 +169,8 @@ class DormandPrince853(Integrator):
         led to it, each bounded as √6·norm·(atol + rtol·|θ|), carried through restarts from an
         earlier output (an impact keeps q). Linear accumulation: error growth or decay along the
         flow is not modelled."""
+        if self.estimates_elsewhere is not None:
+            self.collect_estimates()
         for block, last_q, estimate in reversed(self._deferred):  # the newest entry for q wins, as in the dict
             if last_q == q:
                 return estimate
@@ -177,6 +183,8 @@ class DormandPrince853(Integrator):
     def _estimates(self) -> dict[Vec3, float]:
         """Output q → estimated θ error there (rad), insertion-ordered, at most MAX_OUTPUTS: the deferred
         blocks settled into it first."""
+        if self.estimates_elsewhere is not None:
+            self.collect_estimates()
         if self._deferred:
             self._settle()
         return self._settled
@@ -190,12 +198,27 @@ class DormandPrince853(Integrator):
         reads them as they are): rows (n × 4: q, estimate in rad) then the last output q with `estimate`,
         the same entries as n + 1 calls of `store_estimate`. False (nothing recorded): they would reach
         MAX_OUTPUTS, whose drops the caller applies to the dict."""
+        if self.estimates_elsewhere is not None:
+            self.collect_estimates()
+        return self._defer(rows, q, estimate)
+
+    def _defer(self, rows: np.ndarray, q: Vec3, estimate: float) -> bool:
+        """`defer_estimates` without collecting the estimates recorded elsewhere first."""
         count = len(rows) + 1
         if len(self._settled) + self._deferred_rows + count > MAX_OUTPUTS:
             return False
         self._deferred.append((rows, q, estimate))
         self._deferred_rows += count
         return True
+
+    def collect_estimates(self) -> None:
+        """The estimates recorded elsewhere (`estimates_elsewhere`) into this integrator's, as one `store_estimate`
+        per output in their order: deferred as a block where no drop is due, else stored one by one."""
+        rows = self.estimates_elsewhere(self)  # type: ignore[misc]
+        if len(rows) > 1 and self._defer(rows[:-1], tuple(rows[-1, :3].tolist()), float(rows[-1, 3])):
+            return
+        for a, b, c, estimate in rows.tolist():
+            self._store((a, b, c), estimate)
 
     def _settle(self) -> None:
         """The deferred blocks into the dict, oldest first (none reaches MAX_OUTPUTS: `defer_estimates`)."""
@@ -269,11 +292,19 @@ class DormandPrince853(Integrator):
 
     def store_estimate(self, q: Vec3, estimate: float) -> None:
         """Record the estimate (rad) at an output q; at MAX_OUTPUTS the oldest are dropped down to KEEP_OUTPUTS."""
-        if self._deferred and self.defer_estimates(NO_ROWS, q, estimate):  # after the deferred ones, in order
+        if self.estimates_elsewhere is not None:
+            self.collect_estimates()
+        self._store(q, estimate)
+
+    def _store(self, q: Vec3, estimate: float) -> None:
+        """`store_estimate` without collecting the estimates recorded elsewhere first."""
+        if self._deferred and self._defer(NO_ROWS, q, estimate):  # after the deferred ones, in order
             return
-        if len(self._estimates) >= MAX_OUTPUTS:
-            self._estimates = dict(list(self._estimates.items())[-KEEP_OUTPUTS:])
-        self._estimates[q] = estimate
+        if self._deferred:
+            self._settle()
+        if len(self._settled) >= MAX_OUTPUTS:
+            self._estimates = dict(list(self._settled.items())[-KEEP_OUTPUTS:])
+        self._settled[q] = estimate
 
     def run_grid(self, times: np.ndarray, q: Vec3, v: Vec3, torque: TorqueFn) -> np.ndarray:
         """Outputs at times[1:] from (q, q') at times[0], all under one smooth `torque`: the (n, 6)

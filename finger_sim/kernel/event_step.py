@@ -16,13 +16,18 @@ Everything the call reads and keeps is one float64 array (one argument: numba's 
 about 0.1 µs per argument), which `simulation.event_step` moves to and from the integrator's
 attributes when Python steps:
 
-    [n_model, n_plan, n_gaps, the model (the integrator's), the gap plan (`gap_screen`), st, arr, work]
+    [n_model, n_plan, n_gaps, the model (the integrator's), the gap plan (`gap_screen`), st, arr, work,
+     estimates, log]
     st: the scalars T … X below, the stage torques (N_NODES), a copy of the scalars, then the torque
-        profile the PROFILE flag steps under (`inputs.profile_array`, zero-padded to PROFILE_SIZE) and
-        a held value's code (`inputs.HELD`);
+        profile the PROFILE flag steps under (`inputs.profile_array`, zero-padded to PROFILE_SIZE), a
+        held value's code (`inputs.HELD`), the count of steps `common_step` took (TAKEN) and of its
+        estimate rows not yet read (ESTIMATE_COUNT);
     arr (ROWS × 6): y, f, y_old, dense (7 rows), the attempt's stages (16), y_new, then a copy of y, f,
         y_old and dense;
-    work (4 × n_gaps): the gap screen's.
+    work (4 × n_gaps): the gap screen's;
+    estimates (ESTIMATE_ROWS × 4): q and the θ error estimate (rad) of each output `common_step` gave, oldest
+        first, which `DormandPrince853.error_estimate` reads when asked (`simulation.event_step`);
+    log: the last step's internal steps (`internal_steps.record`).
 """
 
 from __future__ import annotations
@@ -45,8 +50,8 @@ from finger_sim.kernel.internal_steps import (BRANCH, CONTINUED, COUNT, HISTORY_
 from finger_sim.kernel import event_crossing  # noqa: E402
 from finger_sim.kernel.event_checks import EVENT_TOLERANCE  # noqa: E402
 from finger_sim.kernel.locate_event import _estimate  # noqa: E402
-from finger_sim.kernel.numerics import (JIT, OK, _rhs, accelerations, dop853_output_rows, dop853_theta_error,  # noqa: E402
-                                        torque_at)
+from finger_sim.kernel.numerics import (JIT, LAW, OK, _rhs, accelerations, dop853_output_rows,  # noqa: E402
+                                        dop853_theta_error, torque_at)
 
 #: `common_step`'s answer when Python must take the step.
 PYTHON = 1
@@ -73,7 +78,14 @@ SAVED = TAUS + N_NODES
 #: The profile's slot (code and up to three parameters), then the held value's code.
 PROFILE_AT, PROFILE_SIZE = SAVED + N_SCALARS, 4
 HELD_AT = PROFILE_AT + PROFILE_SIZE
-ST_SIZE = HELD_AT + 1
+#: Steps `common_step` took (its answers but PYTHON and EVENT), and its estimate rows not yet read.
+TAKEN, ESTIMATE_COUNT = HELD_AT + 1, HELD_AT + 2
+ST_SIZE = HELD_AT + 3
+#: The estimate rows (q, estimate): as many outputs as `common_step` records before they are read. When they are
+#: full it adds FULL to its status, and the caller reads them before the next call.
+ESTIMATE_ROWS, ESTIMATE_WIDTH = 512, 4
+ESTIMATES_SIZE = ESTIMATE_ROWS * ESTIMATE_WIDTH
+FULL = 16
 #: The rows of arr.
 Y, F, Y_OLD, DENSE, KK, Y_NEW = 0, 1, 2, 3, 10, 26
 KEPT = KK  # y, f, y_old and dense: what a step changes of the solution
@@ -118,10 +130,10 @@ restart_step = njit(**JIT)(dop853.restart_step)
 
 def workspace_size(n_model: int, n_plan: int, n_gaps: int) -> int:
     """The length of a workspace (module docstring)."""
-    return HEADER + n_model + n_plan + ST_SIZE + ROWS * 6 + 4 * n_gaps + HISTORY_SIZE
+    return HEADER + n_model + n_plan + ST_SIZE + ROWS * 6 + 4 * n_gaps + ESTIMATES_SIZE + HISTORY_SIZE
 
 
-@njit(**JIT)
+@njit(**LAW)
 def log_of(ws):
     """The workspace's log of the last step's internal steps (`internal_steps.record`): its last part."""
     return ws[ws.shape[0] - HISTORY_SIZE:]
@@ -135,7 +147,7 @@ def entry_point(ws):  # type: ignore[no-untyped-def]
     return _entry_point(common_step, args)
 
 
-@njit(**JIT)
+@njit(**LAW)
 def parts(ws):
     """The workspace's views: (model, gap plan, st, arr, work); sliced once per call of a caller that steps many
     times (`event_run.run`), passed whole to the step with row indices (a view made per step costs reference
@@ -157,13 +169,24 @@ def parts(ws):
 def common_step(ws, t, t1, command, flags):
     """The step from t to t1 (s) under the held `command` (N·m) or, with flag PROFILE, st's smooth profile,
     as `Simulator.step` takes a step with no gap crossing, on the workspace ws (module docstring); flags:
-    SAME, AT_LAST, PROFILE (or'ed). Returns (status, q1, q1', the error estimate at q1 in rad, τ at t1
-    in N·m): OK; or PYTHON with ws as it was."""
+    SAME, AT_LAST, PROFILE, LOCATE (or'ed). Returns (status, q1, q1', τ at t1 in N·m): OK (SETTLED, ENDED,
+    RESTED); or PYTHON with ws as it was, or EVENT. A step taken (not PYTHON, not EVENT) is counted in
+    st[TAKEN] and its output's θ error estimate (rad) appended to the estimate rows with q1; the status has
+    FULL added when that fills them (the caller reads them, `ESTIMATE_COUNT` back to 0, before the next call)."""
     m, plan, st, arr, work = parts(ws)
-    return step_on(m, plan, st, arr, work, log_of(ws), profile_of(st, flags), t, t1, command, flags)
+    status, q1, v1, estimate, end = step_on(m, plan, st, arr, work, log_of(ws), profile_of(st, flags), t, t1,
+                                            command, flags)
+    if status == PYTHON or status == EVENT:
+        return status, q1, v1, end
+    st[TAKEN] += 1.0
+    n = int(st[ESTIMATE_COUNT])
+    o = ws.shape[0] - HISTORY_SIZE - ESTIMATES_SIZE + ESTIMATE_WIDTH * n  # (indices: no view made per step)
+    ws[o], ws[o + 1], ws[o + 2], ws[o + 3] = q1[0], q1[1], q1[2], estimate
+    st[ESTIMATE_COUNT] = n + 1
+    return (status + FULL if n + 1 == ESTIMATE_ROWS else status), q1, v1, end
 
 
-@njit(**JIT)
+@njit(**LAW)
 def profile_of(st, flags):
     """The torque the step runs under, as `torque_at` reads it: st's profile with flag PROFILE, else the held
     value's code."""

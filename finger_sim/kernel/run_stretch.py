@@ -9,8 +9,8 @@ stop the kernel does not decide), and at the last step before a switch of a
 piecewise-constant profile; that step goes through `sim.step()`, and the next stretch follows (taking
 the solution over from Python's step as `EventStep.step` does).
 
-What `EventStep.step` does after each of its steps is done once per stretch: the Simulator's state,
-torque and step index, the integrator's torque function and its estimates (`DormandPrince853.defer_estimates`,
+What `EventStep.step` does after each of its steps is done once per stretch (`EventStep._took`): the
+Simulator's state, torque and step index, the integrator's torque function; and its estimates (`DormandPrince853.defer_estimates`,
 which builds the dict of estimates only when it is read; `_remember_all` where a drop is due).
 """
 
@@ -90,13 +90,10 @@ def _stretch(sim: Simulator, events: EventStep, compiled: Any, rows: np.ndarray,
         xs[:count] = rows[:count, :6]
         last = rows[count - 1].tolist()
         q, v = (last[0], last[1], last[2]), (last[3], last[4], last[5])
-        events._moved = True  # noqa: SLF001
-        integ._torque = fn  # noqa: SLF001
         block = rows[:count - 1, ESTIMATE_COLUMNS]  # (a copy: rows is the next stretch's buffer)
         if not integ.defer_estimates(block, q, last[6]):  # the dict is built when read, if ever
             _remember_all(integ, rows[:count], q, last[6])
-        sim.q, sim.v, sim.torque, sim.step_index = q, v, end, k + count
-        events._q, events._v = q, v  # noqa: SLF001
+        events._took(sim, integ, fn, k + count - 1, (k + count) * dt, q, v, end, q)  # noqa: SLF001  (as its last step)
         events.taken += count
     return count
 

@@ -7,7 +7,8 @@ takes a step that holds no crossing in one kernel call on the same numbers: the 
 to the integrator's attributes before Python takes a step (a possible crossing, a release from a
 stop, a switch of a piecewise-constant profile inside the step, a profile without a compiled form),
 so that Python's step, its event location included, runs exactly as it always
-did. The estimates of `error_estimate` are written at every step.
+did. The estimates of `error_estimate` are recorded by the kernel at every step (its estimate rows) and moved
+into the integrator when it reads or stores one (`DormandPrince853.estimates_elsewhere`).
 
 A step whose end gaps show a possible contact onset or release is taken whole in the same call where
 Python's step would integrate it under the same function (a held command, a constant or smooth profile):
@@ -45,7 +46,7 @@ import numpy as np
 from finger_sim import stepper_slot
 from finger_sim.inputs import BREAK_EPS, HELD, PIECEWISE_CONSTANT, Constant, Profile, profile_array
 from finger_sim.integrators.base import HeldTorque
-from finger_sim.integrators.dop853 import KEEP_OUTPUTS, MAX_OUTPUTS, DormandPrince853
+from finger_sim.integrators.dop853 import NO_ROWS, DormandPrince853
 from finger_sim.simulation import event_locate
 from finger_sim.simulation.event_handover import hand_over
 from finger_sim.simulation.event_locate import CompiledLocate
@@ -86,6 +87,11 @@ class EventStep:
         o += compiled.ST_SIZE
         self._arr = ws[o:o + compiled.ROWS * WIDTH].reshape(compiled.ROWS, WIDTH)
         self._log = ws[len(ws) - compiled.internal_steps.HISTORY_SIZE:]  # `kernel.event_step.log_of`
+        end = len(ws) - compiled.internal_steps.HISTORY_SIZE
+        #: the outputs' (q, estimate) rows the kernel records (`kernel.event_step.common_step`), and their count
+        self._estimate_rows = ws[end - compiled.ESTIMATES_SIZE:end].reshape(compiled.ESTIMATE_ROWS,
+                                                                            compiled.ESTIMATE_WIDTH)
+        self._estimate_count, self._full, self._taken_at = compiled.ESTIMATE_COUNT, compiled.FULL, compiled.TAKEN
         self._st[compiled.RTOL], self._st[compiled.ATOL] = integ.rtol, integ.atol
         self._st[compiled.RESTITUTION] = sim.scene.restitution  # the stops' (`kernel.event_step._impact`)
         self._impacts, self._rest_gap, self._rested = compiled.IMPACTS, compiled.REST_GAP, compiled.RESTED
@@ -100,53 +106,96 @@ class EventStep:
         self._stays = compiled.stays_at_rest
         self._x = slice(compiled.X, compiled.X + WIDTH)
         self._same, self._at_last = compiled.SAME, compiled.AT_LAST
+        self._locate, self._settled, self._ended = compiled.LOCATE, compiled.SETTLED, compiled.ENDED
         #: the flags of the common step: continuing the kernel's last output under the same function, located
+        #: while `locates`
         self._continuing = compiled.SAME | compiled.AT_LAST | compiled.LOCATE
-        #: the scene's torque when it is a constant (its steps may run here), else None
+        #: the scene's torque when it is a constant (its steps may run here), else None; its value (N·m); both
         self._constant = sim.scene.torque if type(sim.scene.torque) is Constant else None
         self._constant_value = float(self._constant.value) if self._constant is not None else 0.0
+        self._scene_torque = (self._constant, self._constant_value)
         self._integ: DormandPrince853 | None = None  # the integrator the Simulator's last step left
         self._token: tuple | None = None  # and its last output then
         self._holds = False  # the arrays hold the solution (the integrator's attributes are behind)
         self._moved = False  # and the kernel has stepped it since it took it over
-        self._q: tuple | None = None  # the (q, q') tuples of the kernel's last output
+        #: the (q, q') tuples of the kernel's last output while the arrays hold the solution (else None): the
+        #: Simulator's state is still that output where `sim.q is _q`
+        self._q: tuple | None = None
         self._v: tuple | None = None
-        #: steps taken here (the rest went to Python), for tests and benchmarks
-        self.taken = 0
-        #: whether the kernel locates a step's contact onsets and releases itself (`kernel.event_step._settle`);
-        #: False: it hands every possible crossing to Python (`hand_over`), as the tests of that path set
-        self.locates = True
+        self._taken = 0  # steps taken here outside `common_step`'s count (`_rest`'s, a stretch's)
         #: the steps of `taken` whose crossings the kernel located, for tests and benchmarks
         self.settled = 0
-        self._locate, self._settled, self._ended = compiled.LOCATE, compiled.SETTLED, compiled.ENDED
         #: the compiled location of a crossing (`simulation.event_locate`), or None: Python's
         self.locate: CompiledLocate | None = None
+
+    @property
+    def taken(self) -> int:
+        """Steps taken here (the rest went to Python), for tests and benchmarks: `common_step`'s count and the others."""
+        return self._taken + int(self._st[self._taken_at])
+
+    @taken.setter
+    def taken(self, value: int) -> None:
+        self._taken, self._st[self._taken_at] = value, 0.0
+
+    @property
+    def locates(self) -> bool:
+        """Whether the kernel locates a step's contact onsets and releases itself (`kernel.event_step._settle`);
+        False: it hands every possible crossing to Python (`hand_over`), as the tests of that path set."""
+        return bool(self._continuing & self._locate)
+
+    @locates.setter
+    def locates(self, value: bool) -> None:
+        self._continuing = self._same | self._at_last | (self._locate if value else 0)
 
     def step(self, sim: Simulator, torque: Profile | float | None) -> State | None:
         """Take `sim.step(torque)` in the kernel: the state after it (the Simulator's state, torque and
         step index set); None: Python must take it (the integrator is then up to date)."""
-        integ = sim.integrator
-        k, dt = sim.step_index, sim.dt
         # The common step continues the kernel's own last output under the function it stepped under (the
-        # scene's constant torque, or the same held value): what `_prepare` would find, decided at once.
+        # scene's constant torque, or the same held value): what `_prepare` would find, decided at once
+        # (`_q` is None unless the arrays hold the solution, whose last output has a token then; the flags
+        # follow `locates`).
         if torque is None:
-            fn, value = self._constant, self._constant_value
+            fn, value = self._scene_torque
         elif type(torque) is float and (held := sim._held) is not None and held[0] == torque:  # noqa: SLF001
             fn, value = held[1], torque
         else:
-            fn = None
-        if (fn is not None and integ._torque is fn and sim.q is self._q and sim.v is self._v  # noqa: SLF001
-                and self._holds and self.locates and integ is self._integ and integ._last is self._token  # noqa: SLF001
-                and (self._token is not None or _untouched(integ))
+            return self._prepared_step(sim, torque)
+        integ = sim.integrator
+        if not (fn is not None and sim.q is self._q and sim.v is self._v and integ is self._integ
+                and integ._last is self._token and integ._torque is fn  # noqa: SLF001
                 and ((at := sim._rest_at) is None or not sim._mode_list[at])):  # noqa: SLF001
-            flags, continues = self._continuing, True
-        else:
-            fn, value, flags, continues = self._prepare(sim, integ, torque, k, dt)
-            if fn is None:
-                return None
-            if fn is _AT_REST:
-                return self._rest(sim, value, flags, k)
-        status, q, v, estimate, end = self._call(self._ws, k * dt, (k + 1) * dt, value, flags)  # (floats, an int)
+            return self._prepared_step(sim, torque)
+        k, dt = sim.step_index, sim.dt
+        t1 = (k + 1) * dt
+        status, q, v, end = self._call(self._ws, k * dt, t1, value, self._continuing)  # (floats, an int)
+        if status:  # not OK
+            return self._answered(sim, integ, fn, True, k, t1, status, q, v, end)
+        sim.q, sim.v, sim.torque, sim.step_index = q, v, end, k + 1
+        self._q, self._v = q, v
+        return _new_state(self._state, (t1, q, v))
+
+    def _prepared_step(self, sim: Simulator, torque: Profile | float | None) -> State | None:
+        """`step` after the full preparation (`_prepare`): any step but the common one."""
+        integ = sim.integrator
+        k, dt = sim.step_index, sim.dt
+        fn, value, flags, continues = self._prepare(sim, integ, torque, k, dt)
+        if fn is None:
+            return None
+        if fn is _AT_REST:
+            return self._rest(sim, value, flags, k)
+        t1 = (k + 1) * dt
+        status, q, v, end = self._call(self._ws, k * dt, t1, value, flags)
+        if status:
+            return self._answered(sim, integ, fn, continues, k, t1, status, q, v, end)
+        return self._took(sim, integ, fn, k, t1, q, v, end, q)
+
+    def _answered(self, sim: Simulator, integ: DormandPrince853, fn: Any, continues: bool, k: int, t1: float,
+                  status: int, q: tuple, v: tuple, end: float) -> State | None:
+        """`step` after `common_step` answered other than OK (`_prepare`'s `continues`; t1: the step's end, s):
+        the estimate rows read where full, crossings located here, or the step left to Python (None)."""
+        if status >= self._full:  # the estimate rows are full: into the integrator before the next call
+            status -= self._full
+            integ.collect_estimates()
         last = q  # the solution's last output, which the next step may continue
         if status != self._ok:
             if status != self._settled and status != self._ended and status != self._rested:
@@ -158,19 +207,21 @@ class EventStep:
             if status == self._rested:
                 sim._resting = sim._gaps[int(self._st[self._rest_gap])]  # noqa: SLF001  (`simulation.impact.impact`)
                 v = ZERO
+        return self._took(sim, integ, fn, k, t1, q, v, end, last)
+
+    def _took(self, sim: Simulator, integ: DormandPrince853, fn: Any, k: int, t1: float, q: tuple, v: tuple,
+              end: float, last: tuple | None) -> State:
+        """The Simulator's and the solution's state after a step the kernel took to t1 (s), ending at (q, q')
+        under τ = `end` (N·m); `last`: q if it is the solution's last output, else None. The first steps of a
+        solution the kernel started are written back to the integrator, whose last output is then the token
+        the next step checks (`step`)."""
         self._moved = True
         integ._torque = fn  # noqa: SLF001
-        if integ._deferred:  # noqa: SLF001  (a stretch's blocks: kept deferred, the dict not built)
-            integ.store_estimate(q, estimate)
-        else:  # `DormandPrince853.store_estimate`, inline
-            estimates = integ._settled  # noqa: SLF001
-            if len(estimates) >= MAX_OUTPUTS:
-                estimates = integ._estimates = dict(list(estimates.items())[-KEEP_OUTPUTS:])  # noqa: SLF001
-            estimates[q] = estimate
+        if self._token is None:
+            self._write_back(integ)
         sim.q, sim.v, sim.torque, sim.step_index = q, v, end, k + 1
         self._q, self._v = last, v
-        self.taken += 1
-        return _new_state(self._state, ((k + 1) * dt, q, v))
+        return _new_state(self._state, (t1, q, v))
 
     def _prepare(self, sim: Simulator, integ: DormandPrince853, torque: Profile | float | None, k: int,
                  dt: float) -> tuple[Any, float, int, bool]:
@@ -226,6 +277,7 @@ class EventStep:
         if event and continues:
             hand_over(self, integ, fn)
             self._holds = self._moved = False
+            self._q = None
             return
         if event:  # Python integrates under a new function: the solution as before the step
             self._k.restore(self._ws)
@@ -239,9 +291,10 @@ class EventStep:
         if self.follows(integ):
             return True
         self._holds = self._moved = False
+        self._q = None
         if not _fresh(integ):
             return False
-        self._integ, self._token = integ, None
+        self._adopt(integ, None)
         return True
 
     def follows(self, integ: DormandPrince853) -> bool:
@@ -286,8 +339,30 @@ class EventStep:
 
     def taken_in_python(self, integ: DormandPrince853) -> None:
         """The Simulator took its last step in Python: the kernel may continue from `integ`'s solution."""
-        self._integ, self._token = integ, integ._last  # noqa: SLF001
+        self._adopt(integ, integ._last)  # noqa: SLF001
         self._holds = self._moved = False
+        self._q = None
+
+    def _adopt(self, integ: DormandPrince853, token: tuple | None) -> None:
+        """Follow `integ`'s solution, whose last output is `token` (None: a new one). Another integrator
+        followed until now gets the estimate rows recorded for it first; `integ` reads its own here
+        (`DormandPrince853.estimates_elsewhere`)."""
+        followed = self._integ
+        if followed is not integ:
+            if followed is not None:
+                followed.collect_estimates()
+            integ.estimates_elsewhere = self._recorded_estimates
+        self._integ, self._token = integ, token
+
+    def _recorded_estimates(self, integ: DormandPrince853) -> np.ndarray:
+        """The (q, estimate) rows the kernel recorded for `integ`'s outputs since last asked (n × 4, oldest
+        first), forgotten here; none for an integrator not followed now."""
+        st, at = self._st, self._estimate_count
+        n = int(st[at])
+        if not n or integ is not self._integ:
+            return NO_ROWS
+        st[at] = 0.0
+        return self._estimate_rows[:n].copy()
 
     def release(self) -> None:
         """Write the solution back to the integrator, if the kernel moved it, for Python to step."""
@@ -295,6 +370,7 @@ class EventStep:
         if self._moved and integ is not None:
             self._write_back(integ)
         self._holds = self._moved = False
+        self._q = None
 
     def _take_over(self, integ: DormandPrince853) -> None:
         """The integrator's solution into the arrays (`kernel.event_step`'s layout)."""

@@ -76,3 +76,36 @@ def test_a_stretched_run_reads_its_estimates_without_building_the_dict():
     assert sim.error_estimate == ref.error_estimate > 0.0
     assert sim.integrator._deferred  # and reading the last estimate left them so
     assert list(sim.integrator._estimates.items()) == list(ref.integrator._estimates.items())
+
+
+
+def test_the_kernels_estimate_rows_read_late_equal_the_estimates_read_at_every_step():
+    """The common step records each output's estimate in the kernel (`kernel.event_step.common_step`'s rows, 512
+    of them) and the integrator takes them in when it reads or stores one (`DormandPrince853.estimates_elsewhere`).
+    grasp_rigid's 1.6 s (> 3 × 512 kernel steps, past the rows' fill) stepped three times side by side: read never,
+    read every 300th step, and the Python step (`_event_step` switched off) read at every step. Every read equals
+    the Python step's; the estimate of every output read after the run equals the Python step's at that step;
+    the runs' whole tables (order and values) are equal, and stay so across a reset whose new integrator the
+    kernel follows next (the old one's rows reach it then)."""
+    scene = load_scene(CONFIG / "grasp_rigid.yaml").with_overrides(duration=1.6)
+    never, sometimes, ref = Simulator(scene), Simulator(scene), Simulator(scene)
+    ref._event_step = None
+    outputs = []
+    for k in range(scene.step_count):
+        state = ref.step()
+        assert never.step() == sometimes.step() == state
+        outputs.append((state.q, ref.error_estimate))
+        if k % 300 == 299:
+            assert sometimes.error_estimate == outputs[-1][1] > 0.0
+    assert never._event_step.taken > 0.9 * scene.step_count
+    assert never.integrator._deferred  # the late rows were taken in as blocks
+    assert [never.integrator.error_estimate(q) for q, _ in outputs] == [e for _, e in outputs]
+    assert list(never.integrator._estimates.items()) == list(sometimes.integrator._estimates.items())
+    old = never.integrator, sometimes.integrator
+    for sim in (never, sometimes, ref):
+        sim.reset()
+    for _ in range(50):
+        assert never.step() == sometimes.step() == ref.step()
+    assert never.error_estimate == ref.error_estimate
+    assert list(never.integrator._estimates.items()) == list(sometimes.integrator._estimates.items())
+    assert list(old[0]._estimates.items()) == list(old[1]._estimates.items())
