@@ -88,13 +88,20 @@ grip_update = compiled(grip.grip_update, pi_update=pi_update)
 
 
 @njit(**LAW)
+def gap_and_rate(geometry, v0, v1, v2):
+    """A candidate's gap −δ (m) and its rate ∂gap/∂q · q' (m/s) at q' = (v0, v1, v2) from its `geometry`
+    (`Contact.gaps`, `Contact.gap_gradient`)."""
+    d, _, _, nx, ny, j1x, j1y, j3x, j3y = geometry
+    (g0, g2), g1 = gap_gradient(nx, ny, j1x, j1y, j3x, j3y), 0.0
+    return -d, g0 * v0 + g1 * v1 + g2 * v2
+
+
+@njit(**LAW)
 def _store_state(acc, ctx, i, geometry):
     """gaps[i] = −δ (m) and rates[i] = ∂gap/∂q · q' (m/s) of candidate i; acc = (count, Σ F_n N) plus it."""
     gaps, rates, v0, v1, v2, k, e, dd = ctx
     d, _, _, nx, ny, j1x, j1y, j3x, j3y = geometry
-    gaps[i] = -d
-    (g0, g2), g1 = gap_gradient(nx, ny, j1x, j1y, j3x, j3y), 0.0
-    rates[i] = g0 * v0 + g1 * v1 + g2 * v2
+    gaps[i], rates[i] = gap_and_rate(geometry, v0, v1, v2)
     grip_force = acc[1]
     if d > 0.0:
         vx, vy = point_velocity(j1x, j1y, j3x, j3y, v0, v2)

@@ -142,7 +142,7 @@ def log_of(ws):
 def entry_point(ws):  # type: ignore[no-untyped-def]
     """`common_step`'s compiled entry for a workspace like ws and the Simulator's argument types (floats,
     an int), loaded (or compiled) now: it skips numba's type dispatch, as the lean path's `FastStepper.call`."""
-    args = (ws.copy(), 0.0, 1e-3, 0.0, 0)
+    args = (ws.copy(), 0, 1e-3, 0.0, 0)
     common_step(*args)  # no last output: answers PYTHON at once
     return _entry_point(common_step, args)
 
@@ -166,16 +166,16 @@ def parts(ws):
 
 
 @njit(**JIT)
-def common_step(ws, t, t1, command, flags):
-    """The step from t to t1 (s) under the held `command` (N·m) or, with flag PROFILE, st's smooth profile,
-    as `Simulator.step` takes a step with no gap crossing, on the workspace ws (module docstring); flags:
-    SAME, AT_LAST, PROFILE, LOCATE (or'ed). Returns (status, q1, q1', τ at t1 in N·m): OK (SETTLED, ENDED,
-    RESTED); or PYTHON with ws as it was, or EVENT. A step taken (not PYTHON, not EVENT) is counted in
+def common_step(ws, k, dt, command, flags):
+    """Step k, from t = k·dt to t1 = (k + 1)·dt (s), under the held `command` (N·m) or, with flag PROFILE, st's
+    smooth profile, as `Simulator.step` takes a step with no gap crossing, on the workspace ws (module
+    docstring); flags: SAME, AT_LAST, PROFILE, LOCATE (or'ed). Returns (status, q1, q1', τ at t1 in N·m): OK
+    (SETTLED, ENDED, RESTED); or PYTHON with ws as it was, or EVENT. A step taken (not PYTHON, not EVENT) is counted in
     st[TAKEN] and its output's θ error estimate (rad) appended to the estimate rows with q1; the status has
     FULL added when that fills them (the caller reads them, `ESTIMATE_COUNT` back to 0, before the next call)."""
     m, plan, st, arr, work = parts(ws)
-    status, q1, v1, estimate, end = step_on(m, plan, st, arr, work, log_of(ws), profile_of(st, flags), t, t1,
-                                            command, flags)
+    status, q1, v1, estimate, end = step_on(m, plan, st, arr, work, log_of(ws), profile_of(st, flags), k * dt,
+                                            (k + 1) * dt, command, flags)
     if status == PYTHON or status == EVENT:
         return status, q1, v1, end
     st[TAKEN] += 1.0

@@ -2,7 +2,7 @@
 
 `simulation.crossings.first_crossing` asks, for every gap of the scene's non-smooth elements, its
 value and rate at both ends of the step, and looks for a crossing where a gap is not clearly open
-at both ends. `screen` takes the same numbers (the contact's from `closed_loop.contact_states`,
+at both ends. `screen` takes the same numbers (the contact's as `closed_loop.contact_states` gives them,
 `Contact._hits` in its order and arithmetic; the stops' θ1 − lower, upper − θ1; the depth gaps
 ρ − δ) and the same tests (`closed_loop.may_cross`: the skip test of `first_crossing`, then
 `crossings.bracket`'s side test and `locate.predicted_crossing`), so when it finds nothing the
@@ -23,11 +23,25 @@ from finger_sim.kernel import use_writable_cache
 use_writable_cache()  # before numba reads NUMBA_CACHE_DIR
 from numba import njit  # noqa: E402  (after the cache folder is set)
 
-from finger_sim.kernel.closed_loop import contact_states, may_cross  # noqa: E402
-from finger_sim.kernel.numerics import JIT  # noqa: E402
+from finger_sim.kernel.closed_loop import gap_and_rate, may_cross  # noqa: E402
+from finger_sim.kernel.numerics import JIT, LAW, candidate_walk  # noqa: E402
 
 #: The kinds of a gap plan's groups (module docstring).
 STOPS, CONTACT = 1, 2
+
+
+@njit(**LAW)
+def _store_gap(acc, ctx, i, geometry):
+    """work[row, acc] = −δ (m) and work[row + 1, acc] = ∂gap/∂q · q' (m/s) of the candidate visited, the
+    next column returned (`closed_loop.contact_states`' numbers, without the grip force the screen does not
+    read, and with no view of work made)."""
+    work, row, v0, v1, v2 = ctx
+    work[row, acc], work[row + 1, acc] = gap_and_rate(geometry, v0, v1, v2)
+    return acc + 1
+
+
+#: The candidate loop (`effects.contact_candidates`) storing every candidate's gap and rate into the screen's rows.
+_walk_gaps = candidate_walk(_store_gap)
 
 
 @njit(**JIT)
@@ -46,9 +60,8 @@ def gap_states(plan, x, work, row):
             work[row + 1, i] = 1.0 * x[3] + 0.0 * x[4] + 0.0 * x[5]
             work[row + 1, i + 1] = -1.0 * x[3] + 0.0 * x[4] + 0.0 * x[5]
             i += 2
-        else:
-            count, _ = contact_states(plan, o, x, work[row, i:], work[row + 1, i:])
-            i += count
+        else:  # every candidate, in order
+            i = _walk_gaps(plan, o, x[0], x[2], True, i, (work, row, x[3], x[4], x[5]))
         o += n
     depth = int(plan[o])
     o += 1

@@ -10,8 +10,9 @@ piecewise-constant profile; that step goes through `sim.step()`, and the next st
 the solution over from Python's step as `EventStep.step` does).
 
 What `EventStep.step` does after each of its steps is done once per stretch (`EventStep._took`): the
-Simulator's state, torque and step index, the integrator's torque function; and its estimates (`DormandPrince853.defer_estimates`,
-which builds the dict of estimates only when it is read; `_remember_all` where a drop is due).
+Simulator's state, torque and step index, the integrator's torque function; and its estimates
+(`DormandPrince853.defer_estimates`, which builds the dict of estimates only when it is read;
+`_remember_all` where a drop is due).
 """
 
 from __future__ import annotations

@@ -99,7 +99,7 @@ class EventStep:
         self._profile_at = slice(compiled.PROFILE_AT, compiled.PROFILE_AT + compiled.PROFILE_SIZE)
         self._profile_flag = compiled.PROFILE
         self._profile: Profile | None = None  # the smooth profile in the workspace
-        #: `common_step(ws, t, t1, command, flags)`, its compiled entry (floats, an int): one per process
+        #: `common_step(ws, k, dt, command, flags)`, its compiled entry (an int, floats, an int): one per process
         if compiled not in _ENTRY_POINTS:
             _ENTRY_POINTS[compiled] = compiled.entry_point(ws)
         self._call = _ENTRY_POINTS[compiled]
@@ -130,7 +130,8 @@ class EventStep:
 
     @property
     def taken(self) -> int:
-        """Steps taken here (the rest went to Python), for tests and benchmarks: `common_step`'s count and the others."""
+        """Steps taken here (the rest went to Python), for tests and benchmarks: `common_step`'s count and the
+        others."""
         return self._taken + int(self._st[self._taken_at])
 
     @taken.setter
@@ -167,7 +168,7 @@ class EventStep:
             return self._prepared_step(sim, torque)
         k, dt = sim.step_index, sim.dt
         t1 = (k + 1) * dt
-        status, q, v, end = self._call(self._ws, k * dt, t1, value, self._continuing)  # (floats, an int)
+        status, q, v, end = self._call(self._ws, k, dt, value, self._continuing)  # (an int, floats, an int)
         if status:  # not OK
             return self._answered(sim, integ, fn, True, k, t1, status, q, v, end)
         sim.q, sim.v, sim.torque, sim.step_index = q, v, end, k + 1
@@ -184,7 +185,7 @@ class EventStep:
         if fn is _AT_REST:
             return self._rest(sim, value, flags, k)
         t1 = (k + 1) * dt
-        status, q, v, end = self._call(self._ws, k * dt, t1, value, flags)
+        status, q, v, end = self._call(self._ws, k, dt, value, flags)
         if status:
             return self._answered(sim, integ, fn, continues, k, t1, status, q, v, end)
         return self._took(sim, integ, fn, k, t1, q, v, end, q)
