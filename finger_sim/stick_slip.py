@@ -93,6 +93,8 @@ class FrictionStepping(ModeStepping):
 
     def __init__(self, friction: StickSlipContact) -> None:
         self.friction = friction
+        #: the drive (L = 0) it carries, or None: found at `start`
+        self.drive: Drive | None = None
 
     def auto_method(self, scene: Scene) -> AutoPick:
         return AutoPick(*auto_method(scene))
@@ -101,10 +103,95 @@ class FrictionStepping(ModeStepping):
         for carried in sim.mode_steppings:  # a drive's flank or turning-point rule first
             if carried is not self:
                 carried.start(sim)
+        self.drive = carried_drive(sim)
         start(sim, self.friction)
 
-    def advance(self, sim: Simulator, t0: float, t1: float, u: TorqueFn) -> None:
-        advance(sim, self.friction, t0, t1, u)
+    def advance(self, sim: Simulator, t0: float, t1: float, torque: TorqueFn) -> None:
+        """Integrate [t0, t1] of a stick–slip scene under a smooth input (torque τ(s), or a drive's voltage
+        u(s)), splitting it at every turn, breakaway, mesh flank, current-limit kink and gap event (stops,
+        contact onsets) on the way. (With L > 0 the drive's stepper carries the friction instead.)"""
+        friction, drive = self.friction, self.drive
+        if friction.time_varying:  # a moving object: ride with it while locked (`stick_slip_moving`)
+            from finger_sim import stick_slip_moving
+
+            stick_slip_moving.advance(sim, friction, t0, t1, torque)
+            return
+        ledger = None if drive is None else drive.ledger
+        t, q, v = t0, sim.q, sim.v
+        for _ in range(MAX_EVENTS_PER_STEP):
+            if sim._resting is not None:  # on a stop: it holds the load; leaving it is a turning point
+                release = sim._release_time(sim._resting, t, t1, q, torque)
+                if release is None:
+                    friction.mode, friction.hold = LOCKED, 0.0  # the stop holds the load
+                    friction.remember(t1, q)
+                    _account(ledger, sim, t, t1, q, torque)
+                    sim.q, sim.v = q, ZERO
+                    return
+                _account(ledger, sim, t, release, q, torque)
+                sim._resting = None
+                t, v = release, _turn(sim, friction, release, q, torque)
+            if friction.mode == LOCKED:
+                release = _release_time(sim, friction, t, t1, q, torque)
+                _account(ledger, sim, t, t1 if release is None else release, q, torque)
+                if release is None:
+                    friction.hold = _holding(sim, friction, t1, q, torque)
+                    friction.remember(t1, q)
+                    sim.q, sim.v = q, ZERO
+                    return
+                t, v = release, ZERO
+                _slide(sim, friction, t, q, torque, _break_direction(sim, t, _holding(sim, friction, t, q, torque), torque))
+            if t >= t1:  # freed on the step's end (breakaway, release from the stop): a zero-length step divides by zero
+                friction.remember(t1, q)
+                sim.q, sim.v = q, v
+                return
+            q1, v1 = sim._step(t, q, v, t1 - t, torque)
+            guard = drive_stepping.TURN
+            if drive is None:
+                turn = _turn_event(sim, friction, t, q, v, t1, q1, v1, torque)
+            else:  # the mesh's guards: turn (the friction's too), flank and current limit
+                event = drive_stepping._first_event(sim, sim.system, t, q, v, t1, q1, v1, torque)
+                turn = None if event is None else (event.t, *event.state)
+                guard = drive_stepping.TURN if event is None else event.guard
+            end, qe, ve = (t1, q1, v1) if turn is None else turn
+            crossing = sim._first_crossing(t, q, v, end, qe, ve, torque) if sim._gaps else None
+            if crossing is not None:  # a stop or a contact change first: the turn is looked for again after it
+                end, qe, ve = crossing.t, crossing.q, crossing.v
+            if ledger is not None:
+                t_, q_, v_ = t, q, v
+                with getattr(sim.integrator, "aside", nullcontext)():
+                    drive_stepping._integrate(ledger, sim.system, t, end, lambda s: sim._step(t_, q_, v_, s - t_, torque),
+                                              torque)
+            t, q, v = end, qe, ve
+            if crossing is not None:
+                if crossing.gap.restitution is not None:
+                    before = sim.system.kinetic_energy(q, v) + _rotor_energy(sim, v)
+                    v = sim._impact(crossing, torque)
+                    if ledger is not None:
+                        ledger.impact_loss += before - sim.system.kinetic_energy(q, v) - _rotor_energy(sim, v)
+                    if sim._resting is not None:
+                        friction.mode, friction.hold, v = LOCKED, 0.0, ZERO  # idle while the stop holds the load
+                    elif v[0] == 0.0:
+                        v = _turn(sim, friction, t, q, torque)
+                    else:  # the impact reversed the motion
+                        _slide(sim, friction, t, q, torque, math.copysign(1.0, v[0]), v)
+            elif turn is not None:
+                if guard == drive_stepping.TURN:
+                    v = _turn(sim, friction, t, q, torque)
+                elif guard == drive_stepping.FLANK:
+                    drive.mode = drive_stepping.BACK if drive.mode == drive_stepping.DRIVE else drive_stepping.DRIVE
+                # the current limit: a kink of the force, no mode change
+            else:
+                sim.q, sim.v = q1, v1
+                return
+            if t >= t1:
+                if v[0] == 0.0:  # at rest: the mode is not a function of the state
+                    if friction.mode == LOCKED and sim._resting is None:
+                        friction.hold = _holding(sim, friction, t1, q, torque)
+                    friction.remember(t1, q)
+                sim.q, sim.v = q, v
+                return
+        raise SimulationDiverged(f"more than {MAX_EVENTS_PER_STEP} events (friction lock and breakaway, mesh modes, stops, "
+                                 "contact) in one step", method=sim.method, t=t0, dt=sim.dt)
 
     def before_run(self, sim: Simulator, n: int) -> None:
         self.friction.memory = n + 1  # its holding torques are read back after the run: keep every row's
@@ -156,94 +243,6 @@ def start(sim: Simulator, friction: StickSlipContact) -> None:
         friction.remember(0.0, sim.q)
     else:  # a drive's flank was chosen by `actuators.stepping.start`
         friction.mode, friction.direction = SLIDING, math.copysign(1.0, sim.v[0])
-
-
-def advance(sim: Simulator, friction: StickSlipContact, t0: float, t1: float, torque: TorqueFn) -> None:
-    """Integrate [t0, t1] of a stick–slip scene under a smooth input (torque τ(s), or a drive's voltage
-    u(s)), splitting it at every turn, breakaway, mesh flank, current-limit kink and gap event (stops,
-    contact onsets) on the way. (With L > 0 the drive's stepper carries the friction instead.)"""
-    if friction.time_varying:  # a moving object: ride with it while locked (`stick_slip_moving`)
-        from finger_sim import stick_slip_moving
-
-        stick_slip_moving.advance(sim, friction, t0, t1, torque)
-        return
-    drive = carried_drive(sim)
-    ledger = None if drive is None else drive.ledger
-    t, q, v = t0, sim.q, sim.v
-    for _ in range(MAX_EVENTS_PER_STEP):
-        if sim._resting is not None:  # on a stop: it holds the load; leaving it is a turning point
-            release = sim._release_time(sim._resting, t, t1, q, torque)
-            if release is None:
-                friction.mode, friction.hold = LOCKED, 0.0  # the stop holds the load
-                friction.remember(t1, q)
-                _account(ledger, sim, t, t1, q, torque)
-                sim.q, sim.v = q, ZERO
-                return
-            _account(ledger, sim, t, release, q, torque)
-            sim._resting = None
-            t, v = release, _turn(sim, friction, release, q, torque)
-        if friction.mode == LOCKED:
-            release = _release_time(sim, friction, t, t1, q, torque)
-            _account(ledger, sim, t, t1 if release is None else release, q, torque)
-            if release is None:
-                friction.hold = _holding(sim, friction, t1, q, torque)
-                friction.remember(t1, q)
-                sim.q, sim.v = q, ZERO
-                return
-            t, v = release, ZERO
-            _slide(sim, friction, t, q, torque, _break_direction(sim, t, _holding(sim, friction, t, q, torque), torque))
-        if t >= t1:  # freed on the step's end (breakaway, release from the stop): a zero-length step divides by zero
-            friction.remember(t1, q)
-            sim.q, sim.v = q, v
-            return
-        q1, v1 = sim._step(t, q, v, t1 - t, torque)
-        guard = drive_stepping.TURN
-        if drive is None:
-            turn = _turn_event(sim, friction, t, q, v, t1, q1, v1, torque)
-        else:  # the mesh's guards: turn (the friction's too), flank and current limit
-            event = drive_stepping._first_event(sim, sim.system, t, q, v, t1, q1, v1, torque)
-            turn = None if event is None else (event.t, *event.state)
-            guard = drive_stepping.TURN if event is None else event.guard
-        end, qe, ve = (t1, q1, v1) if turn is None else turn
-        crossing = sim._first_crossing(t, q, v, end, qe, ve, torque) if sim._gaps else None
-        if crossing is not None:  # a stop or a contact change first: the turn is looked for again after it
-            end, qe, ve = crossing.t, crossing.q, crossing.v
-        if ledger is not None:
-            t_, q_, v_ = t, q, v
-            with getattr(sim.integrator, "aside", nullcontext)():
-                drive_stepping._integrate(ledger, sim.system, t, end, lambda s: sim._step(t_, q_, v_, s - t_, torque),
-                                          torque)
-        t, q, v = end, qe, ve
-        if crossing is not None:
-            if crossing.gap.restitution is not None:
-                before = sim.system.kinetic_energy(q, v) + _rotor_energy(sim, v)
-                v = sim._impact(crossing, torque)
-                if ledger is not None:
-                    ledger.impact_loss += before - sim.system.kinetic_energy(q, v) - _rotor_energy(sim, v)
-                if sim._resting is not None:
-                    friction.mode, friction.hold, v = LOCKED, 0.0, ZERO  # idle while the stop holds the load
-                elif v[0] == 0.0:
-                    v = _turn(sim, friction, t, q, torque)
-                else:  # the impact reversed the motion
-                    _slide(sim, friction, t, q, torque, math.copysign(1.0, v[0]), v)
-        elif turn is not None:
-            if guard == drive_stepping.TURN:
-                v = _turn(sim, friction, t, q, torque)
-            elif guard == drive_stepping.FLANK:
-                drive.mode = drive_stepping.BACK if drive.mode == drive_stepping.DRIVE else drive_stepping.DRIVE
-            # the current limit: a kink of the force, no mode change
-        else:
-            sim.q, sim.v = q1, v1
-            return
-        if t >= t1:
-            if v[0] == 0.0:  # at rest: the mode is not a function of the state
-                if friction.mode == LOCKED and sim._resting is None:
-                    friction.hold = _holding(sim, friction, t1, q, torque)
-                friction.remember(t1, q)
-            sim.q, sim.v = q, v
-            return
-    raise SimulationDiverged(f"more than {MAX_EVENTS_PER_STEP} events (friction lock and breakaway, mesh modes, stops, "
-                             "contact) in one step", method=sim.method, t=t0, dt=sim.dt)
 
 
 def _rotor_energy(sim: Simulator, v: Vec3) -> float:

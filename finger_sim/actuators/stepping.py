@@ -188,7 +188,7 @@ def advance(sim: Simulator, t0: float, t1: float, u_fn: TorqueFn) -> None:
                 return
             t, v = release, ZERO
             _roll(system, t, q, v, u_fn(t), _break_direction(system, t, q, u_fn(t)))
-            if t >= t1:  # freed on the step's end: no zero-length step (as `stick_slip.advance`)
+            if t >= t1:  # freed on the step's end: no zero-length step (as stick–slip friction's advance)
                 sim.q, sim.v = q, v
                 return
         q1, v1 = sim._step(t, q, v, t1 - t, u_fn)
@@ -252,14 +252,10 @@ class DriveStepping(ModeStepping):
 
         return drive_method(method, reason, scene.method == AUTO, stable, self.drive.inductive)
 
-    def start(self, sim: Simulator) -> None:
-        start(sim)
-
-    def advance(self, sim: Simulator, t0: float, t1: float, u: TorqueFn) -> None:
-        advance(sim, t0, t1, u)
-
-    def fast_stepper(self, sim: Simulator) -> object | None:
-        return fast_stepper(sim)
+    # the module's functions themselves: no extra call on the step's path
+    start = staticmethod(start)
+    advance = staticmethod(advance)
+    fast_stepper = staticmethod(fast_stepper)
 
     def record_run(self, sim: Simulator, n: int, again: Callable[[], Simulator] | None):  # type: ignore[no-untyped-def]
         from finger_sim.actuators import record
@@ -290,7 +286,7 @@ class InductiveDriveStepping(DriveStepping):
     def start(self, sim: Simulator) -> None:
         from finger_sim.actuators import inductive_stepping
 
-        start(sim)  # the mesh mode, and the friction's with it (`inductive_stepping.start`)
+        DriveStepping.start(sim)  # the mesh mode, and the friction's with it (`inductive_stepping.start`)
         inductive_stepping.start_friction(sim)
 
     def advance(self, sim: Simulator, t0: float, t1: float, u: TorqueFn) -> None:

@@ -8,8 +8,9 @@ carried through every piece of it:
 - at rest on a stop q is held and q' = 0 while the slots go on by their own equation at (q, 0)
   (`StatefulRungeKutta.advance_held`); the release is located on the free acceleration under the
   actuator's torque at those slots (`JointStops.release_time`).
-Stick–slip friction (fixed objects) is `stick_slip.advance`'s loop the same way: locked, q is held and the
-slots go on; the holding test, the breakaway and the turn read the actuator's torque at its slots there.
+Stick–slip friction (fixed objects) is `stick_slip.FrictionStepping.advance`'s loop the same way: locked,
+q is held and the slots go on; the holding test, the breakaway and the turn read the actuator's torque at
+its slots there.
 An actuator acts here through its torque on θ1 (`Actuator.torque`); one that writes its own
 `accelerations` (a constrained one, the drive's mesh) is refused with gaps (`simulation.actuated`).
 """
@@ -63,7 +64,7 @@ class ActuatorStepping(ModeStepping):
         else:
             advance(sim, t0, t1, u)
 
-    def after_step(self, sim: Simulator) -> None:
+    def after_step(self, sim: Simulator) -> None:  # type: ignore[override]
         commit(sim)
 
     def own_slots(self, sim: Simulator) -> tuple[float, ...]:
@@ -125,9 +126,9 @@ def start_friction(sim: Simulator, friction: StickSlipContact) -> None:
 
 
 def advance_friction(sim: Simulator, friction: StickSlipContact, t0: float, t1: float, u: TorqueFn) -> None:
-    """`stick_slip.advance` (no drive, fixed objects) with the actuator's own slots carried along: locked or
-    at rest on a stop, q is held and the slots go on (`advance_held`); the holding test, the breakaway and
-    the turn read the actuator's torque at the slots there (`held_torque`)."""
+    """`stick_slip.FrictionStepping.advance` (no drive, fixed objects) with the actuator's own slots carried
+    along: locked or at rest on a stop, q is held and the slots go on (`advance_held`); the holding test, the
+    breakaway and the turn read the actuator's torque at the slots there (`held_torque`)."""
     integ: StatefulRungeKutta = sim.integrator  # type: ignore[assignment]
     t, q, v = t0, sim.q, sim.v
     own = integ.own_of(q, v)
@@ -156,7 +157,7 @@ def advance_friction(sim: Simulator, friction: StickSlipContact, t0: float, t1: 
             t, v = release, ZERO
             stick_slip._slide(sim, friction, t, q, held,
                               stick_slip._break_direction(sim, t, stick_slip._holding(sim, friction, t, q, held), held))
-        if t >= t1:  # freed on the step's end: no zero-length step (as `stick_slip.advance`)
+        if t >= t1:  # freed on the step's end: no zero-length step (as stick–slip friction's advance)
             friction.remember(t1, q)
             _commit(sim, q, v, own)
             return

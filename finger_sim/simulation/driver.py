@@ -103,6 +103,7 @@ class Simulator:
         self.mode_steppings: tuple[ModeStepping, ...] = mode_owners.steppings(owners)
         #: the one of them that steps the segment (it carries the others' modes), or None: the gap loop here
         self._stepping = leader(self.mode_steppings)
+        self._after_step = None if self._stepping is None else self._stepping.after_step
         #: where the rest mode of the impact gaps' owner (the stops' `rest`) is in `mode_values`, or None
         rest_owner = next((gap.element for gap in self._gaps if gap.restitution is not None), None)
         self._rest_at = None if rest_owner is None else self.mode_values.position(rest_owner, REST_MODE)
@@ -227,8 +228,8 @@ class Simulator:
         if not math.isfinite(sum(self.q) + sum(self.v)):  # a NaN or inf anywhere makes the sum non-finite
             raise SimulationDiverged(f"non-finite state (step {self.step_index + 1})", method=self.method, t=t1, dt=self.dt)
         self.step_index += 1
-        if self._stepping is not None:
-            self._stepping.after_step(self)
+        if self._after_step is not None:  # the stepping owner's (`ModeStepping.after_step`)
+            self._after_step(self)
         if events is not None:
             events.taken_in_python(self.integrator)
         return self.state

@@ -3,7 +3,7 @@
 Like Drake's declared witness functions and updates: an owner of modes whose switches the Simulator's
 own gap loop does not locate (the drive's mesh, spec §8; stick–slip friction, §7; an actuator in the
 slot with its own slots) hands the Simulator a `ModeStepping`. It says how its modes start at t = 0
-(`start`), how a smooth segment of a step is split at its events (`advance`), its continuous slots in
+(`start`), how a smooth segment of a step is split at its events (`advance`, `after_step`), its continuous slots in
 the flat state (`own_slots`), the lean compiled step it allows (`fast_stepper`), the method and
 integrator it imposes (`auto_method`, `method_for`, `integrator_for`) and what it records of a whole run
 (`record_run`, `run_states`). The Simulator, its set-up and `simulate` loop over what is declared and name
@@ -75,8 +75,9 @@ class ModeStepping:
         its modes (and those it carries) switched on the way; sets sim.q, sim.v."""
         raise NotImplementedError
 
-    def after_step(self, sim: Simulator) -> None:
-        """Called after each whole step of `Simulator.step`'s general path."""
+    #: called with the Simulator after each whole step of `Simulator.step`'s general path (a method of a
+    #: subclass); None: nothing to do, and the Simulator makes no call
+    after_step: Callable[[Simulator], None] | None = None
 
     def own_slots(self, sim: Simulator) -> tuple[float, ...]:
         """Its continuous slots at the current step (`state_layout`: after q, q' in owner order)."""

@@ -3,7 +3,8 @@
 test_mode_values' clutch (an MCP spring Q1 = −k θ1 behind a clutch, declared in that test file) gets a latch
 here: its stepping and its registry line (`simulation.mode_owners.OWNERS`, added by a fixture). While open
 nothing acts; where θ1 first reaches THETA_L, located inside the step as a guard (`locate.first_guard_crossing`),
-the clutch engages (a jump of k θ_L in the torque at the switch). No line of the Simulator, its set-up or `simulate` names it. Its run matches an independent tight
+the clutch engages (a jump of k θ_L in the torque at the switch). No line of the Simulator, its set-up or
+`simulate` names it. Its run matches an independent tight
 solve (scipy's solve_ivp on test/reference.py's equations, the switch a terminal event) to rk4's accuracy;
 switching the mode at the step's end instead (no location) misses it by far more. The precedence between
 two owners is declared (`carries`), not written as an if-chain: the shipped pairs lead as before and an
@@ -149,7 +150,8 @@ def test_the_switch_unlocated_misses_the_reference() -> None:
 def test_the_precedence_between_two_owners_is_declared() -> None:
     """Stick–slip friction carries the drive's mesh (L = 0); the drive with L > 0 carries the friction; an
     owner that no one carries with another is refused in one line naming both."""
-    friction, drive, inductive = FrictionStepping(None), DriveStepping(None), InductiveDriveStepping(None)  # type: ignore[arg-type]
+    friction = FrictionStepping(None)  # type: ignore[arg-type]
+    drive, inductive = DriveStepping(None), InductiveDriveStepping(None)  # type: ignore[arg-type]
     assert leader([friction, drive]) is friction and leader([drive, friction]) is friction
     assert leader([friction, inductive]) is inductive
     assert leader([drive]) is drive and leader([]) is None
