@@ -21,6 +21,7 @@ import dataclasses
 from collections.abc import Iterable
 from dataclasses import dataclass
 
+from finger_sim import stick_slip
 from finger_sim.effects.contact import Contact
 from finger_sim.scene import Scene
 from finger_sim.simulate import Simulator
@@ -110,7 +111,7 @@ def _carry_modes(sim: Simulator, new: Simulator) -> None:
     if gap is not None and new._rest_at is not None:  # the same gap of the new run's element of that kind
         element = next(e for e in new.system.elements if type(e) is type(gap.element))
         new._resting = Gap(element, gap.index, gap.restitution)
-    friction, old_friction = new._friction, sim._friction
+    friction, old_friction = stick_slip.element(new.system), stick_slip.element(sim.system)
     if friction is not None and old_friction is not None:
         friction.direction, friction.hold = old_friction.direction, old_friction.hold  # mirrors the mode too
         friction.holds.update(old_friction.holds)

@@ -29,22 +29,26 @@ def simulate(scene: Scene, *, kernel: str = "auto", energy_report: bool = False)
 
     On the compiled kernel a smooth scene's steps run in one kernel loop (`kernel.runner`);
     "auto" runs a short scene in Python (`kernel.offline_kernel`: loading numba costs more).
-    A drive scene's `energy_report` is filled during the run when asked for here, else on its first
-    read by running the scene again with the energy ledger (the same states, bit for bit).
+    An owner whose outputs are discrete state (`ModeStepping.record_run`) takes the run and its outputs
+    as it goes; its `energy_report` is filled during the run when asked for here, else on its first read
+    by running the scene again (the same states, bit for bit).
     """
     n = scene.step_count
     chosen = stepper_slot.kernel().offline_kernel(kernel, n, scene)
     sim = Simulator(scene, kernel=chosen)
     x0 = (*sim.q, *sim.v)
     start = time.perf_counter()
-    drive_outputs: dict[str, np.ndarray] = {}
+    own_outputs: dict[str, np.ndarray] = {}
     report: Mapping[str, float] = {}
-    if sim._friction is not None:  # its holding torques are read back after the run: keep every row's
-        sim._friction.memory = n + 1
-    if sim._drive is not None:  # the mesh mode is discrete state: its outputs are taken as the run goes
-        from finger_sim.actuators import record
-
-        xs, drive_outputs, report = record.run(sim, n, None if energy_report else lambda: Simulator(scene, kernel=chosen))
+    recorded = None
+    for stepping in sim.mode_steppings:
+        stepping.before_run(sim, n)
+    for stepping in sim.mode_steppings:  # the first owner that records its own outputs takes the run
+        recorded = stepping.record_run(sim, n, None if energy_report else lambda: Simulator(scene, kernel=chosen))
+        if recorded is not None:
+            break
+    if recorded is not None:
+        xs, own_outputs, report = recorded
     else:
         xs = stepper_slot.kernel().advance(sim, n)  # in the kernel where it can, else step by step
     wall = time.perf_counter() - start
@@ -52,7 +56,7 @@ def simulate(scene: Scene, *, kernel: str = "auto", energy_report: bool = False)
     t = np.arange(n + 1) * sim.dt  # k·dt, as Simulator.time
     energy, residual, values = state_columns(sim.system, t, x)
     names = output_names(sim.system.elements, sim.q)
-    outputs = {**{name: values[:, i] for i, name in enumerate(names)}, **drive_outputs}
+    outputs = {**{name: values[:, i] for i, name in enumerate(names)}, **own_outputs}
     if scene.sensors is not None:  # read from the outputs after the run: the dynamics never see them
         outputs.update(SensorBank(scene.sensors, sim.dt).measure(outputs))
     return Trajectory(

@@ -42,8 +42,10 @@ from finger_sim.errors import SimulationDiverged
 from finger_sim.integrators.base import TorqueFn
 from finger_sim.kinematics import Vec3
 from finger_sim.simulation.locate import LOCATE_TOLERANCE, first_guard_crossing
+from finger_sim.simulation.mode_stepping import AutoPick, ModeStepping
 
 if TYPE_CHECKING:
+    from finger_sim.actuators.drive import Drive
     from finger_sim.dynamics import FingerSystem
     from finger_sim.scene import Scene
     from finger_sim.simulate import Simulator
@@ -82,6 +84,119 @@ def auto_method(scene: Scene) -> tuple[str, str, dict[str, float], int]:
     return AUTO_METHOD, reason, {"rtol": rtol, "atol": atol}, 1
 
 
+class FrictionStepping(ModeStepping):
+    """Stick–slip friction's modes as the Simulator steps them (`simulation.mode_stepping`): `start` and
+    `advance` here, auto's method (`auto_method`); it carries a drive's mesh (L = 0): the two lock as one."""
+
+    name = "stick_slip"
+    carries = ("drive",)
+
+    def __init__(self, friction: StickSlipContact) -> None:
+        self.friction = friction
+        #: the drive (L = 0) it carries, or None: found at `start`
+        self.drive: Drive | None = None
+
+    def auto_method(self, scene: Scene) -> AutoPick:
+        return AutoPick(*auto_method(scene))
+
+    def start(self, sim: Simulator) -> None:
+        for carried in sim.mode_steppings:  # a drive's flank or turning-point rule first
+            if carried is not self:
+                carried.start(sim)
+        self.drive = carried_drive(sim)
+        start(sim, self.friction)
+
+    def advance(self, sim: Simulator, t0: float, t1: float, torque: TorqueFn) -> None:
+        """Integrate [t0, t1] of a stick–slip scene under a smooth input (torque τ(s), or a drive's voltage
+        u(s)), splitting it at every turn, breakaway, mesh flank, current-limit kink and gap event (stops,
+        contact onsets) on the way. (With L > 0 the drive's stepper carries the friction instead.)"""
+        friction, drive = self.friction, self.drive
+        if friction.time_varying:  # a moving object: ride with it while locked (`stick_slip_moving`)
+            from finger_sim import stick_slip_moving
+
+            stick_slip_moving.advance(sim, friction, t0, t1, torque)
+            return
+        ledger = None if drive is None else drive.ledger
+        t, q, v = t0, sim.q, sim.v
+        for _ in range(MAX_EVENTS_PER_STEP):
+            if sim._resting is not None:  # on a stop: it holds the load; leaving it is a turning point
+                release = sim._release_time(sim._resting, t, t1, q, torque)
+                if release is None:
+                    friction.mode, friction.hold = LOCKED, 0.0  # the stop holds the load
+                    friction.remember(t1, q)
+                    _account(ledger, sim, t, t1, q, torque)
+                    sim.q, sim.v = q, ZERO
+                    return
+                _account(ledger, sim, t, release, q, torque)
+                sim._resting = None
+                t, v = release, _turn(sim, friction, release, q, torque)
+            if friction.mode == LOCKED:
+                release = _release_time(sim, friction, t, t1, q, torque)
+                _account(ledger, sim, t, t1 if release is None else release, q, torque)
+                if release is None:
+                    friction.hold = _holding(sim, friction, t1, q, torque)
+                    friction.remember(t1, q)
+                    sim.q, sim.v = q, ZERO
+                    return
+                t, v = release, ZERO
+                _slide(sim, friction, t, q, torque, _break_direction(sim, t, _holding(sim, friction, t, q, torque), torque))
+            if t >= t1:  # freed on the step's end (breakaway, release from the stop): a zero-length step divides by zero
+                friction.remember(t1, q)
+                sim.q, sim.v = q, v
+                return
+            q1, v1 = sim._step(t, q, v, t1 - t, torque)
+            guard = drive_stepping.TURN
+            if drive is None:
+                turn = _turn_event(sim, friction, t, q, v, t1, q1, v1, torque)
+            else:  # the mesh's guards: turn (the friction's too), flank and current limit
+                event = drive_stepping._first_event(sim, sim.system, t, q, v, t1, q1, v1, torque)
+                turn = None if event is None else (event.t, *event.state)
+                guard = drive_stepping.TURN if event is None else event.guard
+            end, qe, ve = (t1, q1, v1) if turn is None else turn
+            crossing = sim._first_crossing(t, q, v, end, qe, ve, torque) if sim._gaps else None
+            if crossing is not None:  # a stop or a contact change first: the turn is looked for again after it
+                end, qe, ve = crossing.t, crossing.q, crossing.v
+            if ledger is not None:
+                t_, q_, v_ = t, q, v
+                with getattr(sim.integrator, "aside", nullcontext)():
+                    drive_stepping._integrate(ledger, sim.system, t, end, lambda s: sim._step(t_, q_, v_, s - t_, torque),
+                                              torque)
+            t, q, v = end, qe, ve
+            if crossing is not None:
+                if crossing.gap.restitution is not None:
+                    before = sim.system.kinetic_energy(q, v) + _rotor_energy(sim, v)
+                    v = sim._impact(crossing, torque)
+                    if ledger is not None:
+                        ledger.impact_loss += before - sim.system.kinetic_energy(q, v) - _rotor_energy(sim, v)
+                    if sim._resting is not None:
+                        friction.mode, friction.hold, v = LOCKED, 0.0, ZERO  # idle while the stop holds the load
+                    elif v[0] == 0.0:
+                        v = _turn(sim, friction, t, q, torque)
+                    else:  # the impact reversed the motion
+                        _slide(sim, friction, t, q, torque, math.copysign(1.0, v[0]), v)
+            elif turn is not None:
+                if guard == drive_stepping.TURN:
+                    v = _turn(sim, friction, t, q, torque)
+                elif guard == drive_stepping.FLANK:
+                    drive.mode = drive_stepping.BACK if drive.mode == drive_stepping.DRIVE else drive_stepping.DRIVE
+                # the current limit: a kink of the force, no mode change
+            else:
+                sim.q, sim.v = q1, v1
+                return
+            if t >= t1:
+                if v[0] == 0.0:  # at rest: the mode is not a function of the state
+                    if friction.mode == LOCKED and sim._resting is None:
+                        friction.hold = _holding(sim, friction, t1, q, torque)
+                    friction.remember(t1, q)
+                sim.q, sim.v = q, v
+                return
+        raise SimulationDiverged(f"more than {MAX_EVENTS_PER_STEP} events (friction lock and breakaway, mesh modes, stops, "
+                                 "contact) in one step", method=sim.method, t=t0, dt=sim.dt)
+
+    def before_run(self, sim: Simulator, n: int) -> None:
+        self.friction.memory = n + 1  # its holding torques are read back after the run: keep every row's
+
+
 def element(system: FingerSystem) -> StickSlipContact | None:
     """The system's stick–slip contact element, or None."""
     return next((e for e in system.elements if isinstance(e, StickSlipContact)), None)
@@ -100,21 +215,21 @@ def holding_torque(system: FingerSystem, friction: StickSlipContact, t: float, q
     return -a0 * PROBE_TORQUE / (a1 - a0)
 
 
-def start(sim: Simulator) -> None:
+def carried_drive(sim: Simulator) -> Drive | None:
+    """The drive (§8, L = 0) whose mesh locks with the friction, or None."""
+    return getattr(sim.system, "drive", None)
+
+
+def start(sim: Simulator, friction: StickSlipContact) -> None:
     """The friction mode of the scene's initial state: at rest, the holding test; moving, sliding."""
-    friction = sim._friction
     if friction.time_varying:  # a moving object: the slip is relative to it
         from finger_sim import stick_slip_moving
 
-        stick_slip_moving.start(sim, sim.scene.torque)
+        stick_slip_moving.start(sim, friction, sim.scene.torque)
         return
     friction.holds.clear()
-    if sim._drive is not None and sim._drive.inductive:  # its mode was set with the mesh's (`inductive_stepping.start`)
-        if sim.v[0] == 0.0:
-            friction.remember(0.0, sim.q)
-        return
     if sim.v[0] == 0.0:
-        drive = sim._drive
+        drive = carried_drive(sim)
         kept = sim.kept_start.get(__name__)  # the holding test's outcome depends on the scene alone
         if kept is None:
             sim.v = _turn(sim, friction, 0.0, sim.q, sim.scene.torque)
@@ -130,103 +245,9 @@ def start(sim: Simulator) -> None:
         friction.mode, friction.direction = SLIDING, math.copysign(1.0, sim.v[0])
 
 
-def advance(sim: Simulator, t0: float, t1: float, torque: TorqueFn) -> None:
-    """Integrate [t0, t1] of a stick–slip scene under a smooth input (torque τ(s), or a drive's voltage
-    u(s)), splitting it at every turn, breakaway, mesh flank, current-limit kink and gap event (stops,
-    contact onsets) on the way."""
-    friction: StickSlipContact = sim._friction
-    if friction.time_varying:  # a moving object: ride with it while locked (`stick_slip_moving`)
-        from finger_sim import stick_slip_moving
-
-        stick_slip_moving.advance(sim, t0, t1, torque)
-        return
-    drive = sim._drive
-    if drive is not None and drive.inductive:  # the current is a state: the mesh's stepper takes the friction too
-        from finger_sim.actuators import inductive_stepping
-
-        inductive_stepping.advance(sim, t0, t1, torque)
-        return
-    ledger = None if drive is None else drive.ledger
-    t, q, v = t0, sim.q, sim.v
-    for _ in range(MAX_EVENTS_PER_STEP):
-        if sim._resting is not None:  # on a stop: it holds the load; leaving it is a turning point
-            release = sim._release_time(sim._resting, t, t1, q, torque)
-            if release is None:
-                friction.mode, friction.hold = LOCKED, 0.0  # the stop holds the load
-                friction.remember(t1, q)
-                _account(ledger, sim, t, t1, q, torque)
-                sim.q, sim.v = q, ZERO
-                return
-            _account(ledger, sim, t, release, q, torque)
-            sim._resting = None
-            t, v = release, _turn(sim, friction, release, q, torque)
-        if friction.mode == LOCKED:
-            release = _release_time(sim, friction, t, t1, q, torque)
-            _account(ledger, sim, t, t1 if release is None else release, q, torque)
-            if release is None:
-                friction.hold = _holding(sim, friction, t1, q, torque)
-                friction.remember(t1, q)
-                sim.q, sim.v = q, ZERO
-                return
-            t, v = release, ZERO
-            _slide(sim, friction, t, q, torque, _break_direction(sim, t, _holding(sim, friction, t, q, torque), torque))
-        if t >= t1:  # freed on the step's end (breakaway, release from the stop): a zero-length step divides by zero
-            friction.remember(t1, q)
-            sim.q, sim.v = q, v
-            return
-        q1, v1 = sim._step(t, q, v, t1 - t, torque)
-        guard = drive_stepping.TURN
-        if drive is None:
-            turn = _turn_event(sim, friction, t, q, v, t1, q1, v1, torque)
-        else:  # the mesh's guards: turn (the friction's too), flank and current limit
-            event = drive_stepping._first_event(sim, sim.system, t, q, v, t1, q1, v1, torque)
-            turn = None if event is None else (event.t, *event.state)
-            guard = drive_stepping.TURN if event is None else event.guard
-        end, qe, ve = (t1, q1, v1) if turn is None else turn
-        crossing = sim._first_crossing(t, q, v, end, qe, ve, torque) if sim._gaps else None
-        if crossing is not None:  # a stop or a contact change first: the turn is looked for again after it
-            end, qe, ve = crossing.t, crossing.q, crossing.v
-        if ledger is not None:
-            t_, q_, v_ = t, q, v
-            with getattr(sim.integrator, "aside", nullcontext)():
-                drive_stepping._integrate(ledger, sim.system, t, end, lambda s: sim._step(t_, q_, v_, s - t_, torque),
-                                          torque)
-        t, q, v = end, qe, ve
-        if crossing is not None:
-            if crossing.gap.restitution is not None:
-                before = sim.system.kinetic_energy(q, v) + _rotor_energy(sim, v)
-                v = sim._impact(crossing, torque)
-                if ledger is not None:
-                    ledger.impact_loss += before - sim.system.kinetic_energy(q, v) - _rotor_energy(sim, v)
-                if sim._resting is not None:
-                    friction.mode, friction.hold, v = LOCKED, 0.0, ZERO  # idle while the stop holds the load
-                elif v[0] == 0.0:
-                    v = _turn(sim, friction, t, q, torque)
-                else:  # the impact reversed the motion
-                    _slide(sim, friction, t, q, torque, math.copysign(1.0, v[0]), v)
-        elif turn is not None:
-            if guard == drive_stepping.TURN:
-                v = _turn(sim, friction, t, q, torque)
-            elif guard == drive_stepping.FLANK:
-                drive.mode = drive_stepping.BACK if drive.mode == drive_stepping.DRIVE else drive_stepping.DRIVE
-            # the current limit: a kink of the force, no mode change
-        else:
-            sim.q, sim.v = q1, v1
-            return
-        if t >= t1:
-            if v[0] == 0.0:  # at rest: the mode is not a function of the state
-                if friction.mode == LOCKED and sim._resting is None:
-                    friction.hold = _holding(sim, friction, t1, q, torque)
-                friction.remember(t1, q)
-            sim.q, sim.v = q, v
-            return
-    raise SimulationDiverged(f"more than {MAX_EVENTS_PER_STEP} events (friction lock and breakaway, mesh modes, stops, "
-                             "contact) in one step", method=sim.method, t=t0, dt=sim.dt)
-
-
 def _rotor_energy(sim: Simulator, v: Vec3) -> float:
     """½ J_m ω_m² with a drive (J), else 0."""
-    return 0.0 if sim._drive is None else sim.system.rotor_energy(v)  # type: ignore[attr-defined]
+    return 0.0 if carried_drive(sim) is None else sim.system.rotor_energy(v)  # type: ignore[attr-defined]
 
 
 def _account(ledger, sim: Simulator, a: float, b: float, q: Vec3, torque: TorqueFn) -> None:  # type: ignore[no-untyped-def]
@@ -238,7 +259,7 @@ def _account(ledger, sim: Simulator, a: float, b: float, q: Vec3, torque: Torque
 def _holding(sim: Simulator, friction: StickSlipContact, t: float, q: Vec3, torque: TorqueFn) -> float:
     """τ_h, N·m, at rest at q at time t: the torque on θ1 that keeps θ1'' = 0, friction left out (with a
     drive: the torque the mesh and the friction must share, `DrivenSystem.holding_torque`)."""
-    if sim._drive is None:
+    if carried_drive(sim) is None:
         return holding_torque(sim.system, friction, t, q, torque(t))
     system: DrivenSystem = sim.system  # type: ignore[assignment]
     mode = friction.mode
@@ -257,7 +278,7 @@ def holding_test(sim: Simulator, friction: StickSlipContact, t: float, q: Vec3, 
     tau_h = _holding(sim, friction, t, q, torque)
     if capacity is None:
         capacity = friction.capacity(q)
-    drive = sim._drive
+    drive = carried_drive(sim)
     if drive is None:
         return capacity - abs(tau_h), tau_h
     p = drive.params
@@ -267,7 +288,7 @@ def holding_test(sim: Simulator, friction: StickSlipContact, t: float, q: Vec3, 
 
 def _break_direction(sim: Simulator, t: float, tau_h: float, torque: TorqueFn) -> float:
     """The way a linkage that does not hold starts to move: −sgn τ_h, with a drive sgn(N τ_a − τ_h) (§8)."""
-    drive = sim._drive
+    drive = carried_drive(sim)
     if drive is None:
         return -math.copysign(1.0, tau_h)
     p = drive.params
@@ -280,7 +301,7 @@ def _slide(sim: Simulator, friction: StickSlipContact, t: float, q: Vec3, torque
     """Enter sliding towards `direction` at (t, q, q'); a drive rolls on the flank that motion takes
     (`actuators.stepping._roll`, with the kinetic friction opposing the motion already applied)."""
     friction.mode, friction.direction = SLIDING, direction
-    if sim._drive is not None:
+    if carried_drive(sim) is not None:
         drive_stepping._roll(sim.system, t, q, v, torque(t), direction)  # type: ignore[arg-type]
 
 
@@ -290,8 +311,9 @@ def _turn(sim: Simulator, friction: StickSlipContact, t: float, q: Vec3, torque:
     margin, tau_h = holding_test(sim, friction, t, q, torque)
     if margin >= 0.0:
         friction.mode, friction.direction, friction.hold = LOCKED, 0.0, tau_h
-        if sim._drive is not None:
-            sim._drive.mode = STUCK
+        drive = carried_drive(sim)
+        if drive is not None:
+            drive.mode = STUCK
     else:
         _slide(sim, friction, t, q, torque, _break_direction(sim, t, tau_h, torque))
     return ZERO

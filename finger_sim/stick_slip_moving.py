@@ -41,10 +41,9 @@ RIDE_RTOL, RIDE_ATOL = 1e-12, 1e-14
 RIDE_PROBE = 1e-5
 
 
-def start(sim: Simulator, torque: TorqueFn) -> None:
+def start(sim: Simulator, friction: StickSlipContact, torque: TorqueFn) -> None:
     """The friction mode of the scene's initial state: at rest relative to the objects, the holding
     test; else sliding towards sgn(θ1' − ω)."""
-    friction: StickSlipContact = sim._friction
     friction.holds.clear()
     start_q = sim.q
     kept = sim.kept_start.get(__name__)  # the test's outcome depends on the scene alone (torque: its input)
@@ -64,12 +63,11 @@ def start(sim: Simulator, torque: TorqueFn) -> None:
         friction.remember(0.0, sim.q, sim.v)
 
 
-def advance(sim: Simulator, t0: float, t1: float, torque: TorqueFn) -> None:
+def advance(sim: Simulator, friction: StickSlipContact, t0: float, t1: float, torque: TorqueFn) -> None:
     """Integrate [t0, t1] under a smooth input τ(s), splitting it at every turn, breakaway and contact
     change (`stick_slip.MAX_EVENTS_PER_STEP` at most)."""
     from finger_sim.stick_slip import MAX_EVENTS_PER_STEP
 
-    friction: StickSlipContact = sim._friction
     t, q, v = t0, sim.q, sim.v
     for _ in range(MAX_EVENTS_PER_STEP):
         if friction.mode == LOCKED:

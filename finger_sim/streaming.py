@@ -61,7 +61,7 @@ def stream_csv(scene: Scene, path: str | Path, *, kernel: str = "auto") -> Strea
     steps = scene.step_count
     sim = Simulator(scene, kernel=offline_kernel(kernel, steps, scene))
     names = output_names(sim.system.elements, sim.q)  # the elements' outputs follow the 9 base columns
-    drive = sim._drive is not None  # then the drive's outputs follow, taken as the run goes (actuators.record)
+    drive = sim.scene.drive is not None  # then the drive's outputs follow, taken as the run goes (actuators.record)
     if drive:
         from finger_sim.actuators import record
 

@@ -55,6 +55,16 @@ def start(sim: Simulator) -> None:
         _roll(system, 0.0, sim.q, sim.v, u, math.copysign(1.0, sim.v[0]), 0.0)
 
 
+def start_friction(sim: Simulator) -> None:
+    """Stick–slip friction at the start, carried (its mode was set with the mesh's, `start`): its holding
+    memory cleared, the initial state remembered at rest."""
+    friction = _friction(sim.system)  # type: ignore[arg-type]
+    if friction is not None:
+        friction.holds.clear()
+        if sim.v[0] == 0.0:
+            friction.remember(0.0, sim.q)
+
+
 def advance(sim: Simulator, t0: float, t1: float, u_fn: TorqueFn) -> None:
     """Integrate [t0, t1] under a smooth voltage u(s) with the current as a state, split at every
     mode change, current-limit event and gap event (stops, contact) on the way."""

@@ -33,8 +33,13 @@ from finger_sim.integrators.base import TorqueFn
 from finger_sim.kinematics import Vec3
 from finger_sim.simulation.locate import GUARD_TOLERANCE  # noqa: F401  (read here by the compiled guards' tests)
 from finger_sim.simulation.locate import LOCATE_TOLERANCE, GuardCrossing, first_guard_crossing
+from finger_sim.simulation.mode_stepping import ModeStepping
 
 if TYPE_CHECKING:
+    from finger_sim.dynamics import FingerSystem
+    from finger_sim.scene import Scene
+    from finger_sim.actuators.drive import Drive
+    from finger_sim.integrators import Integrator
     from finger_sim.simulation.driver import Simulator
 
 #: Events (mode changes, kinks, impacts) allowed within one step before it is declared chattering.
@@ -113,7 +118,8 @@ def start(sim: Simulator) -> None:
     if model is None and sim.requested_kernel != "python":  # our DOP853's compiled stages: its guards too
         model = getattr(sim.integrator, "guard_model", None)
     system.drive.kernel_model, system.drive.guard_cache, system.drive.margin_cache = model, None, None
-    system.keeps_holding_torque, system._held = sim._friction is None and sim._actuator is None, None
+    # τ_h may be kept where no other owner carries a state of its own (stick–slip friction's modes)
+    system.keeps_holding_torque, system._held = len(sim.mode_steppings) == 1, None
     system.holding_torque_is_steady = all(_steady(e) for e in system.elements)
     if model is not None:
         _compiled_guards = stepper_slot.kernel().compiled_drive().drive_guards
@@ -165,15 +171,10 @@ def fast_stepper(sim: Simulator) -> object | None:
 
 
 def advance(sim: Simulator, t0: float, t1: float, u_fn: TorqueFn) -> None:
-    """Integrate [t0, t1] of a drive scene under a smooth voltage u(s), splitting it at every mode
-    change, current-limit kink and gap event (stops, contact) on the way."""
+    """Integrate [t0, t1] of a drive scene (L = 0; L > 0: `inductive_stepping.advance`) under a smooth
+    voltage u(s), splitting it at every mode change, current-limit kink and gap event (stops, contact)."""
     system: DrivenSystem = sim.system  # type: ignore[assignment]
     drive = system.drive
-    if drive.inductive:  # L > 0: the current is a state
-        from finger_sim.actuators import inductive_stepping
-
-        inductive_stepping.advance(sim, t0, t1, u_fn)
-        return
     ledger: EnergyLedger | None = drive.ledger
     t, q, v = t0, sim.q, sim.v
     for _ in range(MAX_EVENTS_PER_STEP):
@@ -187,7 +188,7 @@ def advance(sim: Simulator, t0: float, t1: float, u_fn: TorqueFn) -> None:
                 return
             t, v = release, ZERO
             _roll(system, t, q, v, u_fn(t), _break_direction(system, t, q, u_fn(t)))
-            if t >= t1:  # freed on the step's end: no zero-length step (as `stick_slip.advance`)
+            if t >= t1:  # freed on the step's end: no zero-length step (as stick–slip friction's advance)
                 sim.q, sim.v = q, v
                 return
         q1, v1 = sim._step(t, q, v, t1 - t, u_fn)
@@ -234,6 +235,72 @@ def advance(sim: Simulator, t0: float, t1: float, u_fn: TorqueFn) -> None:
             return
     raise SimulationDiverged(f"more than {MAX_EVENTS_PER_STEP} events (mesh modes, current limit, stops, contact) in "
                              "one step", method=sim.method, t=t0, dt=sim.dt)
+
+
+class DriveStepping(ModeStepping):
+    """The drive's mesh modes (L = 0) as the Simulator steps them (`simulation.mode_stepping`): its start
+    and advance here, its lean step, the method that can step the mesh, and its outputs recorded as the run
+    goes (`actuators.record`). Stick–slip friction carries it (the two lock as one, `stick_slip`)."""
+
+    name = "drive"
+
+    def __init__(self, drive: Drive) -> None:
+        self.drive = drive
+
+    def method_for(self, scene: Scene, method: str, reason: str, stable: Callable[[str], bool]) -> tuple[str, str]:
+        from finger_sim.scene import AUTO
+
+        return drive_method(method, reason, scene.method == AUTO, stable, self.drive.inductive)
+
+    # the module's functions themselves: no extra call on the step's path
+    start = staticmethod(start)
+    advance = staticmethod(advance)
+    fast_stepper = staticmethod(fast_stepper)
+
+    def record_run(self, sim: Simulator, n: int, again: Callable[[], Simulator] | None):  # type: ignore[no-untyped-def]
+        from finger_sim.actuators import record
+
+        return record.run(sim, n, again)
+
+    def run_states(self, sim: Simulator, n: int) -> np.ndarray:
+        from finger_sim.actuators import record
+
+        return record.states(sim, n)
+
+
+class InductiveDriveStepping(DriveStepping):
+    """The drive with L > 0 (`actuators.inductive_stepping`): the winding current is its slot, its method
+    carries it in substeps that resolve L/R, and its advance carries stick–slip friction's modes too."""
+
+    name = "inductive drive"
+    carries = ("stick_slip",)
+
+    def integrator_for(self, scene: Scene, system: FingerSystem, method: type[Integrator],
+                       integrator_cls: type[Integrator], kernel: str, gaps: bool) -> tuple[type[Integrator], str]:
+        from finger_sim.actuators import inductive
+        from finger_sim.scene import AUTO
+
+        substeps = inductive.electrical_substeps(scene, system, method, scene.method == AUTO)  # type: ignore[arg-type]
+        return inductive.integrator_class(integrator_cls, substeps), inductive.kernel_note(kernel, gaps)
+
+    def start(self, sim: Simulator) -> None:
+        from finger_sim.actuators import inductive_stepping
+
+        DriveStepping.start(sim)  # the mesh mode, and the friction's with it (`inductive_stepping.start`)
+        inductive_stepping.start_friction(sim)
+
+    def advance(self, sim: Simulator, t0: float, t1: float, u: TorqueFn) -> None:
+        from finger_sim.actuators import inductive_stepping
+
+        inductive_stepping.advance(sim, t0, t1, u)
+
+    def own_slots(self, sim: Simulator) -> tuple[float, ...]:
+        return (self.drive.i,)
+
+
+def stepping_of(drive: Drive) -> DriveStepping:
+    """The drive's stepping: with its winding current as a state where L > 0."""
+    return InductiveDriveStepping(drive) if drive.inductive else DriveStepping(drive)
 
 
 # -- modes --------------------------------------------------------------------------------

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from finger_sim import stick_slip
 from finger_sim.effects.contact_outputs import FRICTION_MODE, GRIP_FORCE
 from finger_sim.effects.friction_modes import FrictionLaw
 from finger_sim.scene import Scene, load_scene
@@ -66,7 +67,7 @@ def hold_figure(out: Path) -> Path:
 
 def capacity(scene: Scene, traj: Trajectory) -> np.ndarray:
     """Σ μ_s F_n |j_k| (N·m) at every row's pose."""
-    element = Simulator(scene)._friction
+    element = stick_slip.element(Simulator(scene).system)
     return np.array([element.capacity(tuple(q)) for q in traj.q.tolist()])
 
 

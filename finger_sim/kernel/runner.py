@@ -57,10 +57,10 @@ def advance(sim: "Simulator", n: int) -> np.ndarray:
 
 
 def _stepped(sim: "Simulator", n: int) -> np.ndarray:
-    if sim._drive is not None:  # noqa: SLF001  (a drive scene: a stuck mesh's held stretches at once)
-        from finger_sim.actuators import record
-
-        return record.states(sim, n)
+    for stepping in sim.mode_steppings:  # an owner that takes stretches of its modes at once
+        xs = stepping.run_states(sim, n)
+        if xs is not None:
+            return xs
     if sim._event_step is not None:  # noqa: SLF001  (a scene with events: stretches in one kernel call)
         from finger_sim.kernel import run_stretch
 

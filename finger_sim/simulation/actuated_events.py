@@ -8,8 +8,9 @@ carried through every piece of it:
 - at rest on a stop q is held and q' = 0 while the slots go on by their own equation at (q, 0)
   (`StatefulRungeKutta.advance_held`); the release is located on the free acceleration under the
   actuator's torque at those slots (`JointStops.release_time`).
-Stick–slip friction (fixed objects) is `stick_slip.advance`'s loop the same way: locked, q is held and the
-slots go on; the holding test, the breakaway and the turn read the actuator's torque at its slots there.
+Stick–slip friction (fixed objects) is `stick_slip.FrictionStepping.advance`'s loop the same way: locked,
+q is held and the slots go on; the holding test, the breakaway and the turn read the actuator's torque at
+its slots there.
 An actuator acts here through its torque on θ1 (`Actuator.torque`); one that writes its own
 `accelerations` (a constrained one, the drive's mesh) is refused with gaps (`simulation.actuated`).
 """
@@ -25,13 +26,49 @@ from finger_sim.errors import SimulationDiverged
 from finger_sim.integrators import TorqueFn
 from finger_sim.integrators.stateful import StatefulRungeKutta
 from finger_sim.kinematics import Vec3
+from finger_sim.simulation.mode_stepping import ModeStepping
 
 if TYPE_CHECKING:
+    from finger_sim.actuators.base import Actuator
+    from finger_sim.effects.friction_modes import StickSlipContact
     from finger_sim.simulation.driver import Simulator
 
 ZERO: Vec3 = (0.0, 0.0, 0.0)
 #: Events allowed within one step (as `simulation.driver.MAX_EVENTS_PER_STEP`: a stop's Zeno series to rest).
 MAX_EVENTS_PER_STEP = 64
+
+
+class ActuatorStepping(ModeStepping):
+    """An actuator in the slot with its own slots (`Simulator(scene, actuator=...)`), as the Simulator steps
+    it (`simulation.mode_stepping`): the gap events with its slots carried (`advance`), stick–slip friction on
+    fixed objects carried too (`advance_friction`); its slots are the integrator's (`own_of`)."""
+
+    name = "actuator"
+    carries = ("stick_slip",)
+
+    def __init__(self, actuator: Actuator) -> None:
+        self.actuator = actuator
+        #: the stick–slip contact whose modes it carries, or None (found at `start`)
+        self.friction: StickSlipContact | None = None
+
+    def start(self, sim: Simulator) -> None:
+        self.friction = stick_slip.element(sim.system)
+        if self.friction is not None:
+            start_friction(sim, self.friction)
+
+    def advance(self, sim: Simulator, t0: float, t1: float, u: TorqueFn) -> None:
+        if not sim._gaps:  # a smooth scene: one step of the stateful integrator
+            sim.q, sim.v = sim.integrator.step(t0, sim.q, sim.v, t1 - t0, u)
+        elif self.friction is not None:
+            advance_friction(sim, self.friction, t0, t1, u)
+        else:
+            advance(sim, t0, t1, u)
+
+    def after_step(self, sim: Simulator) -> None:  # type: ignore[override]
+        commit(sim)
+
+    def own_slots(self, sim: Simulator) -> tuple[float, ...]:
+        return sim.integrator.own_of(sim.q, sim.v)  # type: ignore[attr-defined]
 
 
 def held_torque(integ: StatefulRungeKutta, t: float, q: Vec3, own: tuple[float, ...], u: TorqueFn) -> TorqueFn:
@@ -49,9 +86,6 @@ def held_torque(integ: StatefulRungeKutta, t: float, q: Vec3, own: tuple[float, 
 def advance(sim: Simulator, t0: float, t1: float, u: TorqueFn) -> None:
     """Integrate [t0, t1] under a smooth input u(s), splitting it at every gap event, with the actuator's
     own slots carried along; the state reached is committed with its slots (`commit`)."""
-    if sim._friction is not None:
-        advance_friction(sim, t0, t1, u)
-        return
     integ: StatefulRungeKutta = sim.integrator  # type: ignore[assignment]
     t, q, v = t0, sim.q, sim.v
     own = integ.own_of(q, v)
@@ -80,9 +114,8 @@ def advance(sim: Simulator, t0: float, t1: float, u: TorqueFn) -> None:
                              method=sim.method, t=t0, dt=sim.dt)
 
 
-def start_friction(sim: Simulator) -> None:
+def start_friction(sim: Simulator, friction: StickSlipContact) -> None:
     """The stick–slip mode of the initial state (`stick_slip.start`) under the actuator's torque at t = 0."""
-    friction = sim._friction
     friction.holds.clear()
     if sim.v[0] == 0.0:
         integ: StatefulRungeKutta = sim.integrator  # type: ignore[assignment]
@@ -92,11 +125,10 @@ def start_friction(sim: Simulator) -> None:
         friction.mode, friction.direction = SLIDING, math.copysign(1.0, sim.v[0])
 
 
-def advance_friction(sim: Simulator, t0: float, t1: float, u: TorqueFn) -> None:
-    """`stick_slip.advance` (no drive, fixed objects) with the actuator's own slots carried along: locked or
-    at rest on a stop, q is held and the slots go on (`advance_held`); the holding test, the breakaway and
-    the turn read the actuator's torque at the slots there (`held_torque`)."""
-    friction = sim._friction
+def advance_friction(sim: Simulator, friction: StickSlipContact, t0: float, t1: float, u: TorqueFn) -> None:
+    """`stick_slip.FrictionStepping.advance` (no drive, fixed objects) with the actuator's own slots carried
+    along: locked or at rest on a stop, q is held and the slots go on (`advance_held`); the holding test, the
+    breakaway and the turn read the actuator's torque at the slots there (`held_torque`)."""
     integ: StatefulRungeKutta = sim.integrator  # type: ignore[assignment]
     t, q, v = t0, sim.q, sim.v
     own = integ.own_of(q, v)
@@ -125,7 +157,7 @@ def advance_friction(sim: Simulator, t0: float, t1: float, u: TorqueFn) -> None:
             t, v = release, ZERO
             stick_slip._slide(sim, friction, t, q, held,
                               stick_slip._break_direction(sim, t, stick_slip._holding(sim, friction, t, q, held), held))
-        if t >= t1:  # freed on the step's end: no zero-length step (as `stick_slip.advance`)
+        if t >= t1:  # freed on the step's end: no zero-length step (as stick–slip friction's advance)
             friction.remember(t1, q)
             _commit(sim, q, v, own)
             return

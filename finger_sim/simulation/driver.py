@@ -5,9 +5,10 @@ so the node and offline runs share one path and the same torques at the same ste
 bit-identical states. A torque profile's breakpoints cut the step into smooth segments; the
 events of the non-smooth force elements (a stop impact, a contact onset) are located inside a
 segment (`simulation.crossings`) and the segment is split there; a stop's impact may start its
-rest mode (`simulation.impact`). A drive's mesh modes and stick–slip friction step their own
-events (`actuators.stepping`, `stick_slip`) with the same pieces. The values of the declared modes live
-in one home per run (`mode_values`, `state_layout.ModeValues`), each owner's at its own entries.
+rest mode (`simulation.impact`). An owner that steps its own modes (`simulation.mode_stepping`,
+listed in `simulation.mode_owners`) steps the segment instead, with the same pieces. The values of the
+declared modes live in one home per run (`mode_values`, `state_layout.ModeValues`), each owner's at its
+own entries.
 """
 
 from __future__ import annotations
@@ -15,8 +16,6 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-from finger_sim import stick_slip
-from finger_sim.actuators import stepping as drive_stepping
 from finger_sim.actuators.base import Actuator
 from finger_sim.effects import EFFECTS
 from finger_sim.errors import SimulationDiverged
@@ -25,10 +24,11 @@ from finger_sim.integrators import HeldTorque, Integrator, TorqueFn
 from finger_sim.kinematics import Vec3
 from finger_sim.projection import OK as FAST_OK
 from finger_sim.scene import Scene
-from finger_sim.simulation import actuated, actuated_events, crossings, event_step, gap_screen, impact
+from finger_sim.simulation import actuated, crossings, event_step, gap_screen, impact, mode_owners
 from finger_sim.simulation.crossings import Crossing, Gap
 from finger_sim.simulation.impact import FREE, REST_MODE, RESTING
 from finger_sim.simulation.locate import ON_GAP
+from finger_sim.simulation.mode_stepping import ModeStepping, leader
 from finger_sim.simulation.setup import for_simulator
 from finger_sim.state_layout import ModeValues, StateLayout, layout_of
 from finger_sim.stepper_slot import BREAKPOINT
@@ -63,26 +63,22 @@ class Simulator:
         kernel name recorded by an earlier run; `self.kernel` names the one that runs. The set-up
         (system, method choice, stability check, compiled plan) is kept per scene (`setup_for`).
         actuator: an actuator with its own state in the slot (`actuators.base`), which takes the scene's
-        input; None: the ideal torque source (or the scene's drive)."""
+        input; None: the ideal torque source (or the scene's own actuator, `system.actuator`)."""
         refuse_profile(scene, "simulate or rollout")
         self.scene = scene
         # the registered effects are part of the key: a plug-in registered later builds another system
         effects = tuple(EFFECTS.values())
         if actuator is not None:  # its integrator and kernel are chosen below (`simulation.actuated`)
             requested, kernel = kernel, "python"
-        # a drive's mesh mode, a friction mode: a system holding run state is this Simulator's own
+        # an owner of modes holds run state: its system is this Simulator's own
         setup = for_simulator(scene, kernel, effects)
         self.system, self.dt, self.method, self.method_reason = setup.system, scene.dt, setup.method, setup.reason
         #: steps in contact (or closing a contact within the step) are split in this many (auto only)
         self.substeps = setup.substeps
         #: keyword options of the integrator (auto's error-controlled method: its tolerances)
         self._options = setup.options
-        #: the drive (spec §8) whose mesh modes this Simulator steps, or None (an ideal torque source)
-        self._drive = getattr(self.system, "drive", None)
-        #: the stick–slip contact (spec §7) whose friction modes this Simulator steps, or None
-        self._friction = stick_slip.element(self.system)
         self._method_cls, self._integrator_cls, self.kernel = setup.method_cls, setup.integrator_cls, setup.kernel
-        #: the kernel asked for: "python" keeps a drive's mesh guards in Python under our DOP853 too
+        #: the kernel asked for: "python" keeps an owner's mode guards in Python under our DOP853 too
         #: (whose stages are compiled by construction, `self.kernel` naming the compiled kernel)
         self.requested_kernel = kernel
         if actuator is not None:
@@ -91,8 +87,9 @@ class Simulator:
             self.method, self._options, self.method_reason = self._integrator_cls.name, {}, self.method_reason + note
         #: the actuator with its own state in the slot, or None
         self._actuator = actuator
-        #: the declared state: (q, q', then the drive's or `actuator`'s own slots), and the elements' modes
-        self.layout: StateLayout = layout_of(self.system.elements, actuator or self._drive)
+        owners = (*self.system.elements, actuator or self.system.actuator)
+        #: the declared state: (q, q', then the actuator's own slots), and the owners' modes
+        self.layout: StateLayout = layout_of(self.system.elements, owners[-1])
         self._gaps, self._kinks, self._gap_elements = setup.gaps, setup.kinks, setup.gap_elements
         #: the gaps declared to the guard loop (`crossings.first_crossing`): all ON_GAP, and which are impact gaps
         self._gap_kinds = (ON_GAP,) * len(self._gaps)
@@ -100,8 +97,13 @@ class Simulator:
         #: the start's findings at the initial state, shared by the scene's Simulators (`Setup.kept_start`)
         self.kept_start = setup.kept_start
         #: the run's discrete state: each declared mode's value, in `layout.modes` order
-        self.mode_values = ModeValues(self.layout, (*self.system.elements, actuator or self._drive))
+        self.mode_values = ModeValues(self.layout, owners)
         self._mode_list = self.mode_values.values
+        #: the owners that step their own modes (`simulation.mode_stepping`), in owner order
+        self.mode_steppings: tuple[ModeStepping, ...] = mode_owners.steppings(owners)
+        #: the one of them that steps the segment (it carries the others' modes), or None: the gap loop here
+        self._stepping = leader(self.mode_steppings)
+        self._after_step = None if self._stepping is None else self._stepping.after_step
         #: where the rest mode of the impact gaps' owner (the stops' `rest`) is in `mode_values`, or None
         rest_owner = next((gap.element for gap in self._gaps if gap.restitution is not None), None)
         self._rest_at = None if rest_owner is None else self.mode_values.position(rest_owner, REST_MODE)
@@ -118,8 +120,8 @@ class Simulator:
         self._event_step = event_step.for_simulator(self)
         #: the lean compiled path of `step` (a compiled fixed-step method on a smooth scene), else None
         self.fast_stepper = setup.fast_stepper
-        #: what `step`'s lean path calls: the fast stepper, or a drive scene's (`actuators.stepping.fast_stepper`)
-        self._lean = self.fast_stepper if self._drive is None else drive_stepping.fast_stepper(self)
+        #: what `step`'s lean path calls: the fast stepper, or the one the stepping owner allows
+        self._lean = self.fast_stepper if self._stepping is None else self._stepping.fast_stepper(self)
 
     def reset(self) -> None:
         """Back to the scene's initial state at t = 0."""
@@ -136,12 +138,10 @@ class Simulator:
         if self._gap_screen is not None:
             self._gap_screen.reset()
         #: the motor torque at the end of the last step (N·m): what a JointState effort reports
-        #: (with a drive: the voltage command, V)
+        #: (with a voltage input: the command, V)
         self.torque = self.scene.torque(0.0)
-        if self._drive is not None:
-            drive_stepping.start(self)
-        if self._friction is not None:
-            (stick_slip.start if self._actuator is None else actuated_events.start_friction)(self)
+        if self._stepping is not None:  # the owners' modes at the initial state
+            self._stepping.start(self)
         self.impacts = 0
         self._held: tuple[float, TorqueFn] | None = None  # the held torque (N·m) and its function
 
@@ -156,12 +156,12 @@ class Simulator:
 
     @property
     def state_vector(self) -> tuple[float, ...]:
-        """The continuous state at the current step, flat, in `layout` order. The drive keeps its current
-        (`Drive.i`); an actuator's slots are those the integrator produced with (q, q') (`own_of`)."""
-        if self._drive is not None:
-            return self.layout.pack(self.q, self.v, (self._drive.i,) if self._drive.inductive else ())
-        own_of = getattr(self.integrator, "own_of", None)
-        return self.layout.pack(self.q, self.v, () if own_of is None else own_of(self.q, self.v))
+        """The continuous state at the current step, flat, in `layout` order: each owner's own slots
+        as its stepping reads them (`ModeStepping.own_slots`)."""
+        own: tuple[float, ...] = ()
+        for stepping in self.mode_steppings:
+            own += stepping.own_slots(self)
+        return self.layout.pack(self.q, self.v, own)
 
     @property
     def modes(self) -> tuple[str, ...]:
@@ -228,8 +228,8 @@ class Simulator:
         if not math.isfinite(sum(self.q) + sum(self.v)):  # a NaN or inf anywhere makes the sum non-finite
             raise SimulationDiverged(f"non-finite state (step {self.step_index + 1})", method=self.method, t=t1, dt=self.dt)
         self.step_index += 1
-        if self._actuator is not None:
-            actuated_events.commit(self)
+        if self._after_step is not None:  # the stepping owner's (`ModeStepping.after_step`)
+            self._after_step(self)
         if events is not None:
             events.taken_in_python(self.integrator)
         return self.state
@@ -237,14 +237,8 @@ class Simulator:
     # -- internals ---------------------------------------------------------------------
     def _advance(self, t0: float, t1: float, torque: TorqueFn) -> None:
         """Integrate [t0, t1] under a smooth torque, splitting it at every event on the way."""
-        if self._actuator is not None and self._gaps:  # stops, contact, stick–slip: the actuator's slots carried
-            actuated_events.advance(self, t0, t1, torque)
-            return
-        if self._friction is not None:  # with a drive too: the mesh and the friction share one lock
-            stick_slip.advance(self, t0, t1, torque)
-            return
-        if self._drive is not None:
-            drive_stepping.advance(self, t0, t1, torque)
+        if self._stepping is not None:  # an owner steps its modes' events with the gaps' (`ModeStepping.advance`)
+            self._stepping.advance(self, t0, t1, torque)
             return
         if not self._gaps:
             self.q, self.v = self.integrator.step(t0, self.q, self.v, t1 - t0, torque)
@@ -288,7 +282,7 @@ class Simulator:
                 return q, v
         return self.integrator.step(t, q, v, h, torque)
 
-    # -- events (`simulation.crossings`, `simulation.impact`), also taken by the drive and stick–slip steps
+    # -- events (`simulation.crossings`, `simulation.impact`), also taken by the owners' steppings
     def _first_crossing(self, t: float, q: Vec3, v: Vec3, t1: float, q1: Vec3, v1: Vec3,
                         torque: TorqueFn) -> Crossing | None:
         """The earliest gap crossing of the step (t, q, q') → (t1, q1, q1'), located; None if none."""

@@ -423,11 +423,11 @@ def _fresh(integ: DormandPrince853) -> bool:
 
 
 def for_simulator(sim: Simulator) -> EventStep | None:
-    """The compiled common step of `sim`, or None (no compiled gap screen, another method, a drive,
-    stick–slip friction, substeps near contact)."""
+    """The compiled common step of `sim`, or None (no compiled gap screen, another method, an owner that
+    steps its own modes, `Simulator.mode_steppings`, substeps near contact)."""
     screen = sim._gap_screen  # noqa: SLF001
     integ = sim.integrator
-    if screen is None or sim._drive is not None or sim._friction is not None:  # noqa: SLF001
+    if screen is None or sim.mode_steppings:
         return None
     if type(integ) is not DormandPrince853 or not integ.compiled or (sim.substeps != 1 and sim._kinks):  # noqa: SLF001
         return None

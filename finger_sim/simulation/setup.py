@@ -3,8 +3,9 @@
 The method (auto resolved), the stability check, the integrator class on the chosen kernel, the
 non-smooth elements' gaps (`simulation.crossings.Gap`) and the compiled fast path; a frozen value,
 so one scene's Simulators share it (`setup_for`, an LRU cache: a node's resets, a rollout's rows).
-A system that holds run state (a drive's mesh mode, a stick–slip contact's friction mode) is built
-anew for each Simulator (`for_simulator`), the rest of the set-up kept.
+A system that holds run state (an owner of modes, `FingerSystem.mode_owners`) is built anew for each
+Simulator (`for_simulator`), the rest of the set-up kept. Owners that step their own modes impose their
+method and integrator through their declared stepping (`simulation.mode_stepping`).
 """
 
 from __future__ import annotations
@@ -12,8 +13,7 @@ from __future__ import annotations
 import functools
 from typing import NamedTuple
 
-from finger_sim import stepper_slot, stick_slip
-from finger_sim.actuators import stepping as drive_stepping
+from finger_sim import stepper_slot
 from finger_sim.auto import (ERROR_CONTROLLED, PYTHON_STAGES_NOTE, choose_method, contact_substeps,
                              integrator_options, warn_unresolved_contact)
 from finger_sim.depth_guard import depth_limit
@@ -22,8 +22,9 @@ from finger_sim.effects import Effect, ForceElement
 from finger_sim.errors import StabilityError
 from finger_sim.integrators import METHODS, Integrator
 from finger_sim.scene import AUTO, Scene
+from finger_sim.simulation import mode_owners
 from finger_sim.simulation.crossings import Gap
-from finger_sim.state_layout import OwnModes
+from finger_sim.simulation.mode_stepping import leader
 from finger_sim.stability import CONTACT_RESOLUTION, fastest_mode, has_contact, largest_stable_dt, mcp_range, stable_at
 
 #: Scenes whose Simulator set-up is kept (`setup_for`): a node's resets, a rollout's rows, a test's reruns.
@@ -46,10 +47,10 @@ class Setup(NamedTuple):
     gap_elements: tuple[tuple[ForceElement, tuple[int, ...]], ...]
     depth_sources: tuple[tuple[int, float], ...]
     fast_stepper: object  # kernel.integrators.FastStepper | None
-    #: the system holds run state (a drive, an element with its own modes): each Simulator builds its own
+    #: the system holds run state (an owner of modes): each Simulator builds its own
     own_system: bool
     #: what the first Simulator's start found at the scene's initial state (a function of the scene alone:
-    #: the mesh's turning-point rule, the holding test riding a moving object), by its owner's module;
+    #: an owner's rule for its modes at rest), by its owner's module;
     #: filled once, read by the next Simulators' `reset`
     kept_start: dict[str, tuple[object, ...]]
 
@@ -91,23 +92,22 @@ def setup_for(scene: Scene, kernel: str, effects: tuple[Effect, ...]) -> Setup:
     (a frozen value) and registry of effects (`effects.EFFECTS`, what builds the system), so a
     scene seen before costs a dictionary look-up."""
     system = scene.build_system()
-    reason = ""
-    method = scene.method
+    # the owners that step their own modes (`simulation.mode_stepping`) impose their method and integrator
+    steppings = mode_owners.steppings((*system.elements, system.actuator))
+    lead = leader(steppings)
+    pick = lead.auto_method(scene) if lead is not None and scene.method == AUTO else None
+    method, reason = (scene.method, "") if pick is None else (pick.method, pick.reason)
     substeps = 1
     options: dict[str, float] = {}
-    inductive = getattr(system, "drive", None) is not None and system.drive.inductive
-    friction = stick_slip.in_scene(scene)
-    if method == AUTO and (inductive or not friction):  # stick–slip: see below
+    if method == AUTO:
         method, reason = choose_method(scene)
-        if (method == ERROR_CONTROLLED and getattr(system, "drive", None) is None
+        if (method == ERROR_CONTROLLED and system.actuator is None
                 and stepper_slot.kernel().model_array(system) is None):
             reason += PYTHON_STAGES_NOTE
-    if getattr(system, "drive", None) is not None:
-        method, reason = drive_stepping.drive_method(method, reason, scene.method == AUTO,
-                                                     lambda name: stable_under_auto(scene, system, name),
-                                                     system.drive.inductive)
-    if scene.method == AUTO and friction and not inductive:  # dop853, restarted at every mode change
-        method, reason, options, substeps = stick_slip.auto_method(scene)
+    for stepping in steppings:
+        method, reason = stepping.method_for(scene, method, reason, lambda name: stable_under_auto(scene, system, name))
+    if pick is not None:
+        options, substeps = pick.options, pick.substeps
     elif scene.method == AUTO:
         options = integrator_options(scene, method)
         if method != ERROR_CONTROLLED:  # its error control resolves the contact mode itself
@@ -118,11 +118,6 @@ def setup_for(scene: Scene, kernel: str, effects: tuple[Effect, ...]) -> Setup:
     if depth is not None and scene.method != AUTO and method_cls.implicit:
         warn_unresolved_contact(scene, method_cls)
     integrator_cls, kernel_name = stepper_slot.kernel().select(method_cls, system, kernel)
-    if getattr(system, "drive", None) is not None and system.drive.inductive:  # L > 0: the current is a state
-        from finger_sim.actuators import inductive
-
-        integrator_cls = inductive.integrator_class(
-            integrator_cls, inductive.electrical_substeps(scene, system, method_cls, scene.method == AUTO))
     q0, _ = scene.initial_state()
     # every gap of every non-smooth element; empty on a smooth scene, which then pays nothing
     gaps = tuple(Gap(e, i, e.impact(i)) for e in system.elements if not e.smooth for i in range(len(e.gaps(q0))))
@@ -135,14 +130,13 @@ def setup_for(scene: Scene, kernel: str, effects: tuple[Effect, ...]) -> Setup:
         depth_sources = tuple((next(p for p, g in enumerate(gaps) if g.element is depth.contact and g.index == i), rho)
                               for i, rho in enumerate(depth.offsets))
         gaps += tuple(Gap(depth, i, None) for i in range(len(depth.offsets)))  # type: ignore[arg-type]
-    if inductive:
-        from finger_sim.actuators.inductive import kernel_note
-
-        reason += kernel_note(kernel_name, bool(gaps))
+    for stepping in steppings:  # an owner with its own slots steps them with the method (a winding current)
+        integrator_cls, note = stepping.integrator_for(scene, system, method_cls, integrator_cls, kernel_name, bool(gaps))
+        reason += note
     fast_stepper = None
-    if hasattr(integrator_cls, "step_plan") and not gaps and getattr(system, "drive", None) is None:
+    if hasattr(integrator_cls, "step_plan") and not gaps and not steppings:  # a stepping brings its own lean path
         fast_stepper = stepper_slot.kernel().fast_stepper(integrator_cls(system), scene.dt, scene.torque)
-    own_system = getattr(system, "drive", None) is not None or any(isinstance(e, OwnModes) for e in system.elements)
+    own_system = bool(system.mode_owners)  # an owner of modes holds run state
     return Setup(system, method, reason, substeps, options, method_cls, integrator_cls, kernel_name, gaps, kinks,
                  gap_elements, depth_sources, fast_stepper, own_system, {})
 

@@ -25,6 +25,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from finger_sim import stick_slip
 from finger_sim.effects.contact import Contact
 from finger_sim.errors import ConfigError
 from finger_sim.integrators.dop853 import DormandPrince853
@@ -89,7 +90,7 @@ def row_scenes(task: Task, factory: Factory, columns: Sequence[tuple[str, Mappin
 
 def _sim_reason(sim: Simulator) -> str | None:
     integ = sim.integrator
-    if sim._friction is not None or sim._timed:  # noqa: SLF001
+    if stick_slip.element(sim.system) is not None or sim._timed:  # noqa: SLF001
         return "stick-slip friction or a moving object"
     if sim.fast_stepper is not None:  # the lean path (no contact, no drive)
         return None if _plan_parts(sim.fast_stepper.plan)[2].shape[1] > 0 else "the paper's Euler"

@@ -24,6 +24,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from finger_sim import stick_slip
 from finger_sim.actuators.drive_outputs import MOTOR_CURRENT
 from finger_sim.effects.contact import Contact
 from finger_sim.effects.contact_outputs import GRIP_FORCE
@@ -63,10 +64,10 @@ def batch_reason(task: Task, factory: Factory) -> str | None:
 
 def sim_reason(sim: Simulator) -> str | None:
     """Why the kernel cannot step a row on this drive scene's Simulator, or None."""
-    drive = sim._drive  # noqa: SLF001
+    drive = getattr(sim.system, "drive", None)
     if drive is None or drive.inductive:
         return "a drive with an inductance (L > 0)" if drive is not None else "no drive"
-    if sim._friction is not None or sim._timed:  # noqa: SLF001
+    if stick_slip.element(sim.system) is not None or sim._timed:  # noqa: SLF001
         return "stick-slip friction or a moving object"
     integ = sim.integrator
     if not isinstance(integ, DormandPrince853) or not integ.compiled:
@@ -99,7 +100,7 @@ class _Row(SweepRow):
 
     def sync(self, i: int, rows: Rows) -> None:
         """The drive's discrete state (mesh mode, direction) into row i's arrays."""
-        drive = self.sim._drive  # noqa: SLF001
+        drive = self.sim.system.drive  # type: ignore[attr-defined]
         p = drive.params
         rows.models[i, len(self.model) - len(drive.kernel_block())] = float(drive.mode)
         rows.drives[i] = (drive.direction, p.efficiency, p.backward_efficiency)
