@@ -13,6 +13,9 @@ locates a crossing is sorted by phase:
   (`DormandPrince853.cut_at`);
 - *cut*: the straddling step retaken to end at the kink;
 - *after*: the rest of the step from the kink (continued or restarted).
+
+A kink located at an internal step's end (no step straddles it) is not cut: its pass 1 counts whole as *up to
+the kink*.
 """
 
 from __future__ import annotations
@@ -38,7 +41,7 @@ class Attempts:
     """One step's attempts: (start t in s, accepted) in order, by phase, and where pass 1 straddled the kink."""
 
     phases: dict[str, list[tuple[float, bool]]] = field(default_factory=lambda: {p: [] for p in PHASES[1:]})
-    straddle_end: float | None = None  # the end (s) of pass 1's internal step across the kink, if cut
+    straddle_end: float | None = None  # the end (s) of pass 1's internal step across the kink, if it was cut
 
     def by_phase(self) -> dict[str, tuple[int, int]]:
         """(accepted, rejected) per phase of PHASES."""
@@ -69,14 +72,15 @@ def count_scene(name: str) -> tuple[dict[int, Attempts], int, int]:
 
     def counted_cut(s: float, *args: Any) -> Any:
         i = bisect.bisect_left(integ._history_starts, s) - 1  # noqa: SLF001  (`cut_at`'s straddling step)
-        if i >= 0:
-            t_old, h_old = integ._history[i][:2]  # noqa: SLF001
-            now.straddle_end = t_old + h_old
+        end = sum(integ._history[i][:2]) if i >= 0 else None  # noqa: SLF001  (t_old + h_old)
         phase[0] = PHASES[2]
         try:
-            return cut_at(s, *args)
+            ended = cut_at(s, *args)
         finally:
             phase[0] = PHASES[3]
+        if ended is not None:  # cut: pass 1's steps past the straddling one are dropped
+            now.straddle_end = end
+        return ended
 
     def counted_locate(*args: Any) -> Any:
         located.add(sim.step_index)
@@ -94,7 +98,8 @@ def count_scene(name: str) -> tuple[dict[int, Attempts], int, int]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m finger_sim.bench.event_attempts", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="python -m finger_sim.bench.event_attempts",
+                                     description=__doc__.splitlines()[0])
     parser.add_argument("--scenes", nargs="*", default=list(SCENES))
     args = parser.parse_args(argv)
     print("Attempts accepted + rejected (Python's counted loop, the kernel's attempts):")

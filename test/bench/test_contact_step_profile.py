@@ -60,8 +60,9 @@ def counters_by_step(name: str) -> tuple[dict[int, tuple[int, int]], dict[int, i
     def counted_cut(s, *args):  # type: ignore[no-untyped-def]
         starts = list(integ._history_starts)  # noqa: SLF001
         straddling = max(i for i, start in enumerate(starts) if start < s)
-        past[sim.step_index] = len(starts) - straddling - 1
-        return cut_at(s, *args)
+        ended = cut_at(s, *args)
+        past[sim.step_index] = len(starts) - straddling - 1 if ended is not None else 0  # none dropped without a cut
+        return ended
 
     integ.cut_at = counted_cut
     counts = {}
@@ -83,4 +84,4 @@ def test_event_attempts_by_phase_add_up_to_the_integrators_own_counts(name):
         phases = attempts.by_phase()
         assert (sum(a for a, _ in phases.values()), sum(r for _, r in phases.values())) == counts[k]
         assert phases["pass 1 past the kink"][0] == past[k]  # the cut dropped exactly those accepted steps
-        assert phases["cut"][0] >= 1 and phases["pass 1 to the kink"][0] >= 1
+        assert phases["pass 1 to the kink"][0] >= 1
