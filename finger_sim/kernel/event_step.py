@@ -254,9 +254,10 @@ def _step(m, plan, st, arr, work, t, t1, command, prof, same, locate, q, v, log)
     side = int(st[SIDE])
     if st[KNOWN] != 1.0:  # the start's gaps: the watch's sides (`crossings.step_to_crossing`) and the screen's start
         gap_states(plan, (q[0], q[1], q[2], v[0], v[1], v[2]), work, side)
-    if not _advance_to(m, st, arr, log, prof, target, plan, work, side):
+    # (most common steps take no internal step: the call, whose array arguments cost reference counts, is skipped)
+    if st[T] < target and not _advance_to(m, st, arr, log, prof, target, plan, work, side):
         return PYTHON, q, v, 0.0
-    stopped = st[HIT] > -np.inf  # at an internal step's end that showed a gap on its other side
+    stopped = st[HIT] > -np.inf  # past an internal step's end that showed a gap on its other side
     out_t, end = (st[HIT], st[HIT]) if stopped else (target, t1)
     t_old, h_old = st[T_OLD], st[H_OLD]
     if out_t < t_old:  # an earlier internal step's output: the history is Python's
