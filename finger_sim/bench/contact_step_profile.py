@@ -17,7 +17,9 @@ takes):
 log; rejected attempts not counted), each 15 right-hand sides (12 stages, the last the next step's
 first, and 3 more for the dense output), against rk6's 7 per output; and the kernel step's cost on
 the same scene before the first event (the same method, no contact yet).
-(d) Event steps: how many per run, the impacts counted by the Simulator.
+(d) Event steps: how many per run, the impacts counted by the Simulator; with --attempts, their DOP853
+attempts by phase (`event_attempts`: pass 1 up to the kink and past it, the cut, the rest), each costing about
+the kernel call with one internal step less the one with none.
 
 Each step's median over the runs (every run takes the same path; the median drops the shared
 machine's preemptions), summed by kind; one Simulator per scene, reset between runs, after two
@@ -33,6 +35,7 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
+from finger_sim.bench import event_attempts
 from finger_sim.bench.plan import config_dir
 from finger_sim.scene import load_scene
 from finger_sim.simulate import Simulator
@@ -143,6 +146,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                                      description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=RUNS)
     parser.add_argument("--scenes", nargs="*", default=list(SCENES))
+    parser.add_argument("--attempts", action="store_true", help="also the event steps' attempts by phase")
     args = parser.parse_args(argv)
     free = free_step(args.runs)
     print(f"free step ({FREE_SCENE}, auto = rk6 lean): {free:.2f} µs; rk6 {RK6_RHS} right-hand sides per step, "
@@ -165,6 +169,9 @@ def main(argv: Sequence[str] | None = None) -> int:
               f"| {p['n event']:.0f}, {p['event']:.0f}, {p['event call']:.0f}, {p['n event in kernel']:.0f} | {p['impacts']:.0f} "
               f"| {p['kernel call'] / whole:.0%} / {(p['kernel'] - p['kernel call']) / whole:.0%} "
               f"/ {p['event'] / whole:.0%} / {p['first'] / whole:.0%} |")
+    if args.attempts:
+        print()
+        event_attempts.main(["--scenes", *args.scenes])
     return 0
 
 

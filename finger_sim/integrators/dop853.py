@@ -157,6 +157,9 @@ class DormandPrince853(Integrator):
         self._history: list[tuple[float, float, np.ndarray, np.ndarray, float, float]] = []
         self._history_starts: list[float] = []
         self._keep_history = True
+        #: the end (s) of the internal step a compiled watched step stopped at (`simulation.event_handover`): the
+        #: next watched `step` stops there too, as its own watch would have
+        self._hit: float | None = None
         #: the compiled loop of internal steps under a held torque (`kernel.internal_steps`), or None
         #: (stages in Python, a system without one), and its scalars and scratch arrays
         self._steps = stages.internal_steps() if self.compiled else None
@@ -235,7 +238,12 @@ class DormandPrince853(Integrator):
             self._estimates = dict(list(self._estimates.items())[-KEEP_OUTPUTS:])
         self._estimates[q_to] = self._estimates.get(q_from, 0.0) + error
 
-    def step(self, t: float, q: Vec3, v: Vec3, dt: float, torque: TorqueFn) -> tuple[Vec3, Vec3]:
+    def step(self, t: float, q: Vec3, v: Vec3, dt: float, torque: TorqueFn,
+             watch: Callable[[float, np.ndarray], bool] | None = None) -> tuple[Vec3, Vec3]:
+        """The output at t + dt (s) of the internal solution from (t, q, q') under `torque`. With `watch`
+        (`simulation.crossings.step_to_crossing`), the internal steps stop one step past the first that ends
+        before t + dt where watch(its end time, its end state y) is True (a gap on its other side), if that one
+        ends before t + dt too: the output is there, at the time `_last` holds."""
         target = t + dt
         last = self._last
         if not self.under_current_modes():
@@ -248,11 +256,14 @@ class DormandPrince853(Integrator):
             self._prune(t)
         else:
             self._restart(t, q, v, dt, torque)
-        held = getattr(torque, "value", None)  # a held or constant torque (`HeldTorque`, `inputs.Constant`)
-        if held is not None and self._steps is not None and self._t < target:
-            self._advance_compiled(target, held)
-        while self._t < target:
-            self._advance(torque)
+        if watch is not None:
+            target = self._watched(t, target, torque, watch)
+        else:
+            held = getattr(torque, "value", None)  # a held or constant torque (`HeldTorque`, `inputs.Constant`)
+            if held is not None and self._steps is not None and self._t < target:
+                self._advance_compiled(target, held)
+            while self._t < target:
+                self._advance(torque)
         t_old, h_old, y_old, dense, err_old, err = self._segment(target)
         status, q1, v1 = self._numerics.dop853_output(self._model, t_old, h_old, y_old, dense, target, self._out)
         if status != self._numerics.OK:
@@ -260,6 +271,23 @@ class DormandPrince853(Integrator):
         self._last = (target, q1, v1)
         self._remember(q1, target, t_old, h_old, err_old, err)
         return q1, v1
+
+    def _watched(self, t: float, target: float, torque: TorqueFn, watch: Callable[[float, np.ndarray], bool]) -> float:
+        """`step`'s internal steps from t to `target` (s) under `watch`: the time of its output
+        (`simulation.crossings.step_to_crossing`: they stop one internal step past the first whose end shows a
+        gap crossed). Each step in Python's loop (the compiled chunk knows no watch); a pass the kernel stopped
+        (`_hit`) stops there again."""
+        hit, self._hit = self._hit, None
+        if hit is not None and hit == self._t and t < hit < target:
+            return hit
+        seen = False  # an internal step ended with a gap on its other side: one more, then stop
+        while self._t < target:
+            self._advance(torque)
+            if self._t < target and (seen or watch(self._t, self._y)):
+                if seen:
+                    return self._t
+                seen = True
+        return target
 
     @contextmanager
     def aside(self) -> Iterator[None]:
@@ -333,6 +361,7 @@ class DormandPrince853(Integrator):
     def _restart(self, t: float, q: Vec3, v: Vec3, dt: float, torque: TorqueFn) -> None:
         self._torque = torque
         self._origin = (t, q, v)
+        self._hit = None
         self._history.clear()
         self._history_starts.clear()
         self._err = self._err_old = self.error_estimate(q)  # (the deferred estimates left as they are)
@@ -380,9 +409,10 @@ class DormandPrince853(Integrator):
         t_old, h_old, y_old, _, err_old, _ = self._history[i]
         if not straddles(s, t_old, h_old):
             return None
-        past = self._history[i + 1][1] if i + 1 < len(self._history) else 0.0  # (t_old, h_old, …)
+        past = self._history[i + 1][1] if i + 1 < len(self._history) else h_old  # (t_old, h_old, …)
         proposed = self._h
         del self._history[i:], self._history_starts[i:]
+        self._hit = None
         self._t, self._y, self._err, self._h = t_old, y_old, err_old, h_old
         self._slope(t_old, torque)
         held = getattr(torque, "value", None)  # as `step`: a held torque's internal steps compiled
@@ -497,14 +527,14 @@ def straddles(s: float, t_old: float, h_old: float) -> bool:
 
 def restart_step(onset: bool, past: float, bounded: float, proposed: float) -> float:
     """The next internal step (s) after `DormandPrince853.cut_at` ended one at a kink. On an `onset`: `past`,
-    the step the error control took just past the kink before the cut (0: none, the straddling step was the
-    last). On a release, or without `past`: the larger of the bounded step's next one and the one `proposed`
-    at the end of the internal steps before the cut (the clipped step's own is too short; error control
-    shrinks it where needed). After an onset the contact's transient needs short steps, which the larger one
+    the step the error control took just past the kink before the cut, or the straddling step's own where it
+    was the last. On a release: the larger of the bounded step's next one and the one `proposed` at the end of
+    the internal steps before the cut (the clipped step's own is too short; error control shrinks it where
+    needed). After an onset the contact's transient needs short steps, which the larger one
     overshoots and retries 5-6 times; after a release the free flight takes the large one at once (the steps
     past it before the cut were held back by the growth limit, not by the error). A plain function: the
     kernel compiles it (`kernel.event_step._cut_at`), on the same numbers."""
-    if onset and past > 0.0:
+    if onset:
         return past
     return max(bounded, proposed)
 

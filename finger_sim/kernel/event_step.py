@@ -41,7 +41,7 @@ from numba import njit  # noqa: E402  (after the cache folder is set)
 from finger_sim.effects import stops  # noqa: E402
 from finger_sim.integrators import dop853  # noqa: E402
 from finger_sim.kernel.closed_loop import I_H, I_H_OLD, I_T, I_T_OLD, N_NODES, _advance  # noqa: E402
-from finger_sim.kernel.gap_screen import screen  # noqa: E402
+from finger_sim.kernel.gap_screen import gap_states, screen  # noqa: E402
 from finger_sim.kernel.integrators import _entry_point  # noqa: E402
 from finger_sim.kernel import internal_steps  # noqa: E402  (its layout, read by `simulation.event_handover`)
 from finger_sim.kernel.internal_steps import (BRANCH, CONTINUED, COUNT, HISTORY_ROWS, HISTORY_SIZE,  # noqa: E402
@@ -72,7 +72,9 @@ HAS_END, END_Q, END_EST = 33, 34, 37
 #: The stops' restitution e (set by `simulation.event_step`); the impacts the kernel applied (a counter the
 #: Simulator reads and clears: `Simulator.impacts`); the position of the gap the last RESTED step rests on.
 RESTITUTION, IMPACTS, REST_GAP = 38, 39, 40
-N_SCALARS = 41
+#: The end (s) of the internal step a watched pass stopped at (`_advance_to`: past a gap's other side), else −inf.
+HIT = 41
+N_SCALARS = 42
 TAUS = N_SCALARS
 SAVED = TAUS + N_NODES
 #: The profile's slot (code and up to three parameters), then the held value's code.
@@ -247,6 +249,7 @@ def _step(m, plan, st, arr, work, t, t1, command, prof, same, locate, q, v, log)
     h = t1 - t
     target = t + h
     log[COUNT], log[BRANCH] = 0.0, 0.0
+    st[HIT] = -np.inf
     ended = st[HAS_END] == 1.0 and st[END_Q] == q[0] and st[END_Q + 1] == q[1] and st[END_Q + 2] == q[2]
     st[HAS_END] = 0.0
     if same and st[HAS_ORIGIN] == 1.0 and st[ORIGIN_T] == t and _is(st, ORIGIN_Q, q, v) and target >= t:
@@ -271,28 +274,35 @@ def _step(m, plan, st, arr, work, t, t1, command, prof, same, locate, q, v, log)
         log[BRANCH] = RESTARTED
     for c in range(N_NODES):
         st[TAUS + c] = command  # a held command's (a profile's are set by each attempt)
-    if not _advance_to(m, st, arr, log, prof, target):
+    side = int(st[SIDE])
+    if st[KNOWN] != 1.0:  # the start's gaps: the watch's sides (`crossings.step_to_crossing`) and the screen's start
+        gap_states(plan, (q[0], q[1], q[2], v[0], v[1], v[2]), work, side)
+    # (most common steps take no internal step: the call, whose array arguments cost reference counts, is skipped)
+    if st[T] < target and not _advance_to(m, st, arr, log, prof, target, plan, work, side):
         return PYTHON, q, v, 0.0
+    stopped = st[HIT] > -np.inf  # past an internal step's end that showed a gap on its other side
+    out_t, end = (st[HIT], st[HIT]) if stopped else (target, t1)
     t_old, h_old = st[T_OLD], st[H_OLD]
-    if target < t_old:  # an earlier internal step's output: the history is Python's
+    if out_t < t_old:  # an earlier internal step's output: the history is Python's
         return PYTHON, q, v, 0.0
-    status, q1, v1 = dop853_output_rows(m, t_old, h_old, arr, Y_OLD, DENSE, target)
+    status, q1, v1 = dop853_output_rows(m, t_old, h_old, arr, Y_OLD, DENSE, out_t)
     if status != OK:
         return PYTHON, q, v, 0.0
-    side = int(st[SIDE])
     status = OK
-    if screen(plan, work, side, st[KNOWN] == 1.0, h, q, v, q1, v1):
+    if screen(plan, work, side, True, end - t if stopped else h, q, v, q1, v1):
         # a crossing may lie inside: kept for Python when the log holds the step's whole history
         if log[BRANCH] == 0.0 or log[COUNT] > HISTORY_ROWS:
             return PYTHON, q, v, 0.0
         if not locate:
             return EVENT, q, v, 0.0
-        status, q1, v1, target, estimate = _settle(m, plan, st, arr, work, side, t, t1, command, prof, q, v, q1, v1,
-                                                   log)
+        status, q1, v1, target, estimate = _settle(m, plan, st, arr, work, side, t, t1, end, out_t, command, prof, q,
+                                                   v, q1, v1, log)
         if status == ENDED or status == RESTED:
             return status, q1, v1, estimate
         if status != SETTLED and status != OK:
             return status, q, v, 0.0
+    elif stopped:  # a side the screen does not confirm: Python steps on from the stop
+        return PYTHON, q, v, 0.0
     else:
         st[KNOWN], st[SIDE] = 1.0, 2 - side
     # `DormandPrince853._remember`: the estimate interpolated over the internal step that covers the output
@@ -315,24 +325,48 @@ def _restart(m, st, arr, t, q, v, tau, span):
 
 
 @njit(**JIT)
-def _advance_to(m, st, arr, log, prof, target):
+def _advance_to(m, st, arr, log, prof, target, plan, work, side):
     """`DormandPrince853.step`'s internal steps until st[T] ≥ target (s) (`closed_loop._advance`), each with its
-    θ error estimate and recorded in log. False where one fails. The rows are sliced only when a step is due."""
+    θ error estimate and recorded in log, watched as `crossings.step_to_crossing` watches them: they stop one step
+    past the first one ending before target with a gap on the other side than in work's start rows `side`
+    (`_crossed`), its end time in st[HIT], where that one ends before target too. False where one fails. The rows
+    are sliced only when a step is due."""
     if not st[T] < target:
         return True
     y, f, y_old, dense, kk, y_new = arr[Y], arr[F], arr[Y_OLD], arr[DENSE:KK], arr[KK:Y_NEW], arr[Y_NEW]
     taus = st[TAUS:SAVED]
+    seen = False
     while st[T] < target:
         if not _advance(m, st[RTOL], st[ATOL], st, y, f, y_old, dense, kk, y_new, taus, prof):
             return False
         st[ERR_OLD] = st[ERR]
         st[ERR] += dop853_theta_error(E53, kk, st[H_OLD], E3_WEIGHT)
         record(log, st, y_old, dense)
+        if st[T] < target and (seen or _crossed(plan, work, side, y)):
+            if seen:
+                st[HIT] = st[T]
+                return True
+            seen = True
     return True
 
 
 @njit(**JIT)
-def _settle(m, plan, st, arr, work, side, t, t1, command, prof, q, v, q1, v1, log):
+def _crossed(plan, work, a, y):
+    """Whether some gap at the internal state y = (q, q') lies on the other side (closed below −EVENT_TOLERANCE)
+    than in work's start rows a, an impact gap counting as open at the start (`crossings.closed_sides`); y's gaps
+    go to the end rows 2 − a (the screen writes them again)."""
+    b, n = 2 - a, int(plan[0])
+    gap_states(plan, (y[0], y[1], y[2], y[3], y[4], y[5]), work, b)
+    flags = plan.shape[0] - n
+    for i in range(n):
+        closed = work[a, i] < -EVENT_TOLERANCE and plan[flags + i] == 0.0
+        if (work[b, i] < -EVENT_TOLERANCE) != closed:
+            return True
+    return False
+
+
+@njit(**JIT)
+def _settle(m, plan, st, arr, work, side, t, t1, end, out_t, command, prof, q, v, q1, v1, log):
     """`Simulator._advance`'s event loop for a step whose screen (start rows `side`) shows a possible
     crossing, the solution advanced to t1 with its internal steps in log: each crossing located
     (`event_crossing.first_crossing`; a kink's straddling internal step retaken to end there, `_cut_at`), the
@@ -343,16 +377,20 @@ def _settle(m, plan, st, arr, work, side, t, t1, command, prof, q, v, q1, v1, lo
     EVENT (nothing changed: Python locates from the log) or PYTHON (the solution
     moved: Python takes the step again) where Python must act (`first_crossing`'s DECLINE, a step that fails).
     The last two: the output's time (`DormandPrince853.step`'s target s + (t1 − s) from the last crossing s),
-    and with ENDED the error estimate at the output (rad)."""
+    and with ENDED the error estimate at the output (rad). A watched pass that stopped before t1 (`_advance_to`)
+    is searched up to its stop: end (s), the segment's end `first_crossing` brackets to (t1 or the stop), and
+    out_t, the output's time (the target or the stop)."""
     found = np.empty(event_crossing.OUT_SIZE)
     st[SAVED + KNOWN] = 0.0  # the screen's rows change here: a restored step computes its start's gaps again
     s, target = t, t + (t1 - t)
     for event in range(MAX_EVENTS_PER_STEP + 1):
-        est1 = _estimate(target, st[T_OLD], st[H_OLD], st[ERR_OLD], st[ERR])
+        est1 = _estimate(out_t, st[T_OLD], st[H_OLD], st[ERR_OLD], st[ERR])
         segs, y_olds, denses = _history(st, arr, log)
-        code, gap = event_crossing.first_crossing(m, plan, work, side, s, q, v, t1, q1, v1, est1, segs, y_olds,
+        code, gap = event_crossing.first_crossing(m, plan, work, side, s, q, v, end, q1, v1, est1, segs, y_olds,
                                                 denses, st[T], found)
         if code == event_crossing.NONE:
+            if out_t < target:  # stopped where the screen saw a crossing that is none: Python steps on
+                return PYTHON, q1, v1, target, 0.0
             st[KNOWN] = 0.0
             return (OK if event == 0 else SETTLED), q1, v1, target, 0.0
         if code == event_crossing.DECLINE or event == MAX_EVENTS_PER_STEP:  # Python acts
@@ -374,7 +412,7 @@ def _settle(m, plan, st, arr, work, side, t, t1, command, prof, q, v, q1, v1, lo
                 st[REST_GAP] = gap
         else:
             onset = not work[side, gap] < -EVENT_TOLERANCE  # open at the start: the contact closes
-            cut = _cut_at(m, st, arr, log, s, t1, command, prof, found, onset)
+            cut = _cut_at(m, st, arr, log, s, command, prof, found, onset)
             if cut == CUT_FAILED:
                 return PYTHON, q1, v1, target, 0.0
             if cut == CUT_PYTHONS:
@@ -386,7 +424,7 @@ def _settle(m, plan, st, arr, work, side, t, t1, command, prof, q, v, q1, v1, lo
                 st[LAST_T], st[LAST_EST] = found[event_crossing.OUT_LAST_T], found[event_crossing.OUT_LAST_EST]
                 _put(st, LAST_Q, (lq[0], lq[1], lq[2]), (lv[0], lv[1], lv[2]))
             else:
-                st[LAST_T], st[LAST_EST] = target, est1
+                st[LAST_T], st[LAST_EST] = out_t, est1
                 _put(st, LAST_Q, q1, v1)
             st[HAS_LAST], st[KNOWN] = 1.0, 0.0
             st[HAS_END], st[END_EST] = 1.0, found[event_crossing.OUT_EST]
@@ -395,6 +433,7 @@ def _settle(m, plan, st, arr, work, side, t, t1, command, prof, q, v, q1, v1, lo
         st[HAS_ORIGIN], st[ORIGIN_T] = 1.0, s
         _put(st, ORIGIN_Q, q, v)
         target = s + (t1 - s)  # `DormandPrince853.step`'s from the crossing
+        gap_states(plan, (q[0], q[1], q[2], v[0], v[1], v[2]), work, side)  # the watch's start: the crossing's
         if not (found[event_crossing.OUT_HAS_LAST] == 1.0 and lq[0] == q[0] and lq[1] == q[1] and lq[2] == q[2]
                 and lv[0] == v[0] and lv[1] == v[1] and lv[2] == v[2]
                 and abs(found[event_crossing.OUT_LAST_T] - s) <= LAST_OUTPUT_SLACK * (t1 - s) and target >= st[T_OLD]):
@@ -402,16 +441,21 @@ def _settle(m, plan, st, arr, work, side, t, t1, command, prof, q, v, q1, v1, lo
             st[ERR] = st[ERR_OLD] = found[event_crossing.OUT_EST]
             _restart(m, st, arr, s, q, v, torque_at(prof, command, s), t1 - s)
             log[COUNT], log[BRANCH] = 0.0, RESTARTED
-            if not _advance_to(m, st, arr, log, prof, target):
-                return PYTHON, q1, v1, target, 0.0
-            if log[COUNT] > HISTORY_ROWS:
-                return PYTHON, q1, v1, target, 0.0
-        if target < st[T_OLD]:  # an earlier internal step's output: the history is Python's
+        st[HIT] = -np.inf
+        if not _advance_to(m, st, arr, log, prof, target, plan, work, side):  # (continued or restarted)
             return PYTHON, q1, v1, target, 0.0
-        status, q1, v1 = dop853_output_rows(m, st[T_OLD], st[H_OLD], arr, Y_OLD, DENSE, target)
+        if log[COUNT] > HISTORY_ROWS:
+            return PYTHON, q1, v1, target, 0.0
+        stopped = st[HIT] > -np.inf
+        out_t, end = (st[HIT], st[HIT]) if stopped else (target, t1)
+        if out_t < st[T_OLD]:  # an earlier internal step's output: the history is Python's
+            return PYTHON, q1, v1, target, 0.0
+        status, q1, v1 = dop853_output_rows(m, st[T_OLD], st[H_OLD], arr, Y_OLD, DENSE, out_t)
         if status != OK:
             return PYTHON, q1, v1, target, 0.0
-        if not screen(plan, work, side, False, t1 - s, q, v, q1, v1):
+        if not screen(plan, work, side, True, end - s, q, v, q1, v1):
+            if stopped:  # a side the screen does not confirm: Python steps on from the stop
+                return PYTHON, q1, v1, target, 0.0
             st[KNOWN], st[SIDE] = 1.0, 2 - side
             return SETTLED, q1, v1, target, 0.0
     return PYTHON, q1, v1, target, 0.0  # (not reached: the last round returns)
@@ -438,13 +482,12 @@ def _impact(m, st, s, t1, command, prof, sign, q, v):
 
 
 @njit(**JIT)
-def _cut_at(m, st, arr, log, s, t1, command, prof, found, onset):
-    """`DormandPrince853.cut_at` for the kink `event_crossing.first_crossing` located at s (s) in the step to
-    t1 (an `onset`: the gap open at the step's start): the logged internal step that straddles it
-    (`dop853.straddles`) and those after it dropped, the solution retaken from that step's start with internal
-    steps ending exactly at s, its output there put in found as the crossing and the last trial (OUT_*), then
-    advanced on to `DormandPrince853.step`'s target s + (t1 − s) from the next step `dop853.restart_step`
-    chooses, logged (what the continued step does). Returns CUT_NONE (no step straddles s: nothing
+def _cut_at(m, st, arr, log, s, command, prof, found, onset):
+    """`DormandPrince853.cut_at` for the kink `event_crossing.first_crossing` located at s (s) (an `onset`: the
+    gap open at the step's start): the logged internal step that straddles it (`dop853.straddles`) and those
+    after it dropped, the solution retaken from that step's start with internal steps ending exactly at s, its
+    output there put in found as the crossing and the last trial (OUT_*), the next step the one
+    `dop853.restart_step` chooses (the caller continues from there). Returns CUT_NONE (no step straddles s: nothing
     changed), CUT (done), CUT_PYTHONS (the straddling step is the one that covered a continued step's start,
     which the log does not hold: nothing changed) or CUT_FAILED (an internal step failed: Python retakes)."""
     n, pre = int(log[COUNT]), 1 if log[BRANCH] == CONTINUED else 0
@@ -464,7 +507,7 @@ def _cut_at(m, st, arr, log, s, t1, command, prof, found, onset):
         return CUT_PYTHONS
     y, f, y_old, dense, kk, y_new = arr[Y], arr[F], arr[Y_OLD], arr[DENSE:KK], arr[KK:Y_NEW], arr[Y_NEW]
     taus = st[TAUS:SAVED]
-    past = log[ROWS_AT + (j + 1) * ROW_SIZE + ROW_H] if j + 1 < n else 0.0
+    past = log[ROWS_AT + (j + 1) * ROW_SIZE + ROW_H] if j + 1 < n else h_old
     proposed = st[H]
     st[T], st[H], st[ERR] = t_old, h_old, row[ROW_ERR_OLD]
     y[:] = row[ROW_Y_OLD:ROW_DENSE]
@@ -486,9 +529,7 @@ def _cut_at(m, st, arr, log, s, t1, command, prof, found, onset):
     found[event_crossing.OUT_LAST_V:event_crossing.OUT_LAST_V + 3] = v
     found[event_crossing.OUT_EST] = found[event_crossing.OUT_LAST_EST] = estimate
     found[event_crossing.OUT_HAS_LAST], found[event_crossing.OUT_LAST_T] = 1.0, s
-    if not _advance_to(m, st, arr, log, prof, s + (t1 - s)):
-        return CUT_FAILED
-    return CUT if log[COUNT] <= HISTORY_ROWS else CUT_FAILED
+    return CUT
 
 
 @njit(**JIT)

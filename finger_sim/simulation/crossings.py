@@ -12,9 +12,12 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, NamedTuple
 
+import numpy as np
+
 from finger_sim.depth_guard import DepthLimit
 from finger_sim.effects import ForceElement
 from finger_sim.integrators import TorqueFn
+from finger_sim.integrators.dop853 import DormandPrince853
 from finger_sim.kinematics import Vec3
 from finger_sim.simulation.locate import (EVENT_TOLERANCE, GapSearch, GuardCrossing, first_guard_crossing,
                                          predicted_crossing, regula_falsi_gap)
@@ -26,6 +29,8 @@ if TYPE_CHECKING:
 MAX_LOCATE_ITERATIONS = 60
 #: A NamedTuple made without its Python-level __new__ (as `locate._new`).
 _new = tuple.__new__
+#: q' = 0: the gaps' values alone are asked (`closed_sides`).
+ZERO = (0.0, 0.0, 0.0)
 #: How deep `bracket` refines a predicted crossing inside a step that its check did not confirm
 #: (each level probes both halves: at most 2^depth − 1 extra integrator steps).
 BRACKET_DEPTH = 3
@@ -90,6 +95,38 @@ def first_crossing(sim: Simulator, t: float, q: Vec3, v: Vec3, t1: float, q1: Ve
         if ended is not None:
             first = Crossing(first.t, *ended, first.gap)
     return first
+
+
+def step_to_crossing(sim: Simulator, t: float, q: Vec3, v: Vec3, t1: float,
+                     torque: TorqueFn) -> tuple[float, Vec3, Vec3]:
+    """The Simulator's step from (t, q, q') toward t1 (s) that `first_crossing` then searches: (its end time, q1,
+    q1'). Our DOP853 stops it one internal step past the first that ends before t1 with a gap on the other side
+    than at t (`DormandPrince853.step`'s watch: the internal state's gaps, an impact gap open at t), so that the
+    internal steps past a kink, which the cut drops (`DormandPrince853.cut_at`), are not taken to t1; the end is
+    then that step's. The one step past it keeps the location's far end off the crossing (regula falsi's far side,
+    which a kink's location returns, may never move from a bracket end that close) and gives the restart after an
+    onset its step (`dop853.restart_step`). The kernel's event step stops at the same internal step
+    (`kernel.event_step._advance_to`)."""
+    integ = sim.integrator
+    if not isinstance(integ, DormandPrince853) or (sim.substeps != 1 and sim._kinks):
+        return t1, *sim._step(t, q, v, t1 - t, torque)
+    start = closed_sides(sim, t, q, open_impacts=True)
+
+    def watch(s: float, y: np.ndarray) -> bool:
+        return closed_sides(sim, s, (float(y[0]), float(y[1]), float(y[2]))) != start
+
+    q1, v1 = integ.step(t, q, v, t1 - t, torque, watch)
+    end = integ._last[0]  # noqa: SLF001  (the output's time: t + (t1 − t), or the watched stop before it)
+    return (end if end < t + (t1 - t) else t1), q1, v1
+
+
+def closed_sides(sim: Simulator, t: float, q: Vec3, open_impacts: bool = False) -> list[bool]:
+    """Whether each gap (in `_gaps` order) is closed (below −EVENT_TOLERANCE) at (t, q); with `open_impacts` an
+    impact gap counts as open (a step's start: `locate.gap_guard`)."""
+    states = gap_states(sim, t, q, ZERO)
+    if open_impacts:
+        return [g < -EVENT_TOLERANCE and not impact for (g, _), impact in zip(states, sim._gap_impacts)]
+    return [g < -EVENT_TOLERANCE for g, _ in states]
 
 
 def gap_states(sim: Simulator, t: float, q: Vec3, v: Vec3) -> list[tuple[float, float]]:

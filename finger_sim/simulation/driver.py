@@ -251,9 +251,12 @@ class Simulator:
                     self.q, self.v = q, ZERO
                     return
                 t, v, self._resting = release, ZERO, None
-            q1, v1 = self._step(t, q, v, t1 - t, torque)
-            crossing = self._first_crossing(t, q, v, t1, q1, v1, torque)
+            end, q1, v1 = crossings.step_to_crossing(self, t, q, v, t1, torque)
+            crossing = self._first_crossing(t, q, v, end, q1, v1, torque)
             if crossing is None:
+                if end < t + (t1 - t):  # stopped where a gap showed its other side, which no crossing confirmed
+                    t, q, v = end, q1, v1
+                    continue
                 self.q, self.v = q1, v1
                 return
             t, q, v = crossing.t, crossing.q, crossing.v

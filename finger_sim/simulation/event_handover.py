@@ -8,7 +8,8 @@ advanced to the step's end, with each internal step it took in its log (`kernel.
 - the state at the last internal step;
 - the history since the step's start: the internal step that covers the start (continued), then the new ones;
 - the origin: the step's start;
-- the torque function it ran under.
+- the torque function it ran under;
+- where its watched internal steps stopped, if they did (a gap on its other side: `crossings.step_to_crossing`).
 
 Python's step then answers its first step and every trial step of the event's location
 (`simulation.crossings`) from that history (`DormandPrince853.step`'s first branch), on the same numbers.
@@ -17,6 +18,7 @@ Before, Python integrated the step again, around a stiff contact's onset tens of
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING, Any
 
 from finger_sim.integrators.dop853 import DormandPrince853
@@ -45,3 +47,5 @@ def hand_over(step: EventStep, integ: DormandPrince853, fn: Any) -> None:
     integ._history[:] = history  # noqa: SLF001
     integ._history_starts[:] = [entry[0] for entry in history]  # noqa: SLF001
     integ._torque = fn  # noqa: SLF001
+    hit = float(step._st[k.HIT])  # noqa: SLF001  (a watched pass stopped: Python's watched step stops there too)
+    integ._hit = hit if hit > -math.inf else None  # noqa: SLF001

@@ -204,10 +204,14 @@ def test_the_regularized_law_still_gives_todays_numbers():
     row 500 2.2e-12 → 8.5e-13, at the last 7.8e-13 → 1.8e-12. Moved ≤ 6e-12 rad since the internal step after a
     cut at an onset is the one taken past it before the cut (`dop853.restart_step`), re-derived the same way
     (2026-11-27): friction_table's max 9.5e-11 → 2.1e-10 rad, at the last row 7.9e-13 → 6.6e-13; the held
-    grip's max 6.3e-11 (unchanged), at row 500 8.5e-13 → 1.3e-12, at the last 1.8e-12 → 7.4e-12."""
+    grip's max 6.3e-11 (unchanged), at row 500 8.5e-13 → 1.3e-12, at the last 1.8e-12 → 7.4e-12. Moved ≤ 3e-12
+    rad since a step's internal steps stop one past the first whose end shows a gap crossed
+    (`crossings.step_to_crossing`), re-derived the same way (2026-11-27): friction_table's max 2.1e-10 → 9.5e-11
+    rad, at the last row 6.6e-13 → 9.3e-13; the held grip's max 6.3e-11 (unchanged), at row 500 1.3e-12 →
+    6.3e-13, at the last 7.4e-12 → 4.6e-12."""
     traj = simulate(load_scene(ref.CONFIG / "hard" / "friction_table.yaml"))
-    assert tuple(traj.q[-1]) == (0.28771950317911493, 0.5912739003401237, -1.6036588983475304)
-    assert traj.outputs["grip_force"][-1] == 0.13642616136360827
+    assert tuple(traj.q[-1]) == (0.287719503178994, 0.591273900339977, -1.6036588983477973)
+    assert traj.outputs["grip_force"][-1] == 0.1364261613431814
     d = data({"friction": 1.0}, {"type": "step", "before": 0.05, "after": 0.02, "at": 0.5}, 1.0)
     del d["model"]["contact"]["friction_model"]
     scene = scene_from_dict(d)
@@ -215,9 +219,9 @@ def test_the_regularized_law_still_gives_todays_numbers():
     traj = simulate(scene)
     # DOP853 continues across output steps on each level of the step profile (`inputs.held_level`; it restarted
     # at every step before): θ moved ≤ 2e-12 rad from main's numbers, against a tolerance of 1e-6
-    assert tuple(traj.q[500]) == (0.28885590223439384, 0.592650624615543, -1.60115818592938)
-    assert tuple(traj.q[-1]) == (0.2878537613739646, 0.5914365769716081, -1.6033634499483536)  # crept to 16.49°
-    assert (traj.outputs["grip_force"][500], traj.outputs["grip_force"][-1]) == (0.416170736115659, 0.1637607205862129)
+    assert tuple(traj.q[500]) == (0.2888559022341028, 0.5926506246151905, -1.60115818593002)
+    assert tuple(traj.q[-1]) == (0.28785376137525553, 0.5914365769731723, -1.6033634499455134)  # crept to 16.49°
+    assert (traj.outputs["grip_force"][500], traj.outputs["grip_force"][-1]) == (0.4161707363584505, 0.16376072064895847)
     assert "friction_mode" not in traj.outputs
 
 
