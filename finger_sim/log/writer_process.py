@@ -94,9 +94,11 @@ _NO_SIZE_TRIGGER = 1 << 62  # chunk_size given to mcap's Writer so only this mod
 _RECORD_PREFIX = struct.Struct("<BQ")  # an MCAP record's opcode and body length
 _LENGTH = struct.Struct("<Q")
 _LENGTH_AT = 1  # the body length's offset in a record
-_CHANNEL_AT, _LOG_TIME_AT = 9, 15  # a Message record's channel id and log time offsets
+_FIELDS_AT = 9  # a Message record's channel id, sequence and log time: 14 bytes from here
+#: Those fields as numpy reads them from the 14 bytes (little-endian, unaligned; the sequence is not read).
+_FIELDS = np.dtype({"names": ["channel", "log_ns"], "formats": ["<u2", "<u8"], "offsets": [0, 6], "itemsize": 14})
+_FIELD_BYTES = np.arange(_FIELDS.itemsize)
 _INDEX_ENTRY_BYTES = 16  # a MessageIndex entry: log time and offset, uint64 each
-_U16, _U64 = np.arange(2), np.arange(8)  # byte offsets of a little-endian uint16 and uint64 field
 # mcap.writer.Writer's private state that this module works with (mcap 1.x; checked at start):
 _CHUNK_INDEX_LIST = "_Writer__chunk_indices"  # the list of ChunkIndex kept until finish()
 _CHUNK_BUILDER = "_Writer__chunk_builder"  # the open chunk (mcap._chunk_builder.ChunkBuilder)
@@ -185,12 +187,11 @@ class _Record:
 
 
 class PackedMessageIndex(MessageIndex):
-    """mcap's MessageIndex record whose `records` are arrays of (log time, offset) rows (uint64),
-    one per run of messages, written as one block (mcap's makes two struct calls per entry): the
-    same bytes."""
+    """mcap's MessageIndex record whose `records` is one array of (log time, offset) rows (uint64),
+    written as one block (mcap's makes two struct calls per entry): the same bytes."""
 
     def write(self, stream: RecordBuilder) -> None:
-        entries = np.concatenate(self.records) if self.records else np.empty((0, 2), np.uint64)
+        entries: np.ndarray = self.records  # type: ignore[assignment]
         stream.start_record(Opcode.MESSAGE_INDEX)
         stream.write(struct.pack("<HI", self.channel_id, len(entries) * _INDEX_ENTRY_BYTES))
         stream.write(entries.astype("<u8", copy=False).tobytes())
@@ -287,6 +288,8 @@ class ChunkedFile:
         self.opened_at = 0.0  # time.monotonic() at the open chunk's first message
         self._pending_bytes = 0
         self._first_ns = self._last_ns = 0  # log-time range of the open chunk
+        #: the open chunk's runs not yet in its message index: channel ids, log times, offsets in the chunk
+        self._runs: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
 
     def register(self, item: Register) -> None:
         schema_id = self._schema_ids.get(item.type_name)
@@ -310,9 +313,11 @@ class ChunkedFile:
 
         This is the writer's per-message path: the records are what mcap's Writer.add_message
         would write (the same bytes: test_writer_memory compares whole files); each run of them
-        within one chunk is appended to the open chunk in one write, and the chunk's message
-        index, time range and the file's statistics are updated as mcap updates them, with numpy
-        over the run; mcap still closes, compresses and indexes the chunks.
+        within one chunk is appended to the open chunk in one write, its time range and the
+        file's statistics are updated as mcap updates them, and the chunk's message index is
+        built with numpy over all its runs when it closes; mcap still closes, compresses and
+        indexes the chunks. A wake-up runs few numpy calls (its caches are cold): a run that
+        fits the open chunk, the usual case, is checked with its minimum and maximum alone.
         """
         if positions is None:
             positions, at, length_at = [], start, _RECORD_PREFIX.size
@@ -322,14 +327,26 @@ class ChunkedFile:
                 at += length_at + unpack_length(records, at + _LENGTH_AT)[0]
         if not len(positions):
             return 0
-        pos = np.array(positions, dtype=np.int64)
-        ends = np.append(pos[1:], stop)
+        pos = np.asarray(positions, dtype=np.int64)
         raw = np.frombuffer(records, dtype=np.uint8)
-        try:  # copies: `records` must not stay exported (the caller resizes it)
-            channels = raw[(pos + _CHANNEL_AT)[:, None] + _U16].view("<u2")[:, 0].astype(np.int64)
-            log_ns = raw[(pos + _LOG_TIME_AT)[:, None] + _U64].view("<u8")[:, 0].copy()
+        try:  # a copy: `records` must not stay exported (the caller resizes it)
+            fields = raw[(pos + _FIELDS_AT)[:, None] + _FIELD_BYTES].view(_FIELDS)[:, 0]
         finally:
             del raw
+        channels, log_ns = fields["channel"], fields["log_ns"]
+        data_bytes = stop - int(pos[0]) - len(pos) * HEADER.size
+        lo, hi = int(log_ns.min()), int(log_ns.max())
+        if self.pending:
+            lo, hi = min(lo, self._first_ns), max(hi, self._last_ns)
+        if hi - lo < self._interval_ns and self._pending_bytes + data_bytes < self._chunk_size:
+            self._append(records, pos, stop, channels, log_ns, data_bytes, lo, hi)
+            return 0
+        return self._add_across_chunks(records, pos, stop, channels, log_ns)
+
+    def _add_across_chunks(self, records: bytearray, pos: np.ndarray, stop: int, channels: np.ndarray,
+                           log_ns: np.ndarray) -> int:
+        """add_messages of a run that closes a chunk: each message's chunk found with numpy."""
+        ends = np.append(pos[1:], stop)
         sizes = ends - pos - HEADER.size  # the data bytes of each
         committed, i, n = 0, 0, len(pos)
         while i < n:
@@ -354,28 +371,14 @@ class ChunkedFile:
     def _append(self, records: bytearray, pos: np.ndarray, stop: int, channels: np.ndarray, log_ns: np.ndarray,
                 data_bytes: int, first_ns: int, last_ns: int) -> None:
         """Append the Message records at `pos` (up to `stop`) to the open chunk, with what
-        Writer.add_message keeps per message: the chunk's message index, message count and
-        log-time range (`first_ns`, `last_ns`: the open chunk's with these), the file's
-        message counts and range. Channels are indexed in the order they first appear, as mcap does."""
+        Writer.add_message keeps per message: the run for the chunk's message index
+        (`_index_runs`), the chunk's message count and log-time range (`first_ns`, `last_ns`: the
+        open chunk's with these), the file's message count and range."""
         chunk, stats = self._chunk, self._stats
         start = int(pos[0])
-        offsets = (pos - start + chunk.count).astype(np.uint64)
+        self._runs.append((channels, log_ns, pos + (chunk.count - start)))
         with memoryview(records) as view:
             chunk.record_writer.write(view[start:stop])
-        # every message's index entry, grouped by channel (in order within each): one slice per channel
-        order = np.argsort(channels, kind="stable")
-        grouped = np.empty((len(pos), 2), np.uint64)
-        grouped[:, 0], grouped[:, 1] = log_ns[order], offsets[order]
-        ids, first_at, counts = np.unique(channels, return_index=True, return_counts=True)
-        bounds = np.concatenate(([0], np.cumsum(counts))).tolist()
-        indexes, channel_counts = chunk.message_indices, stats.channel_message_counts
-        for k in np.argsort(first_at, kind="stable").tolist():
-            channel_id = int(ids[k])
-            entries = indexes.get(channel_id)
-            if entries is None:
-                entries = indexes[channel_id] = PackedMessageIndex(channel_id=channel_id, records=[])
-            entries.records.append(grouped[bounds[k]:bounds[k + 1]])
-            channel_counts[channel_id] += bounds[k + 1] - bounds[k]
         if self.pending == 0:
             self.opened_at = time.monotonic()
         added = len(pos)
@@ -388,8 +391,28 @@ class ChunkedFile:
         stats.message_end_time = max(stats.message_end_time, last_ns)
         stats.message_count += added
 
+    def _index_runs(self) -> None:
+        """The open chunk's message index and the file's message counts by channel, from its runs:
+        every message's entry, grouped by channel (in order within each), the channels in the order
+        they first appear, as mcap's add_message leaves them."""
+        if not self._runs:
+            return
+        channels, log_ns, offsets = (np.concatenate(parts) for parts in zip(*self._runs))
+        self._runs = []
+        order = np.argsort(channels, kind="stable")
+        entries = np.empty((len(order), 2), np.uint64)
+        entries[:, 0], entries[:, 1] = log_ns[order], offsets[order]
+        ids, first_at, counts = np.unique(channels, return_index=True, return_counts=True)
+        bounds = np.concatenate(([0], np.cumsum(counts))).tolist()
+        indexes, channel_counts = self._chunk.message_indices, self._stats.channel_message_counts
+        for k in np.argsort(first_at, kind="stable").tolist():
+            channel_id = int(ids[k])
+            indexes[channel_id] = PackedMessageIndex(channel_id=channel_id, records=entries[bounds[k]:bounds[k + 1]])
+            channel_counts[channel_id] += bounds[k + 1] - bounds[k]
+
     def close_chunk(self) -> int:
         """Write the open chunk (if any) and flush; returns the messages it held."""
+        self._index_runs()
         self._writer.flush()  # finalizes the open chunk (if it holds messages) and flushes the stream
         committed, self.pending, self._pending_bytes = self.pending, 0, 0
         return committed
@@ -397,6 +420,7 @@ class ChunkedFile:
     def finish(self) -> int:
         """Close the open chunk, write the summary and footer, fsync and close the file."""
         try:
+            self._index_runs()
             self._writer.finish()  # closes the open chunk too
             self._file.flush()
             if stat.S_ISREG(os.fstat(self._file.fileno()).st_mode):  # not a pipe or device
