@@ -29,17 +29,19 @@ without a summary: the file reads as a crash, and keeps everything that was hand
 The process runs in its own session, and ignores SIGINT and SIGTERM once started: the caller
 decides when the file ends, by `Close` or by dying.
 
-Cost: mcap's chunking, compression, chunk and message indexes and summary are used as they are,
-but the per-message part of Writer.add_message (a Message object written field by field, a
-quarter of it the message index written entry by entry) is done here in bulk, to the same bytes
-(`ChunkedFile.add_messages`, `PackedMessageIndex`): the records arrive as mcap writes them, each
-run between two chunk boundaries is appended in one write, and its message index entries, time
-range and counts are taken with numpy over the whole run; Python does not touch a message
-(docs/node_performance.md: 2.0 µs a message before, 22k messages a
-second for a 10-finger hand). This works with
-mcap's Writer's private state (its open chunk, statistics and chunk index list, mcap 1.x); a
-Writer without it is refused at start, and test/log/test_writer_memory.py compares whole files
-with what mcap's add_message writes.
+Cost: mcap's records, chunk index and summary are used as they are, but the per-message part of
+Writer.add_message (a Message object written field by field, a quarter of it the message index
+written entry by entry) is done here in bulk, to the same bytes (`ChunkedFile.add_messages`,
+`PackedMessageIndex`): the records arrive as mcap writes them, each run between two chunk
+boundaries is appended in one write, its time range and counts are taken with numpy over the
+whole run, and the chunk's message index over all its runs when it closes; Python does not touch
+a message (docs/node_performance.md: 2.0 µs a message before, 22k messages a second for a
+10-finger hand). A chunk is closed here too (`ChunkedFile.close_chunk`: mcap's Chunk, MessageIndex
+and ChunkIndex records, as its Writer.flush writes them) so that zstd runs at ZSTD_LEVEL (1: faster
+and smaller than mcap's fixed 3 on a node's chunks). This works with mcap's Writer's private state
+(its open chunk, statistics and chunk index list, mcap 1.x); a Writer without it is refused at
+start, and test/log/test_writer_memory.py compares whole files, at mcap's zstd level, with what
+mcap's add_message and flush write.
 
 Memory: mcap's Writer keeps one ChunkIndex object per written chunk until `finish()` (about
 0.8 kB each as Python objects: +6 MB an hour at two chunks a second). `SpilledChunkIndexes`
@@ -61,15 +63,18 @@ import struct
 import sys
 import tempfile
 import time
+import zlib
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, BinaryIO
 
+import lz4.frame  # lz4 and zstandard: mcap's own requirements
 import numpy as np
+import zstandard
 from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
-from mcap.records import ChunkIndex, MessageIndex
+from mcap.records import Chunk, ChunkIndex, MessageIndex
 from mcap.well_known import MessageEncoding, Profile, SchemaEncoding
 from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 
@@ -91,6 +96,11 @@ MAX_CHANNELS = 0xFFFF
 LIBRARY = f"finger_sim.log; {LIBRARY_IDENTIFIER}"
 _READ_BYTES = 1 << 20  # largest read from stdin at a time
 _NO_SIZE_TRIGGER = 1 << 62  # chunk_size given to mcap's Writer so only this module closes chunks
+#: zstd's level for chunks. On a 1 kHz node's 0.5 s chunks (~200 kB) level 1 took 205 µs a chunk with cold
+#: caches against mcap's level 3's 306 µs, and its chunks were 7 % smaller (docs/node_performance.md).
+ZSTD_LEVEL = 1
+#: The level mcap's Writer compresses with (zstandard.compress's default): its files byte for byte.
+MCAP_ZSTD_LEVEL = 3
 _RECORD_PREFIX = struct.Struct("<BQ")  # an MCAP record's opcode and body length
 _LENGTH = struct.Struct("<Q")
 _LENGTH_AT = 1  # the body length's offset in a record
@@ -98,6 +108,7 @@ _FIELDS_AT = 9  # a Message record's channel id, sequence and log time: 14 bytes
 #: Those fields as numpy reads them from the 14 bytes (little-endian, unaligned; the sequence is not read).
 _FIELDS = np.dtype({"names": ["channel", "log_ns"], "formats": ["<u2", "<u8"], "offsets": [0, 6], "itemsize": 14})
 _FIELD_BYTES = np.arange(_FIELDS.itemsize)
+_MAX_LOG_NS = (1 << 64) - 1  # MCAP log times are uint64
 _INDEX_ENTRY_BYTES = 16  # a MessageIndex entry: log time and offset, uint64 each
 # mcap.writer.Writer's private state that this module works with (mcap 1.x; checked at start):
 _CHUNK_INDEX_LIST = "_Writer__chunk_indices"  # the list of ChunkIndex kept until finish()
@@ -255,7 +266,8 @@ def spill_chunk_indexes(writer: Writer, folder: Path) -> SpilledChunkIndexes:
 class ChunkedFile:
     """One mcap Writer whose chunks this class closes (see finger_sim.log.recorder's module doc)."""
 
-    def __init__(self, path: Path, *, interval_ns: int, chunk_size: int, compression: CompressionType) -> None:
+    def __init__(self, path: Path, *, interval_ns: int, chunk_size: int, compression: CompressionType,
+                 zstd_level: int = ZSTD_LEVEL) -> None:
         # A new or regular file is written under a temporary name until its header is out, so
         # `path` never holds a partial header; a pipe or device is written in place.
         temp = None if path.exists() and not path.is_file() else path.with_name(f".{path.name}.{os.urandom(4).hex()}.part")
@@ -282,6 +294,11 @@ class ChunkedFile:
             sync_folder(path.parent)  # the name survives a power cut too
         self._interval_ns = interval_ns
         self._chunk_size = chunk_size
+        # a chunk's compression as its record names it, and the compressor (mcap's Writer's but zstd's level)
+        self._compression, self._compress = {
+            CompressionType.ZSTD: ("zstd", zstandard.ZstdCompressor(level=zstd_level).compress),
+            CompressionType.LZ4: ("lz4", lz4.frame.compress), CompressionType.NONE: ("", bytes)}[compression]
+        self._records = RecordBuilder()  # a closed chunk's records on their way to the file
         self._schema_ids: dict[str, int] = {}
         self._channel_ids: dict[int, int] = {}  # the caller's channel index → mcap channel id
         self.pending = 0  # messages in the open chunk
@@ -345,28 +362,43 @@ class ChunkedFile:
 
     def _add_across_chunks(self, records: bytearray, pos: np.ndarray, stop: int, channels: np.ndarray,
                            log_ns: np.ndarray) -> int:
-        """add_messages of a run that closes a chunk: each message's chunk found with numpy."""
+        """add_messages of a run that closes a chunk: the pieces each chunk takes, found with numpy."""
         ends = np.append(pos[1:], stop)
         sizes = ends - pos - HEADER.size  # the data bytes of each
+        in_order = bool((log_ns[1:] >= log_ns[:-1]).all())
         committed, i, n = 0, 0, len(pos)
         while i < n:
             times = log_ns[i:]
-            first = np.uint64(self._first_ns if self.pending else times[0])
-            last = np.uint64(self._last_ns if self.pending else times[0])
-            lo = np.minimum.accumulate(np.minimum(times, first))
-            hi = np.maximum.accumulate(np.maximum(times, last))
-            too_long = np.flatnonzero(hi - lo >= self._interval_ns)  # closes the chunk before that message
-            full = np.flatnonzero(self._pending_bytes + np.cumsum(sizes[i:]) >= self._chunk_size)  # ... after it
-            take = min(too_long[0] if too_long.size else n - i, full[0] + 1 if full.size else n - i)
+            first, last = (self._first_ns, self._last_ns) if self.pending else (int(times[0]), int(times[0]))
+            take = self._time_room(times, first, last, in_order)
+            full = np.flatnonzero(self._pending_bytes + np.cumsum(sizes[i:i + take]) >= self._chunk_size)
+            if full.size:  # the chunk closes after that message
+                take = int(full[0]) + 1
             if take == 0:  # the open chunk cannot take the next message's log time
                 committed += self.close_chunk()
                 continue
-            self._append(records, pos[i:i + take], int(ends[i + take - 1]), channels[i:i + take], log_ns[i:i + take],
-                         int(sizes[i:i + take].sum()), int(lo[take - 1]), int(hi[take - 1]))
+            piece = times[:take]
+            self._append(records, pos[i:i + take], int(ends[i + take - 1]), channels[i:i + take], piece,
+                         int(sizes[i:i + take].sum()), min(first, int(piece.min())), max(last, int(piece.max())))
             i += take
-            if full.size and take == full[0] + 1:
+            if full.size:
                 committed += self.close_chunk()
         return committed
+
+    def _time_room(self, times: np.ndarray, first: int, last: int, in_order: bool) -> int:
+        """How many of the next messages (log `times`, ns) the open chunk (log-time range `first` …
+        `last`) takes before its span would reach the interval; `in_order`: the times never decrease,
+        so the span grows with each and one binary search finds the end (else cumulative min and max)."""
+        if in_order:
+            lo = min(first, int(times[0]))
+            if last - lo >= self._interval_ns:
+                return 0
+            limit = lo + self._interval_ns
+            return len(times) if limit > _MAX_LOG_NS else int(np.searchsorted(times, np.uint64(limit)))
+        lo = np.minimum.accumulate(np.minimum(times, np.uint64(first)))
+        hi = np.maximum.accumulate(np.maximum(times, np.uint64(last)))
+        too_long = np.flatnonzero(hi - lo >= self._interval_ns)  # closes the chunk before that message
+        return int(too_long[0]) if too_long.size else len(times)
 
     def _append(self, records: bytearray, pos: np.ndarray, stop: int, channels: np.ndarray, log_ns: np.ndarray,
                 data_bytes: int, first_ns: int, last_ns: int) -> None:
@@ -412,16 +444,46 @@ class ChunkedFile:
 
     def close_chunk(self) -> int:
         """Write the open chunk (if any) and flush; returns the messages it held."""
-        self._index_runs()
-        self._writer.flush()  # finalizes the open chunk (if it holds messages) and flushes the stream
+        if self._chunk.num_messages:
+            self._write_chunk()
+        self._file.flush()
         committed, self.pending, self._pending_bytes = self.pending, 0, 0
         return committed
+
+    def _write_chunk(self) -> None:
+        """Write the open chunk and its message indexes, as mcap's Writer does when it closes one,
+        but compressed with this file's compressor (mcap's Writer has no level: zstd at 3)."""
+        self._index_runs()
+        chunk, records, file = self._chunk, self._records, self._file
+        data = chunk.end()
+        compressed = self._compress(data)
+        start = file.tell()
+        Chunk(compression=self._compression, data=compressed, message_start_time=chunk.message_start_time,
+              message_end_time=chunk.message_end_time, uncompressed_crc=zlib.crc32(data),
+              uncompressed_size=len(data)).write(records)
+        length = records.count
+        file.write(records.end())
+        indexes_start, offsets = file.tell(), {}
+        for channel_id, index in chunk.message_indices.items():
+            offsets[channel_id] = indexes_start + records.count
+            index.write(records)
+        indexes_length = records.count
+        file.write(records.end())
+        self._stats.chunk_count += 1
+        assert self.chunk_indexes is not None
+        self.chunk_indexes.append(ChunkIndex(
+            message_start_time=chunk.message_start_time, message_end_time=chunk.message_end_time,
+            chunk_start_offset=start, chunk_length=length, message_index_offsets=offsets,
+            message_index_length=indexes_length, compression=self._compression, compressed_size=len(compressed),
+            uncompressed_size=len(data)))
+        chunk.reset()
 
     def finish(self) -> int:
         """Close the open chunk, write the summary and footer, fsync and close the file."""
         try:
-            self._index_runs()
-            self._writer.finish()  # closes the open chunk too
+            if self._chunk.num_messages:
+                self._write_chunk()
+            self._writer.finish()
             self._file.flush()
             if stat.S_ISREG(os.fstat(self._file.fileno()).st_mode):  # not a pipe or device
                 os.fsync(self._file.fileno())  # a finished log survives a power cut
