@@ -332,9 +332,9 @@ class ChunkedFile:
         would write (the same bytes: test_writer_memory compares whole files); each run of them
         within one chunk is appended to the open chunk in one write, its time range and the
         file's statistics are updated as mcap updates them, and the chunk's message index is
-        built with numpy over all its runs when it closes; mcap still closes, compresses and
-        indexes the chunks. A wake-up runs few numpy calls (its caches are cold): a run that
-        fits the open chunk, the usual case, is checked with its minimum and maximum alone.
+        built with numpy over all its runs when it closes (close_chunk). A wake-up runs few numpy
+        calls (its caches are cold): a run that fits the open chunk, the usual case, is checked
+        with its minimum and maximum alone.
         """
         if positions is None:
             positions, at, length_at = [], start, _RECORD_PREFIX.size
