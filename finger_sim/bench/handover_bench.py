@@ -1,14 +1,18 @@
 """What recording costs a paced 1 kHz loop, without ROS: the node's hand-over path alone.
 
-    python -m finger_sim.bench.handover_bench [--old <checkout>] [--messages 3 22] [--seconds 8] [--rounds 3]
+    python -m finger_sim.bench.handover_bench [--old <checkout>] [--messages 3 22] [--node] [--seconds 8] [--rounds 3]
 
 Each run is a fresh process that steps a 1 kHz loop paced like the node (sleep to the next
 1 ms deadline) and hands each step's state of N CDR messages (JointState-sized, 160 bytes,
 one topic each) through finger_sim.ros.state_output.StateOutput, as the node's
-_publish_state does, into a McapRecorder with the default handover; sending is a no-op. The
+_publish_state does, into a McapRecorder with the default handover; sending is a no-op. With
+--node the states are instead finger_node's own (`node_states`: paper_flexion stepped at 1 kHz,
+/clock, joint_states and fingertip_pose every step, markers at 30 Hz, diagnostics at 1 Hz, made
+by the node's CDR writers and rclpy's serializer; no DDS). The
 same loop with no recorder is the baseline. Figures: CPU s per sim s (cores at real time) of
 the loop's process (every thread: the recorder's sender thread included) and of its log writer
-process, over SECONDS after WARMUP_S (the writer process's start-up excluded); and the loop
+process (McapRecorder.cpu, to the ns), over SECONDS after WARMUP_S (the writer process's
+start-up excluded); the log's bytes per sim s; and the loop
 thread's own CPU for one state's begin, adds and flush (median µs, thread CPU clock): what the
 stepping thread pays per state, paced. With --old, every run of this checkout is followed by the same
 run of the old one (first on PYTHONPATH): A B A B, medians over the rounds.
@@ -30,13 +34,45 @@ WARMUP_S = 3.0  # wall s after open before measuring: the writer process imports
 RATE_HZ = 1000.0
 PAYLOAD_BYTES = 160  # about a 3-joint JointState's CDR
 NS = 1_000_000_000
+MARKERS_EVERY, DIAGNOSTICS_EVERY = 33, 1000  # steps between the node's markers (30 Hz) and diagnostics (1 Hz)
+NODE = 0  # `--messages` value standing for the node's own states (--node)
 
 
-def _cpu_s(stat_path: str) -> float:
-    """utime + stime of /proc/<...>/stat, s."""
-    with open(stat_path) as f:
-        fields = f.read().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+def node_states(steps: int) -> tuple[dict[str, str], list[tuple[list[str], list[bytes]]]]:
+    """finger_node's logged topics (topic → type) and each step's (topics, CDR bytes): paper_flexion
+    at 1 kHz under its scripted torque, as finger_sim.ros.finger and node publish it."""
+    from rclpy.serialization import serialize_message
+
+    from finger_sim.log.cdr_writer import JointStateCdr, MarkerArrayCdr, PoseStampedCdr, clock_cdr
+    from finger_sim.ros import conversions
+    from finger_sim.scene import load_scene
+    from finger_sim.scene_paths import resolve_scene
+    from finger_sim.simulate import Simulator
+
+    sim = Simulator(load_scene(resolve_scene("paper_flexion")).with_overrides(dt=1e-3))
+    frames = conversions.FingerFrames.from_system(sim.system)
+    joints, pose = JointStateCdr(frames.base_frame, frames.joint_names), PoseStampedCdr(frames.base_frame)
+    markers = MarkerArrayCdr(conversions.markers(frames, sim.q, 0))
+    types = {"/clock": "rosgraph_msgs/msg/Clock", "/joint_states": "sensor_msgs/msg/JointState",
+             "/fingertip_pose": "geometry_msgs/msg/PoseStamped", "/finger_markers": "visualization_msgs/msg/MarkerArray",
+             "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray"}
+    states = []
+    for k in range(steps):
+        sim.step()
+        stamp = k * round(NS / RATE_HZ)
+        topics = ["/clock", "/joint_states", "/fingertip_pose"]
+        datas = [clock_cdr(stamp), joints(stamp, *conversions.joint_values(frames, sim.q, sim.v, sim.torque)),
+                 pose(stamp, *conversions.fingertip_values(frames, sim.q))]
+        if k % MARKERS_EVERY == 0:
+            topics.append("/finger_markers")
+            datas.append(markers(stamp, conversions.marker_values(frames, sim.q)))
+        if k % DIAGNOSTICS_EVERY == 0:  # about the node's: one status of ~25 values
+            values = {f"key_{i}": 0.001 * (k + i) for i in range(25)}
+            status = conversions.status("finger_node: simulation", "finger", b"\x00", "running", values)
+            topics.append("/diagnostics")
+            datas.append(serialize_message(conversions.diagnostic_array(stamp, [status])))
+        states.append((topics, datas))
+    return types, states
 
 
 def run_loop(messages: int, seconds: float, record: bool) -> dict[str, float]:
@@ -45,43 +81,49 @@ def run_loop(messages: int, seconds: float, record: bool) -> dict[str, float]:
     from finger_sim.ros.interfaces import Endpoint
     from finger_sim.ros.state_output import StateOutput
 
+    steps, dt_ns = round(seconds * RATE_HZ), round(NS / RATE_HZ)
+    if messages == NODE:
+        types, states = node_states(steps)
+    else:
+        types = {f"/f{i}/joint_states": "sensor_msgs/msg/JointState" for i in range(messages)}
+        states = [(list(types), [(k * dt_ns).to_bytes(8, "little") * (PAYLOAD_BYTES // 8)] * messages) for k in range(steps)]
     folder = tempfile.mkdtemp(prefix="handover_bench_")
     recorder = McapRecorder(Path(folder) / "bench.mcap").open() if record else None
-    endpoints = []
-    for i in range(messages):
-        topic = f"/f{i}/joint_states"
+    endpoints = {}
+    for topic, type_name in types.items():
         if recorder is not None:
-            recorder.register_channel(topic, "sensor_msgs/msg/JointState")
-        endpoints.append(Endpoint(None, topic, object, True, False, lambda data: None))
+            recorder.register_channel(topic, type_name)
+        endpoints[topic] = Endpoint(None, topic, object, True, False, lambda data: None)
     output = StateOutput(recorder)
     time.sleep(WARMUP_S)
-    writer_stat = f"/proc/{recorder.writer_pid}/stat" if recorder is not None else None
-    w0, c0 = (_cpu_s(writer_stat) if writer_stat else 0.0), time.process_time()
-    steps, dt_ns = round(seconds * RATE_HZ), round(NS / RATE_HZ)
+    w0, c0 = recorder.cpu().writer_s if recorder is not None else 0.0, time.process_time()
     thread_ns, states_ns = time.thread_time_ns, []
     start = time.perf_counter()
     for k in range(steps):
         stamp = k * dt_ns
-        data = stamp.to_bytes(8, "little") * (PAYLOAD_BYTES // 8)
+        topics, datas = states[k]
         state_start = thread_ns()
         output.begin()
-        for endpoint in endpoints:
-            output.add(endpoint, data, stamp)
+        for topic, data in zip(topics, datas):
+            output.add(endpoints[topic], data, stamp)
         output.flush(stamp)
         states_ns.append(thread_ns() - state_start)
         wait = start + (k + 1) / RATE_HZ - time.perf_counter()
         if wait > 0:
             time.sleep(wait)
     wall = time.perf_counter() - start
-    loop, writer = time.process_time() - c0, (_cpu_s(writer_stat) - w0) if writer_stat else 0.0
+    loop, writer = time.process_time() - c0, (recorder.cpu().writer_s - w0) if recorder is not None else 0.0
+    log_bytes = 0
     if recorder is not None:
         recorder.close()
-        assert (recorder.written, recorder.dropped) == (steps * messages, 0), "the log lost messages"
+        expected = sum(len(datas) for _, datas in states)
+        assert (recorder.written, recorder.dropped) == (expected, 0), "the log lost messages"
+        log_bytes = recorder.path.stat().st_size
     sim = steps / RATE_HZ
     import finger_sim
 
     return {"loop": loop / sim, "writer": writer / sim, "rtf": sim / wall, "state_us": statistics.median(states_ns) / 1e3,
-            "package": str(Path(finger_sim.__file__).parent)}
+            "log_bytes": log_bytes / sim, "package": str(Path(finger_sim.__file__).parent)}
 
 
 def _run(checkout: Path | None, messages: int, seconds: float, record: bool) -> dict[str, float]:
@@ -103,6 +145,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--old", type=Path, default=None, help="a checkout of the old code, run after each new run")
     parser.add_argument("--messages", type=int, nargs="+", default=[3, 22], help="CDR messages per state")
+    parser.add_argument("--node", action="store_true", help="finger_node's own states instead (node_states)")
     parser.add_argument("--seconds", type=float, default=8.0, help="measured sim (= wall) s per run")
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--one", nargs=3, help=argparse.SUPPRESS)  # a single run in this process (JSON out)
@@ -111,6 +154,8 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(run_loop(int(args.one[0]), float(args.one[1]), args.one[2] == "1")))
         return 0
     sides = {"new": None} | ({"old": args.old} if args.old is not None else {})
+    if args.node:
+        args.messages = [NODE]
     runs: dict[tuple[str, int, bool], list[dict[str, float]]] = {}
     load0 = os.getloadavg()[0]
     for _ in range(args.rounds):
@@ -119,9 +164,9 @@ def main(argv: list[str] | None = None) -> int:
                 for side, checkout in sides.items():
                     runs.setdefault((side, n, record), []).append(_run(checkout, n, args.seconds, record))
     print(f"load average {load0:.1f} → {os.getloadavg()[0]:.1f}; medians of {args.rounds} rounds, cores (CPU s per sim s)")
-    print("| side | messages a state | loop, no log | loop, recording | its writer process | added by recording | "
-          "the same, µs a step | loop thread a state, µs (no log, recording) | real-time factor (lowest run) |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("| side | messages a state | loop, no log | loop, recording | its writer process (rounds) | added by recording | "
+          "the same, µs a step | loop thread a state, µs (no log, recording) | real-time factor (lowest run) | log, kB per sim s |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for n in args.messages:
         for side in sides:
             off, on = runs[(side, n, False)], runs[(side, n, True)]
@@ -131,8 +176,10 @@ def main(argv: list[str] | None = None) -> int:
             rtf = min(r["rtf"] for r in off + on)
             added = loop + writer - base
             state_us = [statistics.median(r["state_us"] for r in runs) for runs in (off, on)]
-            print(f"| {side} | {n} | {base:.4f} | {loop:.4f} | {writer:.4f} | +{added:.4f} | {added * 1e6 / RATE_HZ:.1f} | "
-                  f"{state_us[0]:.1f}, {state_us[1]:.1f} | {rtf:.3f} |")
+            writers = ", ".join(f"{r['writer']:.4f}" for r in on)
+            print(f"| {side} | {'node' if n == NODE else n} | {base:.4f} | {loop:.4f} | {writer:.4f} ({writers}) | +{added:.4f} | "
+                  f"{added * 1e6 / RATE_HZ:.1f} | {state_us[0]:.1f}, {state_us[1]:.1f} | {rtf:.3f} | "
+                  f"{statistics.median(r['log_bytes'] for r in on) / 1e3:.1f} |")
     return 0
 
 

@@ -29,17 +29,19 @@ without a summary: the file reads as a crash, and keeps everything that was hand
 The process runs in its own session, and ignores SIGINT and SIGTERM once started: the caller
 decides when the file ends, by `Close` or by dying.
 
-Cost: mcap's chunking, compression, chunk and message indexes and summary are used as they are,
-but the per-message part of Writer.add_message (a Message object written field by field, a
-quarter of it the message index written entry by entry) is done here in bulk, to the same bytes
-(`ChunkedFile.add_messages`, `PackedMessageIndex`): the records arrive as mcap writes them, each
-run between two chunk boundaries is appended in one write, and its message index entries, time
-range and counts are taken with numpy over the whole run; Python does not touch a message
-(docs/node_performance.md: 2.0 µs a message before, 22k messages a
-second for a 10-finger hand). This works with
-mcap's Writer's private state (its open chunk, statistics and chunk index list, mcap 1.x); a
-Writer without it is refused at start, and test/log/test_writer_memory.py compares whole files
-with what mcap's add_message writes.
+Cost: mcap's records, chunk index and summary are used as they are, but the per-message part of
+Writer.add_message (a Message object written field by field, a quarter of it the message index
+written entry by entry) is done here in bulk, to the same bytes (`ChunkedFile.add_messages`,
+`PackedMessageIndex`): the records arrive as mcap writes them, each run between two chunk
+boundaries is appended in one write, its time range and counts are taken with numpy over the
+whole run, and the chunk's message index over all its runs when it closes; Python does not touch
+a message (docs/node_performance.md: 2.0 µs a message before, 22k messages a second for a
+10-finger hand). A chunk is closed here too (`ChunkedFile.close_chunk`: mcap's Chunk, MessageIndex
+and ChunkIndex records, as its Writer.flush writes them) so that zstd runs at ZSTD_LEVEL (1: faster
+and smaller than mcap's fixed 3 on a node's chunks). This works with mcap's Writer's private state
+(its open chunk, statistics and chunk index list, mcap 1.x); a Writer without it is refused at
+start, and test/log/test_writer_memory.py compares whole files, at mcap's zstd level, with what
+mcap's add_message and flush write.
 
 Memory: mcap's Writer keeps one ChunkIndex object per written chunk until `finish()` (about
 0.8 kB each as Python objects: +6 MB an hour at two chunks a second). `SpilledChunkIndexes`
@@ -61,15 +63,18 @@ import struct
 import sys
 import tempfile
 import time
+import zlib
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, BinaryIO
 
+import lz4.frame  # lz4 and zstandard: mcap's own requirements
 import numpy as np
+import zstandard
 from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
-from mcap.records import ChunkIndex, MessageIndex
+from mcap.records import Chunk, ChunkIndex, MessageIndex
 from mcap.well_known import MessageEncoding, Profile, SchemaEncoding
 from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 
@@ -91,12 +96,20 @@ MAX_CHANNELS = 0xFFFF
 LIBRARY = f"finger_sim.log; {LIBRARY_IDENTIFIER}"
 _READ_BYTES = 1 << 20  # largest read from stdin at a time
 _NO_SIZE_TRIGGER = 1 << 62  # chunk_size given to mcap's Writer so only this module closes chunks
+#: zstd's level for chunks. On a 1 kHz node's 0.5 s chunks (~200 kB) level 1 took 205 µs a chunk with cold
+#: caches against mcap's level 3's 306 µs, and its chunks were 7 % smaller (docs/node_performance.md).
+ZSTD_LEVEL = 1
+#: The level mcap's Writer compresses with (zstandard.compress's default): its files byte for byte.
+MCAP_ZSTD_LEVEL = 3
 _RECORD_PREFIX = struct.Struct("<BQ")  # an MCAP record's opcode and body length
 _LENGTH = struct.Struct("<Q")
 _LENGTH_AT = 1  # the body length's offset in a record
-_CHANNEL_AT, _LOG_TIME_AT = 9, 15  # a Message record's channel id and log time offsets
+_FIELDS_AT = 9  # a Message record's channel id, sequence and log time: 14 bytes from here
+#: Those fields as numpy reads them from the 14 bytes (little-endian, unaligned; the sequence is not read).
+_FIELDS = np.dtype({"names": ["channel", "log_ns"], "formats": ["<u2", "<u8"], "offsets": [0, 6], "itemsize": 14})
+_FIELD_BYTES = np.arange(_FIELDS.itemsize)
+_MAX_LOG_NS = (1 << 64) - 1  # MCAP log times are uint64
 _INDEX_ENTRY_BYTES = 16  # a MessageIndex entry: log time and offset, uint64 each
-_U16, _U64 = np.arange(2), np.arange(8)  # byte offsets of a little-endian uint16 and uint64 field
 # mcap.writer.Writer's private state that this module works with (mcap 1.x; checked at start):
 _CHUNK_INDEX_LIST = "_Writer__chunk_indices"  # the list of ChunkIndex kept until finish()
 _CHUNK_BUILDER = "_Writer__chunk_builder"  # the open chunk (mcap._chunk_builder.ChunkBuilder)
@@ -185,12 +198,11 @@ class _Record:
 
 
 class PackedMessageIndex(MessageIndex):
-    """mcap's MessageIndex record whose `records` are arrays of (log time, offset) rows (uint64),
-    one per run of messages, written as one block (mcap's makes two struct calls per entry): the
-    same bytes."""
+    """mcap's MessageIndex record whose `records` is one array of (log time, offset) rows (uint64),
+    written as one block (mcap's makes two struct calls per entry): the same bytes."""
 
     def write(self, stream: RecordBuilder) -> None:
-        entries = np.concatenate(self.records) if self.records else np.empty((0, 2), np.uint64)
+        entries: np.ndarray = self.records  # type: ignore[assignment]
         stream.start_record(Opcode.MESSAGE_INDEX)
         stream.write(struct.pack("<HI", self.channel_id, len(entries) * _INDEX_ENTRY_BYTES))
         stream.write(entries.astype("<u8", copy=False).tobytes())
@@ -254,7 +266,8 @@ def spill_chunk_indexes(writer: Writer, folder: Path) -> SpilledChunkIndexes:
 class ChunkedFile:
     """One mcap Writer whose chunks this class closes (see finger_sim.log.recorder's module doc)."""
 
-    def __init__(self, path: Path, *, interval_ns: int, chunk_size: int, compression: CompressionType) -> None:
+    def __init__(self, path: Path, *, interval_ns: int, chunk_size: int, compression: CompressionType,
+                 zstd_level: int = ZSTD_LEVEL) -> None:
         # A new or regular file is written under a temporary name until its header is out, so
         # `path` never holds a partial header; a pipe or device is written in place.
         temp = None if path.exists() and not path.is_file() else path.with_name(f".{path.name}.{os.urandom(4).hex()}.part")
@@ -281,12 +294,19 @@ class ChunkedFile:
             sync_folder(path.parent)  # the name survives a power cut too
         self._interval_ns = interval_ns
         self._chunk_size = chunk_size
+        # a chunk's compression as its record names it, and the compressor (mcap's Writer's but zstd's level)
+        self._compression, self._compress = {
+            CompressionType.ZSTD: ("zstd", zstandard.ZstdCompressor(level=zstd_level).compress),
+            CompressionType.LZ4: ("lz4", lz4.frame.compress), CompressionType.NONE: ("", bytes)}[compression]
+        self._records = RecordBuilder()  # a closed chunk's records on their way to the file
         self._schema_ids: dict[str, int] = {}
         self._channel_ids: dict[int, int] = {}  # the caller's channel index → mcap channel id
         self.pending = 0  # messages in the open chunk
         self.opened_at = 0.0  # time.monotonic() at the open chunk's first message
         self._pending_bytes = 0
         self._first_ns = self._last_ns = 0  # log-time range of the open chunk
+        #: the open chunk's runs not yet in its message index: channel ids, log times, offsets in the chunk
+        self._runs: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
 
     def register(self, item: Register) -> None:
         schema_id = self._schema_ids.get(item.type_name)
@@ -310,9 +330,11 @@ class ChunkedFile:
 
         This is the writer's per-message path: the records are what mcap's Writer.add_message
         would write (the same bytes: test_writer_memory compares whole files); each run of them
-        within one chunk is appended to the open chunk in one write, and the chunk's message
-        index, time range and the file's statistics are updated as mcap updates them, with numpy
-        over the run; mcap still closes, compresses and indexes the chunks.
+        within one chunk is appended to the open chunk in one write, its time range and the
+        file's statistics are updated as mcap updates them, and the chunk's message index is
+        built with numpy over all its runs when it closes (close_chunk). A wake-up runs few numpy
+        calls (its caches are cold): a run that fits the open chunk, the usual case, is checked
+        with its minimum and maximum alone.
         """
         if positions is None:
             positions, at, length_at = [], start, _RECORD_PREFIX.size
@@ -322,60 +344,73 @@ class ChunkedFile:
                 at += length_at + unpack_length(records, at + _LENGTH_AT)[0]
         if not len(positions):
             return 0
-        pos = np.array(positions, dtype=np.int64)
-        ends = np.append(pos[1:], stop)
+        pos = np.asarray(positions, dtype=np.int64)
         raw = np.frombuffer(records, dtype=np.uint8)
-        try:  # copies: `records` must not stay exported (the caller resizes it)
-            channels = raw[(pos + _CHANNEL_AT)[:, None] + _U16].view("<u2")[:, 0].astype(np.int64)
-            log_ns = raw[(pos + _LOG_TIME_AT)[:, None] + _U64].view("<u8")[:, 0].copy()
+        try:  # a copy: `records` must not stay exported (the caller resizes it)
+            fields = raw[(pos + _FIELDS_AT)[:, None] + _FIELD_BYTES].view(_FIELDS)[:, 0]
         finally:
             del raw
+        channels, log_ns = fields["channel"], fields["log_ns"]
+        data_bytes = stop - int(pos[0]) - len(pos) * HEADER.size
+        lo, hi = int(log_ns.min()), int(log_ns.max())
+        if self.pending:
+            lo, hi = min(lo, self._first_ns), max(hi, self._last_ns)
+        if hi - lo < self._interval_ns and self._pending_bytes + data_bytes < self._chunk_size:
+            self._append(records, pos, stop, channels, log_ns, data_bytes, lo, hi)
+            return 0
+        return self._add_across_chunks(records, pos, stop, channels, log_ns)
+
+    def _add_across_chunks(self, records: bytearray, pos: np.ndarray, stop: int, channels: np.ndarray,
+                           log_ns: np.ndarray) -> int:
+        """add_messages of a run that closes a chunk: the pieces each chunk takes, found with numpy."""
+        ends = np.append(pos[1:], stop)
         sizes = ends - pos - HEADER.size  # the data bytes of each
+        in_order = bool((log_ns[1:] >= log_ns[:-1]).all())
         committed, i, n = 0, 0, len(pos)
         while i < n:
             times = log_ns[i:]
-            first = np.uint64(self._first_ns if self.pending else times[0])
-            last = np.uint64(self._last_ns if self.pending else times[0])
-            lo = np.minimum.accumulate(np.minimum(times, first))
-            hi = np.maximum.accumulate(np.maximum(times, last))
-            too_long = np.flatnonzero(hi - lo >= self._interval_ns)  # closes the chunk before that message
-            full = np.flatnonzero(self._pending_bytes + np.cumsum(sizes[i:]) >= self._chunk_size)  # ... after it
-            take = min(too_long[0] if too_long.size else n - i, full[0] + 1 if full.size else n - i)
+            first, last = (self._first_ns, self._last_ns) if self.pending else (int(times[0]), int(times[0]))
+            take = self._time_room(times, first, last, in_order)
+            full = np.flatnonzero(self._pending_bytes + np.cumsum(sizes[i:i + take]) >= self._chunk_size)
+            if full.size:  # the chunk closes after that message
+                take = int(full[0]) + 1
             if take == 0:  # the open chunk cannot take the next message's log time
                 committed += self.close_chunk()
                 continue
-            self._append(records, pos[i:i + take], int(ends[i + take - 1]), channels[i:i + take], log_ns[i:i + take],
-                         int(sizes[i:i + take].sum()), int(lo[take - 1]), int(hi[take - 1]))
+            piece = times[:take]
+            self._append(records, pos[i:i + take], int(ends[i + take - 1]), channels[i:i + take], piece,
+                         int(sizes[i:i + take].sum()), min(first, int(piece.min())), max(last, int(piece.max())))
             i += take
-            if full.size and take == full[0] + 1:
+            if full.size:
                 committed += self.close_chunk()
         return committed
+
+    def _time_room(self, times: np.ndarray, first: int, last: int, in_order: bool) -> int:
+        """How many of the next messages (log `times`, ns) the open chunk (log-time range `first` …
+        `last`) takes before its span would reach the interval; `in_order`: the times never decrease,
+        so the span grows with each and one binary search finds the end (else cumulative min and max)."""
+        if in_order:
+            lo = min(first, int(times[0]))
+            if last - lo >= self._interval_ns:
+                return 0
+            limit = lo + self._interval_ns
+            return len(times) if limit > _MAX_LOG_NS else int(np.searchsorted(times, np.uint64(limit)))
+        lo = np.minimum.accumulate(np.minimum(times, np.uint64(first)))
+        hi = np.maximum.accumulate(np.maximum(times, np.uint64(last)))
+        too_long = np.flatnonzero(hi - lo >= self._interval_ns)  # closes the chunk before that message
+        return int(too_long[0]) if too_long.size else len(times)
 
     def _append(self, records: bytearray, pos: np.ndarray, stop: int, channels: np.ndarray, log_ns: np.ndarray,
                 data_bytes: int, first_ns: int, last_ns: int) -> None:
         """Append the Message records at `pos` (up to `stop`) to the open chunk, with what
-        Writer.add_message keeps per message: the chunk's message index, message count and
-        log-time range (`first_ns`, `last_ns`: the open chunk's with these), the file's
-        message counts and range. Channels are indexed in the order they first appear, as mcap does."""
+        Writer.add_message keeps per message: the run for the chunk's message index
+        (`_index_runs`), the chunk's message count and log-time range (`first_ns`, `last_ns`: the
+        open chunk's with these), the file's message count and range."""
         chunk, stats = self._chunk, self._stats
         start = int(pos[0])
-        offsets = (pos - start + chunk.count).astype(np.uint64)
+        self._runs.append((channels, log_ns, pos + (chunk.count - start)))
         with memoryview(records) as view:
             chunk.record_writer.write(view[start:stop])
-        # every message's index entry, grouped by channel (in order within each): one slice per channel
-        order = np.argsort(channels, kind="stable")
-        grouped = np.empty((len(pos), 2), np.uint64)
-        grouped[:, 0], grouped[:, 1] = log_ns[order], offsets[order]
-        ids, first_at, counts = np.unique(channels, return_index=True, return_counts=True)
-        bounds = np.concatenate(([0], np.cumsum(counts))).tolist()
-        indexes, channel_counts = chunk.message_indices, stats.channel_message_counts
-        for k in np.argsort(first_at, kind="stable").tolist():
-            channel_id = int(ids[k])
-            entries = indexes.get(channel_id)
-            if entries is None:
-                entries = indexes[channel_id] = PackedMessageIndex(channel_id=channel_id, records=[])
-            entries.records.append(grouped[bounds[k]:bounds[k + 1]])
-            channel_counts[channel_id] += bounds[k + 1] - bounds[k]
         if self.pending == 0:
             self.opened_at = time.monotonic()
         added = len(pos)
@@ -388,16 +423,67 @@ class ChunkedFile:
         stats.message_end_time = max(stats.message_end_time, last_ns)
         stats.message_count += added
 
+    def _index_runs(self) -> None:
+        """The open chunk's message index and the file's message counts by channel, from its runs:
+        every message's entry, grouped by channel (in order within each), the channels in the order
+        they first appear, as mcap's add_message leaves them."""
+        if not self._runs:
+            return
+        channels, log_ns, offsets = (np.concatenate(parts) for parts in zip(*self._runs))
+        self._runs = []
+        order = np.argsort(channels, kind="stable")
+        entries = np.empty((len(order), 2), np.uint64)
+        entries[:, 0], entries[:, 1] = log_ns[order], offsets[order]
+        ids, first_at, counts = np.unique(channels, return_index=True, return_counts=True)
+        bounds = np.concatenate(([0], np.cumsum(counts))).tolist()
+        indexes, channel_counts = self._chunk.message_indices, self._stats.channel_message_counts
+        for k in np.argsort(first_at, kind="stable").tolist():
+            channel_id = int(ids[k])
+            indexes[channel_id] = PackedMessageIndex(channel_id=channel_id, records=entries[bounds[k]:bounds[k + 1]])
+            channel_counts[channel_id] += bounds[k + 1] - bounds[k]
+
     def close_chunk(self) -> int:
         """Write the open chunk (if any) and flush; returns the messages it held."""
-        self._writer.flush()  # finalizes the open chunk (if it holds messages) and flushes the stream
+        if self._chunk.num_messages:
+            self._write_chunk()
+        self._file.flush()
         committed, self.pending, self._pending_bytes = self.pending, 0, 0
         return committed
+
+    def _write_chunk(self) -> None:
+        """Write the open chunk and its message indexes, as mcap's Writer does when it closes one,
+        but compressed with this file's compressor (mcap's Writer has no level: zstd at 3)."""
+        self._index_runs()
+        chunk, records, file = self._chunk, self._records, self._file
+        data = chunk.end()
+        compressed = self._compress(data)
+        start = file.tell()
+        Chunk(compression=self._compression, data=compressed, message_start_time=chunk.message_start_time,
+              message_end_time=chunk.message_end_time, uncompressed_crc=zlib.crc32(data),
+              uncompressed_size=len(data)).write(records)
+        length = records.count
+        file.write(records.end())
+        indexes_start, offsets = file.tell(), {}
+        for channel_id, index in chunk.message_indices.items():
+            offsets[channel_id] = indexes_start + records.count
+            index.write(records)
+        indexes_length = records.count
+        file.write(records.end())
+        self._stats.chunk_count += 1
+        assert self.chunk_indexes is not None
+        self.chunk_indexes.append(ChunkIndex(
+            message_start_time=chunk.message_start_time, message_end_time=chunk.message_end_time,
+            chunk_start_offset=start, chunk_length=length, message_index_offsets=offsets,
+            message_index_length=indexes_length, compression=self._compression, compressed_size=len(compressed),
+            uncompressed_size=len(data)))
+        chunk.reset()
 
     def finish(self) -> int:
         """Close the open chunk, write the summary and footer, fsync and close the file."""
         try:
-            self._writer.finish()  # closes the open chunk too
+            if self._chunk.num_messages:
+                self._write_chunk()
+            self._writer.finish()
             self._file.flush()
             if stat.S_ISREG(os.fstat(self._file.fileno()).st_mode):  # not a pipe or device
                 os.fsync(self._file.fileno())  # a finished log survives a power cut

@@ -14,9 +14,11 @@ from __future__ import annotations
 import random
 import struct
 import tracemalloc
+import zlib
 from pathlib import Path
 
 import pytest
+import zstandard
 from mcap.reader import SeekingReader
 from mcap.records import Chunk
 from mcap.stream_reader import StreamReader
@@ -24,7 +26,8 @@ from mcap.well_known import MessageEncoding, Profile, SchemaEncoding
 from mcap.writer import CompressionType, Writer
 from rosbags.highlevel import AnyReader
 
-from finger_sim.log.writer_process import LIBRARY, ChunkedFile, Register, _NO_SIZE_TRIGGER, message_record
+from finger_sim.log.writer_process import (LIBRARY, MCAP_ZSTD_LEVEL, ZSTD_LEVEL, ChunkedFile, Register, _NO_SIZE_TRIGGER,
+                                           message_record)
 
 TOPICS = ("/a", "/b", "/c", "/d", "/e", "/f")  # a node logs about six topics
 WARMUP_CHUNKS = 200  # chunks before the heap is first measured (buffers, caches, first allocations)
@@ -58,10 +61,11 @@ def add(log: ChunkedFile, messages: list[tuple[int, int, int, int, bytes]]) -> i
     return log.add_messages(records, 0, len(records))
 
 
-def write_chunks(path: Path, chunks: int, *, measure_after: int | None = None) -> tuple[int, int]:
+def write_chunks(path: Path, chunks: int, *, measure_after: int | None = None, compression: CompressionType = CompressionType.ZSTD,
+                 zstd_level: int = ZSTD_LEVEL) -> tuple[int, int]:
     """`chunks` chunks through ChunkedFile, finished; returns the traced heap after chunk
     `measure_after` and after the last chunk (bytes), or zeros when not measured."""
-    log = ChunkedFile(path, interval_ns=1 << 62, chunk_size=1 << 30, compression=CompressionType.ZSTD)
+    log = ChunkedFile(path, interval_ns=1 << 62, chunk_size=1 << 30, compression=compression, zstd_level=zstd_level)
     for i, topic in enumerate(TOPICS):
         log.register(Register(i, topic, FLOAT64, "float64 data\n", {}))
     heap = [0, 0]
@@ -91,12 +95,10 @@ def test_the_chunk_index_does_not_grow_the_heap(tmp_path: Path) -> None:
         f"heap grew by {growth} B over {CHUNKS} chunks ({growth / CHUNKS:.0f} B per chunk)")
 
 
-def test_the_spilled_index_gives_mcaps_own_file_byte_for_byte(tmp_path: Path) -> None:
-    chunks = 50
-    ours, reference = tmp_path / "ours.mcap", tmp_path / "mcap.mcap"
-    write_chunks(ours, chunks)
-    with reference.open("wb") as f:  # the same input through mcap's Writer alone
-        writer = Writer(f, chunk_size=_NO_SIZE_TRIGGER, compression=CompressionType.ZSTD)
+def mcaps_own_file(path: Path, chunks: int, compression: CompressionType) -> None:
+    """write_chunks's input through mcap's Writer alone."""
+    with path.open("wb") as f:
+        writer = Writer(f, chunk_size=_NO_SIZE_TRIGGER, compression=compression)
         writer.start(profile=Profile.ROS2, library=LIBRARY)
         writer.flush()
         schema = writer.register_schema(name=FLOAT64, encoding=SchemaEncoding.ROS2, data=b"float64 data\n")
@@ -107,13 +109,46 @@ def test_the_spilled_index_gives_mcaps_own_file_byte_for_byte(tmp_path: Path) ->
                 writer.add_message(channels[index], log_ns, data, publish_ns, sequence)
             writer.flush()
         writer.finish()
+
+
+@pytest.mark.parametrize("compression", list(CompressionType))
+def test_the_spilled_index_gives_mcaps_own_file_byte_for_byte(tmp_path: Path, compression: CompressionType) -> None:
+    """At mcap's zstd level (and with lz4 or none) the file is the one mcap's Writer writes."""
+    chunks = 50
+    ours, reference = tmp_path / "ours.mcap", tmp_path / "mcap.mcap"
+    write_chunks(ours, chunks, compression=compression, zstd_level=MCAP_ZSTD_LEVEL)
+    mcaps_own_file(reference, chunks, compression)
     assert ours.read_bytes() == reference.read_bytes()
+
+
+def chunk_records(path: Path) -> list[Chunk]:
+    with path.open("rb") as f:
+        return [record for record in StreamReader(f, emit_chunks=True).records if isinstance(record, Chunk)]
+
+
+def test_our_zstd_level_changes_only_the_compressed_bytes(tmp_path: Path) -> None:
+    """At ZSTD_LEVEL each chunk holds mcap's uncompressed bytes and CRC, compressed at that level
+    (zstandard's frame header does not name a level: checked by compressing again)."""
+    chunks = 20
+    ours, reference = tmp_path / "ours.mcap", tmp_path / "mcap.mcap"
+    write_chunks(ours, chunks)
+    mcaps_own_file(reference, chunks, CompressionType.ZSTD)
+    got, expected = chunk_records(ours), chunk_records(reference)
+    assert len(got) == len(expected) == chunks
+    for ours_chunk, mcap_chunk in zip(got, expected):
+        plain = zstandard.decompress(mcap_chunk.data)
+        assert zstandard.decompress(ours_chunk.data) == plain
+        assert (ours_chunk.uncompressed_crc, ours_chunk.uncompressed_size) == (zlib.crc32(plain), len(plain))
+        assert ours_chunk.compression == "zstd"
+        assert ours_chunk.data == zstandard.ZstdCompressor(level=ZSTD_LEVEL).compress(plain)
+        assert (ours_chunk.message_start_time, ours_chunk.message_end_time) == (
+            mcap_chunk.message_start_time, mcap_chunk.message_end_time)
 
 
 @pytest.mark.parametrize("chunks", [1, 37])
 def test_every_message_reads_back_through_the_spilled_index(tmp_path: Path, chunks: int) -> None:
     path = tmp_path / "log.mcap"
-    write_chunks(path, chunks)
+    write_chunks(path, chunks)  # at ZSTD_LEVEL
     expected = [(TOPICS[i], log_ns, data) for c in range(chunks) for i, _, log_ns, _, data in chunk_messages(c)]
     with path.open("rb") as f:
         reader = SeekingReader(f)
@@ -159,20 +194,24 @@ def reference_file(path: Path, messages: list[tuple[int, int, int, int, bytes]],
         writer.finish()
 
 
-def test_chunks_cut_inside_a_call_give_mcaps_own_file_byte_for_byte(tmp_path: Path) -> None:
-    """Out-of-order log times, channels in any order, payloads of any size, chunks closed on the
-    log-time span and on size in the middle of a call: the same bytes as mcap's add_message."""
+@pytest.mark.parametrize("out_of_order", [True, False])
+def test_chunks_cut_inside_a_call_give_mcaps_own_file_byte_for_byte(tmp_path: Path, out_of_order: bool) -> None:
+    """Log times out of order (or in order, as a node logs them: ChunkedFile's binary search),
+    channels in any order, payloads of any size, chunks closed on the log-time span and on size in
+    the middle of a call: the same bytes as mcap's add_message."""
     rng = random.Random(15)
+    early_or_late = [-5 * DT_NS, 100 * DT_NS] if out_of_order else []
     interval_ns, chunk_size = 40 * DT_NS, 3_000
     messages, t = [], 0
     for n in range(3_000):
         t += rng.choice([0, DT_NS, 2 * DT_NS])
-        log_ns = max(0, t + rng.choice([0] * 20 + [-5 * DT_NS, 100 * DT_NS]))  # now and then a late or early one
+        log_ns = max(0, t + rng.choice([0] * 20 + early_or_late))  # now and then a late or early one
         data = b"\x00\x01\x00\x00" + rng.randbytes(rng.choice([8, 8, 64, 900]))
         messages.append((rng.randrange(len(TOPICS)), n + 1, log_ns, log_ns + rng.randrange(1000), data))
     calls = sorted(rng.sample(range(1, len(messages)), 40)) + [len(messages)]  # where each add_messages call ends
     ours, reference = tmp_path / "ours.mcap", tmp_path / "mcap.mcap"
-    log = ChunkedFile(ours, interval_ns=interval_ns, chunk_size=chunk_size, compression=CompressionType.ZSTD)
+    log = ChunkedFile(ours, interval_ns=interval_ns, chunk_size=chunk_size, compression=CompressionType.ZSTD,
+                      zstd_level=MCAP_ZSTD_LEVEL)
     for i, topic in enumerate(TOPICS):
         log.register(Register(i, topic, FLOAT64, "float64 data\n", {}))
     committed, begin = 0, 0
