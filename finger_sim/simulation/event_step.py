@@ -213,13 +213,13 @@ class EventStep:
     def _took(self, sim: Simulator, integ: DormandPrince853, fn: Any, k: int, t1: float, q: tuple, v: tuple,
               end: float, last: tuple | None) -> State:
         """The Simulator's and the solution's state after a step the kernel took to t1 (s), ending at (q, q')
-        under τ = `end` (N·m); `last`: q if it is the solution's last output, else None. The first steps of a
-        solution the kernel started are written back to the integrator, whose last output is then the token
-        the next step checks (`step`)."""
+        under τ = `end` (N·m); `last`: q if it is the solution's last output, else None. After the first step of a
+        solution the kernel started, the integrator's last output is set to the kernel's, the token the next step
+        checks (`step`); the rest of its attributes are written back only when Python steps (`release`)."""
         self._moved = True
         integ._torque = fn  # noqa: SLF001
         if self._token is None:
-            self._write_back(integ)
+            integ._last = self._token = self._last_output()  # noqa: SLF001
         sim.q, sim.v, sim.torque, sim.step_index = q, v, end, k + 1
         self._q, self._v = last, v
         return _new_state(self._state, (t1, q, v))
@@ -400,14 +400,20 @@ class EventStep:
         integ._err, integ._err_old = st[k.ERR], st[k.ERR_OLD]  # noqa: SLF001
         integ._y, integ._y_old = arr[k.Y].copy(), arr[k.Y_OLD].copy()  # noqa: SLF001
         integ._f[:], integ._dense[:] = arr[k.F], arr[k.DENSE:k.KK]  # noqa: SLF001
-        integ._last = ((st[k.LAST_T], tuple(st[k.LAST_Q:k.LAST_Q + 3]), tuple(st[k.LAST_V:k.LAST_V + 3]))  # noqa: SLF001
-                       if st[k.HAS_LAST] else None)
+        integ._last = self._last_output()  # noqa: SLF001
         integ._origin = ((st[k.ORIGIN_T], tuple(st[k.ORIGIN_Q:k.ORIGIN_Q + 3]), tuple(st[k.ORIGIN_V:k.ORIGIN_V + 3]))  # noqa: SLF001
                          if st[k.HAS_ORIGIN] else None)
         integ._history[:] = [(integ._t_old, integ._h_old, integ._y_old, integ._dense.copy(), integ._err_old,  # noqa: SLF001
                               integ._err)]  # noqa: SLF001
         integ._history_starts[:] = [integ._t_old]  # noqa: SLF001
         self._token = integ._last  # noqa: SLF001
+
+    def _last_output(self) -> tuple | None:
+        """The arrays' solution's last output (t, q, q'), or None (a new solution)."""
+        k, st = self._k, self._st
+        if not st[k.HAS_LAST]:
+            return None
+        return float(st[k.LAST_T]), tuple(st[k.LAST_Q:k.LAST_Q + 3].tolist()), tuple(st[k.LAST_V:k.LAST_V + 3].tolist())
 
 
 def _untouched(integ: DormandPrince853) -> bool:
