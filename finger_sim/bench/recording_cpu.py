@@ -31,6 +31,11 @@ would flatter recording. So the ratio errs high, and so does its numerator (the 
 what remains of its clock reads). What the split leaves out, recording's indirect cost on the stepping thread
 (cold caches after the hand-over), is shown beside it: the stepping thread's CPU outside write_records with
 recording on, against the stepping thread with recording off in the same round.
+
+With `--old`, the same rounds run the old checkout's pair right after this one's, and a table compares the two
+sides part by part (the sender and status threads apart) with each side's node-level on − off difference; its
+last row is the change itself: this side's on − off less the old side's, round by round, with its paired
+bootstrap interval (own and indirect together, where the parts alone leave the indirect cost out).
 """
 
 from __future__ import annotations
@@ -108,17 +113,37 @@ def own_cpu(w: Any) -> float:
     return sum(w.recorder.values())
 
 
+def indirect_cpu(off: Sequence[Any], on: Sequence[Any]) -> list[float]:
+    """Each round's indirect cost on the stepping thread, CPU s per sim s: its CPU outside write_records with
+    recording on, less its CPU with recording off in the same round."""
+    return [w.threads.get(STEPPING, 0.0) - w.recorder.get("caller", 0.0) - o.threads.get(STEPPING, 0.0)
+            for o, w in zip(off, on)]
+
+
 def compared(sides: dict[str, tuple[Sequence[Any], Sequence[Any]]]) -> list[str]:
-    """A table of recording's own CPU by part, side by side: side → its (off, on) runs, measured in the
-    same rounds (node_bench --recording-cpu --old)."""
-    lines = ["| side | recording's own, in all | stepping thread in write_records | sender + status threads | "
-             "writer process | own / least recording-off round |", "|---|---|---|---|---|---|"]
+    """A table of what recording adds, by part, side by side: side → its (off, on) runs, measured in the
+    same rounds (node_bench --recording-cpu --old); with two sides, a last row of the first's node-level
+    on − off difference less the second's, round by round, with its paired bootstrap interval."""
+    lines = ["| side | on − off, the node (interval) | recording's own, in all | stepping thread in write_records | "
+             "sender thread | status thread | writer process | indirect on the stepping thread | "
+             "own / least recording-off round |", "|---|---|---|---|---|---|---|---|---|"]
+    added: dict[str, list[float]] = {}
     for side, (off, on) in sides.items():
         floor = min(node_cpu(w) for w in off)
-        parts = [_spread([w.recorder.get(k, 0.0) for w in on]) for k in ("caller", "threads", "writer")]
+        added[side] = [node_cpu(w) - node_cpu(o) for o, w in zip(off, on)]
+        low, high = interval([node_cpu(w) for w in on], [node_cpu(o) for o in off], added_cpu)
+        parts = [_spread([w.recorder.get("caller", 0.0) for w in on]),
+                 *(_spread([w.threads.get(name, 0.0) for w in on]) for name in RECORDER_THREADS),
+                 _spread([w.recorder.get("writer", 0.0) for w in on]), _spread(indirect_cpu(off, on), "+.4f")]
         ratios = [own_cpu(w) / floor for w in on]
-        lines.append(f"| {side} | {_spread([own_cpu(w) for w in on])} | {' | '.join(parts)} | "
+        lines.append(f"| {side} | {statistics.median(added[side]):+.4f} ({low:+.4f} to {high:+.4f}) | "
+                     f"{_spread([own_cpu(w) for w in on])} | {' | '.join(parts)} | "
                      f"{_spread([100 * r for r in ratios], '.1f')} % |")
+    if len(added) == 2:
+        (first, a), (second, b) = added.items()
+        low, high = interval(a, b, added_cpu)
+        lines.append(f"| {first} − {second}, round by round | {float(added_cpu(np.array(a), np.array(b))):+.4f} "
+                     f"({low:+.4f} to {high:+.4f}) | | | | | | | |")
     return lines
 
 
@@ -141,7 +166,7 @@ def report(off: Sequence[Any], on: Sequence[Any], command: str, duration: float,
         return [w.threads.get(name, 0.0) for w in runs]
 
     outside = [t - c for t, c in zip(thread(on, STEPPING), part("caller"))]  # stepping thread outside write_records
-    paired = [o - f for o, f in zip(outside, thread(off, STEPPING))]  # each round's on run against its off run
+    paired = indirect_cpu(off, on)  # each round's on run against its off run
     indirect = statistics.median(paired)
     names = sorted({n for w in (*off, *on) for n in w.threads},
                    key=lambda n: -statistics.median(thread(off, n) + thread(on, n)))
@@ -201,7 +226,8 @@ def report(off: Sequence[Any], on: Sequence[Any], command: str, duration: float,
         "",
         *per_thread,
         *(["", "Side by side with the old checkout (`--old`), measured in the same rounds, CPU s per sim s, "
-           "median (min–max):", "", *compared({"new": (off, on), "old": old})] if old is not None else []),
+           f"median (min–max); the on − off difference with its {100 * CONFIDENCE:.0f} % paired bootstrap interval:",
+           "", *compared({"new": (off, on), "old": old})] if old is not None else []),
         END,
     ])
 

@@ -93,15 +93,28 @@ def test_threads_grouped_by_name_without_their_number() -> None:
 
 
 def test_old_side_by_side_table() -> None:
-    old_on = [Window(cpu_per_sim_s=c, recorder={"caller": k + 0.001, "threads": THREADS, "writer": WRITER})
-              for c, k in zip(ON, CALLER)]
+    old_step_on = np.array(STEP_ON) + 0.002
+    old_on = [Window(cpu_per_sim_s=c, threads={"stepping": s, "executor": 0.0007, "mcap sender": 0.0017,
+                                               "mcap status": 0.0002},
+                     recorder={"caller": k + 0.001, "threads": THREADS, "writer": WRITER})
+              for c, s, k in zip(ON, old_step_on, CALLER)]
     section = recording_cpu.report(_off(), _on(), "cmd", 10.0, ((1.0,), (1.0,)), old=(_off(), old_on))
     old_own = np.array(CALLER) + 0.001 + THREADS + WRITER
-    (line,) = [line for line in section.splitlines() if line.startswith("| old |")]
-    cells = [cell.strip() for cell in line.strip("|").split("|")]
-    assert cells[1] == f"{np.median(old_own):.4f} ({old_own.min():.4f}–{old_own.max():.4f})"
+    cells = _cells(section, "old")
+    old_added = (old_step_on + 0.0007 + 0.0019 + WRITER) - NODE_OFF  # its threads and writer, less the off run
+    low, high = recording_cpu.interval(old_added + NODE_OFF, NODE_OFF, recording_cpu.added_cpu)
+    assert cells[1] == f"{np.median(old_added):+.4f} ({low:+.4f} to {high:+.4f})"
+    assert cells[2] == f"{np.median(old_own):.4f} ({old_own.min():.4f}–{old_own.max():.4f})"
     caller = np.array(CALLER) + 0.001
-    assert cells[2] == f"{np.median(caller):.4f} ({caller.min():.4f}–{caller.max():.4f})"
+    assert cells[3] == f"{np.median(caller):.4f} ({caller.min():.4f}–{caller.max():.4f})"
+    assert cells[4:6] == ["0.0017 (0.0017–0.0017)", "0.0002 (0.0002–0.0002)"]
+    indirect = old_step_on - caller - np.array(STEP_OFF)
+    assert cells[7] == f"{np.median(indirect):+.4f} ({indirect.min():+.4f}–{indirect.max():+.4f})"
     ratios = 100 * old_own / NODE_OFF.min()
-    assert cells[5] == f"{np.median(ratios):.1f} ({ratios.min():.1f}–{ratios.max():.1f}) %"
+    assert cells[8] == f"{np.median(ratios):.1f} ({ratios.min():.1f}–{ratios.max():.1f}) %"
+    # the change itself: new's on − off less old's, round by round (old's stepping thread took 0.002 more)
+    change = (NODE_ON - NODE_OFF) - old_added
+    low, high = recording_cpu.interval(NODE_ON - NODE_OFF, old_added, recording_cpu.added_cpu)
+    assert _cells(section, "new − old, round by round")[1] == f"{np.median(change):+.4f} ({low:+.4f} to {high:+.4f})"
+    assert np.isclose(np.median(change), -0.002)
     assert "| new |" in section and "| old |" not in recording_cpu.report(_off(), _on(), "cmd", 10.0, ((1.0,), (1.0,)))
