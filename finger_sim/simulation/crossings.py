@@ -106,18 +106,40 @@ def step_to_crossing(sim: Simulator, t: float, q: Vec3, v: Vec3, t1: float,
     then that step's. The one step past it keeps the location's far end off the crossing (regula falsi's far side,
     which a kink's location returns, may never move from a bracket end that close) and gives the restart after an
     onset its step (`dop853.restart_step`). The kernel's event step stops at the same internal step
-    (`kernel.event_step._advance_to`)."""
+    (`kernel.event_step._advance_to`), and so does the compiled chunk of internal steps (`GapWatch.compiled`)."""
     integ = sim.integrator
     if not isinstance(integ, DormandPrince853) or (sim.substeps != 1 and sim._kinks):
         return t1, *sim._step(t, q, v, t1 - t, torque)
-    start = closed_sides(sim, t, q, open_impacts=True)
-
-    def watch(s: float, y: np.ndarray) -> bool:
-        return closed_sides(sim, s, (float(y[0]), float(y[1]), float(y[2]))) != start
-
-    q1, v1 = integ.step(t, q, v, t1 - t, torque, watch)
+    q1, v1 = integ.step(t, q, v, t1 - t, torque, GapWatch(sim, t, q, v))
     end = integ._last[0]  # noqa: SLF001  (the output's time: t + (t1 − t), or the watched stop before it)
     return (end if end < t + (t1 - t) else t1), q1, v1
+
+
+class GapWatch:
+    """What `DormandPrince853.step` watches in a step of `step_to_crossing` from (t, q, q') (`dop853.Watch`):
+    whether an internal step's end shows a gap on the other side than at t (`closed_sides`, an impact gap open at
+    t), the start's sides found when first asked. The compiled chunk of internal steps asks the same of the gap
+    plan (`compiled`, `Simulator._watched_gaps`: `kernel.gap_screen.crossed`, the same numbers)."""
+
+    __slots__ = ("_sim", "_t", "_q", "_v", "_start")
+
+    def __init__(self, sim: Simulator, t: float, q: Vec3, v: Vec3) -> None:
+        self._sim, self._t, self._q, self._v = sim, t, q, v
+        self._start: list[bool] | None = None
+
+    def __call__(self, s: float, y: np.ndarray) -> bool:
+        """Whether the internal state y = (q, q') at s (s) has a gap on its other side than at the start."""
+        if self._start is None:
+            self._start = closed_sides(self._sim, self._t, self._q, open_impacts=True)
+        return closed_sides(self._sim, s, (float(y[0]), float(y[1]), float(y[2]))) != self._start
+
+    def compiled(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """The gap plan, a work array of its own (4 × n_gaps) and the start (q, q') for the compiled chunk
+        (`kernel.internal_steps.advance_to`); None: the gaps have no compiled form (`simulation.gap_screen`)."""
+        gaps = self._sim._watched_gaps
+        if gaps is None:
+            return None
+        return (*gaps, np.array((*self._q, *self._v)))
 
 
 def closed_sides(sim: Simulator, t: float, q: Vec3, open_impacts: bool = False) -> list[bool]:

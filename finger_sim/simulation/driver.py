@@ -115,6 +115,8 @@ class Simulator:
         self._timed = frozenset(g.element for g in self._gaps if getattr(g.element, "time_varying", False))
         #: the compiled check of a step's end gaps (`simulation.gap_screen`), or None: the Python check alone
         self._gap_screen = gap_screen.for_simulator(self)
+        #: the gap plan and work array of the compiled watch of DOP853's internal steps (`crossings.GapWatch`), or None
+        self._watched_gaps = None if self._gap_screen is None else self._gap_screen.for_watch()
         self.reset()
         #: the compiled common step of a scene with events (`simulation.event_step`), or None
         self._event_step = event_step.for_simulator(self)
