@@ -97,19 +97,23 @@ def first_crossing(sim: Simulator, t: float, q: Vec3, v: Vec3, t1: float, q1: Ve
     return first
 
 
+def watches(sim: Simulator) -> bool:
+    """Whether the Simulator's steps in its gap loop are watched (`step_to_crossing`): our DOP853 without substeps
+    (else the Simulator takes its plain step, `Simulator._step`). Its integrator's class is set when it is built."""
+    return issubclass(sim._integrator_cls, DormandPrince853) and not (sim.substeps != 1 and sim._kinks)
+
+
 def step_to_crossing(sim: Simulator, t: float, q: Vec3, v: Vec3, t1: float,
                      torque: TorqueFn) -> tuple[float, Vec3, Vec3]:
-    """The Simulator's step from (t, q, q') toward t1 (s) that `first_crossing` then searches: (its end time, q1,
-    q1'). Our DOP853 stops it one internal step past the first that ends before t1 with a gap on the other side
-    than at t (`DormandPrince853.step`'s watch: the internal state's gaps, an impact gap open at t), so that the
-    internal steps past a kink, which the cut drops (`DormandPrince853.cut_at`), are not taken to t1; the end is
-    then that step's. The one step past it keeps the location's far end off the crossing (regula falsi's far side,
+    """The step of a watched Simulator (`watches`) from (t, q, q') toward t1 (s) that `first_crossing` then
+    searches: (its end time, q1, q1'). DOP853 stops it one internal step past the first that ends before t1 with
+    a gap on the other side than at t (`DormandPrince853.step`'s watch: the internal state's gaps, an impact gap
+    open at t), so that the internal steps past a kink, which the cut drops (`DormandPrince853.cut_at`), are not
+    taken to t1; the end is then that step's. The one step past it keeps the location's far end off the crossing (regula falsi's far side,
     which a kink's location returns, may never move from a bracket end that close) and gives the restart after an
     onset its step (`dop853.restart_step`). The kernel's event step stops at the same internal step
     (`kernel.event_step._advance_to`), and so does the compiled chunk of internal steps (`GapWatch.compiled`)."""
     integ = sim.integrator
-    if not isinstance(integ, DormandPrince853) or (sim.substeps != 1 and sim._kinks):
-        return t1, *sim._step(t, q, v, t1 - t, torque)
     q1, v1 = integ.step(t, q, v, t1 - t, torque, GapWatch(sim, t, q, v))
     end = integ._last[0]  # noqa: SLF001  (the output's time: t + (t1 − t), or the watched stop before it)
     return (end if end < t + (t1 - t) else t1), q1, v1

@@ -115,7 +115,9 @@ class Simulator:
         self._timed = frozenset(g.element for g in self._gaps if getattr(g.element, "time_varying", False))
         #: the compiled check of a step's end gaps (`simulation.gap_screen`), or None: the Python check alone
         self._gap_screen = gap_screen.for_simulator(self)
-        #: the gap plan and work array of the compiled watch of DOP853's internal steps (`crossings.GapWatch`), or None
+        #: whether the gap loop's steps are watched (`crossings.step_to_crossing`), and the gap plan and work array
+        #: of the compiled watch (`crossings.GapWatch`), or None
+        self._watched = crossings.watches(self)
         self._watched_gaps = None if self._gap_screen is None else self._gap_screen.for_watch()
         self.reset()
         #: the compiled common step of a scene with events (`simulation.event_step`), or None
@@ -253,7 +255,11 @@ class Simulator:
                     self.q, self.v = q, ZERO
                     return
                 t, v, self._resting = release, ZERO, None
-            end, q1, v1 = crossings.step_to_crossing(self, t, q, v, t1, torque)
+            if self._watched:
+                end, q1, v1 = crossings.step_to_crossing(self, t, q, v, t1, torque)
+            else:
+                end = t1
+                q1, v1 = self._step(t, q, v, t1 - t, torque)
             crossing = self._first_crossing(t, q, v, end, q1, v1, torque)
             if crossing is None:
                 if end < t + (t1 - t):  # stopped where a gap showed its other side, which no crossing confirmed
