@@ -100,12 +100,12 @@ class Watch(Protocol):
     """What a watched `DormandPrince853.step` watches (`simulation.crossings.GapWatch`): the gaps at an internal
     step's end against the step's start."""
 
-    def __call__(self, s: float, y: np.ndarray) -> bool:
-        """Whether the internal state y = (q, q') at s (s) shows a gap on its other side than at the step's start."""
+    def crossed(self, t: float, q: Vec3, s: float, y: np.ndarray) -> bool:
+        """Whether the internal state y = (q, q') at s (s) shows a gap on its other side than the step's start (t, q)."""
 
-    def compiled(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    def compiled(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The same test for the compiled chunk (`kernel.internal_steps.advance_to`): the gap plan
-        (`kernel.gap_screen`), a 4 × n_gaps work array and the step's start (q, q'); None: Python's test only."""
+        (`kernel.gap_screen`) and a 4 × n_gaps work array; None: Python's test only."""
 
 
 class DormandPrince853(Integrator):
@@ -256,8 +256,8 @@ class DormandPrince853(Integrator):
              watch: Watch | None = None) -> tuple[Vec3, Vec3]:
         """The output at t + dt (s) of the internal solution from (t, q, q') under `torque`. With `watch`
         (`simulation.crossings.step_to_crossing`), the internal steps stop one step past the first that ends
-        before t + dt where watch(its end time, its end state y) is True (a gap on its other side), if that one
-        ends before t + dt too: the output is there, at the time `_last` holds."""
+        before t + dt where `watch.crossed` (t, q, its end time, its end state y) is True (a gap on its other side),
+        if that one ends before t + dt too: the output is there, at the time `_last` holds."""
         target = t + dt
         last = self._last
         if not self.under_current_modes():
@@ -271,7 +271,7 @@ class DormandPrince853(Integrator):
         else:
             self._restart(t, q, v, dt, torque)
         if watch is not None:
-            target = self._watched(t, target, torque, watch)
+            target = self._watched(t, q, v, target, torque, watch)
         else:
             held = getattr(torque, "value", None)  # a held or constant torque (`HeldTorque`, `inputs.Constant`)
             if held is not None and self._steps is not None and self._t < target:
@@ -286,8 +286,8 @@ class DormandPrince853(Integrator):
         self._remember(q1, target, t_old, h_old, err_old, err)
         return q1, v1
 
-    def _watched(self, t: float, target: float, torque: TorqueFn, watch: Watch) -> float:
-        """`step`'s internal steps from t to `target` (s) under `watch`: the time of its output
+    def _watched(self, t: float, q: Vec3, v: Vec3, target: float, torque: TorqueFn, watch: Watch) -> float:
+        """`step`'s internal steps from (t, q, q') to `target` (s) under `watch`: the time of its output
         (`simulation.crossings.step_to_crossing`: they stop one internal step past the first whose end shows a
         gap crossed). Under a held torque in compiled chunks that watch on the gap plan (`watch.compiled`), else
         (and to retry a step the chunk could not take) in Python's loop; a pass the kernel's event step stopped
@@ -300,13 +300,13 @@ class DormandPrince853(Integrator):
         if held is not None and self._steps is not None and self._t < target:
             gaps = watch.compiled()
             if gaps is not None:
-                state = self._advance_compiled(target, held, gaps=gaps)
+                state = self._advance_compiled(target, held, gaps=(*gaps, np.array((*q, *v))))
                 if state == self._steps.STOPPED:
                     return self._t
                 seen = state == self._steps.SEEN
         while self._t < target:
             self._advance(torque)
-            if self._t < target and (seen or watch(self._t, self._y)):
+            if self._t < target and (seen or watch.crossed(t, q, self._t, self._y)):
                 if seen:
                     return self._t
                 seen = True
@@ -458,8 +458,8 @@ class DormandPrince853(Integrator):
         COMPILED_CHUNK internal steps (`kernel.internal_steps.advance_to`, the same numbers), each step
         kept in the history as `_advance` keeps it; it stops before a step that fails, which the Python
         loop then retries and reports. The rejected attempts are not counted here. `bounded` (`cut_at`):
-        the last step ends exactly at target, as `_advance(torque, target)` ends it. `gaps` (`Watch.compiled`):
-        the steps watched as `_watched` watches them. The watch's state at the end (`kernel.internal_steps`:
+        the last step ends exactly at target, as `_advance(torque, target)` ends it. `gaps` (`Watch.compiled`'s,
+        and the step's start q, q'): the steps watched as `_watched` watches them. The watch's state at the end (`kernel.internal_steps`:
         STOPPED where the watch ended the pass before target)."""
         k = self._steps
         st, y, f = self._step_scalars, self._y_next, self._f_next

@@ -97,15 +97,18 @@ def first_crossing(sim: Simulator, t: float, q: Vec3, v: Vec3, t1: float, q1: Ve
     return first
 
 
-def watches(sim: Simulator) -> bool:
-    """Whether the Simulator's steps in its gap loop are watched (`step_to_crossing`): our DOP853 without substeps
-    (else the Simulator takes its plain step, `Simulator._step`). Its integrator's class is set when it is built."""
-    return issubclass(sim._integrator_cls, DormandPrince853) and not (sim.substeps != 1 and sim._kinks)
+def watch_for(sim: Simulator) -> GapWatch | None:
+    """What the Simulator's steps in its gap loop watch (`step_to_crossing`), or None: they are not watched (the
+    Simulator takes its plain step, `Simulator._step`). Watched: our DOP853 without substeps (its integrator's
+    class is set when it is built)."""
+    if not issubclass(sim._integrator_cls, DormandPrince853) or (sim.substeps != 1 and sim._kinks):
+        return None
+    return GapWatch(sim)
 
 
 def step_to_crossing(sim: Simulator, t: float, q: Vec3, v: Vec3, t1: float,
                      torque: TorqueFn) -> tuple[float, Vec3, Vec3]:
-    """The step of a watched Simulator (`watches`) from (t, q, q') toward t1 (s) that `first_crossing` then
+    """The step of a watched Simulator (`watch_for`) from (t, q, q') toward t1 (s) that `first_crossing` then
     searches: (its end time, q1, q1'). DOP853 stops it one internal step past the first that ends before t1 with
     a gap on the other side than at t (`DormandPrince853.step`'s watch: the internal state's gaps, an impact gap
     open at t), so that the internal steps past a kink, which the cut drops (`DormandPrince853.cut_at`), are not
@@ -114,36 +117,37 @@ def step_to_crossing(sim: Simulator, t: float, q: Vec3, v: Vec3, t1: float,
     onset its step (`dop853.restart_step`). The kernel's event step stops at the same internal step
     (`kernel.event_step._advance_to`), and so does the compiled chunk of internal steps (`GapWatch.compiled`)."""
     integ = sim.integrator
-    q1, v1 = integ.step(t, q, v, t1 - t, torque, GapWatch(sim, t, q, v))
+    q1, v1 = integ.step(t, q, v, t1 - t, torque, sim._watch)
     end = integ._last[0]  # noqa: SLF001  (the output's time: t + (t1 − t), or the watched stop before it)
     return (end if end < t + (t1 - t) else t1), q1, v1
 
 
 class GapWatch:
-    """What `DormandPrince853.step` watches in a step of `step_to_crossing` from (t, q, q') (`dop853.Watch`):
-    whether an internal step's end shows a gap on the other side than at t (`closed_sides`, an impact gap open at
-    t), the start's sides found when first asked. The compiled chunk of internal steps asks the same of the gap
-    plan (`compiled`, `Simulator._watched_gaps`: `kernel.gap_screen.crossed`, the same numbers)."""
+    """What `DormandPrince853.step` watches in a Simulator's watched steps (`watch_for`, `dop853.Watch`): whether an
+    internal step's end shows a gap on the other side than at the step's start (`closed_sides`, an impact gap open
+    at the start), the start's sides found once per start. The compiled chunk of internal steps asks the same of
+    the gap plan (`compiled`: `kernel.gap_screen.crossed`, the same numbers)."""
 
-    __slots__ = ("_sim", "_t", "_q", "_v", "_start")
+    __slots__ = ("_sim", "_gaps", "_start", "_sides")
 
-    def __init__(self, sim: Simulator, t: float, q: Vec3, v: Vec3) -> None:
-        self._sim, self._t, self._q, self._v = sim, t, q, v
-        self._start: list[bool] | None = None
+    def __init__(self, sim: Simulator) -> None:
+        self._sim = sim
+        screen = sim._gap_screen
+        self._gaps = None if screen is None else screen.for_watch()
+        self._start: tuple[float, Vec3] | None = None  # the start (t, q) whose sides _sides holds
+        self._sides: list[bool] = []
 
-    def __call__(self, s: float, y: np.ndarray) -> bool:
-        """Whether the internal state y = (q, q') at s (s) has a gap on its other side than at the start."""
-        if self._start is None:
-            self._start = closed_sides(self._sim, self._t, self._q, open_impacts=True)
-        return closed_sides(self._sim, s, (float(y[0]), float(y[1]), float(y[2]))) != self._start
+    def crossed(self, t: float, q: Vec3, s: float, y: np.ndarray) -> bool:
+        """Whether the internal state y = (q, q') at s (s) has a gap on its other side than the step's start (t, q)."""
+        start = self._start
+        if start is None or start[1] is not q or start[0] != t:
+            self._start, self._sides = (t, q), closed_sides(self._sim, t, q, open_impacts=True)
+        return closed_sides(self._sim, s, (float(y[0]), float(y[1]), float(y[2]))) != self._sides
 
-    def compiled(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-        """The gap plan, a work array of its own (4 × n_gaps) and the start (q, q') for the compiled chunk
+    def compiled(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The gap plan and a work array of its own (4 × n_gaps) for the compiled chunk
         (`kernel.internal_steps.advance_to`); None: the gaps have no compiled form (`simulation.gap_screen`)."""
-        gaps = self._sim._watched_gaps
-        if gaps is None:
-            return None
-        return (*gaps, np.array((*self._q, *self._v)))
+        return self._gaps
 
 
 def closed_sides(sim: Simulator, t: float, q: Vec3, open_impacts: bool = False) -> list[bool]:

@@ -115,10 +115,8 @@ class Simulator:
         self._timed = frozenset(g.element for g in self._gaps if getattr(g.element, "time_varying", False))
         #: the compiled check of a step's end gaps (`simulation.gap_screen`), or None: the Python check alone
         self._gap_screen = gap_screen.for_simulator(self)
-        #: whether the gap loop's steps are watched (`crossings.step_to_crossing`), and the gap plan and work array
-        #: of the compiled watch (`crossings.GapWatch`), or None
-        self._watched = crossings.watches(self)
-        self._watched_gaps = None if self._gap_screen is None else self._gap_screen.for_watch()
+        #: what DOP853 watches in the gap loop's steps (`crossings.step_to_crossing`), or None: they are not watched
+        self._watch = crossings.watch_for(self)
         self.reset()
         #: the compiled common step of a scene with events (`simulation.event_step`), or None
         self._event_step = event_step.for_simulator(self)
@@ -255,7 +253,7 @@ class Simulator:
                     self.q, self.v = q, ZERO
                     return
                 t, v, self._resting = release, ZERO, None
-            if self._watched:
+            if self._watch is not None:
                 end, q1, v1 = crossings.step_to_crossing(self, t, q, v, t1, torque)
             else:
                 end = t1

@@ -63,7 +63,7 @@ class GapScreen:
 
     def for_watch(self) -> tuple[np.ndarray, np.ndarray]:
         """The gap plan and a work array of its own, for the compiled watch of DOP853's internal steps
-        (`crossings.GapWatch.compiled`)."""
+        (`crossings.GapWatch`)."""
         return self._plan, np.empty_like(self._work)
 
     def reset(self) -> None:
