@@ -101,7 +101,8 @@ class Watch(Protocol):
     step's end against the step's start."""
 
     def crossed(self, t: float, q: Vec3, s: float, y: np.ndarray) -> bool:
-        """Whether the internal state y = (q, q') at s (s) shows a gap on its other side than the step's start (t, q)."""
+        """Whether the internal state y = (q, q') at s (s) shows a gap on its other side than the step's start
+        (t, q)."""
 
     def compiled(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The same test for the compiled chunk (`kernel.internal_steps.advance_to`): the gap plan
@@ -459,8 +460,8 @@ class DormandPrince853(Integrator):
         kept in the history as `_advance` keeps it; it stops before a step that fails, which the Python
         loop then retries and reports. The rejected attempts are not counted here. `bounded` (`cut_at`):
         the last step ends exactly at target, as `_advance(torque, target)` ends it. `gaps` (`Watch.compiled`'s,
-        and the step's start q, q'): the steps watched as `_watched` watches them. The watch's state at the end (`kernel.internal_steps`:
-        STOPPED where the watch ended the pass before target)."""
+        and the step's start q, q'): the steps watched as `_watched` watches them. The watch's state at the end
+        (`kernel.internal_steps`: STOPPED where the watch ended the pass before target)."""
         k = self._steps
         st, y, f = self._step_scalars, self._y_next, self._f_next
         plan, work, start = (k.NO_PLAN, k.NO_WORK, k.NO_PLAN) if gaps is None else gaps

@@ -112,10 +112,11 @@ def step_to_crossing(sim: Simulator, t: float, q: Vec3, v: Vec3, t1: float,
     searches: (its end time, q1, q1'). DOP853 stops it one internal step past the first that ends before t1 with
     a gap on the other side than at t (`DormandPrince853.step`'s watch: the internal state's gaps, an impact gap
     open at t), so that the internal steps past a kink, which the cut drops (`DormandPrince853.cut_at`), are not
-    taken to t1; the end is then that step's. The one step past it keeps the location's far end off the crossing (regula falsi's far side,
-    which a kink's location returns, may never move from a bracket end that close) and gives the restart after an
-    onset its step (`dop853.restart_step`). The kernel's event step stops at the same internal step
-    (`kernel.event_step._advance_to`), and so does the compiled chunk of internal steps (`GapWatch.compiled`)."""
+    taken to t1; the end is then that step's. The one step past it keeps the location's far end off the crossing
+    (regula falsi's far side, which a kink's location returns, may never move from a bracket end that close) and
+    gives the restart after an onset its step (`dop853.restart_step`). The kernel's event step stops at the same
+    internal step (`kernel.event_step._advance_to`), and so does the compiled chunk of internal steps
+    (`GapWatch.compiled`)."""
     integ = sim.integrator
     q1, v1 = integ.step(t, q, v, t1 - t, torque, sim._watch)
     end = integ._last[0]  # noqa: SLF001  (the output's time: t + (t1 − t), or the watched stop before it)
