@@ -4,9 +4,9 @@
 `Simulator.step` (the node's path) on each shipped contact scene in three variants: the whole
 common step compiled (`simulation.event_step`, the default), the Python DOP853 step with the
 compiled step-end gap check (`simulation.gap_screen`; the event step switched off), and the Python
-check alone (both switched off); and the free paper_flexion. CPU per step (`time.process_time`),
-every variant timed in turn within each repeat after one warm-up round; medians, and ratios to the
-free step.
+check alone (both switched off; DOP853's watch of its internal steps stays compiled, `crossings.GapWatch`);
+and the free paper_flexion. CPU per step (`time.process_time`), every variant timed in turn within each
+repeat after one warm-up round; medians, and ratios to the free step.
 """
 
 from __future__ import annotations

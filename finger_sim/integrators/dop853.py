@@ -29,6 +29,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from types import ModuleType
+from typing import Protocol
 
 import numpy as np
 
@@ -93,6 +94,19 @@ _D = np.ascontiguousarray(coefficients.D, dtype=np.float64)
 _E53 = np.vstack([_E5, _E3])  # both error estimates in one product
 #: The coefficients as nested lists, for the attempt in Python (`_python_attempt`)
 _LISTS = tuple(x.tolist() for x in (_A, _B, _C, _E3, _E5, _D))
+
+
+class Watch(Protocol):
+    """What a watched `DormandPrince853.step` watches (`simulation.crossings.GapWatch`): the gaps at an internal
+    step's end against the step's start."""
+
+    def crossed(self, t: float, q: Vec3, s: float, y: np.ndarray) -> bool:
+        """Whether the internal state y = (q, q') at s (s) shows a gap on its other side than the step's start
+        (t, q)."""
+
+    def compiled(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The same test for the compiled chunk (`kernel.internal_steps.advance_to`): the gap plan
+        (`kernel.gap_screen`) and a 4 × n_gaps work array; None: Python's test only."""
 
 
 class DormandPrince853(Integrator):
@@ -163,7 +177,8 @@ class DormandPrince853(Integrator):
         #: the compiled loop of internal steps under a held torque (`kernel.internal_steps`), or None
         #: (stages in Python, a system without one), and its scalars and scratch arrays
         self._steps = stages.internal_steps() if self.compiled else None
-        self._step_scalars, self._y_next, self._f_next = np.empty(6), np.empty(6), np.empty(6)
+        self._step_scalars = np.empty(self._steps.ST_SIZE) if self._steps is not None else None
+        self._y_next, self._f_next = np.empty(6), np.empty(6)
         self._y_scratch, self._y_new = np.empty(6), np.empty(6)
 
     def error_estimate(self, q: Vec3) -> float:
@@ -239,11 +254,11 @@ class DormandPrince853(Integrator):
         self._estimates[q_to] = self._estimates.get(q_from, 0.0) + error
 
     def step(self, t: float, q: Vec3, v: Vec3, dt: float, torque: TorqueFn,
-             watch: Callable[[float, np.ndarray], bool] | None = None) -> tuple[Vec3, Vec3]:
+             watch: Watch | None = None) -> tuple[Vec3, Vec3]:
         """The output at t + dt (s) of the internal solution from (t, q, q') under `torque`. With `watch`
         (`simulation.crossings.step_to_crossing`), the internal steps stop one step past the first that ends
-        before t + dt where watch(its end time, its end state y) is True (a gap on its other side), if that one
-        ends before t + dt too: the output is there, at the time `_last` holds."""
+        before t + dt where `watch.crossed` (t, q, its end time, its end state y) is True (a gap on its other side),
+        if that one ends before t + dt too: the output is there, at the time `_last` holds."""
         target = t + dt
         last = self._last
         if not self.under_current_modes():
@@ -257,7 +272,7 @@ class DormandPrince853(Integrator):
         else:
             self._restart(t, q, v, dt, torque)
         if watch is not None:
-            target = self._watched(t, target, torque, watch)
+            target = self._watched(t, q, v, target, torque, watch)
         else:
             held = getattr(torque, "value", None)  # a held or constant torque (`HeldTorque`, `inputs.Constant`)
             if held is not None and self._steps is not None and self._t < target:
@@ -272,18 +287,27 @@ class DormandPrince853(Integrator):
         self._remember(q1, target, t_old, h_old, err_old, err)
         return q1, v1
 
-    def _watched(self, t: float, target: float, torque: TorqueFn, watch: Callable[[float, np.ndarray], bool]) -> float:
-        """`step`'s internal steps from t to `target` (s) under `watch`: the time of its output
+    def _watched(self, t: float, q: Vec3, v: Vec3, target: float, torque: TorqueFn, watch: Watch) -> float:
+        """`step`'s internal steps from (t, q, q') to `target` (s) under `watch`: the time of its output
         (`simulation.crossings.step_to_crossing`: they stop one internal step past the first whose end shows a
-        gap crossed). Each step in Python's loop (the compiled chunk knows no watch); a pass the kernel stopped
+        gap crossed). Under a held torque in compiled chunks that watch on the gap plan (`watch.compiled`), else
+        (and to retry a step the chunk could not take) in Python's loop; a pass the kernel's event step stopped
         (`_hit`) stops there again."""
         hit, self._hit = self._hit, None
         if hit is not None and hit == self._t and t < hit < target:
             return hit
         seen = False  # an internal step ended with a gap on its other side: one more, then stop
+        held = getattr(torque, "value", None)  # a held or constant torque, as in `step`
+        if held is not None and self._steps is not None and self._t < target:
+            gaps = watch.compiled()
+            if gaps is not None:
+                state = self._advance_compiled(target, held, gaps=(*gaps, np.array((*q, *v))))
+                if state == self._steps.STOPPED:
+                    return self._t
+                seen = state == self._steps.SEEN
         while self._t < target:
             self._advance(torque)
-            if self._t < target and (seen or watch(self._t, self._y)):
+            if self._t < target and (seen or watch.crossed(t, q, self._t, self._y)):
                 if seen:
                     return self._t
                 seen = True
@@ -429,24 +453,29 @@ class DormandPrince853(Integrator):
         self._remember(q1, s, self._t_old, self._h_old, self._err_old, self._err)
         return q1, v1
 
-    def _advance_compiled(self, target: float, held: float, bounded: bool = False) -> None:
+    def _advance_compiled(self, target: float, held: float, bounded: bool = False,
+                          gaps: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> float:
         """`while _t < target: _advance(torque)` under the held torque `held` (N·m) in compiled chunks of
         COMPILED_CHUNK internal steps (`kernel.internal_steps.advance_to`, the same numbers), each step
         kept in the history as `_advance` keeps it; it stops before a step that fails, which the Python
         loop then retries and reports. The rejected attempts are not counted here. `bounded` (`cut_at`):
-        the last step ends exactly at target, as `_advance(torque, target)` ends it."""
+        the last step ends exactly at target, as `_advance(torque, target)` ends it. `gaps` (`Watch.compiled`'s,
+        and the step's start q, q'): the steps watched as `_watched` watches them. The watch's state at the end
+        (`kernel.internal_steps`: STOPPED where the watch ended the pass before target)."""
         k = self._steps
         st, y, f = self._step_scalars, self._y_next, self._f_next
+        plan, work, start = (k.NO_PLAN, k.NO_WORK, k.NO_PLAN) if gaps is None else gaps
+        st[k.WATCH] = k.START
         self._taus.fill(held)
         while self._t < target:
-            st[:] = (self._t, self._h, self._t_old, self._h_old, self._err, self._err_old)
+            st[:k.WATCH] = (self._t, self._h, self._t_old, self._h_old, self._err, self._err_old)
             y[:], f[:] = self._y, self._f
             rows = np.empty((COMPILED_CHUNK, k.ROW_SIZE))  # the history keeps views of its rows
             n = k.advance_to(self._model, self.rtol, self.atol, st, y, f, self._y_scratch, self._dense, self._kk,
-                             self._y_new, self._taus, HELD_ARRAY, target, rows, bounded)
+                             self._y_new, self._taus, HELD_ARRAY, target, rows, bounded, plan, work, start)
             done = n if n >= 0 else -n - 1
             if done:
-                self._t, self._h, self._t_old, self._h_old, self._err, self._err_old = st.tolist()
+                self._t, self._h, self._t_old, self._h_old, self._err, self._err_old = st[:k.WATCH].tolist()
                 self._y, self._f[:] = y.copy(), f  # a new array for y, as `_advance` makes one per step
                 self.accepted += done
                 y_olds, denses = rows[:done, k.ROW_Y_OLD:k.ROW_DENSE], rows[:done, k.ROW_DENSE:].reshape(done, 7, 6)
@@ -455,8 +484,9 @@ class DormandPrince853(Integrator):
                     if self._keep_history:
                         self._history.append((t_old, h_old, y_old, dense, err_old, err))
                         self._history_starts.append(t_old)
-            if n < 0:
-                return
+            if n < 0 or st[k.WATCH] == k.STOPPED:
+                break
+        return float(st[k.WATCH])
 
     def _advance(self, torque: TorqueFn, bound: float = math.inf) -> None:
         """One accepted internal step from _t (scipy's `RungeKutta._step_impl`), ending at `bound` (s) at

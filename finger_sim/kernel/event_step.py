@@ -41,7 +41,7 @@ from numba import njit  # noqa: E402  (after the cache folder is set)
 from finger_sim.effects import stops  # noqa: E402
 from finger_sim.integrators import dop853  # noqa: E402
 from finger_sim.kernel.closed_loop import I_H, I_H_OLD, I_T, I_T_OLD, N_NODES, _advance  # noqa: E402
-from finger_sim.kernel.gap_screen import gap_states, screen  # noqa: E402
+from finger_sim.kernel.gap_screen import crossed, gap_states, screen  # noqa: E402
 from finger_sim.kernel.integrators import _entry_point  # noqa: E402
 from finger_sim.kernel import internal_steps  # noqa: E402  (its layout, read by `simulation.event_handover`)
 from finger_sim.kernel.internal_steps import (BRANCH, CONTINUED, COUNT, HISTORY_ROWS, HISTORY_SIZE,  # noqa: E402
@@ -329,8 +329,8 @@ def _advance_to(m, st, arr, log, prof, target, plan, work, side):
     """`DormandPrince853.step`'s internal steps until st[T] ≥ target (s) (`closed_loop._advance`), each with its
     θ error estimate and recorded in log, watched as `crossings.step_to_crossing` watches them: they stop one step
     past the first one ending before target with a gap on the other side than in work's start rows `side`
-    (`_crossed`), its end time in st[HIT], where that one ends before target too. False where one fails. The rows
-    are sliced only when a step is due."""
+    (`gap_screen.crossed`), its end time in st[HIT], where that one ends before target too. False where one fails.
+    The rows are sliced only when a step is due."""
     if not st[T] < target:
         return True
     y, f, y_old, dense, kk, y_new = arr[Y], arr[F], arr[Y_OLD], arr[DENSE:KK], arr[KK:Y_NEW], arr[Y_NEW]
@@ -342,27 +342,12 @@ def _advance_to(m, st, arr, log, prof, target, plan, work, side):
         st[ERR_OLD] = st[ERR]
         st[ERR] += dop853_theta_error(E53, kk, st[H_OLD], E3_WEIGHT)
         record(log, st, y_old, dense)
-        if st[T] < target and (seen or _crossed(plan, work, side, y)):
+        if st[T] < target and (seen or crossed(plan, work, side, y)):
             if seen:
                 st[HIT] = st[T]
                 return True
             seen = True
     return True
-
-
-@njit(**JIT)
-def _crossed(plan, work, a, y):
-    """Whether some gap at the internal state y = (q, q') lies on the other side (closed below −EVENT_TOLERANCE)
-    than in work's start rows a, an impact gap counting as open at the start (`crossings.closed_sides`); y's gaps
-    go to the end rows 2 − a (the screen writes them again)."""
-    b, n = 2 - a, int(plan[0])
-    gap_states(plan, (y[0], y[1], y[2], y[3], y[4], y[5]), work, b)
-    flags = plan.shape[0] - n
-    for i in range(n):
-        closed = work[a, i] < -EVENT_TOLERANCE and plan[flags + i] == 0.0
-        if (work[b, i] < -EVENT_TOLERANCE) != closed:
-            return True
-    return False
 
 
 @njit(**JIT)

@@ -24,6 +24,7 @@ use_writable_cache()  # before numba reads NUMBA_CACHE_DIR
 from numba import njit  # noqa: E402  (after the cache folder is set)
 
 from finger_sim.kernel.closed_loop import gap_and_rate, may_cross  # noqa: E402
+from finger_sim.kernel.event_checks import EVENT_TOLERANCE  # noqa: E402
 from finger_sim.kernel.numerics import JIT, LAW, candidate_walk  # noqa: E402
 
 #: The kinds of a gap plan's groups (module docstring).
@@ -91,5 +92,21 @@ def screen(plan, work, a, known, h, q, v, q1, v1):
         if plan[flags + i] != 0.0 and 0.0 > g0:  # an impact gap: the step starts on the open side
             g0 = 0.0
         if may_cross(g0, work[a + 1, i], work[b, i], work[b + 1, i], h):
+            return True
+    return False
+
+
+@njit(**JIT)
+def crossed(plan, work, a, y):
+    """Whether some gap at the internal state y = (q, q') lies on the other side (closed below −EVENT_TOLERANCE)
+    than in work's start rows a, an impact gap counting as open at the start (`crossings.closed_sides`): the watch
+    of DOP853's internal steps (`event_step._advance_to`, `internal_steps.advance_to`). y's gaps go to the end
+    rows 2 − a (the screen writes them again)."""
+    b, n = 2 - a, int(plan[0])
+    gap_states(plan, (y[0], y[1], y[2], y[3], y[4], y[5]), work, b)
+    flags = plan.shape[0] - n
+    for i in range(n):
+        closed = work[a, i] < -EVENT_TOLERANCE and plan[flags + i] == 0.0
+        if (work[b, i] < -EVENT_TOLERANCE) != closed:
             return True
     return False

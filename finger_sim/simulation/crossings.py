@@ -97,27 +97,58 @@ def first_crossing(sim: Simulator, t: float, q: Vec3, v: Vec3, t1: float, q1: Ve
     return first
 
 
+def watch_for(sim: Simulator) -> GapWatch | None:
+    """What the Simulator's steps in its gap loop watch (`step_to_crossing`), or None: they are not watched (the
+    Simulator takes its plain step, `Simulator._step`). Watched: our DOP853 without substeps (its integrator's
+    class is set when it is built)."""
+    if not issubclass(sim._integrator_cls, DormandPrince853) or (sim.substeps != 1 and sim._kinks):
+        return None
+    return GapWatch(sim)
+
+
 def step_to_crossing(sim: Simulator, t: float, q: Vec3, v: Vec3, t1: float,
                      torque: TorqueFn) -> tuple[float, Vec3, Vec3]:
-    """The Simulator's step from (t, q, q') toward t1 (s) that `first_crossing` then searches: (its end time, q1,
-    q1'). Our DOP853 stops it one internal step past the first that ends before t1 with a gap on the other side
-    than at t (`DormandPrince853.step`'s watch: the internal state's gaps, an impact gap open at t), so that the
-    internal steps past a kink, which the cut drops (`DormandPrince853.cut_at`), are not taken to t1; the end is
-    then that step's. The one step past it keeps the location's far end off the crossing (regula falsi's far side,
-    which a kink's location returns, may never move from a bracket end that close) and gives the restart after an
-    onset its step (`dop853.restart_step`). The kernel's event step stops at the same internal step
-    (`kernel.event_step._advance_to`)."""
+    """The step of a watched Simulator (`watch_for`) from (t, q, q') toward t1 (s) that `first_crossing` then
+    searches: (its end time, q1, q1'). DOP853 stops it one internal step past the first that ends before t1 with
+    a gap on the other side than at t (`DormandPrince853.step`'s watch: the internal state's gaps, an impact gap
+    open at t), so that the internal steps past a kink, which the cut drops (`DormandPrince853.cut_at`), are not
+    taken to t1; the end is then that step's. The one step past it keeps the location's far end off the crossing
+    (regula falsi's far side, which a kink's location returns, may never move from a bracket end that close) and
+    gives the restart after an onset its step (`dop853.restart_step`). The kernel's event step stops at the same
+    internal step (`kernel.event_step._advance_to`), and so does the compiled chunk of internal steps
+    (`GapWatch.compiled`)."""
     integ = sim.integrator
-    if not isinstance(integ, DormandPrince853) or (sim.substeps != 1 and sim._kinks):
-        return t1, *sim._step(t, q, v, t1 - t, torque)
-    start = closed_sides(sim, t, q, open_impacts=True)
-
-    def watch(s: float, y: np.ndarray) -> bool:
-        return closed_sides(sim, s, (float(y[0]), float(y[1]), float(y[2]))) != start
-
-    q1, v1 = integ.step(t, q, v, t1 - t, torque, watch)
+    q1, v1 = integ.step(t, q, v, t1 - t, torque, sim._watch)
     end = integ._last[0]  # noqa: SLF001  (the output's time: t + (t1 − t), or the watched stop before it)
     return (end if end < t + (t1 - t) else t1), q1, v1
+
+
+class GapWatch:
+    """What `DormandPrince853.step` watches in a Simulator's watched steps (`watch_for`, `dop853.Watch`): whether an
+    internal step's end shows a gap on the other side than at the step's start (`closed_sides`, an impact gap open
+    at the start), the start's sides found once per start. The compiled chunk of internal steps asks the same of
+    the gap plan (`compiled`: `kernel.gap_screen.crossed`, the same numbers)."""
+
+    __slots__ = ("_sim", "_gaps", "_start", "_sides")
+
+    def __init__(self, sim: Simulator) -> None:
+        self._sim = sim
+        screen = sim._gap_screen
+        self._gaps = None if screen is None else screen.for_watch()
+        self._start: tuple[float, Vec3] | None = None  # the start (t, q) whose sides _sides holds
+        self._sides: list[bool] = []
+
+    def crossed(self, t: float, q: Vec3, s: float, y: np.ndarray) -> bool:
+        """Whether the internal state y = (q, q') at s (s) has a gap on its other side than the step's start (t, q)."""
+        start = self._start
+        if start is None or start[1] is not q or start[0] != t:
+            self._start, self._sides = (t, q), closed_sides(self._sim, t, q, open_impacts=True)
+        return closed_sides(self._sim, s, (float(y[0]), float(y[1]), float(y[2]))) != self._sides
+
+    def compiled(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The gap plan and a work array of its own (4 × n_gaps) for the compiled chunk
+        (`kernel.internal_steps.advance_to`); None: the gaps have no compiled form (`simulation.gap_screen`)."""
+        return self._gaps
 
 
 def closed_sides(sim: Simulator, t: float, q: Vec3, open_impacts: bool = False) -> list[bool]:

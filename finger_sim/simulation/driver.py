@@ -115,6 +115,8 @@ class Simulator:
         self._timed = frozenset(g.element for g in self._gaps if getattr(g.element, "time_varying", False))
         #: the compiled check of a step's end gaps (`simulation.gap_screen`), or None: the Python check alone
         self._gap_screen = gap_screen.for_simulator(self)
+        #: what DOP853 watches in the gap loop's steps (`crossings.step_to_crossing`), or None: they are not watched
+        self._watch = crossings.watch_for(self)
         self.reset()
         #: the compiled common step of a scene with events (`simulation.event_step`), or None
         self._event_step = event_step.for_simulator(self)
@@ -251,7 +253,11 @@ class Simulator:
                     self.q, self.v = q, ZERO
                     return
                 t, v, self._resting = release, ZERO, None
-            end, q1, v1 = crossings.step_to_crossing(self, t, q, v, t1, torque)
+            if self._watch is not None:
+                end, q1, v1 = crossings.step_to_crossing(self, t, q, v, t1, torque)
+            else:
+                end = t1
+                q1, v1 = self._step(t, q, v, t1 - t, torque)
             crossing = self._first_crossing(t, q, v, end, q1, v1, torque)
             if crossing is None:
                 if end < t + (t1 - t):  # stopped where a gap showed its other side, which no crossing confirmed

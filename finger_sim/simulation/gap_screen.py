@@ -61,6 +61,11 @@ class GapScreen:
         self._work = np.empty((4, int(plan[0])))
         self.reset()
 
+    def for_watch(self) -> tuple[np.ndarray, np.ndarray]:
+        """The gap plan and a work array of its own, for the compiled watch of DOP853's internal steps
+        (`crossings.GapWatch`)."""
+        return self._plan, np.empty_like(self._work)
+
     def reset(self) -> None:
         """Forget the kept gaps (a new run, or a state the screen did not produce)."""
         self._end: tuple[Vec3, Vec3] | None = None  # the state whose gaps rows _side, _side + 1 hold

@@ -29,16 +29,14 @@ SCENES = ("grasp_impact", "grasp_rigid", "grasp_cylinder", "press_table", "paper
           "hard/elastic_impact", "hard/grasp_release", "hard/rigid_fast", "hard/soft_pass_through",
           "hard/stops_elastic", "hard/friction_table", "friction/hold_table")
 
-#: Of them, those stepped by the stick–slip step (`stick_slip.advance`), whose internal steps are unwatched.
-FRICTION = ("hard/friction_table", "friction/hold_table")
-
 Command = Callable[[int, Simulator], "float | None"]
 
 
 def run(scene, compiled: bool, event_step: bool, command: Command = lambda k, sim: None,
         tolerances: tuple[float, float] | None = None) -> tuple[np.ndarray, str, dict]:
     """Every step's (q, q', torque, error estimate), the error that ended the run ("" if none), and the
-    integrator's counts: accepted internal steps, and internal steps taken by the compiled loop.
+    integrator's counts: accepted internal steps, internal steps taken by the compiled loop, its watched passes
+    that the watch stopped before their output time, and the most internal steps of one watched pass.
     tolerances: DOP853's (rtol, atol) instead of the scene's."""
     sim = Simulator(scene)
     if tolerances is not None:
@@ -46,16 +44,20 @@ def run(scene, compiled: bool, event_step: bool, command: Command = lambda k, si
     if not event_step:
         sim._event_step = None
     assert isinstance(sim.integrator, DormandPrince853)
-    counts = {"compiled": 0}
+    counts = {"compiled": 0, "stopped": 0, "most watched": 0}
     original = DormandPrince853._advance_compiled
 
-    def counted(integ, target, held, bounded=False):
+    def counted(integ, target, held, bounded=False, gaps=None):
         before = integ.accepted
-        original(integ, target, held, bounded)
+        state = original(integ, target, held, bounded, gaps)
         counts["compiled"] += integ.accepted - before
+        if gaps is not None:
+            counts["stopped"] += state == integ._steps.STOPPED
+            counts["most watched"] = max(counts["most watched"], integ.accepted - before)
+        return state
 
     if compiled:
-        sim.integrator._advance_compiled = lambda target, held, bounded=False: counted(sim.integrator, target, held, bounded)
+        sim.integrator._advance_compiled = lambda *args, **kwargs: counted(sim.integrator, *args, **kwargs)
     else:
         sim.integrator._steps = None  # the Python loop of `_advance` (main's path)
     rows, error = [], ""
@@ -83,10 +85,11 @@ def assert_same(scene, event_step: bool, command: Command = lambda k, sim: None)
 def test_runs_equal_the_python_loop_bit_for_bit(name, event_step):
     scene = load_scene(CONFIG / f"{name}.yaml")
     counts = assert_same(scene, event_step)
-    if not event_step and hasattr(scene.torque, "value") and name in FRICTION:
-        # a constant torque: every internal step is compiled (the stick–slip step does not watch its internal
-        # steps; the plain event step does, in Python's loop: `DormandPrince853._watched`)
+    if not event_step and hasattr(scene.torque, "value"):
+        # a constant torque: every internal step is compiled, the watched ones of the plain event loop
+        # (`DormandPrince853._watched`) too; those stopped by the watch are among them on the impact scenes
         assert counts["compiled"] == counts["accepted"] > 0
+        assert counts["stopped"] > 0 or name not in ("grasp_impact", "grasp_rigid")
 
 
 @pytest.mark.parametrize("name", ["grasp_impact", "friction/hold_table", "hard/grasp_release"])
@@ -95,6 +98,22 @@ def test_held_commands_step_by_step_equal_the_python_loop(name):
     rng = np.random.default_rng(11)
     values = np.repeat(rng.uniform(-0.03, 0.05, 30), rng.integers(1, 20, 30))  # runs of a value, and new ones
     assert assert_same(scene, False, lambda k, sim: float(values[k % len(values)]))["compiled"] > 0
+
+
+def test_a_watched_pass_longer_than_one_call_stops_where_the_python_loop_stops():
+    """grasp_rigid through the plain event loop (`crossings.step_to_crossing`, the kernel's event step off) at
+    tolerances 1000× tighter: a watched pass takes more internal steps than one compiled chunk holds (the watch's
+    state carried from one call to the next), and every state, error estimate and internal step equals Python's
+    loop's, the passes the watch stopped before their output time included."""
+    scene = load_scene(CONFIG / "grasp_rigid.yaml")
+    integ = Simulator(scene).integrator
+    tight = (integ.rtol / 1000.0, integ.atol / 1000.0)
+    rows, error, counts = run(scene, True, False, tolerances=tight)
+    reference, reference_error, reference_counts = run(scene, False, False, tolerances=tight)
+    np.testing.assert_array_equal(rows, reference)
+    assert error == reference_error == ""
+    assert counts["compiled"] == counts["accepted"] == reference_counts["accepted"]
+    assert counts["most watched"] > COMPILED_CHUNK and counts["stopped"] > 0
 
 
 def test_a_stiff_contact_takes_more_internal_steps_than_one_call_holds():
