@@ -160,7 +160,8 @@ def crossing_retry(m, y, y_new, h, shrunk):
     proposes `shrunk`: where the trial lands inside a contact that was open at its start (a candidate's gap −δ > 0
     at y, < 0 at y_new), the step to the earliest such linearly interpolated crossing, h·g0/(g0 − g1), if longer
     (the trial's error is the contact force's, switched on inside it: a shrink by the error's rule lands inside
-    again); else `shrunk`. Called by `DormandPrince853._advance` and its compiled twin (`closed_loop._advance`) alike."""
+    again); else `shrunk`, also for a model without a contact element (Python's stages: `DormandPrince853.compiled`
+    False). Called by `DormandPrince853._advance` and its compiled twin (`closed_loop._advance`) alike."""
     o = HEADER + 1
     fraction = math.inf
     for _ in range(int(m[HEADER])):
@@ -168,7 +169,7 @@ def crossing_retry(m, y, y_new, h, shrunk):
         o += 2
         if code == CONTACT:
             count = 0
-            for kind in range(4):
+            for kind in range(len(contact_candidates.RECORD_SIZE)):  # the candidates of each kind
                 count += int(m[o + contact_candidates.COUNTS + kind])
             before, after = np.empty(count), np.empty(count)
             _walk_gaps(m, o, y[0], y[2], True, 0, before)
