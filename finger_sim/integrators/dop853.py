@@ -526,8 +526,10 @@ class DormandPrince853(Integrator):
                     self._history_starts.append(t)
                 return
             # a non-finite trial (e.g. a contact state far outside its law) is rejected like a large
-            # error, as scipy does: the step shrinks by MIN_FACTOR
-            h *= max(num.MIN_FACTOR, num.SAFETY * norm**num.ERROR_EXPONENT) if math.isfinite(norm) else num.MIN_FACTOR
+            # error, as scipy does: the step shrinks by MIN_FACTOR; a trial that lands inside a contact is
+            # retried up to the contact's interpolated onset (`crossing_retry`)
+            shrunk = h * (max(num.MIN_FACTOR, num.SAFETY * norm**num.ERROR_EXPONENT) if math.isfinite(norm) else num.MIN_FACTOR)
+            h = num.crossing_retry(self._model, self._y, y_new, h, shrunk)
             rejected = True
             self.rejected += 1
         raise SimulationDiverged(f"internal step fell to {h:.3g} s (rtol {self.rtol:g})", method=self.name, t=t)

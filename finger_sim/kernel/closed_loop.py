@@ -47,8 +47,8 @@ from finger_sim.kernel.event_checks import EVENT_TOLERANCE, predicted_crossing  
 from finger_sim.integrators import dop853  # noqa: E402
 from finger_sim.inputs import HELD, HELD_ARRAY  # noqa: E402
 from finger_sim.kernel.numerics import (ERROR_EXPONENT, JIT, LAW, MAX_FACTOR, MIN_FACTOR, OK, SAFETY,  # noqa: E402
-                                        _profile_step, _rhs, candidate_walk, compiled, dop853_attempt, dop853_output,
-                                        gap_gradient, normal_force, point_velocity, torque_at)
+                                        _profile_step, _rhs, candidate_walk, compiled, crossing_retry, dop853_attempt,
+                                        dop853_output, gap_gradient, normal_force, point_velocity, torque_at)
 from finger_sim import grip_law as grip  # noqa: E402
 
 #: A row's status after `run` (module docstring).
@@ -161,7 +161,8 @@ def _advance(m, rtol, atol, st, y, f, y_old, dense, kk, y_new, taus, prof):
             st[I_T] = t + h
             st[I_H] = min(MAX_STEP, h * (min(1.0, factor) if rejected else factor))
             return True
-        h *= max(MIN_FACTOR, SAFETY * norm**ERROR_EXPONENT) if math.isfinite(norm) else MIN_FACTOR
+        shrunk = h * (max(MIN_FACTOR, SAFETY * norm**ERROR_EXPONENT) if math.isfinite(norm) else MIN_FACTOR)
+        h = crossing_retry(m, y, y_new, h, shrunk)
         rejected = True
     return False
 

@@ -123,7 +123,7 @@ initial_step = njit(**JIT)(dop853.initial_step)
 BOUNCES, RESTS, UNSURE = stops.BOUNCES, stops.RESTS, stops.UNSURE
 rest_verdict = njit(**JIT)(stops.rest_verdict)
 #: `_cut_at`'s answers.
-CUT_NONE, CUT, CUT_PYTHONS, CUT_FAILED = 0, 1, 2, 3
+CUT_NONE, CUT, CUT_FAILED = 0, 1, 2
 #: Whether an internal step straddles a located kink (`DormandPrince853.cut_at`), its one plain function compiled.
 straddles = njit(**JIT)(dop853.straddles)
 #: The next internal step after a cut at a kink (`DormandPrince853.cut_at`), its one plain function compiled.
@@ -400,8 +400,6 @@ def _settle(m, plan, st, arr, work, side, t, t1, end, out_t, command, prof, q, v
             cut = _cut_at(m, st, arr, log, s, command, prof, found, onset)
             if cut == CUT_FAILED:
                 return PYTHON, q1, v1, target, 0.0
-            if cut == CUT_PYTHONS:
-                return (EVENT if event == 0 else PYTHON), q1, v1, target, 0.0
             q = (found[event_crossing.OUT_Q], found[event_crossing.OUT_Q + 1], found[event_crossing.OUT_Q + 2])
             v = (found[event_crossing.OUT_V], found[event_crossing.OUT_V + 1], found[event_crossing.OUT_V + 2])
         if s >= t1 or rests:  # the crossing ends the step: its state the output, the last trial (else the end) the last output
@@ -473,30 +471,32 @@ def _cut_at(m, st, arr, log, s, command, prof, found, onset):
     after it dropped, the solution retaken from that step's start with internal steps ending exactly at s, its
     output there put in found as the crossing and the last trial (OUT_*), the next step the one
     `dop853.restart_step` chooses (the caller continues from there). Returns CUT_NONE (no step straddles s: nothing
-    changed), CUT (done), CUT_PYTHONS (the straddling step is the one that covered a continued step's start,
-    which the log does not hold: nothing changed) or CUT_FAILED (an internal step failed: Python retakes)."""
+    changed), CUT (done) or CUT_FAILED (an internal step failed: Python retakes). A straddling step that covered a
+    continued step's start (taken for the output before) is retaken from its copy of before the step; the log then
+    holds the whole history from its start (its branch RESTARTED: no such step before it, `_history`)."""
     n, pre = int(log[COUNT]), 1 if log[BRANCH] == CONTINUED else 0
-    j, row = n - 1, log[ROWS_AT:ROWS_AT + ROW_SIZE]
+    j = n - 1
     while j >= 0 and not log[ROWS_AT + j * ROW_SIZE + ROW_T] < s:
         j -= 1
     if j >= 0:
-        row = log[ROWS_AT + j * ROW_SIZE:ROWS_AT + (j + 1) * ROW_SIZE]
-        t_old, h_old = row[ROW_T], row[ROW_H]
+        o = ROWS_AT + j * ROW_SIZE
+        t_old, h_old, err_old, start = log[o + ROW_T], log[o + ROW_H], log[o + ROW_ERR_OLD], log[o + ROW_Y_OLD:o + ROW_DENSE]
     elif pre and st[SAVED + T_OLD] < s:
-        t_old, h_old = st[SAVED + T_OLD], st[SAVED + H_OLD]
+        t_old, h_old, err_old, start = st[SAVED + T_OLD], st[SAVED + H_OLD], st[SAVED + ERR_OLD], arr[ROWS - KEPT + Y_OLD]
     else:
         return CUT_NONE
     if not straddles(s, t_old, h_old):
         return CUT_NONE
-    if j < 0:
-        return CUT_PYTHONS
     y, f, y_old, dense, kk, y_new = arr[Y], arr[F], arr[Y_OLD], arr[DENSE:KK], arr[KK:Y_NEW], arr[Y_NEW]
     taus = st[TAUS:SAVED]
     past = log[ROWS_AT + (j + 1) * ROW_SIZE + ROW_H] if j + 1 < n else h_old
     proposed = st[H]
-    st[T], st[H], st[ERR] = t_old, h_old, row[ROW_ERR_OLD]
-    y[:] = row[ROW_Y_OLD:ROW_DENSE]
-    log[COUNT] = j
+    st[T], st[H], st[ERR] = t_old, h_old, err_old
+    y[:] = start
+    if j >= 0:
+        log[COUNT] = j
+    else:
+        log[COUNT], log[BRANCH] = 0.0, RESTARTED
     _rhs(m, t_old, y, torque_at(prof, command, t_old), f)
     while st[T] < s:
         if not internal_steps.bounded_step(m, st[RTOL], st[ATOL], st, y, f, y_old, dense, kk, y_new, taus, prof, s):

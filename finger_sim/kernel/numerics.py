@@ -119,6 +119,17 @@ def candidate_walk(visit):  # type: ignore[no-untyped-def]
 contact_forces = candidate_walk(_add_force)
 
 
+@njit(**LAW)
+def _store_gap(acc, gaps, i, geometry):
+    """gaps[i] = −δ (m), the gap of candidate i (`Contact.gaps`); acc: the count so far."""
+    gaps[i] = -geometry[0]
+    return acc + 1
+
+
+#: The candidate loop storing every candidate's gap (`crossing_retry`).
+_walk_gaps = candidate_walk(_store_gap)
+
+
 @njit(**JIT)
 def generalized_force(m, t, q0, q1, q2, v0, v1, v2, tau):
     """Q = (τ, 0, 0) + Σ elements, N·m: `FingerSystem.generalized_force`."""
@@ -141,6 +152,33 @@ def generalized_force(m, t, q0, q1, q2, v0, v1, v2, tau):
         f3 += e3
         o += n
     return f1, f2, f3
+
+
+@njit(**JIT)
+def crossing_retry(m, y, y_new, h, shrunk):
+    """The step (s) of the attempt after a rejected DOP853 trial of h s from y to y_new (q, q'), whose error control
+    proposes `shrunk`: where the trial lands inside a contact that was open at its start (a candidate's gap −δ > 0
+    at y, < 0 at y_new), the step to the earliest such linearly interpolated crossing, h·g0/(g0 − g1), if longer
+    (the trial's error is the contact force's, switched on inside it: a shrink by the error's rule lands inside
+    again); else `shrunk`, also for a model without a contact element (Python's stages: `DormandPrince853.compiled`
+    False). Called by `DormandPrince853._advance` and its compiled twin (`closed_loop._advance`) alike."""
+    o = HEADER + 1
+    fraction = math.inf
+    for _ in range(int(m[HEADER])):
+        code, n = int(m[o]), int(m[o + 1])
+        o += 2
+        if code == CONTACT:
+            count = 0
+            for kind in range(len(contact_candidates.RECORD_SIZE)):  # the candidates of each kind
+                count += int(m[o + contact_candidates.COUNTS + kind])
+            before, after = np.empty(count), np.empty(count)
+            _walk_gaps(m, o, y[0], y[2], True, 0, before)
+            _walk_gaps(m, o, y_new[0], y_new[2], True, 0, after)
+            for i in range(count):
+                if before[i] > 0.0 > after[i]:
+                    fraction = min(fraction, before[i] / (before[i] - after[i]))
+        o += n
+    return shrunk if fraction == math.inf else max(shrunk, h * fraction)
 
 
 @njit(**JIT)

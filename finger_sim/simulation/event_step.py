@@ -286,9 +286,9 @@ class EventStep:
 
     def claim(self, integ: DormandPrince853) -> bool:
         """Whether the kernel may take `integ`'s next step: it `follows` the solution, or the solution is
-        new (a run's first step, a reset's), whose initial step is taken here too and for which no output
-        of an earlier solution may stand. Otherwise another hand stepped or set it: the integrator is the
-        truth, and Python takes the step."""
+        new (a run's first step, a reset's: then taken into the arrays, `_start`), whose initial step is taken
+        here too and for which no output of an earlier solution may stand. Otherwise another hand stepped or set
+        it: the integrator is the truth, and Python takes the step."""
         if self.follows(integ):
             return True
         self._holds = self._moved = False
@@ -296,6 +296,7 @@ class EventStep:
         if not _fresh(integ):
             return False
         self._adopt(integ, None)
+        self._start(integ)
         return True
 
     def follows(self, integ: DormandPrince853) -> bool:
@@ -346,12 +347,15 @@ class EventStep:
 
     def _adopt(self, integ: DormandPrince853, token: tuple | None) -> None:
         """Follow `integ`'s solution, whose last output is `token` (None: a new one). Another integrator
-        followed until now gets the estimate rows recorded for it first; `integ` reads its own here
-        (`DormandPrince853.estimates_elsewhere`)."""
+        followed until now keeps the estimate rows recorded for it, copied out of the workspace, and takes them
+        in only when it reads or stores an estimate (`KeptEstimates`; a reset's old integrator, which a node
+        never reads); `integ` reads its own here (`DormandPrince853.estimates_elsewhere`)."""
         followed = self._integ
         if followed is not integ:
             if followed is not None:
-                followed.collect_estimates()
+                followed.estimates_elsewhere = KeptEstimates(self._recorded_estimates(followed))
+            if integ.estimates_elsewhere is not None:  # rows kept for it elsewhere (followed before): in first
+                integ.collect_estimates()
             integ.estimates_elsewhere = self._recorded_estimates
         self._integ, self._token = integ, token
 
@@ -373,24 +377,30 @@ class EventStep:
         self._holds = self._moved = False
         self._q = None
 
-    def _take_over(self, integ: DormandPrince853) -> None:
-        """The integrator's solution into the arrays (`kernel.event_step`'s layout)."""
-        k, st, arr = self._k, self._st, self._arr
+    def _start(self, integ: DormandPrince853) -> None:
+        """A new solution (`_fresh`) into the arrays: the integrator's scalars, no last output, no origin. Its
+        arrays are not copied: the kernel's restart and first internal step write them before anything reads
+        them (y, f at the start; y_old and the dense output after the step)."""
+        k, st = self._k, self._st
         st[k.T], st[k.H], st[k.T_OLD], st[k.H_OLD] = integ._t, integ._h, integ._t_old, integ._h_old  # noqa: SLF001
         st[k.ERR], st[k.ERR_OLD] = integ._err, integ._err_old  # noqa: SLF001
+        # (the screen's kept gaps and an ended step's output are of another step)
+        st[k.HAS_LAST] = st[k.HAS_ORIGIN] = st[k.KNOWN] = st[k.HAS_END] = 0.0
+        self._holds, self._moved, self._q = True, False, None
+
+    def _take_over(self, integ: DormandPrince853) -> None:
+        """The integrator's solution into the arrays (`kernel.event_step`'s layout)."""
+        self._start(integ)
+        k, st, arr = self._k, self._st, self._arr
         arr[k.Y], arr[k.F], arr[k.Y_OLD], arr[k.DENSE:k.KK] = integ._y, integ._f, integ._y_old, integ._dense  # noqa: SLF001
         last, origin = integ._last, integ._origin  # noqa: SLF001
-        st[k.HAS_LAST] = float(last is not None)  # none: a new solution (`_fresh`)
         if last is not None:
-            st[k.LAST_T] = last[0]
+            st[k.HAS_LAST], st[k.LAST_T] = 1.0, last[0]
             st[k.LAST_Q:k.LAST_Q + 3], st[k.LAST_V:k.LAST_V + 3] = last[1], last[2]
             st[k.LAST_EST] = integ.error_estimate(last[1])  # what a restart from it reads
-        st[k.HAS_ORIGIN] = float(origin is not None)
         if origin is not None:
-            st[k.ORIGIN_T] = origin[0]
+            st[k.HAS_ORIGIN], st[k.ORIGIN_T] = 1.0, origin[0]
             st[k.ORIGIN_Q:k.ORIGIN_Q + 3], st[k.ORIGIN_V:k.ORIGIN_V + 3] = origin[1], origin[2]
-        st[k.KNOWN] = st[k.HAS_END] = 0.0  # the screen's kept gaps and an ended step's output are of another step
-        self._holds, self._moved, self._q = True, False, None
 
     def _write_back(self, integ: DormandPrince853) -> None:
         """The arrays' solution into the integrator's attributes, as its own steps would have left them
@@ -414,6 +424,20 @@ class EventStep:
         if not st[k.HAS_LAST]:
             return None
         return float(st[k.LAST_T]), tuple(st[k.LAST_Q:k.LAST_Q + 3].tolist()), tuple(st[k.LAST_V:k.LAST_V + 3].tolist())
+
+
+class KeptEstimates:
+    """The estimate rows (n × 4: q, estimate in rad, oldest first) the kernel recorded for an integrator it no longer
+    follows: its `estimates_elsewhere`, handing them over once, when it first reads or stores an estimate."""
+
+    __slots__ = ("_rows",)
+
+    def __init__(self, rows: np.ndarray) -> None:
+        self._rows = rows
+
+    def __call__(self, integ: DormandPrince853) -> np.ndarray:
+        rows, self._rows = self._rows, NO_ROWS
+        return rows
 
 
 def _untouched(integ: DormandPrince853) -> bool:
