@@ -9,7 +9,7 @@ the rooms are wired). Dependency inversion, as a plug-in registry: data flows co
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from types import ModuleType
 from typing import TYPE_CHECKING, Any, NamedTuple, Protocol
 
@@ -24,6 +24,10 @@ if TYPE_CHECKING:
 STEP_TOO_SMALL = 3  # DOP853's step fell below its floor
 BREAKPOINT = 4  # a torque switch lies inside the step: the caller splits it (state unchanged)
 STATE_NON_FINITE = 5  # the step ended in a non-finite state (the Simulator's own check)
+
+#: A compiled function that a Python path of the step calls, and arguments of the types it calls it with (their
+#: values unused): what an owner of such a path declares (`compiled_calls`) for `CompiledKernel.load`.
+CompiledCall = tuple[Callable[..., Any], tuple[Any, ...]]
 
 
 class StageFunctions(NamedTuple):
@@ -69,6 +73,10 @@ class CompiledKernel(Protocol):
 
     def advance(self, sim: Any, n: int) -> np.ndarray:
         """Step a Simulator n times under its scene's profile; the (n, 6) states after each step."""
+        ...
+
+    def load(self, calls: Iterable[CompiledCall]) -> None:
+        """Load (or compile) each compiled function for its arguments' types now, not at its first call."""
         ...
 
     def compiled_numerics(self) -> ModuleType:

@@ -11,10 +11,13 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections.abc import Callable
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 from finger_sim.dynamics import FingerSystem
 from finger_sim.kinematics import Vec3
+
+if TYPE_CHECKING:
+    from finger_sim.stepper_slot import CompiledCall
 
 TorqueFn = Callable[[float], float]
 
@@ -54,6 +57,11 @@ class Integrator(ABC):
     @abstractmethod
     def step(self, t: float, q: Vec3, v: Vec3, dt: float, torque: TorqueFn) -> tuple[Vec3, Vec3]:
         """(q, q') at t + dt from (q, q') at t; rad, rad/s, s."""
+
+    def compiled_calls(self) -> tuple[CompiledCall, ...]:
+        """The compiled functions `step` may call from Python, with arguments of their types
+        (`stepper_slot.CompiledCall`), for the Simulator to load before its first step; none by default."""
+        return ()
 
     @classmethod
     @abstractmethod

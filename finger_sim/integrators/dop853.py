@@ -181,6 +181,28 @@ class DormandPrince853(Integrator):
         self._y_next, self._f_next = np.empty(6), np.empty(6)
         self._y_scratch, self._y_new = np.empty(6), np.empty(6)
 
+    def compiled_calls(self) -> tuple[stepper_slot.CompiledCall, ...]:
+        """The compiled functions of its Python steps (`step`, `cut_at`, `_advance`, `_advance_compiled`), with
+        arguments of the types those pass (its own arrays, floats; the watch's gap plan and work are arrays as
+        NO_PLAN and NO_WORK are)."""
+        num, m, y, kk, dense = self._numerics, self._model, self._y, self._kk, self._dense
+        calls: list[stepper_slot.CompiledCall] = [
+            (num.dop853_output, (m, 0.0, 0.0, self._y_old, dense, 0.0, self._out)),
+            (num.dop853_theta_error, (_E53, kk, 0.0, E3_WEIGHT)),
+            (num.crossing_retry, (m, y, self._y_new, 0.0, 0.0)),
+        ]
+        if self.compiled:
+            calls += [(self._rhs, (m, 0.0, y, 0.0, self._f)),
+                      (self._attempt, (m, _A, _B, _C, _E3, _E5, _D, 0.0, y, self._f, 0.0, self._taus, self.rtol,
+                                       self.atol, kk, self._y_new, dense))]
+        k = self._steps
+        if k is not None:
+            rows = np.empty((0, k.ROW_SIZE))
+            calls.append((k.advance_to, (m, self.rtol, self.atol, self._step_scalars, self._y_next, self._f_next,
+                                         self._y_scratch, dense, kk, self._y_new, self._taus, HELD_ARRAY, 0.0, rows,
+                                         False, k.NO_PLAN, k.NO_WORK, k.NO_PLAN)))
+        return tuple(calls)
+
     def error_estimate(self, q: Vec3) -> float:
         """The estimated θ error (rad) of an output q of this integrator (0 for a state it did not
         produce): the sum of the local error estimates of the accepted internal steps on the path that

@@ -35,6 +35,7 @@ from finger_sim import stepper_slot
 from finger_sim.errors import ConfigError
 
 if TYPE_CHECKING:
+    from collections.abc import Iterable
     from types import ModuleType
 
     import numpy as np
@@ -248,6 +249,30 @@ def advance(sim: "Simulator", n: int) -> "np.ndarray":
     from finger_sim.kernel.runner import advance as run
 
     return run(sim, n)
+
+
+#: (function, its arguments' Python types) that `load` has loaded in this process. Each function is called from
+#: Python with one signature (an array's rank and layout, which Python's types do not tell apart, fixed by its caller).
+_LOADED: set[tuple[object, tuple[type, ...]]] = set()
+
+
+def load(calls: "Iterable[stepper_slot.CompiledCall]") -> None:
+    """Load each compiled function's machine code for the types of its arguments (`Dispatcher.compile`) now.
+
+    numba loads a function from its on-disk cache lazily, at its first call in a process (5–20 ms of CPU each):
+    in a paced step, the first that reaches a path (Python's event path after hundreds of kernel steps), that
+    is a stall. A plain function (numba absent, or not imported: nothing was compiled) is left as it is.
+    """
+    numba = sys.modules.get("numba")
+    if numba is None:
+        return
+    from numba.core.dispatcher import Dispatcher
+
+    for function, args in calls:
+        key = (function, tuple(map(type, args)))  # numba's typing costs ~10 µs an argument: once per process
+        if key not in _LOADED and isinstance(function, Dispatcher):
+            function.compile(tuple(numba.typeof(a) for a in args))
+            _LOADED.add(key)
 
 
 def compiled_numerics() -> "ModuleType":

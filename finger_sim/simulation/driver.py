@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
+from finger_sim import stepper_slot
 from finger_sim.actuators.base import Actuator
 from finger_sim.effects import EFFECTS
 from finger_sim.errors import SimulationDiverged
@@ -124,6 +125,10 @@ class Simulator:
         self.fast_stepper = setup.fast_stepper
         #: what `step`'s lean path calls: the fast stepper, or the one the stepping owner allows
         self._lean = self.fast_stepper if self._stepping is None else self._stepping.fast_stepper(self)
+        # every compiled function its step may call from Python, loaded now: numba loads one at its first call
+        # in a process (5–20 ms), a stall of the paced step that first reaches that path (Python's event path)
+        stepper_slot.kernel().load(call for owner in (self.integrator, self._gap_screen, self._event_step)
+                                   if owner is not None for call in owner.compiled_calls())
 
     def reset(self) -> None:
         """Back to the scene's initial state at t = 0."""

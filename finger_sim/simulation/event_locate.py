@@ -44,6 +44,13 @@ class CompiledLocate:
         #: located crossings answered here (the rest went to Python), for tests and benchmarks
         self.taken = 0
 
+    def compiled_calls(self) -> tuple[stepper_slot.CompiledCall, ...]:
+        """`__call__`'s compiled call, with arguments of its types (`stepper_slot.CompiledCall`): 1-D, 2-D and 3-D
+        float arrays (the model, the rows of the history), floats, (q, q') tuples and the kink flag."""
+        q, rows = (0.0, 0.0, 0.0), np.empty((0, 6))
+        return ((self._k.locate, (self._plan, self._plan, np.empty((0, 4)), rows, np.empty((0, 7, 6)), self._meta,
+                                  self._work, self._x, self._log, 0.0, q, q, 0.0, 0.0, 0.0, 0.0, q, q, True)),)
+
     def __call__(self, sim: Simulator, gap: Gap, t: float, q: Vec3, v: Vec3, lo: tuple[float, float],
                  hi: tuple[float, float, Vec3, Vec3], torque: TorqueFn) -> tuple[float, Vec3, Vec3] | None:
         """(s, q(s), q'(s)) of `crossings.locate_gap(sim, gap, …)`, or None: Python locates it."""

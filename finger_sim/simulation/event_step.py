@@ -104,6 +104,7 @@ class EventStep:
             _ENTRY_POINTS[compiled] = compiled.entry_point(ws)
         self._call = _ENTRY_POINTS[compiled]
         self._stays = compiled.stays_at_rest
+        self._rests = sim._rest_at is not None  # noqa: SLF001  (a stop's rest mode: `_rest` may run)
         self._x = slice(compiled.X, compiled.X + WIDTH)
         self._same, self._at_last = compiled.SAME, compiled.AT_LAST
         self._locate, self._settled, self._ended = compiled.LOCATE, compiled.SETTLED, compiled.ENDED
@@ -127,6 +128,13 @@ class EventStep:
         self.settled = 0
         #: the compiled location of a crossing (`simulation.event_locate`), or None: Python's
         self.locate: CompiledLocate | None = None
+
+    def compiled_calls(self) -> tuple[stepper_slot.CompiledCall, ...]:
+        """The compiled calls of its steps beside the common step (loaded here already): the restore of a declined
+        step, the rest test (with a stop's rest mode), and the location's (`locate`), with arguments of their types."""
+        k, ws = self._k, self._ws
+        rest = ((k.stays_at_rest, (ws, 0.0, 0.0, 0.0, 0, 0.0, 0.0, 0.0, 0.0)),) if self._rests else ()
+        return ((k.restore, (ws,)), *rest, *(() if self.locate is None else self.locate.compiled_calls()))
 
     @property
     def taken(self) -> int:

@@ -61,6 +61,11 @@ class GapScreen:
         self._work = np.empty((4, int(plan[0])))
         self.reset()
 
+    def compiled_calls(self) -> tuple[stepper_slot.CompiledCall, ...]:
+        """`clear`'s compiled call, with arguments of its types (`stepper_slot.CompiledCall`)."""
+        q = (0.0, 0.0, 0.0)
+        return ((self._screen, (self._plan, self._work, 0, False, 0.0, q, q, q, q)),)
+
     def for_watch(self) -> tuple[np.ndarray, np.ndarray]:
         """The gap plan and a work array of its own, for the compiled watch of DOP853's internal steps
         (`crossings.GapWatch`)."""
