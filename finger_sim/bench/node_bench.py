@@ -430,8 +430,14 @@ def configs(workdir: Path) -> dict[str, tuple[dict, bool]]:
 
 
 def side_envs(old: Path | None, domain_id: int) -> dict[str, dict[str, str]]:
-    """'new' (and 'old', with `old` first on PYTHONPATH) → a node's environment in `domain_id`."""
-    return {"new": ros_env(domain_id)} | ({} if old is None else {"old": dict(ros_env(domain_id), PYTHONPATH=str(old))})
+    """'new' (this checkout, ROOT) and 'old' (`old`) → a node's environment in `domain_id`: its checkout first on
+    PYTHONPATH, and PYTHONSAFEPATH set, because `python -m` otherwise puts the working folder first on sys.path,
+    so that a bench started inside a checkout ran that checkout's code on both sides."""
+    def env(checkout: Path) -> dict[str, str]:
+        path = os.pathsep.join([str(checkout), os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep)
+        return dict(ros_env(domain_id), PYTHONPATH=path, PYTHONSAFEPATH="1")
+
+    return {"new": env(ROOT)} | ({} if old is None else {"old": env(old)})
 
 
 def targets(old: Path | None, duration: float, rounds: int, domain_id: int, workdir: Path,
