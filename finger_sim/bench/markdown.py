@@ -32,7 +32,8 @@ from finger_sim.bench.plan import (
 )
 from finger_sim.bench.processes import cpu_model
 from finger_sim.bench.reference import Reference
-from finger_sim.bench.runners import FAMILY_SCIPY, LONG_RUN_SECONDS, MAX_SCIPY_EVALUATIONS, Run, mujoco_available
+from finger_sim.bench.runners import (FAMILY_SCIPY, LONG_RUN_SECONDS, MAX_SCIPY_EVALUATIONS, SHORT_RUN_REPEATS,
+                                      SHORT_RUN_SECONDS, Run, mujoco_available)
 from finger_sim.bench.tables import MET, NOT_MET, ScipyGoalRow, Tables, mujoco_verdict
 from finger_sim.scene import Scene
 
@@ -117,7 +118,8 @@ def render(tables: Tables, scenes: dict[str, Scene], refs: dict[str, Reference],
     )
     add(
         f"- **CPU time**: `time.process_time` of the stepping loop alone (no setup, no model compile), median of "
-        f"{REPEATS} repeats; a run whose first repeat takes over {LONG_RUN_SECONDS:g} s is timed once. "
+        f"{REPEATS} repeats; a run whose first repeat takes over {LONG_RUN_SECONDS:g} s is timed once, one under "
+        f"{SHORT_RUN_SECONDS * 1e3:g} ms {SHORT_RUN_REPEATS} times (every runner alike). "
         "µs/step = CPU / steps; real-time factor (RTF) = simulated s / CPU s."
     )
     add(

@@ -5,7 +5,8 @@ grid of |θ − θ_ref| on the three angles, rad), the largest loop-closure resi
 the relative energy drift where energy is conserved, and the CPU time of the stepping
 alone: `time.process_time`, median of the repeats, with setup (model building, stability
 checks, MJCF compiling) outside it. A run whose first repeat takes longer than
-LONG_RUN_SECONDS is timed once: its relative timing noise is already small.
+LONG_RUN_SECONDS is timed once: its relative timing noise is already small; one whose first repeat takes less
+than SHORT_RUN_SECONDS is repeated at least SHORT_RUN_REPEATS times (`repeats_after`), for every runner alike.
 
 On a contact scene (objects) a run also reports the grip force Σ F_n at its end and its
 spread over the last GRIP_WINDOW of the run (a run at rest has none; a chattering contact
@@ -37,6 +38,10 @@ from finger_sim import stepper_slot, stick_slip
 
 #: Runs whose first repeat takes longer than this (s of CPU) are not repeated.
 LONG_RUN_SECONDS = 2.0
+#: Runs whose first repeat takes less than this (s of CPU) are repeated at least SHORT_RUN_REPEATS times: the median of
+#: three sub-millisecond whole runs moved by a third from bench to bench (paper_to_stop's 0.3 ms run read 0.33–0.45 ms).
+SHORT_RUN_SECONDS = 0.005
+SHORT_RUN_REPEATS = 15
 #: A scipy run that asks for more right-hand-side evaluations than this is given up
 #: (scipy's Radau at rtol 1e-12 on stiff_spring would take ~2e7 evaluations, 10 minutes).
 MAX_SCIPY_EVALUATIONS = 300_000
@@ -109,17 +114,23 @@ def conserves_energy(scene: Scene) -> bool:
     return no_torque and scene.damping == 0.0 and elastic and lossless_contact
 
 
+def repeats_after(first_cpu: float, repeats: int) -> int:
+    """How many repeats a run gets in all, given its first one's CPU s: one after a long first run, at least
+    SHORT_RUN_REPEATS after a short one, else `repeats`."""
+    if first_cpu > LONG_RUN_SECONDS:
+        return 1
+    return max(repeats, SHORT_RUN_REPEATS) if first_cpu < SHORT_RUN_SECONDS else repeats
+
+
 def _timed(fn: Callable[[], object], repeats: int) -> tuple[object, float, int]:
-    """(first result, median CPU s, repeats done) of fn(); stops repeating after a long first run."""
-    results, cpus = None, []
-    for k in range(repeats):
+    """(first result, median CPU s, repeats done) of fn(); repeated as `repeats_after` its first run says."""
+    results, cpus, count = None, [], repeats
+    while len(cpus) < count:
         start = time.process_time()
         out = fn()
         cpus.append(time.process_time() - start)
-        if k == 0:
-            results = out
-            if cpus[0] > LONG_RUN_SECONDS:
-                break
+        if len(cpus) == 1:
+            results, count = out, repeats_after(cpus[0], repeats)
     return results, statistics.median(cpus), len(cpus)
 
 
@@ -194,13 +205,12 @@ def run_method(
     try:
         if whole_run:  # an untimed run first: the whole run's compiled loops load (or compile) lazily, outside the timing
             run_states(Simulator(resolved, kernel=kernel), n, whole_run=True)
-        for k in range(repeats):
+        count = repeats
+        while len(cpus) < count:
             out, cpu = run_states(Simulator(resolved, kernel=kernel), n, whole_run=whole_run)
             cpus.append(cpu)
-            if k == 0:
-                states = out
-                if cpu > LONG_RUN_SECONDS:
-                    break
+            if len(cpus) == 1:
+                states, count = out, repeats_after(cpu, repeats)
     except (SimulationDiverged, ZeroDivisionError, OverflowError, ValueError, np.linalg.LinAlgError) as exc:
         run.status, run.note = DIVERGED, f"{type(exc).__name__}: {exc}"[:160]
         return run
@@ -467,13 +477,12 @@ def run_mujoco_peer(
         cpus = []
         first = None
         with _mujoco_warnings(warnings):
-            for k in range(repeats):
+            count = repeats
+            while len(cpus) < count:
                 out = once()
                 cpus.append(out[2])
-                if k == 0:
-                    first = out
-                    if out[2] > LONG_RUN_SECONDS:
-                        break
+                if len(cpus) == 1:
+                    first, count = out, repeats_after(out[2], repeats)
     except (SimulationDiverged, FingerSimError, ValueError) as exc:
         said = f" (MuJoCo: {warnings[0]})" if warnings else ""
         run.status, run.note = DIVERGED, (str(exc).split(":", 1)[-1].strip() + said)[:200]
