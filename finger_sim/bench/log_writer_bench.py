@@ -35,7 +35,7 @@ ROOT = Path(__file__).resolve().parents[2]
 TOPICS = (("/joint_states", "sensor_msgs/msg/JointState", 148), ("/fingertip_pose", "geometry_msgs/msg/PoseStamped", 84),
           ("/clock", "rosgraph_msgs/msg/Clock", 12))
 STEP_NS = 1_000_000  # 1 kHz
-RUN_MESSAGES = 750  # messages a run: a default handover (0.25 s) of the node's three topics at 1 kHz
+RUN_MESSAGES = 750  # messages a run: 0.25 s of the node's three topics at 1 kHz (the handover its figures were made with)
 CHUNK_INTERVAL_NS = 500_000_000  # finger_sim.log.recorder.DEFAULT_CHUNK_INTERVAL_S
 CHUNK_SIZE = 1 << 20
 ZSTD = 3  # mcap.writer.CompressionType.ZSTD

@@ -118,8 +118,9 @@ DEFAULT_IDLE_FLUSH_S = 1.0  # wall seconds without messages after which the open
 DEFAULT_CHUNK_WALL_S = 1.0  # wall seconds after which an open chunk is closed, whatever its log-time span
 #: Wall seconds between handovers to the writer process. Its CPU, the sender's and the status thread's
 #: at a node's few messages a step is largely per handover: 0.1 s cost the three about 3.5 µs a 1 kHz
-#: step more than 0.25 s (docs/node_performance.md). A kill -9 of the caller loses at most this much.
-DEFAULT_HANDOVER_S = 0.25
+#: step more than 0.25 s, and 0.25 s about 3 µs more than 0.5 s in the node (docs/node_performance.md).
+#: A kill -9 of the caller loses at most this much: as much log time as one chunk holds.
+DEFAULT_HANDOVER_S = 0.5
 _PIPE_BYTES = 1 << 20  # the pipe to the writer process: Linux's default pipe-max-size (its default is 64 kB)
 MAX_METADATA_BYTES = 1 << 16  # UTF-8 bytes of one metadata record's keys and values
 _MAX_TIME_NS = 1 << 64  # MCAP timestamps are uint64

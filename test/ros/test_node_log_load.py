@@ -37,7 +37,7 @@ DT_NS = 1_000_000
 #: sits idle long enough for its idle flush.
 COMMAND_PERIOD_S = 0.1
 #: A queue of 50 messages between the stepping thread and the log's writer (which takes the
-#: queue every handover, 0.25 s by default): far less than one handover of a 1 kHz run's 4 messages a step.
+#: queue every handover, 0.5 s by default): far less than one handover of a 1 kHz run's 4 messages a step.
 SMALL_QUEUE = 50
 
 
