@@ -513,8 +513,10 @@ def targets_report(runs: dict[tuple[str, str], list[Window]], command: str, old:
     rows = [
         ("1 kHz, recording off: CPU s per sim s (cores at real time)", *(f"{per_sim('1k_off', x):.3f}" for x in both), "", ""),
         ("1 kHz, recording on: CPU s per sim s", *(f"{per_sim('1k_rec', x):.3f}" for x in both), "", ""),
+        # Off and on run one after the other, a few rounds: the stepping thread alone scatters more than recording
+        # adds, so this row reports and `--recording-cpu` (paired rounds run at once, counted by thread) decides.
         ("CPU added by recording at 1 kHz", *(f"{100 * added(x):+.0f} %" for x in both),
-         f"≤ {100 * t['record_cpu']:.0f} %", ok(added("new") <= t["record_cpu"])),
+         f"≤ {100 * t['record_cpu']:.0f} %", "not decided here: `--recording-cpu`"),
         ("  real-time factor off / on (median window)", *(f"{rtf('1k_off', x):.3f} / {rtf('1k_rec', x):.3f}" for x in both), "", ""),
         ("as fast as possible, publishing and recording every step: sim s per wall s (median window)",
          *(f"{rtf('fast_rec', x):.1f}×" for x in both), f"≥ {t['fast_rtf']:g}×", ok(rtf("fast_rec", "new") >= t["fast_rtf"])),
