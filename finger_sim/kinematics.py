@@ -14,6 +14,9 @@ from finger_sim.errors import ConfigError
 from finger_sim.model import FingerParams
 
 Vec3 = tuple[float, float, float]
+#: q' = 0: the one tuple a resting or held state's velocity is set to, shared by every module, so that
+#: `v is ZERO` tells such a state wherever it was set (the drive keeps its holding torque for it).
+ZERO: Vec3 = (0.0, 0.0, 0.0)
 
 #: Assembly branch of spec §1 (the distal phalanx flexes with the proximal one):
 #: θ2 = φ + BRANCH·acos(...), where φ is the direction of D→B.

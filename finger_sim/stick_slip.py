@@ -40,7 +40,7 @@ from finger_sim.effects import build_elements
 from finger_sim.effects.friction_modes import FRICTION, LOCKED, SLIDING, STICK_SLIP, StickSlipContact
 from finger_sim.errors import SimulationDiverged
 from finger_sim.integrators.base import TorqueFn
-from finger_sim.kinematics import Vec3
+from finger_sim.kinematics import ZERO, Vec3
 from finger_sim.simulation.locate import LOCATE_TOLERANCE, first_guard_crossing
 from finger_sim.simulation.mode_stepping import AutoPick, ModeStepping
 
@@ -51,7 +51,6 @@ if TYPE_CHECKING:
     from finger_sim.simulate import Simulator
 
 LOG = logging.getLogger(__name__)
-ZERO: Vec3 = (0.0, 0.0, 0.0)
 #: The sliding linkage's one guard, direction·θ1' (rad/s), one-sided: `locate.first_guard_crossing`.
 TURN_GUARD = (False,)
 #: Events (turns, breakaways, impacts, contact changes) allowed within one step before it is

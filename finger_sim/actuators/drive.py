@@ -34,7 +34,7 @@ from finger_sim.actuators.drive_outputs import (DRIVE_OUTPUTS, ENCODER, MESH_LOS
 from finger_sim.dynamics import FingerSystem
 from finger_sim.effects.base import ForceElement
 from finger_sim.errors import SimulationDiverged
-from finger_sim.kinematics import Vec3
+from finger_sim.kinematics import ZERO, Vec3
 from finger_sim.model import FingerParams
 from finger_sim.scene_yaml import mapping, number, whole
 from finger_sim.state_layout import ModeSet, OwnModes, Slot
@@ -49,7 +49,6 @@ MESH = ModeSet("mesh", MESH_MODES, ("turn", "flank", "limit"))
 WINDING_CURRENT = Slot("i", "A", "winding current (L > 0)")
 #: The drive's input.
 VOLTAGE_INPUT = Slot("voltage", "V", "terminal voltage command")
-ZERO: Vec3 = (0.0, 0.0, 0.0)
 #: Bounds of the drive's values: far beyond any prosthetic finger's motor and gear (spec §8's
 #: defaults are 8 Ω, 4e-3 N·m/A, 5e-9 kg·m², 6 V, 0.5 A, N = 300); they keep products finite.
 MAX_RESISTANCE = 1e4  # Ω

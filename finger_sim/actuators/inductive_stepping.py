@@ -26,14 +26,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.optimize import brentq
 
-from finger_sim.actuators.drive import BACK, DRIVE, STUCK, ZERO, DrivenSystem, holding_margin
+from finger_sim.actuators.drive import BACK, DRIVE, STUCK, DrivenSystem, holding_margin
 from finger_sim.actuators.stepping import (FLANK, GAUSS_NODES, GAUSS_WEIGHTS, GUARDS_TWO_SIDED, MAX_EVENTS_PER_STEP,
                                            TURN, EnergyLedger)
 from finger_sim.effects.friction_modes import LOCKED, SLIDING, StickSlipContact
 from finger_sim.errors import SimulationDiverged
 from finger_sim.integrators.base import TorqueFn
 from finger_sim.integrators.stateful import StatefulRungeKutta
-from finger_sim.kinematics import Vec3
+from finger_sim.kinematics import ZERO, Vec3
 from finger_sim.simulation.locate import LOCATE_TOLERANCE, GuardCrossing, first_guard_crossing
 
 if TYPE_CHECKING:

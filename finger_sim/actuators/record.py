@@ -11,9 +11,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from finger_sim.actuators.drive import STUCK, ZERO, DrivenSystem
+from finger_sim.actuators.drive import STUCK, DrivenSystem
 from finger_sim.actuators.stepping import EnergyLedger
 from finger_sim.inputs import PIECEWISE_CONSTANT, Constant, steps_on_segment
+from finger_sim.kinematics import ZERO
 
 if TYPE_CHECKING:
     from finger_sim.simulation.driver import Simulator

@@ -27,10 +27,10 @@ import numpy as np
 from scipy.optimize import brentq
 
 from finger_sim import stepper_slot
-from finger_sim.actuators.drive import BACK, DRIVE, STUCK, ZERO, DrivenSystem, holding_margin
+from finger_sim.actuators.drive import BACK, DRIVE, STUCK, DrivenSystem, holding_margin
 from finger_sim.errors import ConfigError, SimulationDiverged
 from finger_sim.integrators.base import TorqueFn
-from finger_sim.kinematics import Vec3
+from finger_sim.kinematics import ZERO, Vec3
 from finger_sim.simulation.locate import GUARD_TOLERANCE  # noqa: F401  (read here by the compiled guards' tests)
 from finger_sim.simulation.locate import LOCATE_TOLERANCE, GuardCrossing, first_guard_crossing
 from finger_sim.simulation.mode_stepping import ModeStepping

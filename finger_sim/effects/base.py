@@ -18,11 +18,12 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
+from finger_sim.kinematics import Vec3
+
 if TYPE_CHECKING:
     from finger_sim.effects.parameters import Parameter
     from finger_sim.scene import Scene
 
-Vec3 = tuple[float, float, float]
 
 #: Codes of the compiled force laws an element may name as its `kernel_code` (the kernel's force sum computes
 #: each from the element's `kernel_params()`). NO_FORCE: an element whose Q is zero (the stops).

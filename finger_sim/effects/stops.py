@@ -18,12 +18,12 @@ from typing import TYPE_CHECKING, ClassVar
 
 from finger_sim.effects.base import NO_FORCE, NO_OUTPUTS, Vec3, effect
 from finger_sim.effects.parameters import scalar
+from finger_sim.kinematics import ZERO
 from finger_sim.state_layout import ModeSet
 
 if TYPE_CHECKING:
     from finger_sim.scene import Scene
 
-ZERO: Vec3 = (0.0, 0.0, 0.0)
 #: The finger rests on a stop after an impact whose rebound would rise no higher than this (rad): the
 #: rest cuts the rest of the impacts' Zeno series (heights × e² each), so θ departs from the model's
 #: (spec §3: impacts alone) by at most this much, 10× below the smallest `integrator.tolerance`, and the

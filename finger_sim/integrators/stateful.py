@@ -22,10 +22,9 @@ from finger_sim.dynamics import FingerSystem
 from finger_sim.errors import ConfigError
 from finger_sim.integrators.base import Integrator, TorqueFn
 from finger_sim.integrators.explicit import ExplicitRungeKutta, rk_stage_loop, tableau_rows
-from finger_sim.kinematics import Vec3
+from finger_sim.kinematics import ZERO, Vec3
 from finger_sim.projection import project
 
-ZERO: Vec3 = (0.0, 0.0, 0.0)
 #: States whose own slots the integrator remembers (event location tries ≤ 2 × 60 per step).
 MEMORY = 256
 

@@ -24,7 +24,8 @@ import numpy as np
 from finger_sim.inputs import steps_on_segment
 from finger_sim.integrators.dop853 import KEEP_OUTPUTS, MAX_OUTPUTS
 from finger_sim.kernel import event_run
-from finger_sim.simulation.event_step import ZERO, EventStep
+from finger_sim.kinematics import ZERO
+from finger_sim.simulation.event_step import EventStep
 
 #: The columns of `event_run.run`'s rows that `DormandPrince853.defer_estimates` keeps: q, the estimate.
 ESTIMATE_COLUMNS = [0, 1, 2, 6]

@@ -25,7 +25,7 @@ from finger_sim.effects.friction_modes import LOCKED, SLIDING
 from finger_sim.errors import SimulationDiverged
 from finger_sim.integrators import TorqueFn
 from finger_sim.integrators.stateful import StatefulRungeKutta
-from finger_sim.kinematics import Vec3
+from finger_sim.kinematics import ZERO, Vec3
 from finger_sim.simulation.mode_stepping import ModeStepping
 
 if TYPE_CHECKING:
@@ -33,7 +33,6 @@ if TYPE_CHECKING:
     from finger_sim.effects.friction_modes import StickSlipContact
     from finger_sim.simulation.driver import Simulator
 
-ZERO: Vec3 = (0.0, 0.0, 0.0)
 #: Events allowed within one step (as `simulation.driver.MAX_EVENTS_PER_STEP`: a stop's Zeno series to rest).
 MAX_EVENTS_PER_STEP = 64
 

@@ -18,7 +18,7 @@ from finger_sim.depth_guard import DepthLimit
 from finger_sim.effects import ForceElement
 from finger_sim.integrators import TorqueFn
 from finger_sim.integrators.dop853 import DormandPrince853
-from finger_sim.kinematics import Vec3
+from finger_sim.kinematics import ZERO, Vec3
 from finger_sim.simulation.locate import (EVENT_TOLERANCE, GapSearch, GuardCrossing, first_guard_crossing,
                                          predicted_crossing, regula_falsi_gap)
 
@@ -30,7 +30,6 @@ MAX_LOCATE_ITERATIONS = 60
 #: A NamedTuple made without its Python-level __new__ (as `locate._new`).
 _new = tuple.__new__
 #: q' = 0: the gaps' values alone are asked (`closed_sides`).
-ZERO = (0.0, 0.0, 0.0)
 #: How deep `bracket` refines a predicted crossing inside a step that its check did not confirm
 #: (each level probes both halves: at most 2^depth − 1 extra integrator steps).
 BRACKET_DEPTH = 3

@@ -22,7 +22,7 @@ from finger_sim.effects import EFFECTS
 from finger_sim.errors import SimulationDiverged
 from finger_sim.inputs import BREAK_EPS, HELD_ARRAY, Profile
 from finger_sim.integrators import HeldTorque, Integrator, TorqueFn
-from finger_sim.kinematics import Vec3
+from finger_sim.kinematics import ZERO, Vec3
 from finger_sim.projection import OK as FAST_OK
 from finger_sim.scene import Scene
 from finger_sim.simulation import actuated, crossings, event_step, gap_screen, impact, mode_owners
@@ -41,7 +41,6 @@ MAX_EVENTS_PER_STEP = 64
 #: A step is split into substeps (auto on a contact scene) when a contact gap, moving at its
 #: start rate, would close within this many step lengths: margin for the acceleration towards it.
 NEAR_CONTACT = 2.0
-ZERO: Vec3 = (0.0, 0.0, 0.0)
 
 
 class State(NamedTuple):

@@ -47,6 +47,7 @@ from finger_sim import stepper_slot
 from finger_sim.inputs import BREAK_EPS, HELD, PIECEWISE_CONSTANT, Constant, Profile, profile_array
 from finger_sim.integrators.base import HeldTorque
 from finger_sim.integrators.dop853 import NO_ROWS, DormandPrince853
+from finger_sim.kinematics import ZERO
 from finger_sim.simulation import event_locate
 from finger_sim.simulation.event_handover import hand_over
 from finger_sim.simulation.event_locate import CompiledLocate
@@ -57,7 +58,6 @@ if TYPE_CHECKING:
 #: Columns of the kernel's solution rows: (q, q').
 WIDTH = 6
 #: q' at rest on a stop (as `Simulator._advance` sets it).
-ZERO = (0.0, 0.0, 0.0)
 #: State(t, q, v) without the NamedTuple's Python-level __new__ (as `Simulator.step`'s lean path).
 _new_state = tuple.__new__
 #: `EventStep._prepare`'s answer for a step resting on a stop (`EventStep._rest` takes it).

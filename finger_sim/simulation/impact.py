@@ -10,13 +10,12 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from finger_sim.integrators import TorqueFn
-from finger_sim.kinematics import Vec3
+from finger_sim.kinematics import ZERO, Vec3
 from finger_sim.simulation.crossings import Crossing, Gap
 
 if TYPE_CHECKING:
     from finger_sim.simulation.driver import Simulator
 
-ZERO: Vec3 = (0.0, 0.0, 0.0)
 #: The mode an element with impact gaps declares for the rest on them (`effects.stops.REST`).
 REST_MODE = "rest"
 #: Its values: free, resting on a closed gap.

@@ -12,9 +12,8 @@ import numpy as np
 
 from finger_sim.dynamics import FingerSystem
 from finger_sim.effects import ForceElement
-from finger_sim.kinematics import Vec3
+from finger_sim.kinematics import ZERO, Vec3
 
-ZERO: Vec3 = (0.0, 0.0, 0.0)
 
 
 def output_names(elements: Sequence[ForceElement], q: Vec3) -> tuple[str, ...]:
